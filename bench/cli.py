@@ -1,0 +1,186 @@
+"""The ``bench`` command: ``list``, ``run``, ``report``, ``view``.
+
+Bad input ends with one line on stderr (``error: FILE: FIELD: PROBLEM``) and
+exit code 2, before anything is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.resources
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from bench import registry
+from bench.errors import ConfigError
+
+EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, exit 2 (argparse prints usage + message)
+        raise ConfigError("", f"{self.prog}: {message}")
+
+
+def _presets() -> dict[str, object]:
+    root = importlib.resources.files("bench") / "presets"
+    return {p.name[:-5]: p for p in root.iterdir() if p.name.endswith(".toml")}
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if not 1 <= value <= 1024:
+        raise argparse.ArgumentTypeError(f"expected 1 to 1024, got {value}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from bench.executors import default_workers
+    p = _Parser(prog="bench", description="Benchmark radar maneuver detectors, trackers and TBD methods.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    ls = sub.add_parser("list", help="methods and scenarios, with task and summary")
+    ls.add_argument("-v", "--verbose", action="store_true", help="show every parameter with its default")
+    run = sub.add_parser("run", help="run (or resume) a sweep")
+    run.add_argument("sweep", nargs="?", help="sweep file (TOML)")
+    run.add_argument("--preset", help=f"a packaged sweep: {', '.join(sorted(_presets()))}")
+    run.add_argument("--out", help="run folder (default: reports/<name>/)")
+    run.add_argument("--workers", type=_positive_int, default=default_workers(),
+                     help="worker processes (default: CPU count)")
+    run.add_argument("--executor", default="local", choices=["local"], help="where units run")
+    run.add_argument("--fresh", action="store_true", help="discard stored results and start over")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--no-record", action="store_true", help="do not write recording.rrd")
+    run.add_argument("--viewer", action="store_true", help="stream trials live to a spawned Rerun viewer")
+    run.add_argument("--yes", action="store_true", help="run a very large sweep without asking")
+    rep = sub.add_parser("report", help="rebuild CSV, figures, report.md and recording from results.sqlite")
+    rep.add_argument("dir")
+    rep.add_argument("--no-record", action="store_true", help="do not rewrite recording.rrd")
+    view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
+    view.add_argument("dir")
+    return p
+
+
+# ------------------------------------------------------------------ commands
+
+def cmd_list(args) -> int:
+    from bench.params import describe_params
+    for title, table in (("scenarios", registry.scenarios()), ("methods", registry.methods())):
+        print(f"{title}:")
+        for name, cls in table.items():
+            kind = ", ".join(cls.tasks) if title == "scenarios" else cls.task
+            print(f"  {name:<14} {kind:<20} {cls.summary()}")
+            if args.verbose:
+                for pname, ptype, default, doc in describe_params(cls.Params):
+                    print(f"      {pname} ({ptype}, default {default!r}): {doc}")
+    missing = registry.unavailable()
+    if missing:
+        print("unavailable:")
+        for u in missing:
+            print(f"  {u.source:<14} {u.error}")
+    return 0
+
+
+def _load_plan(args):
+    from bench.config import load_sweep, parse_sweep_text
+    if bool(args.sweep) == bool(args.preset):
+        raise ConfigError("", "give a sweep file or --preset NAME (one of them)")
+    if args.preset:
+        presets = _presets()
+        if args.preset not in presets:
+            raise ConfigError("--preset", f"unknown preset {args.preset!r} (known: {', '.join(sorted(presets))})")
+        source = f"preset {args.preset}"
+        try:
+            return parse_sweep_text(presets[args.preset].read_bytes(), source, allow_large=args.yes), source
+        except ConfigError as err:
+            raise ConfigError(f"{source}: {err.field}" if err.field else source, err.problem) from None
+    try:
+        return load_sweep(args.sweep, allow_large=args.yes), args.sweep
+    except ConfigError as err:
+        raise ConfigError(f"{args.sweep}: {err.field}" if err.field else args.sweep, err.problem) from None
+
+
+def _command_line(args, plan) -> str:
+    words = ["bench", "run"] + (["--preset", args.preset] if args.preset else [args.sweep])
+    if args.out:
+        words += ["--out", args.out]
+    return shlex.join(words)
+
+
+def cmd_run(args) -> int:
+    from bench.report import build_outputs
+    from bench.runner import Interrupted, plan_record, run_sweep, write_plan_toml
+    plan, _source = _load_plan(args)
+    out_dir = Path(args.out) if args.out else Path("reports") / plan.name
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ConfigError("--out", f"{out_dir} exists and is not a folder")
+    command = _command_line(args, plan)
+    viewer = None
+    if args.viewer:
+        from bench.recording import LiveViewer
+        try:
+            viewer = LiveViewer(application_id="radar-bench", recording_id=f"{plan.name}-{plan.fingerprint()}")
+        except RuntimeError as exc:
+            raise ConfigError("--viewer", str(exc)) from None
+    on_result = None
+    if viewer is not None:
+        from bench.recording import TrialRecord
+
+        def on_result(result):
+            viewer.log_records([TrialRecord.from_bytes(b) for _, b in result.records])
+    try:
+        store = run_sweep(plan, out_dir, plan_record=plan_record(plan, command), workers=args.workers,
+                          executor=args.executor, fresh=args.fresh, quiet=args.quiet, on_result=on_result)
+    except Interrupted as exc:
+        print(f"interrupted: {exc.stored} of {exc.total} units are stored in {out_dir}; "
+              f"run `{command}` again to resume", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        if viewer is not None:
+            viewer.close()
+    write_plan_toml(out_dir / "plan.toml", plan, command)
+    store.close()
+    report = build_outputs(out_dir, recording=not args.no_record)
+    print(f"wrote {report}")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from bench.report import build_outputs
+    report = build_outputs(Path(args.dir), recording=not args.no_record)
+    print(f"wrote {report}")
+    return 0
+
+
+def cmd_view(args) -> int:
+    path = Path(args.dir) / "recording.rrd"
+    if not path.exists():
+        raise ConfigError("", f"{path} does not exist (was the run made with --no-record?)")
+    exe = shutil.which("rerun")
+    cmd = [exe, str(path)] if exe else [sys.executable, "-m", "rerun", str(path)]
+    return subprocess.call(cmd)
+
+
+COMMANDS = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "view": cmd_view}
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        args = build_parser().parse_args(argv)
+        return COMMANDS[args.command](args)
+    except ConfigError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,350 @@
+"""Sweep files: parsing, validation, grid expansion, the resolved plan.
+
+A sweep file (TOML, DESIGN.md section 4) is validated completely before any
+work is done. Every problem raises :class:`~bench.errors.ConfigError` naming
+the field, e.g. ``methods[1].params.window: expected int >= 3, got -2``.
+
+Grids: in ``params`` (and ``scenario_params``) a list value is a grid axis and
+the Cartesian product of the axes is expanded, one config per combination. For
+a parameter whose type is itself a list (e.g. AR coefficients), a list of lists
+is the axis.
+
+A config's identity is a readable label in the style of benchopt:
+``cumulant[window=32]`` — the registry name plus the parameters the sweep set
+(for scenarios, only the grid axes: a single scenario config is its name).
+``plan.toml`` keeps each method's label, so re-running it gives the same
+identities and the same results.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+from bench import registry
+from bench.errors import ConfigError
+from bench.params import build_params, is_tuple_field, params_as_dict
+from bench.rng import stable_key
+
+TOP_KEYS = {"name", "description", "scenario", "trials", "seed", "snr_db", "chunk",
+            "scenario_params", "methods", "calibration", "record", "provenance"}
+METHOD_KEYS = {"name", "params", "label"}
+CALIBRATION_MODES = ("nominal", "empirical", "gumbel")
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+MAX_SNR_LEVELS = 1000
+MAX_CONFIGS = 1000
+#: trial-runs (trials x SNR levels x configs) above which a sweep needs --yes
+LARGE_SWEEP_TRIAL_RUNS = 50_000_000
+
+
+@dataclass(frozen=True)
+class ComponentConfig:
+    """One expanded config of a method or scenario."""
+
+    name: str
+    params: Any                 # the component's Params instance (all defaults filled)
+    label: str                  # the config's identity, e.g. "cumulant[window=32]"
+    params_text: str            # what distinguishes it, "window=32" (the ``params`` CSV column)
+
+    @property
+    def key(self) -> int:
+        """Stable integer identity, from the name and *all* resolved params."""
+        return stable_key([self.name, params_as_dict(self.params)])
+
+
+@dataclass(frozen=True)
+class CalibrationConfig:
+    pfa: float = 0.01
+    mode: str = "empirical"
+    h0_trials: int = 2000
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The fully resolved sweep: what runs, with every default filled in."""
+
+    name: str
+    description: str
+    scenario: str
+    scenarios: tuple[ComponentConfig, ...]
+    trials: int
+    seed: int
+    snr_db: tuple[float, ...]
+    chunk: int
+    methods: tuple[ComponentConfig, ...]
+    calibration: CalibrationConfig
+    record_trials: int
+    source: str
+
+    @property
+    def trial_runs(self) -> int:
+        return self.trials * len(self.snr_db) * len(self.methods) * len(self.scenarios)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The plan as a sweep file that reproduces it (written as plan.toml)."""
+        scenario_params = _merge_scenario_grid(self.scenarios)
+        return {
+            "name": self.name,
+            "description": self.description,
+            "scenario": self.scenario,
+            "trials": self.trials,
+            "seed": self.seed,
+            "snr_db": list(self.snr_db),
+            "chunk": self.chunk,
+            "scenario_params": scenario_params,
+            "methods": [{"name": m.name, "label": m.label, "params": params_as_dict(m.params)}
+                        for m in self.methods],
+            "calibration": {"pfa": self.calibration.pfa, "mode": self.calibration.mode,
+                            "h0_trials": self.calibration.h0_trials},
+            "record": {"trials": self.record_trials},
+        }
+
+    def fingerprint(self) -> str:
+        """Identity of the results a run of this plan produces (for resume)."""
+        d = self.to_dict()
+        d.pop("description")
+        return f"{stable_key(d):016x}"
+
+
+def _format_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return repr(int(v)) if v.is_integer() and abs(v) < 1e15 else repr(v)
+    if isinstance(v, (list, tuple)):
+        return "(" + ",".join(_format_value(x) for x in v) + ")"
+    return str(v)
+
+
+def _merge_scenario_grid(configs: tuple[ComponentConfig, ...]) -> dict[str, Any]:
+    """Scenario params of the plan: resolved values, lists where a grid varies."""
+    dicts = [params_as_dict(c.params) for c in configs]
+    merged = {}
+    for key in dicts[0]:
+        values = [d[key] for d in dicts]
+        distinct = [v for i, v in enumerate(values) if v not in values[:i]]
+        merged[key] = distinct[0] if len(distinct) == 1 else distinct
+    return merged
+
+
+# --------------------------------------------------------------------------- checks
+
+def _expect_table(value: Any, field: str) -> dict:
+    if not isinstance(value, dict):
+        raise ConfigError(field, f"expected a table, got {type(value).__name__} {value!r}"[:200])
+    return value
+
+
+def _expect_int(value: Any, field: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise ConfigError(field, f"expected int in [{lo}, {hi}], got {value!r}"[:200])
+    return value
+
+
+def _expect_number(value: Any, field: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(field, f"expected a finite number, got {value!r}"[:200])
+    return float(value)
+
+
+def _reject_unknown(table: Mapping, allowed: set, field: str) -> None:
+    for key in table:
+        if key not in allowed:
+            where = f"{field}.{key}" if field else str(key)
+            raise ConfigError(where, f"unknown key (allowed: {', '.join(sorted(allowed))})")
+
+
+def _parse_snr(value: Any) -> tuple[float, ...]:
+    field = "snr_db"
+    if isinstance(value, dict):
+        _reject_unknown(value, {"start", "stop", "step"}, field)
+        for key in ("start", "stop", "step"):
+            if key not in value:
+                raise ConfigError(f"{field}.{key}", "missing (a range needs start, stop and step)")
+        start, stop, step = (_expect_number(value[k], f"{field}.{k}") for k in ("start", "stop", "step"))
+        if step <= 0:
+            raise ConfigError(f"{field}.step", f"expected a number > 0, got {step!r}")
+        if stop < start:
+            raise ConfigError(f"{field}.stop", f"expected >= start ({start:g}), got {stop:g}")
+        count = math.floor((stop - start) / step + 1e-9) + 1
+        if count > MAX_SNR_LEVELS:
+            raise ConfigError(field, f"{count} levels; at most {MAX_SNR_LEVELS}")
+        values = [round(start + i * step, 9) for i in range(count)]
+    elif isinstance(value, list):
+        if not value:
+            raise ConfigError(field, "empty list: give at least one SNR value")
+        if len(value) > MAX_SNR_LEVELS:
+            raise ConfigError(field, f"{len(value)} levels; at most {MAX_SNR_LEVELS}")
+        values = [round(_expect_number(v, f"{field}[{i}]"), 9) for i, v in enumerate(value)]
+    else:
+        values = [round(_expect_number(value, field), 9)]
+    if len(set(values)) != len(values):
+        raise ConfigError(field, "repeated SNR values")
+    return tuple(sorted(values))
+
+
+def _grid_axes(params_cls: type, values: Mapping[str, Any], field: str) -> list[list[tuple[str, Any]]]:
+    """Each parameter as a list of (name, value) choices (a grid axis)."""
+    axes = []
+    for key, value in values.items():
+        if not isinstance(key, str):
+            raise ConfigError(field, f"parameter names must be strings, got {key!r}")
+        try:
+            tuple_field = is_tuple_field(params_cls, key)
+        except KeyError:
+            tuple_field = False  # unknown names are reported by build_params
+        is_axis = isinstance(value, list) and (not tuple_field or (value and all(isinstance(v, list) for v in value)))
+        if is_axis:
+            if not value:
+                raise ConfigError(f"{field}.{key}", "empty list: a grid axis needs at least one value")
+            axes.append([(key, v) for v in value])
+        else:
+            axes.append([(key, value)])
+    return axes
+
+
+def _expand(name: str, params_cls: type, values: Mapping[str, Any], field: str, *,
+            identity: str = "explicit") -> list[ComponentConfig]:
+    """One config per grid point. ``identity`` says which parameters name a config:
+    ``"explicit"`` every parameter the sweep set (methods), ``"grid"`` only the
+    grid axes (scenarios: a single scenario config is just its name)."""
+    axes = _grid_axes(params_cls, values, field)
+    size = math.prod(len(a) for a in axes) if axes else 1
+    if size > MAX_CONFIGS:
+        raise ConfigError(field, f"grid of {size} configs; at most {MAX_CONFIGS}")
+    configs = []
+    for combo in itertools.product(*axes) if axes else [()]:
+        try:
+            params = build_params(params_cls, dict(combo))
+        except ConfigError as err:
+            raise err.within(field) from None
+        named = [k for (k, _), axis in zip(combo, axes) if identity == "explicit" or len(axis) > 1]
+        inner = ",".join(f"{k}={_format_value(getattr(params, k))}" for k in named)
+        configs.append(ComponentConfig(name, params, f"{name}[{inner}]" if inner else name, inner))
+    return configs
+
+
+def _params_text_of_label(name: str, label: str) -> str:
+    """``window=32`` from ``cumulant[window=32]``; a free-form label is its own text."""
+    if label == name:
+        return ""
+    if label.startswith(f"{name}[") and label.endswith("]"):
+        return label[len(name) + 1:-1]
+    return label
+
+
+def _parse_methods(value: Any, scenario_cls) -> tuple[ComponentConfig, ...]:
+    if not isinstance(value, list) or not value:
+        raise ConfigError("methods", "expected at least one [[methods]] table")
+    configs: list[ComponentConfig] = []
+    seen: dict[str, str] = {}
+    for i, entry in enumerate(value):
+        field = f"methods[{i}]"
+        entry = _expect_table(entry, field)
+        _reject_unknown(entry, METHOD_KEYS, field)
+        if "name" not in entry or not isinstance(entry["name"], str):
+            raise ConfigError(f"{field}.name", "missing method name (a string)")
+        cls = registry.get_method(entry["name"], f"{field}.name")
+        if scenario_cls.tasks and cls.task not in scenario_cls.tasks:
+            raise ConfigError(f"{field}.name", f"method {cls.name!r} ({cls.task}) cannot run on "
+                                               f"scenario {scenario_cls.name!r} ({', '.join(scenario_cls.tasks)})")
+        params = _expect_table(entry.get("params", {}), f"{field}.params")
+        expanded = _expand(cls.name, cls.Params, params, f"{field}.params")
+        if "label" in entry:
+            label = entry["label"]
+            if not isinstance(label, str) or not label.strip() or len(label) > 200:
+                raise ConfigError(f"{field}.label", f"expected a non-empty string, got {label!r}"[:200])
+            if len(expanded) != 1:
+                raise ConfigError(f"{field}.label", "a label names one config; remove the grid (list) values")
+            c = expanded[0]
+            expanded = [ComponentConfig(c.name, c.params, label, _params_text_of_label(c.name, label))]
+        for c in expanded:
+            if c.label in seen:
+                raise ConfigError(field, f"config {c.label!r} repeats {seen[c.label]}")
+            seen[c.label] = field
+        configs.extend(expanded)
+    if len(configs) > MAX_CONFIGS:
+        raise ConfigError("methods", f"{len(configs)} method configs; at most {MAX_CONFIGS}")
+    return tuple(configs)
+
+
+def _parse_calibration(value: Any) -> CalibrationConfig:
+    table = _expect_table(value, "calibration")
+    _reject_unknown(table, {"pfa", "mode", "h0_trials"}, "calibration")
+    default = CalibrationConfig()
+    pfa = _expect_number(table.get("pfa", default.pfa), "calibration.pfa")
+    if not 0 < pfa < 0.5:
+        raise ConfigError("calibration.pfa", f"expected a number in (0, 0.5), got {pfa!r}")
+    mode = table.get("mode", default.mode)
+    if mode not in CALIBRATION_MODES:
+        raise ConfigError("calibration.mode", f"expected one of {', '.join(map(repr, CALIBRATION_MODES))}, got {mode!r}"[:200])
+    if mode == "gumbel":
+        raise ConfigError("calibration.mode", "'gumbel' is the scene-level tail fit for TBD methods, "
+                                              "not available for per-step detectors; use 'empirical'")
+    h0 = _expect_int(table.get("h0_trials", default.h0_trials), "calibration.h0_trials", 10, 10_000_000)
+    return CalibrationConfig(pfa, mode, h0)
+
+
+def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large: bool = False) -> Plan:
+    """Validate a parsed sweep mapping and resolve it into a :class:`Plan`."""
+    _reject_unknown(data, TOP_KEYS, "")
+    for key in ("name", "scenario", "snr_db", "methods"):
+        if key not in data:
+            raise ConfigError(key, "missing")
+    name = data["name"]
+    if not isinstance(name, str) or not NAME_PATTERN.match(name):
+        raise ConfigError("name", "expected letters, digits, '_', '-' or '.' (at most 64, no path "
+                                  f"separators), got {name!r}"[:200])
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise ConfigError("description", f"expected a string, got {description!r}"[:200])
+    if not isinstance(data["scenario"], str):
+        raise ConfigError("scenario", f"expected a scenario name, got {data['scenario']!r}"[:200])
+    scenario_cls = registry.get_scenario(data["scenario"], "scenario")
+    scenario_params = _expect_table(data.get("scenario_params", {}), "scenario_params")
+    scenarios = _expand(scenario_cls.name, scenario_cls.Params, scenario_params, "scenario_params",
+                        identity="grid")
+    trials = _expect_int(data.get("trials", 100), "trials", 1, 10_000_000)
+    seed = _expect_int(data.get("seed", 0), "seed", 0, 2**63 - 1)
+    chunk = _expect_int(data.get("chunk", 50), "chunk", 1, 1_000_000)
+    snr_db = _parse_snr(data["snr_db"])
+    methods = _parse_methods(data["methods"], scenario_cls)
+    calibration = _parse_calibration(data.get("calibration", {}))
+    record = _expect_table(data.get("record", {}), "record")
+    _reject_unknown(record, {"trials"}, "record")
+    record_trials = _expect_int(record.get("trials", 1), "record.trials", 0, 1000)
+    plan = Plan(name, description, scenario_cls.name, tuple(scenarios), trials, seed, snr_db, chunk,
+                methods, calibration, record_trials, source)
+    if plan.trial_runs > LARGE_SWEEP_TRIAL_RUNS and not allow_large:
+        raise ConfigError("trials", f"the sweep asks for {plan.trial_runs:,} trial-runs "
+                                    f"(trials x SNR levels x configs); pass --yes to run it anyway")
+    return plan
+
+
+def load_sweep(path: str | Path, *, allow_large: bool = False) -> Plan:
+    """Read and validate a sweep file. Raises ConfigError (field '' for file-level problems)."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ConfigError("", f"cannot read the file ({exc.strerror or exc})") from None
+    return parse_sweep_text(raw, str(path), allow_large=allow_large)
+
+
+def parse_sweep_text(raw: bytes, source: str, *, allow_large: bool = False) -> Plan:
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError("", f"not UTF-8 text (byte {exc.start})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError("", f"invalid TOML: {exc}") from None
+    except RecursionError:
+        raise ConfigError("", "invalid TOML: nested too deeply") from None
+    return parse_sweep(data, source, allow_large=allow_large)

@@ -1,0 +1,138 @@
+"""The interfaces every scenario and method implements (DESIGN.md section 3).
+
+Everything is batched over Monte Carlo trials: arrays carry a leading trial
+axis ``n``.
+
+* A :class:`Scenario` generates a :class:`Batch` of ``n`` trials at one SNR
+  (or under the null hypothesis, ``snr_db=None``).
+* A :class:`Method` turns a Batch into an output for its task:
+  :class:`DetectionOutput` for ``maneuver-detection``.
+
+Methods are pure: the same batch and params give the same output. They never
+decide alarms; the harness applies a threshold (nominal or calibrated) so every
+detector is compared at the same false-alarm rate.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+MANEUVER_DETECTION = "maneuver-detection"
+TRACKING = "tracking"
+TBD = "tbd"
+TASKS = (MANEUVER_DETECTION, TRACKING, TBD)
+
+
+@dataclass
+class Batch:
+    """``n`` Monte Carlo trials of one scenario config at one SNR.
+
+    Attributes
+    ----------
+    t : (K,) float
+        Time of each step, seconds.
+    truth : (n, K, d) float
+        True state per trial and step.
+    z : (n, K, m) float
+        Point measurements (or ``(n, K, H, W)`` frames for TBD scenes).
+    meta : dict
+        Scenario facts the methods and metrics need. Keys used by the harness:
+        ``onset_step`` / ``offset_step`` (maneuver step indices, ``None``
+        under the null), ``detect_window_steps``, ``warmup_steps``,
+        ``snr_definition`` (one sentence), ``realised_snr_db`` ((n,) array),
+        ``position_index`` (indices of the position components of the state).
+        A scenario may add a ``filter`` model for methods that run a filter.
+    trials : (n,) int
+        Global index of each trial within its SNR level (for seeds and CSV).
+    """
+
+    t: np.ndarray
+    truth: np.ndarray
+    z: np.ndarray
+    meta: dict[str, Any]
+    trials: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.truth.shape[0])
+
+    @property
+    def steps(self) -> int:
+        return int(self.t.shape[0])
+
+
+@dataclass
+class DetectionOutput:
+    """Output of a maneuver detector.
+
+    statistic : (n, K) float — the test statistic per trial and step; an
+        alarm is ``statistic >= threshold``.
+    valid_from : int — first step at which the statistic is fully formed
+        (e.g. a sliding window is full). Steps before it are never counted as
+        false alarms nor used for calibration.
+    traces : dict of (n, K) arrays — extra per-step series worth seeing in a
+        recording (e.g. the whitened innovation).
+    """
+
+    statistic: np.ndarray
+    valid_from: int = 0
+    traces: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def _summary(cls: type) -> str:
+    doc = inspect.getdoc(cls) or ""
+    return doc.strip().splitlines()[0] if doc.strip() else ""
+
+
+class Component:
+    """Shared by scenarios and methods: a registry name, a params dataclass."""
+
+    name: ClassVar[str] = ""
+    Params: ClassVar[type]
+
+    @classmethod
+    def summary(cls) -> str:
+        """One line, from the first line of the class docstring."""
+        return _summary(cls)
+
+    @classmethod
+    def default_params(cls):
+        return cls.Params()
+
+
+class Scenario(Component):
+    """Supplies batches of trials. Subclasses implement :meth:`generate`."""
+
+    #: tasks whose methods can run on this scenario
+    tasks: ClassVar[tuple[str, ...]] = ()
+
+    def generate(self, params, snr_db: float | None, n: int, rng) -> Batch:
+        """``n`` trials at ``snr_db`` (``None``: the null hypothesis).
+
+        ``rng`` is a :class:`bench.rng.TrialRNG`: one independent stream per
+        trial, so a trial's draws do not depend on how trials are chunked.
+        """
+        raise NotImplementedError
+
+
+class Method(Component):
+    """A detector, tracker or TBD algorithm. Subclasses implement :meth:`run`."""
+
+    task: ClassVar[str] = ""
+
+    def run(self, batch: Batch, params) -> Any:
+        raise NotImplementedError
+
+    def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
+        """The method's own analytic threshold for per-step false-alarm rate
+        ``pfa`` (detectors) or per-scene rate (TBD)."""
+        raise NotImplementedError
+
+
+def params_fields(cls: type) -> list[str]:
+    return [f.name for f in dataclasses.fields(cls)]

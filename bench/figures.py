@@ -1,0 +1,92 @@
+"""Report figures (matplotlib, Agg backend): PNGs readable on GitHub."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+DPI = 110
+
+
+def _save(fig, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=DPI, bbox_inches="tight")
+    plt.close(fig)
+    tmp.replace(path)
+    return path
+
+
+STYLES = ("o-", "s--", "^-.", "D:", "v-", "P--", "X-.", "*:")
+
+
+def _curves(summary: pd.DataFrame):
+    """(colour, marker/line style, label, rows) per config; styles differ so equal curves stay visible."""
+    for i, (label, g) in enumerate(summary.groupby("config", sort=False)):
+        yield f"C{i % 10}", STYLES[i % len(STYLES)], label, g.sort_values("snr_db")
+
+
+def pd_vs_snr(summary: pd.DataFrame, path: Path, pfa: float, title: str) -> Path:
+    """Pd against SNR per method config, with the 95% Wilson band."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    for color, style, label, g in _curves(summary):
+        ax.plot(g.snr_db, g.pd, style, color=color, ms=4, lw=1.5, label=label, mfc="none")
+        ax.fill_between(g.snr_db, g.pd_low, g.pd_high, color=color, alpha=0.18, lw=0)
+    ax.axhline(0.5, color="0.6", lw=0.8, ls=":")
+    ax.set(xlabel="SNR (dB)", ylabel="probability of detection $P_D$", ylim=(-0.02, 1.02),
+           title=f"{title}: $P_D$ vs SNR at $P_{{FA}}$ = {pfa:g} (95% bands)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right")
+    return _save(fig, path)
+
+
+def delay_vs_snr(summary: pd.DataFrame, path: Path, title: str) -> Path:
+    """Mean detection delay of detected trials, with its bootstrap band."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    for color, style, label, g in _curves(summary):
+        ok = g.delay_mean.notna()
+        ax.plot(g.snr_db[ok], g.delay_mean[ok], style, color=color, ms=4, lw=1.5, label=label, mfc="none")
+        ax.fill_between(g.snr_db[ok], g.delay_low[ok], g.delay_high[ok], color=color, alpha=0.18, lw=0)
+    ax.set(xlabel="SNR (dB)", ylabel="mean delay of detected trials (steps)",
+           title=f"{title}: detection delay (95% bootstrap bands)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def runtime(per_method: pd.DataFrame, path: Path) -> Path:
+    """Seconds per trial per method config (log scale)."""
+    fig, ax = plt.subplots(figsize=(7.5, 0.5 + 0.45 * len(per_method)))
+    y = np.arange(len(per_method))
+    ax.barh(y, per_method.seconds_per_trial * 1e3, color=[f"C{i % 10}" for i in y])
+    ax.set_yticks(y, per_method.config, fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xscale("log")
+    ax.set(xlabel="milliseconds per trial (one core)", title="runtime per method config")
+    ax.grid(alpha=0.3, axis="x")
+    return _save(fig, path)
+
+
+def trial_timeline(record, path: Path, title: str) -> Path:
+    """One trial's statistic and threshold per method over time (the paper's single-run figure)."""
+    methods = list(record.methods.items())
+    fig, axes = plt.subplots(len(methods), 1, figsize=(7.5, 1.9 * len(methods) + 0.6), sharex=True,
+                             squeeze=False)
+    for ax, (i, (label, tr)) in zip(axes[:, 0], enumerate(methods)):
+        color = f"C{i % 10}"
+        ax.plot(record.t, tr.statistic, color=color, lw=1.2, label=label)
+        ax.axhline(tr.threshold, color="k", lw=0.9, ls="--", label="threshold")
+        hit = np.asarray(tr.alarms, bool)
+        ax.plot(record.t[hit], tr.statistic[hit], "v", color="crimson", ms=4, label="alarm")
+        ax.set_yscale("symlog", linthresh=max(tr.threshold, 1e-6))
+        ax.legend(fontsize=7, loc="upper left")
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time (s)")
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, path)

@@ -1,0 +1,283 @@
+"""Outputs of a run, all rebuilt from ``results.sqlite`` (``bench report DIR``).
+
+Writes ``trials.csv``, ``summary.csv``, ``calibration.csv``, ``report.md``,
+``figures/*.png`` and ``recording.rrd``. Every file is written to a temporary
+name and renamed, so no reader ever sees a half-written output.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bench import figures
+from bench.errors import ConfigError
+from bench.metrics import snr_at_pd
+from bench.provenance import provenance
+from bench.recording import TrialRecord, write_recording
+from bench.runner import calibrations
+from bench.store import Store
+from bench.tasks import handler
+
+TRIAL_KEYS = ["scenario", "method", "config", "params", "snr_db", "trial", "seed", "realised_snr_db",
+              "threshold"]
+SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials", "pd", "pd_low", "pd_high",
+                   "pfa", "pfa_low", "pfa_high", "delay_mean", "delay_low", "delay_high", "delay_median",
+                   "rmse_mean", "seconds_per_trial", "threshold", "realised_snr_db"]
+
+
+def _write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(path)
+
+
+def _write_csv(df: pd.DataFrame, path: Path) -> None:
+    _write_text(path, df.to_csv(index=False, float_format=None, lineterminator="\n"))
+
+
+def trials_frame(store: Store, record: dict) -> pd.DataFrame:
+    """One row per (scenario config, method config, SNR, trial), in a fixed order."""
+    info = {m["label"]: m for m in record["methods"]}
+    frames = []
+    for _unit, label, scenario, snr, cols in store.iter_metrics():
+        df = pd.DataFrame(cols)
+        df.insert(0, "scenario", scenario)
+        df.insert(1, "method", info[label]["name"])
+        df.insert(2, "config", label)
+        df.insert(3, "params", info[label]["params"])
+        df.insert(4, "snr_db", snr)
+        frames.append(df)
+    if not frames:
+        return pd.DataFrame(columns=TRIAL_KEYS)
+    df = pd.concat(frames, ignore_index=True)
+    order = {m["label"]: i for i, m in enumerate(record["methods"])}
+    df = df.assign(_o=df.config.map(order)).sort_values(["scenario", "_o", "snr_db", "trial"])
+    rest = [c for c in df.columns if c not in TRIAL_KEYS and c != "_o"]
+    return df[TRIAL_KEYS + rest].reset_index(drop=True)
+
+
+def summary_frame(trials: pd.DataFrame, runs: pd.DataFrame, record: dict) -> pd.DataFrame:
+    tasks = {m["label"]: m["task"] for m in record["methods"]}
+    parts = [handler(task).summarise(g) for task, g in trials.groupby(trials.config.map(tasks))] \
+        if len(trials) else []
+    summary = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=SUMMARY_COLUMNS)
+    ev = runs[(runs.phase == "evaluation") & runs.error.isna()]
+    speed = ev.groupby(["scenario", "method", "snr_db"]).agg(s=("seconds", "sum"), n=("n", "sum"))
+    speed = (speed.s / speed.n).rename("seconds_per_trial").reset_index().rename(columns={"method": "config"})
+    summary = summary.merge(speed, on=["scenario", "config", "snr_db"], how="left")
+    order = {m["label"]: i for i, m in enumerate(record["methods"])}
+    summary = summary.assign(_o=summary.config.map(order)).sort_values(["scenario", "_o", "snr_db"])
+    return summary[SUMMARY_COLUMNS].reset_index(drop=True)
+
+
+# ------------------------------------------------------------------ markdown helpers
+
+def _fmt(x, digits: int = 3) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "–"
+    if isinstance(x, (int, np.integer)):
+        return str(x)
+    ax = abs(x)
+    return f"{x:.{digits}g}" if (ax >= 1e-3 or ax == 0) else f"{x:.2e}"
+
+
+def _fmt_crossing(x: float, snr) -> str:
+    if np.isneginf(x):
+        return f"< {_fmt(float(np.min(snr)))}"
+    if np.isnan(x):
+        return f"> {_fmt(float(np.max(snr)))}"
+    return _fmt(x)
+
+
+def _table(header: list[str], rows: list[list]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ report sections
+
+def _section_plan(record: dict, store: Store) -> str:
+    sweep = record["sweep"]
+    snr = sweep["snr_db"]
+    snr_text = f"{_fmt(snr[0])} to {_fmt(snr[-1])} dB ({len(snr)} levels)" if len(snr) > 2 else \
+        ", ".join(f"{_fmt(s)} dB" for s in snr)
+    rows = [["scenario", f"`{sweep['scenario']}`"],
+            ["scenario params", ", ".join(f"{k} = {v}" for k, v in sweep["scenario_params"].items())],
+            ["SNR", snr_text], ["trials per SNR level", sweep["trials"]], ["seed", sweep["seed"]],
+            ["trials per unit (chunk)", sweep["chunk"]],
+            ["calibration", f"{sweep['calibration']['mode']}, requested Pfa {sweep['calibration']['pfa']:g} "
+                            f"per step, {sweep['calibration']['h0_trials']} null trials"]]
+    methods = [[f"`{m['label']}`", m["name"], m["task"],
+                ", ".join(f"{k}={v}" for k, v in sweep["methods"][i]["params"].items())]
+               for i, m in enumerate(record["methods"])]
+    definition = store.meta("snr_definition") or "see the scenario's documentation"
+    return "\n\n".join([
+        "## What was run",
+        _table(["", ""], rows),
+        f"**SNR definition.** {definition}",
+        "Every method config runs on the same generated trials (common random numbers); trial *i* sees "
+        "the same noise at every SNR level. The resolved sweep is `plan.toml` next to this report.",
+        _table(["config", "method", "task", "resolved parameters"], methods),
+    ])
+
+
+def _section_calibration(cals, summary: pd.DataFrame) -> str:
+    if not cals:
+        return "## Calibration\n\nNo method config was calibrated (see Failures)."
+    measured = summary.groupby("config").agg(fa_pfa=("pfa", "mean"))
+    rows = []
+    for c in cals:
+        used_pfa = measured.fa_pfa.get(c.method, np.nan)
+        rows.append([f"`{c.method}`", c.mode, f"{c.pfa:g}", _fmt(c.nominal, 4),
+                     f"{_fmt(c.nominal_pfa)} [{_fmt(c.nominal_pfa_low)}, {_fmt(c.nominal_pfa_high)}]",
+                     _fmt(c.used, 4), _fmt(used_pfa), f"{c.null_values:,}"])
+    return "\n\n".join([
+        "## Calibration",
+        "Thresholds are applied by the harness, so every detector is compared at the same false-alarm "
+        "rate. *Measured Pfa of nominal* is the fraction of null-hypothesis statistic values (separate "
+        "calibration trials, all steps after warm-up) at or above the method's own analytic threshold, "
+        "with its 95% Wilson interval; *empirical* thresholds are the (1 − Pfa) quantile of the same "
+        "values. *Pfa in evaluation* is the per-step false-alarm rate measured before the maneuver onset "
+        "in the evaluation trials, at the threshold used, averaged over SNR levels.",
+        _table(["config", "mode", "requested Pfa", "nominal threshold", "measured Pfa of nominal [95% CI]",
+                "threshold used", "Pfa in evaluation", "null values"], rows),
+        "Window statistics are correlated from step to step, so the intervals, which treat steps as "
+        "independent, are narrower than the truth for them.",
+    ])
+
+
+def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: float) -> str:
+    if summary.empty:
+        return "## Detection\n\nNo results."
+    figures.pd_vs_snr(summary, fig_dir / "pd_vs_snr.png", pfa, title)
+    figures.delay_vs_snr(summary, fig_dir / "delay_vs_snr.png", title)
+    rows = []
+    for label, g in summary.groupby("config", sort=False):
+        g = g.sort_values("snr_db")
+        mid, low, high = (_fmt_crossing(x, g.snr_db) for x in snr_at_pd(g.snr_db, g.pd, g.pd_low, g.pd_high))
+        best = g.iloc[-1]
+        rows.append([f"`{label}`", mid, f"[{low}, {high}]",
+                     f"{_fmt(best.pd)} at {_fmt(best.snr_db)} dB", _fmt(best.delay_mean)])
+    detail = summary.pivot_table(index="snr_db", columns="config", values="pd", sort=False)
+    detail_rows = [[_fmt(s)] + [_fmt(v) for v in r] for s, r in zip(detail.index, detail.to_numpy())]
+    return "\n\n".join([
+        "## Detection probability",
+        "![Pd vs SNR](figures/pd_vs_snr.png)",
+        "SNR at which Pd = 0.5, interpolated linearly between levels; the interval is where the 95% "
+        "Pd band crosses 0.5. `< x` / `> x`: the crossing lies outside the swept range.",
+        _table(["config", "SNR at Pd = 0.5 (dB)", "interval (dB)", "Pd at the highest SNR",
+                "mean delay there (steps)"], rows),
+        "<details><summary>Pd per SNR level</summary>\n\n" +
+        _table(["SNR (dB)"] + [f"`{c}`" for c in detail.columns], detail_rows) + "\n\n</details>",
+        "## Detection delay",
+        "![delay vs SNR](figures/delay_vs_snr.png)",
+        "Delay = first alarm at or after the onset minus the onset, over detected trials only.",
+    ])
+
+
+def _section_runtime(runs: pd.DataFrame, units: pd.DataFrame, fig_dir: Path, record: dict) -> str:
+    ev = runs[runs.error.isna()]
+    if ev.empty:
+        return "## Runtime\n\nNo successful runs."
+    per = ev.groupby("method").agg(seconds=("seconds", "sum"), n=("n", "sum")).reset_index()
+    per["seconds_per_trial"] = per.seconds / per.n
+    order = {m["label"]: i for i, m in enumerate(record["methods"])}
+    per = per.rename(columns={"method": "config"}).assign(_o=lambda d: d.config.map(order)).sort_values("_o")
+    figures.runtime(per, fig_dir / "runtime.png")
+    gen = units.generate_seconds.sum() / units.n.sum()
+    rows = [[f"`{r.config}`", f"{r.seconds_per_trial * 1e3:.3g}", f"{r.n:,}", f"{r.seconds:.3g}"]
+            for r in per.itertuples()]
+    return "\n\n".join([
+        "## Runtime",
+        "![runtime](figures/runtime.png)",
+        _table(["config", "ms per trial", "trials run", "total seconds"], rows),
+        f"Scenario generation: {gen * 1e3:.3g} ms per trial. Times are per unit, on one core each.",
+    ])
+
+
+def _section_failures(runs: pd.DataFrame) -> str:
+    bad = runs[runs.error.notna()]
+    if bad.empty:
+        return "## Failures\n\nNone: every method config ran on every unit."
+    rows = [[f"`{r.method}`", r.phase, "null" if pd.isna(r.snr_db) else _fmt(r.snr_db), f"`{r.unit}`",
+             str(r.error).replace("|", "\\|")[:300]] for r in bad.head(50).itertuples()]
+    more = f"\n\n… and {len(bad) - 50} more (see `results.sqlite`, table `runs`)." if len(bad) > 50 else ""
+    return "## Failures\n\n" + _table(["config", "phase", "SNR (dB)", "unit", "error"], rows) + more
+
+
+def _section_provenance(record: dict, store: Store, prov: dict) -> str:
+    rows = [["command", f"`{record.get('command', '')}`"], ["sweep file", f"`{record.get('source', '')}`"],
+            ["plan fingerprint", f"`{store.meta('fingerprint')}`"]]
+    wall = store.meta("last_wall_seconds")
+    if wall:
+        rows.append(["wall time of the last `bench run`", f"{float(wall):.1f} s"])
+    rows += [[k, v] for k, v in prov.items()]
+    return "## Provenance\n\n" + _table(["", ""], rows)
+
+
+RECORDING_TEXT = """## Recording
+
+`recording.rrd` holds, for the first {n} trial(s) of every SNR level, the true and measured
+positions (2D, y negated so north is up), and per method config the statistic, the threshold in
+force and the alarms, on the timelines `step` and `time`, plus Pd-vs-SNR per config under
+`/summary`. Open it with `bench view {out}` or `rerun {out}/recording.rrd`."""
+
+
+def build_outputs(out_dir: Path, *, recording: bool = True) -> Path:
+    """(Re)build every output of a run folder from its store; returns report.md's path."""
+    out_dir = Path(out_dir)
+    db = out_dir / "results.sqlite"
+    if not db.exists():
+        raise ConfigError("", f"{out_dir} has no results.sqlite (not a bench run folder)")
+    store = Store(db)
+    try:
+        return _build(store, out_dir, recording)
+    finally:
+        store.close()
+
+
+def _build(store: Store, out_dir: Path, recording: bool) -> Path:
+    record = store.plan()
+    sweep = record["sweep"]
+    runs, units = store.runs(), store.units()
+    trials = trials_frame(store, record)
+    summary = summary_frame(trials, runs, record)
+    cals = calibrations(store, [s["label"] for s in record["scenarios"]], [m["label"] for m in record["methods"]],
+                        sweep["calibration"]["pfa"], sweep["calibration"]["mode"])
+    _write_csv(trials, out_dir / "trials.csv")
+    _write_csv(summary, out_dir / "summary.csv")
+    _write_csv(pd.DataFrame([c.as_row() for c in cals]), out_dir / "calibration.csv")
+    fig_dir = out_dir / "figures"
+    title = sweep["name"]
+    records = [TrialRecord.from_bytes(b) for b in store.records()]
+    done, total = len(units), int(store.meta("units_total") or len(units))
+    parts = [f"# {title}", sweep.get("description") or "",
+             f"Reproduce with `{record.get('command', '')}`." +
+             ("" if done >= total else f" **Incomplete run: {done} of {total} units stored.**"),
+             _section_plan(record, store),
+             _section_calibration(cals, summary),
+             _section_detection(summary, fig_dir, title, sweep["calibration"]["pfa"])]
+    if records:
+        top = max(records, key=lambda r: (r.snr_db if r.snr_db is not None else -np.inf, -r.trial))
+        figures.trial_timeline(top, fig_dir / "trial_timeline.png",
+                               f"{title}: trial {top.trial} at {_fmt(top.snr_db)} dB")
+        parts += ["## One trial over time",
+                  f"Statistic, threshold in force and alarms of each method on trial {top.trial} at "
+                  f"{_fmt(top.snr_db)} dB (symmetric-log scale).",
+                  "![one trial](figures/trial_timeline.png)"]
+    parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
+    if recording and records:
+        write_recording(out_dir / "recording.rrd", records, summary.assign(method=summary.config),
+                        recording_id=f"{title}-{store.meta('fingerprint')}")
+        parts.append(RECORDING_TEXT.format(n=sweep["record"]["trials"], out=out_dir))
+    parts.append(_section_provenance(record, store, provenance()))
+    report = out_dir / "report.md"
+    _write_text(report, "\n\n".join(p for p in parts if p) + "\n")
+    return report
+

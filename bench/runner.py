@@ -1,0 +1,249 @@
+"""The runner: plans units of work, executes them, stores results as they finish.
+
+A **unit** is (scenario config, SNR, chunk of trials). Its batch is generated
+once and every method config runs on it (common random numbers: differences
+between methods are not noise differences). Each trial's random stream is
+derived from the sweep seed and the trial's identity only (:mod:`bench.rng`),
+so results do not depend on chunk size, workers or executor.
+
+A run has two phases:
+
+1. **calibration** units: ``h0_trials`` null-hypothesis trials per scenario
+   config; each method's null statistic values and nominal threshold are stored;
+2. **evaluation** units: ``trials`` per SNR level, evaluated at the threshold
+   the calibration chose (:mod:`bench.calibration`).
+
+The driver alone writes the store, one transaction per unit. Units already in
+the store are skipped, which is what makes an interrupted run resumable.
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from bench import registry, tomlw
+from bench.calibration import CalibrationResult, calibrate
+from bench.config import Plan
+from bench.executors import make_executor
+from bench.progress import Progress
+from bench.provenance import provenance
+from bench.recording import TrialRecord
+from bench.rng import CALIBRATION, EVALUATION, TrialRNG
+from bench.store import MethodRun, Store, UnitResult
+from bench.tasks import handler
+
+RUN_FILES = ("results.sqlite", "results.sqlite-wal", "results.sqlite-shm", "plan.toml", "trials.csv",
+             "summary.csv", "calibration.csv", "report.md", "recording.rrd")
+
+
+@dataclass(frozen=True)
+class Unit:
+    phase: str                  # "calibration" | "evaluation"
+    scenario_index: int
+    scenario_label: str
+    snr_db: float | None
+    trial_start: int
+    n: int
+
+    @property
+    def key(self) -> str:
+        snr = "null" if self.snr_db is None else f"{self.snr_db:+.9g}"
+        return f"{self.phase}/{self.scenario_label}/{snr}/{self.trial_start:09d}+{self.n}"
+
+
+@dataclass
+class UnitTask:
+    """What a worker needs to run one unit."""
+
+    plan: Plan
+    unit: Unit
+    thresholds: dict[str, float | None] = field(default_factory=dict)   # evaluation only
+
+
+class Interrupted(Exception):
+    def __init__(self, stored: int, total: int):
+        super().__init__(f"interrupted: {stored} of {total} units are stored")
+        self.stored, self.total = stored, total
+
+
+def _chunks(total: int, chunk: int):
+    for start in range(0, total, chunk):
+        yield start, min(chunk, total - start)
+
+
+def plan_units(plan: Plan) -> tuple[list[Unit], list[Unit]]:
+    calibration, evaluation = [], []
+    for i, sc in enumerate(plan.scenarios):
+        for start, n in _chunks(plan.calibration.h0_trials, plan.chunk):
+            calibration.append(Unit("calibration", i, sc.label, None, start, n))
+        for snr in plan.snr_db:
+            for start, n in _chunks(plan.trials, plan.chunk):
+                evaluation.append(Unit("evaluation", i, sc.label, snr, start, n))
+    return calibration, evaluation
+
+
+# ------------------------------------------------------------------ worker side
+
+def _error_text(exc: BaseException) -> str:
+    frames = traceback.extract_tb(exc.__traceback__)
+    where = f" ({Path(frames[-1].filename).name}:{frames[-1].lineno})" if frames else ""
+    return f"{type(exc).__name__}: {exc}{where}"
+
+
+def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict) -> bytes:
+    sc = plan.scenarios[unit.scenario_index]
+    pos = list(batch.meta.get("position_index", (0, 1)))
+    z_xy = batch.meta.get("z_xy")
+    measured = z_xy[i] if z_xy is not None else batch.z[i][:, :2]
+    rec = TrialRecord(scenario=sc.name, snr_db=unit.snr_db, trial=int(batch.trials[i]), t=batch.t,
+                      truth_xy=batch.truth[i][:, pos], measurements_xy=measured, methods=traces)
+    return rec.to_bytes()
+
+
+def execute_unit(task: UnitTask) -> UnitResult:
+    """Generate one unit's batch, run every method config on it, evaluate."""
+    registry.discover()
+    plan, unit = task.plan, task.unit
+    sc = plan.scenarios[unit.scenario_index]
+    domain = CALIBRATION if unit.phase == "calibration" else EVALUATION
+    rng = TrialRNG(plan.seed, domain, sc.key, range(unit.trial_start, unit.trial_start + unit.n))
+    t0 = time.perf_counter()
+    batch = registry.get_scenario(sc.name)().generate(sc.params, unit.snr_db, unit.n, rng)
+    result = UnitResult(unit.key, unit.phase, sc.label, unit.snr_db, unit.trial_start, unit.n,
+                        time.perf_counter() - t0)
+    result.common = {"trial": np.asarray(batch.trials, np.int64), "seed": rng.seed_values(),
+                     "realised_snr_db": np.asarray(batch.meta.get("realised_snr_db",
+                                                                   np.full(unit.n, np.nan)), float)}
+    recorded = [i for i, t in enumerate(batch.trials) if t < plan.record_trials] \
+        if unit.phase == "evaluation" else []
+    traces: dict[int, dict] = {i: {} for i in recorded}
+    for mc in plan.methods:
+        method_cls = registry.get_method(mc.name)
+        run = MethodRun(mc.label, 0.0)
+        t1 = time.perf_counter()
+        try:
+            task_handler = handler(method_cls.task)
+            method = method_cls()
+            if unit.phase == "evaluation" and task.thresholds.get(mc.label) is None:
+                raise RuntimeError("no threshold: the calibration of this method failed")
+            out = task_handler.check_output(method.run(batch, mc.params), batch)
+            if unit.phase == "calibration":
+                run.null_values = task_handler.null_values(batch, out)
+                run.nominal_threshold = float(method.nominal_threshold(mc.params, plan.calibration.pfa, batch))
+            else:
+                threshold = float(task.thresholds[mc.label])
+                run.metrics = task_handler.trial_metrics(batch, out, threshold)
+                run.metrics["threshold"] = np.full(unit.n, threshold)
+                for i in recorded:
+                    traces[i][mc.label] = task_handler.trace(out, i, threshold)
+        except Exception as exc:  # noqa: BLE001 - one method's failure never stops the others
+            run.error = _error_text(exc)
+        run.seconds = time.perf_counter() - t1
+        result.runs.append(run)
+    result.records = [(int(batch.trials[i]), _trial_record(plan, unit, batch, i, traces[i]))
+                      for i in recorded]
+    result.snr_definition = str(batch.meta.get("snr_definition", ""))
+    return result
+
+
+# ------------------------------------------------------------------ driver side
+
+def calibrations(store: Store, scenarios: list[str], methods: list[str], pfa: float,
+                 mode: str) -> list[CalibrationResult]:
+    """Calibrate every (scenario config, method config) from the stored null values.
+
+    A method config whose calibration failed on any unit gets no threshold.
+    """
+    runs = store.runs()
+    failed = runs[(runs.phase == "calibration") & runs.error.notna()]
+    failed_pairs = set(zip(failed.scenario, failed.method))
+    out = []
+    for sc in scenarios:
+        for m in methods:
+            values, nominal = store.null_values(sc, m)
+            if (sc, m) in failed_pairs or values.size == 0 or nominal is None:
+                continue
+            out.append(calibrate(sc, m, values, nominal, pfa, mode))
+    return out
+
+
+def _run_phase(executor, tasks, store: Store, progress: Progress, on_result=None) -> None:
+    for result in executor.imap_unordered(execute_unit, tasks):
+        store.save_unit(result)
+        if result.snr_definition and store.meta("snr_definition") is None:
+            store.set_meta("snr_definition", result.snr_definition)
+        progress.advance()
+        if on_result is not None:
+            on_result(result)
+
+
+def clear_run_folder(out_dir: Path) -> None:
+    """Remove what a previous run wrote (and only that) for ``--fresh``."""
+    for name in RUN_FILES:
+        (out_dir / name).unlink(missing_ok=True)
+    shutil.rmtree(out_dir / "figures", ignore_errors=True)
+
+
+def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
+              executor: str = "local", fresh: bool = False, quiet: bool = False,
+              on_result=None) -> Store:
+    """Run (or resume) a sweep into ``out_dir``; returns the open store."""
+    out_dir = Path(out_dir)
+    if fresh and out_dir.exists():
+        clear_run_folder(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    store = Store(out_dir / "results.sqlite")
+    store.bind_plan(plan.fingerprint(), plan_record)
+    cal_units, eval_units = plan_units(plan)
+    done = store.done_units()
+    total = len(cal_units) + len(eval_units)
+    progress = Progress(total, sum(u.key in done for u in cal_units + eval_units), quiet=quiet)
+    ex = make_executor(executor, workers)
+    started = time.monotonic()
+    try:
+        _run_phase(ex, [UnitTask(plan, u) for u in cal_units if u.key not in done], store, progress)
+        thresholds: dict[str, dict[str, float | None]] = {sc.label: {m.label: None for m in plan.methods}
+                                                          for sc in plan.scenarios}
+        for c in calibrations(store, [s.label for s in plan.scenarios], [m.label for m in plan.methods],
+                              plan.calibration.pfa, plan.calibration.mode):
+            thresholds[c.scenario][c.method] = c.used
+        tasks = [UnitTask(plan, u, thresholds[u.scenario_label]) for u in eval_units if u.key not in done]
+        _run_phase(ex, tasks, store, progress, on_result)
+    except KeyboardInterrupt:
+        progress.close()
+        if hasattr(ex, "pool"):
+            ex.shutdown(cancel=True)
+        raise Interrupted(len(store.done_units()), total) from None
+    ex.shutdown()
+    progress.close()
+    store.set_meta("last_wall_seconds", repr(time.monotonic() - started))
+    store.set_meta("units_total", str(total))
+    return store
+
+
+def plan_record(plan: Plan, command: str) -> dict:
+    """What the store keeps of the plan: the sweep, the configs, the command."""
+    return {
+        "sweep": plan.to_dict(),
+        "source": plan.source,
+        "command": command,
+        "methods": [{"label": m.label, "name": m.name, "params": m.params_text,
+                     "task": registry.get_method(m.name).task} for m in plan.methods],
+        "scenarios": [{"label": s.label, "name": s.name, "params": s.params_text} for s in plan.scenarios],
+    }
+
+
+def write_plan_toml(path: Path, plan: Plan, command: str) -> None:
+    """The resolved sweep, re-runnable as a sweep file, with provenance."""
+    body = {**plan.to_dict(), "provenance": {"command": command, "fingerprint": plan.fingerprint(),
+                                             **provenance()}}
+    text = "# Resolved plan written by bench; `bench run plan.toml` reproduces the results.\n" + tomlw.dumps(body)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(path)

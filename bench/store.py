@@ -1,0 +1,195 @@
+"""The results store: one SQLite file per run folder (``results.sqlite``, WAL).
+
+Only the driver process writes, one transaction per finished unit, so a run
+stopped at any moment (Ctrl-C, ``kill -9``, a crash) holds exactly the units
+that finished; started again, the run skips them (:meth:`Store.done_units`) and
+ends with the results of an uninterrupted run.
+
+Arrays are stored as ``.npy``/``.npz`` bytes (never pickle).
+
+Tables
+------
+meta        key/value: plan fingerprint, the plan as JSON, creation time
+units       one row per finished unit (phase, scenario, SNR, trial range, timing)
+runs        one row per (unit, method config): seconds and error (NULL if fine)
+metrics     per (unit, method config): the per-trial metric columns (npz)
+null_stats  per (calibration unit, method config): null-hypothesis statistic
+            values used for calibration (npy) and the nominal threshold
+records     per recorded trial: a serialised :class:`bench.recording.TrialRecord`
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import sqlite3
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+import pandas as pd
+
+from bench.errors import ConfigError
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS units (
+    key TEXT PRIMARY KEY, phase TEXT NOT NULL, scenario TEXT NOT NULL, snr_db REAL,
+    trial_start INTEGER NOT NULL, n INTEGER NOT NULL, generate_seconds REAL NOT NULL,
+    finished REAL NOT NULL);
+CREATE TABLE IF NOT EXISTS runs (
+    unit TEXT NOT NULL, method TEXT NOT NULL, seconds REAL NOT NULL, error TEXT,
+    PRIMARY KEY (unit, method));
+CREATE TABLE IF NOT EXISTS metrics (
+    unit TEXT NOT NULL, method TEXT NOT NULL, data BLOB NOT NULL, PRIMARY KEY (unit, method));
+CREATE TABLE IF NOT EXISTS null_stats (
+    unit TEXT NOT NULL, scenario TEXT NOT NULL, method TEXT NOT NULL, nominal REAL,
+    data BLOB NOT NULL, PRIMARY KEY (unit, method));
+CREATE TABLE IF NOT EXISTS records (
+    unit TEXT NOT NULL, trial INTEGER NOT NULL, data BLOB NOT NULL, PRIMARY KEY (unit, trial));
+"""
+
+
+@dataclass
+class MethodRun:
+    """What one method config produced on one unit."""
+
+    label: str
+    seconds: float
+    error: str | None = None
+    metrics: dict[str, np.ndarray] | None = None   # evaluation units: per-trial columns
+    null_values: np.ndarray | None = None          # calibration units: null statistic values
+    nominal_threshold: float | None = None         # calibration units
+
+
+@dataclass
+class UnitResult:
+    """Everything a worker returns for one unit of work."""
+
+    key: str
+    phase: str                      # "calibration" | "evaluation"
+    scenario: str                   # scenario config label
+    snr_db: float | None
+    trial_start: int
+    n: int
+    generate_seconds: float
+    runs: list[MethodRun] = field(default_factory=list)
+    common: dict[str, np.ndarray] = field(default_factory=dict)  # per-trial columns shared by methods
+    records: list[tuple[int, bytes]] = field(default_factory=list)
+    snr_definition: str = ""        # the scenario's SNR definition, one sentence
+
+
+def array_to_bytes(a: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.save(buf, np.ascontiguousarray(a), allow_pickle=False)
+    return buf.getvalue()
+
+
+def bytes_to_array(b: bytes) -> np.ndarray:
+    return np.load(io.BytesIO(b), allow_pickle=False)
+
+
+def columns_to_bytes(cols: dict[str, np.ndarray]) -> bytes:
+    buf = io.BytesIO()
+    np.savez(buf, **{k: np.asarray(v) for k, v in cols.items()})
+    return buf.getvalue()
+
+
+def bytes_to_columns(b: bytes) -> dict[str, np.ndarray]:
+    with np.load(io.BytesIO(b), allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
+class Store:
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.db = sqlite3.connect(self.path, timeout=30)
+        self.db.execute("PRAGMA journal_mode=WAL")
+        self.db.execute("PRAGMA synchronous=NORMAL")
+        self.db.executescript(SCHEMA)
+
+    def close(self) -> None:
+        self.db.close()
+
+    # ---------------------------------------------------------------- plan
+    def bind_plan(self, fingerprint: str, plan: dict) -> None:
+        """Tie the store to a plan; refuse results of a different sweep."""
+        row = self.db.execute("SELECT value FROM meta WHERE key='fingerprint'").fetchone()
+        if row is not None and row[0] != fingerprint:
+            raise ConfigError("--out", f"{self.path.parent} holds results of a different sweep; "
+                                       "use --fresh to start over or choose another --out")
+        with self.db:
+            self.db.execute("INSERT OR REPLACE INTO meta VALUES ('fingerprint', ?)", (fingerprint,))
+            self.db.execute("INSERT OR REPLACE INTO meta VALUES ('plan', ?)", (json.dumps(plan),))
+            self.db.execute("INSERT OR IGNORE INTO meta VALUES ('created', ?)", (repr(time.time()),))
+
+    def meta(self, key: str) -> str | None:
+        row = self.db.execute("SELECT value FROM meta WHERE key=?", (key,)).fetchone()
+        return None if row is None else row[0]
+
+    def set_meta(self, key: str, value: str) -> None:
+        with self.db:
+            self.db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, value))
+
+    def plan(self) -> dict:
+        text = self.meta("plan")
+        if text is None:
+            raise ConfigError("", f"{self.path} holds no plan (not a bench run folder?)")
+        return json.loads(text)
+
+    # ---------------------------------------------------------------- units
+    def done_units(self) -> set[str]:
+        return {r[0] for r in self.db.execute("SELECT key FROM units")}
+
+    def save_unit(self, r: UnitResult) -> None:
+        """Store one finished unit in a single transaction."""
+        with self.db:
+            self.db.execute("INSERT INTO units VALUES (?,?,?,?,?,?,?,?)",
+                            (r.key, r.phase, r.scenario, r.snr_db, r.trial_start, r.n,
+                             r.generate_seconds, time.time()))
+            for run in r.runs:
+                self.db.execute("INSERT INTO runs VALUES (?,?,?,?)", (r.key, run.label, run.seconds, run.error))
+                if run.metrics is not None:
+                    cols = {**r.common, **run.metrics}
+                    self.db.execute("INSERT INTO metrics VALUES (?,?,?)",
+                                    (r.key, run.label, columns_to_bytes(cols)))
+                if run.null_values is not None:
+                    self.db.execute("INSERT INTO null_stats VALUES (?,?,?,?,?)",
+                                    (r.key, r.scenario, run.label, run.nominal_threshold,
+                                     array_to_bytes(run.null_values)))
+            for trial, blob in r.records:
+                self.db.execute("INSERT INTO records VALUES (?,?,?)", (r.key, trial, blob))
+
+    # ---------------------------------------------------------------- reads
+    def units(self) -> pd.DataFrame:
+        return pd.read_sql_query("SELECT * FROM units ORDER BY key", self.db)
+
+    def runs(self) -> pd.DataFrame:
+        return pd.read_sql_query(
+            "SELECT runs.unit, runs.method, runs.seconds, runs.error, units.phase, units.scenario, "
+            "units.snr_db, units.n FROM runs JOIN units ON runs.unit = units.key ORDER BY runs.unit, runs.method",
+            self.db)
+
+    def iter_metrics(self) -> Iterator[tuple[str, str, str, float | None, dict[str, np.ndarray]]]:
+        """(unit, method, scenario, snr_db, columns) for every evaluation result."""
+        q = ("SELECT metrics.unit, metrics.method, units.scenario, units.snr_db, metrics.data "
+             "FROM metrics JOIN units ON metrics.unit = units.key ORDER BY units.scenario, "
+             "metrics.method, units.snr_db, units.trial_start")
+        for unit, method, scenario, snr, blob in self.db.execute(q):
+            yield unit, method, scenario, snr, bytes_to_columns(blob)
+
+    def null_values(self, scenario: str, method: str) -> tuple[np.ndarray, float | None]:
+        """Pooled null statistic values of a method config, in unit order, and its nominal threshold."""
+        rows = self.db.execute("SELECT data, nominal FROM null_stats WHERE scenario=? AND method=? "
+                               "ORDER BY unit", (scenario, method)).fetchall()
+        if not rows:
+            return np.empty(0), None
+        values = np.concatenate([bytes_to_array(b) for b, _ in rows])
+        return values, rows[0][1]
+
+    def records(self) -> list[bytes]:
+        q = ("SELECT records.data FROM records JOIN units ON records.unit = units.key "
+             "ORDER BY units.scenario, units.snr_db, records.trial")
+        return [r[0] for r in self.db.execute(q)]

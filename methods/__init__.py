@@ -1,0 +1,3 @@
+"""Methods: one module per method family; each registers its methods with
+:func:`bench.registry.register_method`. Modules whose name starts with ``_``
+are helpers and are not imported by discovery."""

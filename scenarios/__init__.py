@@ -1,0 +1,2 @@
+"""Scenarios: one module per scenario family; each registers its scenarios
+with :func:`bench.registry.register_scenario`."""

@@ -1,0 +1,237 @@
+"""Scenario ``cv-turn-cv``: the classic maneuver-detection test track."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from bench.core import MANEUVER_DETECTION, Batch, Scenario
+from bench.errors import ConfigError
+from bench.kalman import LinearGaussianModel, kalman_filter, steady_state
+from bench.params import param
+from bench.registry import register_scenario
+
+#: indices of x and y in the state [x, vx, y, vy]
+POSITION_INDEX = (0, 2)
+
+SNR_DEFINITION = (
+    "SNR at the detector input: the reference CV filter is linear, so its "
+    "innovation is a maneuver-induced part nu_m (the filter run on the "
+    "noise-free measurements of the deterministic track, started on the truth) "
+    "plus a noise part; SNR = mean over the turn steps [onset, onset + "
+    "turn_steps) of ||nu_m||^2 / 2, divided by the steady-state innovation "
+    "noise variance per component S_11, in dB; under the null the noise "
+    "level is that of 0 dB."
+)
+
+
+def cv_model(dt: float, sigma_w: float, tracking_index: float) -> LinearGaussianModel:
+    """Per-axis discrete white-noise acceleration (DWNA) model, 2D positions.
+
+    Bar-Shalom, Li & Kirubarajan (2001), sec. 6.3.2: per axis
+    F = [[1, T], [0, 1]], G = [T^2/2, T]', Q = sigma_a^2 G G'. The process
+    noise is set by Kalata's tracking index lambda = sigma_a T^2 / sigma_w, so
+    Q and R = sigma_w^2 I both scale with sigma_w^2 and the gain depends on
+    lambda only.
+    """
+    F = np.kron(np.eye(2), np.array([[1.0, dt], [0.0, 1.0]]))
+    G = dwna_gain(dt)
+    sigma_a = tracking_index * sigma_w / dt ** 2
+    Q = sigma_a ** 2 * G @ G.T
+    H = np.zeros((2, 4))
+    H[0, POSITION_INDEX[0]] = H[1, POSITION_INDEX[1]] = 1.0
+    R = sigma_w ** 2 * np.eye(2)
+    return LinearGaussianModel(F=F, H=H, Q=Q, R=R)
+
+
+def dwna_gain(dt: float) -> np.ndarray:
+    """Noise gain G (4, 2) mapping a per-axis acceleration into [x, vx, y, vy]."""
+    return np.kron(np.eye(2), np.array([[dt ** 2 / 2.0], [dt]]))
+
+
+def ct_transition(omega: float, dt: float) -> np.ndarray:
+    """Exact coordinated-turn transition for [x, vx, y, vy], turn rate omega
+    (rad/s, positive = counter-clockwise), known turn rate; see Li & Jilkov,
+    "Survey of maneuvering target tracking. Part I", IEEE TAES 39(4), 2003.
+    """
+    s, c = np.sin(omega * dt), np.cos(omega * dt)
+    return np.array([
+        [1.0, s / omega, 0.0, -(1.0 - c) / omega],
+        [0.0, c, 0.0, -s],
+        [0.0, (1.0 - c) / omega, 1.0, s / omega],
+        [0.0, s, 0.0, c],
+    ])
+
+
+def deterministic_track(p, turn: bool) -> np.ndarray:
+    """The noise-free state (K, 4): start at the origin heading +x.
+
+    The turn acts on the transitions *into* steps onset .. onset+turn_steps-1,
+    so the measurement at ``onset_step`` is the first one the turn moves, and
+    ``onset_step + turn_steps`` is the first step reached by a CV transition
+    again. Without ``turn`` the track is the same CV line throughout.
+    """
+    F_cv = cv_model(p.dt_s, 1.0, p.tracking_index).F
+    F_ct = ct_transition(np.deg2rad(p.turn_rate_deg_s), p.dt_s)
+    x = np.empty((p.steps, 4))
+    x[0] = (0.0, p.speed_m_s, 0.0, 0.0)
+    for k in range(1, p.steps):
+        in_turn = turn and p.onset_step <= k < p.onset_step + p.turn_steps
+        x[k] = (F_ct if in_turn else F_cv) @ x[k - 1]
+    return x
+
+
+def filter_response(model: LinearGaussianModel, track: np.ndarray) -> np.ndarray:
+    """Innovation (K, 2) of the steady-state filter on noise-free measurements
+    of ``track``, started exactly on the truth: the maneuver-induced part nu_m.
+    """
+    P_prior = steady_state(model)[0]
+    z = (track @ model.H.T)[None]
+    return kalman_filter(model, z, track[None, 0], P_prior).nu[0]
+
+
+def maneuver_power(p) -> float:
+    """P_m: mean over the turn steps of ||nu_m(k)||^2 / m (m^2)."""
+    nu_m = filter_response(cv_model(p.dt_s, 1.0, p.tracking_index),
+                           deterministic_track(p, turn=True))
+    turn = slice(p.onset_step, p.onset_step + p.turn_steps)
+    return float(np.mean(np.sum(nu_m[turn] ** 2, axis=-1)) / nu_m.shape[-1])
+
+
+def noise_std_for_snr(p, snr_db: float) -> float:
+    """sigma_w (m) that gives ``snr_db`` under :data:`SNR_DEFINITION`.
+
+    nu_m does not depend on sigma_w (the gain depends on the tracking index
+    only) while S = sigma_w^2 S_unit, so SNR = P_m / (sigma_w^2 S_unit_11).
+    """
+    S_unit = steady_state(cv_model(p.dt_s, 1.0, p.tracking_index))[2]
+    return float(np.sqrt(maneuver_power(p) / (S_unit[0, 0] * 10.0 ** (snr_db / 10.0))))
+
+
+@register_scenario
+class CvTurnCv(Scenario):
+    """Constant velocity, coordinated turn, constant velocity; 2D position measurements.
+
+    The truth is a deterministic track (CV along +x from the origin, a
+    coordinated turn of ``turn_steps`` steps from ``onset_step``, CV again),
+    plus, with ``process_noise``, the reference filter's own discrete
+    white-noise acceleration, so the filter is matched apart from the turn.
+    The process-noise part is superposed linearly: n_k = F n_{k-1} + G w_k,
+    n_{-1} = 0, with the CV ``F``.
+
+    The reference filter (``meta["filter"]``) is the per-axis DWNA CV filter
+    (:func:`cv_model`). It starts in steady state: ``meta["P0"]`` is the
+    steady-state prior covariance and ``meta["x0"]`` = truth at step 0 +
+    chol(P0) e, so under the matched model its innovations are white and
+    stationary from step 0.
+
+    SNR: see :data:`SNR_DEFINITION` (DESIGN.md sec. 10). Under the null
+    (``snr_db=None``) the track is the same CV line without the turn and the
+    noise level is that of 0 dB: every shipped detector normalises by S, so
+    the scale of the null is immaterial to them. Random draws, in this order
+    whatever the SNR or hypothesis: initial estimate error (4,), process noise
+    (K, 2), measurement noise (K, 2); trial i sees the same standard normals
+    at every SNR.
+    """
+
+    name = "cv-turn-cv"
+    tasks = (MANEUVER_DETECTION,)
+
+    @dataclass(frozen=True)
+    class Params:
+        steps: int = param(160, "number of measurement steps K", ge=2)
+        dt_s: float = param(1.0, "sampling interval T (s)", gt=0.0)
+        onset_step: int = param(80, "first step moved by the turn (step index)", ge=1)
+        turn_steps: int = param(40, "duration of the turn (steps)", ge=1)
+        speed_m_s: float = param(200.0, "target speed (m/s)", gt=0.0)
+        turn_rate_deg_s: float = param(
+            3.0, "turn rate (deg/s), positive = left (counter-clockwise); non-zero")
+        tracking_index: float = param(
+            0.1, "Kalata's tracking index lambda = sigma_a T^2 / sigma_w of the "
+            "reference filter (dimensionless); fixes its gain whatever the noise level",
+            gt=0.0)
+        process_noise: bool = param(
+            True, "truth includes the filter's white-noise acceleration (matched "
+            "filter); false: deterministic track (filter Q then over-estimated)")
+        detect_window_steps: int = param(
+            40, "a detection counts if the first alarm at or after onset comes "
+            "within this many steps", ge=1)
+        warmup_steps: int = param(10, "steps ignored before false alarms are counted", ge=0)
+
+        def validate(self) -> None:
+            if self.turn_rate_deg_s == 0.0:
+                raise ConfigError("turn_rate_deg_s", "must be non-zero (a zero rate is no maneuver)")
+            if self.onset_step + self.turn_steps > self.steps:
+                raise ConfigError("turn_steps", f"onset_step + turn_steps = "
+                                  f"{self.onset_step + self.turn_steps} exceeds steps = {self.steps}")
+            if self.warmup_steps >= self.onset_step:
+                raise ConfigError("warmup_steps", f"must be < onset_step = {self.onset_step} "
+                                  f"(no null region left), got {self.warmup_steps}")
+            if self.onset_step + self.detect_window_steps > self.steps:
+                raise ConfigError("detect_window_steps", f"onset_step + detect_window_steps = "
+                                  f"{self.onset_step + self.detect_window_steps} exceeds "
+                                  f"steps = {self.steps}")
+
+    def generate(self, params, snr_db: float | None, n: int, rng) -> Batch:
+        p = params
+        K, T = p.steps, p.dt_s
+        # Draw first, in a fixed order, so every SNR and the null share the noise.
+        e = rng.standard_normal(4)
+        w = rng.standard_normal((K, 2))
+        v = rng.standard_normal((K, 2))
+
+        null = snr_db is None
+        sigma_w = noise_std_for_snr(p, 0.0 if null else snr_db)
+        model = cv_model(T, sigma_w, p.tracking_index)
+        P0 = steady_state(model)[0]
+
+        track = deterministic_track(p, turn=not null)
+        truth = track[None] + self._process_noise(p, sigma_w, w)
+        z = truth[..., POSITION_INDEX] + sigma_w * v
+        x0 = truth[:, 0] + e @ np.linalg.cholesky(P0).T
+
+        meta = {
+            "onset_step": None if null else p.onset_step,
+            "offset_step": None if null else p.onset_step + p.turn_steps,
+            "detect_window_steps": p.detect_window_steps,
+            "warmup_steps": p.warmup_steps,
+            "snr_definition": SNR_DEFINITION,
+            "realised_snr_db": self._realised_snr_db(p, model, z, x0, P0, track, null),
+            "position_index": POSITION_INDEX,
+            "filter": model,
+            "x0": x0,
+            "P0": P0,
+            "noise_std_m": sigma_w,
+            "dt_s": T,
+            "z_xy": z,
+        }
+        return Batch(t=T * np.arange(K), truth=truth, z=z, meta=meta,
+                     trials=np.asarray(rng.trials))
+
+    @staticmethod
+    def _process_noise(p, sigma_w: float, w: np.ndarray) -> np.ndarray:
+        """(n, K, 4) accumulated DWNA noise, zeros if ``process_noise`` is off."""
+        noise = np.zeros((w.shape[0], p.steps, 4))
+        if not p.process_noise:
+            return noise
+        F = cv_model(p.dt_s, 1.0, p.tracking_index).F
+        Gw = (p.tracking_index * sigma_w / p.dt_s ** 2) * w @ dwna_gain(p.dt_s).T
+        noise[:, 0] = Gw[:, 0]
+        for k in range(1, p.steps):
+            noise[:, k] = noise[:, k - 1] @ F.T + Gw[:, k]
+        return noise
+
+    @staticmethod
+    def _realised_snr_db(p, model, z, x0, P0, track, null: bool) -> np.ndarray:
+        """Per trial: 10 log10(P_m / mean over the turn of ||nu - nu_m||^2 / m).
+
+        By linearity nu - nu_m is exactly the noise part of the innovation.
+        """
+        if null:
+            return np.full(z.shape[0], np.nan)
+        nu = kalman_filter(model, z, x0, P0).nu
+        nu_m = filter_response(model, track)
+        turn = slice(p.onset_step, p.onset_step + p.turn_steps)
+        noise_power = np.mean(np.sum((nu - nu_m)[:, turn] ** 2, axis=-1), axis=-1) / 2.0
+        return 10.0 * np.log10(maneuver_power(p) / noise_power)

@@ -1,0 +1,138 @@
+"""The CLI driven as a user would drive it (subprocesses)."""
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import pandas as pd
+import pytest
+
+from bench.report import SUMMARY_COLUMNS
+
+TRIAL_COLUMNS = ["scenario", "method", "params", "snr_db", "trial", "seed", "detected", "delay",
+                 "false_alarms", "null_steps"]
+KEY = ["scenario", "config", "snr_db", "trial"]
+
+
+def test_list_shows_methods_and_scenarios(bench_cli):
+    out = bench_cli("list", check=True).stdout
+    for name in ("cv-turn-cv", "innovation", "cumulant", "maneuver-detection"):
+        assert name in out
+
+
+def test_run_writes_every_output_and_report_rebuilds_them(bench_cli, write_sweep, tmp_path):
+    out = tmp_path / "run"
+    bench_cli("run", write_sweep(), "--out", out, "--workers", 1, "--quiet", check=True)
+    for name in ("plan.toml", "results.sqlite", "trials.csv", "summary.csv", "calibration.csv", "report.md",
+                 "recording.rrd", "figures/pd_vs_snr.png", "figures/delay_vs_snr.png", "figures/runtime.png"):
+        assert (out / name).exists(), name
+    trials = pd.read_csv(out / "trials.csv")
+    assert set(TRIAL_COLUMNS) <= set(trials.columns)
+    assert len(trials) == 3 * 2 * 12           # configs x SNR levels x trials
+    summary = pd.read_csv(out / "summary.csv")
+    assert list(summary.columns) == SUMMARY_COLUMNS
+    assert len(summary) == 3 * 2
+    assert ((summary.pd_low <= summary.pd) & (summary.pd <= summary.pd_high)).all()
+    report = (out / "report.md").read_text()
+    for section in ("## Calibration", "## Detection probability", "## Runtime", "## Failures", "## Provenance"):
+        assert section in report
+
+    before = {n: (out / n).read_text() for n in ("trials.csv", "summary.csv", "calibration.csv")}
+    for n in before:
+        (out / n).unlink()
+    bench_cli("report", out, check=True)
+    assert {n: (out / n).read_text() for n in before} == before
+
+
+def test_plan_toml_reruns_to_the_same_results(bench_cli, write_sweep, tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    bench_cli("run", write_sweep(), "--out", a, "--workers", 1, "--quiet", "--no-record", check=True)
+    bench_cli("run", a / "plan.toml", "--out", b, "--workers", 1, "--quiet", "--no-record", check=True)
+    assert (a / "trials.csv").read_text() == (b / "trials.csv").read_text()
+
+
+def test_same_results_whatever_the_workers_and_chunks(bench_cli, write_sweep, tmp_path):
+    runs = [("w1", 1, 5), ("w2", 2, 5), ("w2c3", 2, 3), ("w1c12", 1, 12)]
+    frames = []
+    for name, workers, chunk in runs:
+        sweep = write_sweep(f"{name}.toml", chunk=chunk)
+        bench_cli("run", sweep, "--out", tmp_path / name, "--workers", workers, "--quiet", "--no-record",
+                  check=True)
+        frames.append(pd.read_csv(tmp_path / name / "trials.csv").sort_values(KEY).reset_index(drop=True))
+    for other in frames[1:]:
+        pd.testing.assert_frame_equal(frames[0], other)
+
+
+@pytest.mark.parametrize("text, field", [
+    ('name = "x"\nscenario = [', "invalid TOML"),
+    ('name = "x"\nscenario = "cv-turn-cv"\nsnr_db = [0]\n[[methods]]\nname = "magic"\n', "methods[0].name"),
+    ('name = "x"\nscenario = "cv-turn-cv"\nsnr_db = [0]\n[[methods]]\nname = "innovation"\n'
+     'params = { size = 3 }\n', "methods[0].params.size"),
+    ('name = "x"\nscenario = "cv-turn-cv"\nsnr_db = [0]\n[[methods]]\nname = "innovation"\n'
+     'params = { window = "five" }\n', "methods[0].params.window"),
+    ('name = "x"\nscenario = "cv-turn-cv"\nsnr_db = []\n[[methods]]\nname = "innovation"\n', "snr_db"),
+    ('name = "x"\nscenario = "cv-turn-cv"\ntrials = 1.5\nsnr_db = [0]\n[[methods]]\nname = "innovation"\n',
+     "trials"),
+])
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(bench_cli, write_sweep, tmp_path, text, field):
+    out = tmp_path / "never"
+    proc = bench_cli("run", write_sweep(text=text), "--out", out, "--quiet")
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and field in lines[0], proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert not out.exists()
+
+
+def test_bad_command_line_is_one_line_too(bench_cli, tmp_path):
+    for args in (["run"], ["run", "--preset", "nope"], ["run", "x.toml", "--workers", "0"], ["frobnicate"],
+                 ["run", tmp_path / "missing.toml"]):
+        proc = bench_cli(*args)
+        assert proc.returncode == 2, args
+        assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr, proc.stderr
+
+
+def _stored_units(db) -> int:
+    try:
+        with sqlite3.connect(db, timeout=5) as con:
+            return con.execute("SELECT count(*) FROM units").fetchone()[0]
+    except sqlite3.Error:
+        return 0
+
+
+def test_killed_run_resumes_to_the_uninterrupted_results(bench_cli, write_sweep, tmp_path):
+    sweep = write_sweep(trials=40, snr="[-3, 0, 3, 6, 9]", chunk=4, h0=200)
+    whole = tmp_path / "whole"
+    bench_cli("run", sweep, "--out", whole, "--workers", 1, "--quiet", "--no-record", check=True)
+
+    part = tmp_path / "part"
+    proc = subprocess.Popen([sys.executable, "-m", "bench", "run", str(sweep), "--out", str(part), "--workers", "1",
+                             "--quiet", "--no-record"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while _stored_units(part / "results.sqlite") < 60 and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.02)
+    assert proc.poll() is None, "the run finished before it could be killed; make the sweep larger"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    stored = _stored_units(part / "results.sqlite")
+    assert 60 <= stored < 100, stored       # 50 calibration + 50 evaluation units in all
+    assert not (part / "summary.csv").exists()
+
+    bench_cli("run", sweep, "--out", part, "--workers", 1, "--quiet", "--no-record", check=True)
+    assert (part / "trials.csv").read_text() == (whole / "trials.csv").read_text()
+    # every column but the timing is a result and must be identical
+    results = lambda d: pd.read_csv(d / "summary.csv").drop(columns="seconds_per_trial")  # noqa: E731
+    pd.testing.assert_frame_equal(results(part), results(whole))
+
+
+def test_a_run_folder_refuses_a_different_sweep(bench_cli, write_sweep, tmp_path):
+    out = tmp_path / "run"
+    bench_cli("run", write_sweep(), "--out", out, "--workers", 1, "--quiet", "--no-record", check=True)
+    proc = bench_cli("run", write_sweep("other.toml", trials=13), "--out", out, "--quiet")
+    assert proc.returncode == 2 and "--fresh" in proc.stderr
+    bench_cli("run", write_sweep("other.toml", trials=13), "--out", out, "--quiet", "--fresh", "--no-record",
+              check=True)
+    assert len(pd.read_csv(out / "trials.csv")) == 3 * 2 * 13

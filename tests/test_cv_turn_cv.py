@@ -1,0 +1,119 @@
+"""Scenario cv-turn-cv: shapes, the maneuver innovation, the SNR definition."""
+
+import numpy as np
+import pytest
+import scipy.stats
+
+from bench.errors import ConfigError
+from bench.kalman import innovations, steady_state
+from bench.params import build_params
+from bench.registry import get_scenario
+from bench.rng import TrialRNG
+from scenarios.cv_turn_cv import (CvTurnCv, cv_model, deterministic_track,
+                                  filter_response, maneuver_power)
+
+DEFAULT = build_params(CvTurnCv.Params, {})
+
+
+def make(snr_db, n=20, seed=1, **values):
+    params = build_params(CvTurnCv.Params, values)
+    rng = TrialRNG(seed=seed, domain=0, scenario_key=0, trials=range(n))
+    return CvTurnCv().generate(params, snr_db, n, rng)
+
+
+def test_registered():
+    assert get_scenario("cv-turn-cv") is CvTurnCv
+    assert CvTurnCv.summary().startswith("Constant velocity, coordinated turn")
+
+
+def test_shapes_and_meta():
+    b = make(10.0, n=7)
+    K = DEFAULT.steps
+    assert b.t.shape == (K,) and b.truth.shape == (7, K, 4) and b.z.shape == (7, K, 2)
+    assert b.meta["x0"].shape == (7, 4) and b.meta["P0"].shape == (4, 4)
+    assert b.meta["realised_snr_db"].shape == (7,)
+    assert b.meta["z_xy"].shape == (7, K, 2)
+    assert b.meta["onset_step"] == 80 and b.meta["offset_step"] == 120
+    assert b.meta["position_index"] == (0, 2)
+    assert isinstance(b.meta["snr_definition"], str) and "S_11" in b.meta["snr_definition"]
+    np.testing.assert_array_equal(b.trials, np.arange(7))
+    assert np.all(np.isfinite(b.z))
+
+
+def test_deterministic_given_rng():
+    a, b = make(5.0, n=4), make(5.0, n=4)
+    np.testing.assert_array_equal(a.z, b.z)
+    np.testing.assert_array_equal(a.meta["x0"], b.meta["x0"])
+
+
+def test_maneuver_innovation_starts_at_onset():
+    nu_m = filter_response(cv_model(DEFAULT.dt_s, 1.0, DEFAULT.tracking_index),
+                           deterministic_track(DEFAULT, turn=True))
+    assert np.max(np.abs(nu_m[:DEFAULT.onset_step])) < 1e-9
+    assert np.linalg.norm(nu_m[DEFAULT.onset_step]) > 1.0
+    assert maneuver_power(DEFAULT) > 0
+
+
+def test_gain_independent_of_noise_level():
+    K1 = steady_state(cv_model(1.0, 1.0, 0.1))[3]
+    K2 = steady_state(cv_model(1.0, 37.0, 0.1))[3]
+    np.testing.assert_allclose(K1, K2, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("snr_db", [0.0, 10.0])
+def test_noise_innovation_power_matches_S(snr_db):
+    """Pooled over trials and turn steps, the noise part of the innovation has
+    power S_11, so the realised SNR matches the requested one.
+
+    Each whitened noise component is N(0, 1), independent over components,
+    steps and trials, so the pooled power / S_11 is chi2(N) / N with
+    N = m * turn_steps * n; the tolerance is its 1e-6 two-sided quantile in dB.
+    """
+    n, p = 400, DEFAULT
+    b = make(snr_db, n=n, seed=2004)
+    nu = innovations(b).nu
+    nu_m = filter_response(b.meta["filter"], deterministic_track(p, turn=True))
+    turn = slice(p.onset_step, p.onset_step + p.turn_steps)
+    power = np.mean((nu - nu_m)[:, turn] ** 2)
+    snr = 10 * np.log10(maneuver_power(p) / power)
+    N = 2 * p.turn_steps * n
+    lo, hi = scipy.stats.chi2.ppf([1e-6, 1 - 1e-6], N) / N
+    assert -10 * np.log10(hi) < snr - snr_db < -10 * np.log10(lo)
+    S11 = steady_state(b.meta["filter"])[2][0, 0]
+    assert lo < power / S11 < hi
+    # the per-trial realised SNR agrees with the pooled one on average
+    assert abs(np.mean(b.meta["realised_snr_db"]) - snr_db) < 0.5
+
+
+def test_null_has_no_turn():
+    b0 = make(None, n=5, process_noise=False)
+    assert b0.meta["onset_step"] is None and b0.meta["offset_step"] is None
+    assert np.all(np.isnan(b0.meta["realised_snr_db"]))
+    np.testing.assert_allclose(b0.truth[..., 2:], 0.0, atol=1e-9)       # y, vy stay 0
+    np.testing.assert_allclose(b0.truth[..., 1], DEFAULT.speed_m_s)
+
+
+def test_null_and_alternative_share_noise():
+    """Null noise is the 0 dB level, so 0 dB minus null is the turn alone."""
+    alt, null = make(0.0, n=5), make(None, n=5)
+    diff = alt.truth - null.truth
+    turn = deterministic_track(DEFAULT, True) - deterministic_track(DEFAULT, False)
+    np.testing.assert_allclose(diff, np.broadcast_to(turn, diff.shape), atol=1e-6)
+    np.testing.assert_allclose(alt.z - null.z, diff[..., [0, 2]], atol=1e-6)
+    assert alt.meta["noise_std_m"] == null.meta["noise_std_m"]
+
+
+@pytest.mark.parametrize("values, field", [
+    ({"turn_rate_deg_s": 0.0}, "turn_rate_deg_s"),
+    ({"onset_step": 150}, "turn_steps"),
+    ({"warmup_steps": 80}, "warmup_steps"),
+    ({"detect_window_steps": 100}, "detect_window_steps"),
+    ({"steps": 1}, "steps"),
+    ({"dt_s": 0}, "dt_s"),
+    ({"tracking_index": -1.0}, "tracking_index"),
+    ({"process_noise": 1}, "process_noise"),
+])
+def test_bad_params_name_the_field(values, field):
+    with pytest.raises(ConfigError) as err:
+        build_params(CvTurnCv.Params, values)
+    assert err.value.field == field

@@ -1,0 +1,87 @@
+"""The batched Kalman filter against FilterPy, trial by trial, step by step."""
+
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+
+from bench.kalman import (LinearGaussianModel, covariance_sequence, innovations,
+                          kalman_filter, steady_state, whiten)
+
+
+def random_model(rng, d=4, m=2):
+    """A random stable-ish model with full-rank Q and R."""
+    F = np.eye(d) + 0.3 * rng.standard_normal((d, d))
+    H = rng.standard_normal((m, d))
+    A = rng.standard_normal((d, d))
+    B = rng.standard_normal((m, m))
+    return LinearGaussianModel(F=F, H=H, Q=0.1 * A @ A.T + 0.01 * np.eye(d),
+                               R=B @ B.T + 0.1 * np.eye(m))
+
+
+@pytest.fixture
+def setup():
+    rng = np.random.default_rng(12)
+    model = random_model(rng)
+    n, K = 5, 25
+    z = rng.standard_normal((n, K, 2)) * 3.0
+    x0 = rng.standard_normal((n, 4))
+    A = rng.standard_normal((4, 4))
+    P0 = 10.0 * A @ A.T + np.eye(4)          # far from steady state
+    return model, z, x0, P0
+
+
+def test_matches_filterpy_trial_by_trial(setup):
+    model, z, x0, P0 = setup
+    res = kalman_filter(model, z, x0, P0)
+    n, K, _ = z.shape
+    for i in range(n):
+        kf = KalmanFilter(dim_x=4, dim_z=2)
+        kf.F, kf.H, kf.Q, kf.R = model.F, model.H, model.Q, model.R
+        kf.x, kf.P = x0[i].reshape(4, 1).copy(), P0.copy()
+        for k in range(K):
+            np.testing.assert_allclose(res.x_prior[i, k], kf.x[:, 0], rtol=1e-9, atol=1e-12)
+            kf.update(z[i, k])
+            np.testing.assert_allclose(res.nu[i, k], kf.y[:, 0], rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(res.S[k], kf.S, rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(res.x_post[i, k], kf.x[:, 0], rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(res.P_post[k], kf.P, rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(res.gain[k], kf.K, rtol=1e-9, atol=1e-12)
+            kf.predict()
+
+
+def test_steady_state_is_limit_of_recursion(setup):
+    model, _, _, P0 = setup
+    P_prior, P_post, S, K = covariance_sequence(model, P0, 400)
+    P_inf, P_post_inf, S_inf, K_inf = steady_state(model)
+    np.testing.assert_allclose(P_prior[-1], P_inf, rtol=1e-8)
+    np.testing.assert_allclose(P_post[-1], P_post_inf, rtol=1e-8)
+    np.testing.assert_allclose(S[-1], S_inf, rtol=1e-8)
+    np.testing.assert_allclose(K[-1], K_inf, rtol=1e-8, atol=1e-12)
+
+
+def test_steady_start_gives_constant_gain(setup):
+    model, z, x0, _ = setup
+    P_inf = steady_state(model)[0]
+    res = kalman_filter(model, z, x0, P_inf)
+    np.testing.assert_allclose(res.P_prior, np.broadcast_to(P_inf, res.P_prior.shape), rtol=1e-8)
+
+
+def test_whitening(setup):
+    model, z, x0, P0 = setup
+    res = kalman_filter(model, z, x0, P0)
+    whitened, nis = whiten(res.nu, res.S)
+    expected = np.einsum("nki,kij,nkj->nk", res.nu, np.linalg.inv(res.S), res.nu)
+    np.testing.assert_allclose(nis, expected, rtol=1e-10)
+    L = np.linalg.cholesky(res.S)
+    np.testing.assert_allclose(np.einsum("kij,nkj->nki", L, whitened), res.nu, rtol=1e-10, atol=1e-12)
+
+
+def test_innovations_reads_batch_meta(setup):
+    from bench.core import Batch
+    model, z, x0, P0 = setup
+    n, K, _ = z.shape
+    batch = Batch(t=np.arange(K, dtype=float), truth=np.zeros((n, K, 4)), z=z,
+                  meta={"filter": model, "x0": x0, "P0": P0}, trials=np.arange(n))
+    inn = innovations(batch)
+    np.testing.assert_array_equal(inn.nu, kalman_filter(model, z, x0, P0).nu)
+    assert inn.whitened.shape == (n, K, 2) and inn.nis.shape == (n, K) and inn.S.shape == (K, 2, 2)

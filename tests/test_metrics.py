@@ -1,0 +1,55 @@
+"""Metric definitions (DESIGN.md section 7) and calibration."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from bench.calibration import calibrate, empirical_threshold
+from bench.metrics import crossing, detection_trial_metrics, snr_at_pd
+
+
+def test_detection_metrics_follow_the_definitions():
+    K = 12
+    stat = np.zeros((3, K))
+    stat[0, [2, 7]] = 5        # a false alarm at 2, detection at onset 6 + 1
+    stat[1, 11] = 5            # alarm after the detection window: missed
+    stat[2, [6, 8]] = 5        # detection at the onset itself
+    m = detection_trial_metrics(stat, 5.0, onset=6, detect_window=4, null_start=1)
+    assert m["detected"].tolist() == [True, False, True]
+    assert np.array_equal(m["delay"], [1, np.nan, 0], equal_nan=True)
+    assert m["false_alarms"].tolist() == [1, 0, 0]
+    assert m["null_steps"].tolist() == [5, 5, 5]
+    assert m["peak_statistic"].tolist() == [5, 0, 5]
+
+
+def test_empirical_threshold_exceedance_never_above_pfa():
+    rng = np.random.default_rng(0)
+    for n in (10, 99, 1000, 12345):
+        v = rng.standard_normal(n)
+        for pfa in (0.001, 0.01, 0.1, 0.37):
+            t = empirical_threshold(v, pfa)
+            assert np.mean(v >= t) <= pfa
+            # and it is the smallest such threshold: any value below t would exceed pfa
+            below = v[v < t]
+            if below.size:
+                assert np.mean(v >= below.max()) > pfa
+
+
+def test_calibration_reports_the_nominal_thresholds_measured_pfa():
+    v = np.random.default_rng(1).chisquare(2, 200_000)
+    nominal = stats.chi2.ppf(0.99, 2)
+    c = calibrate("s", "m", v, nominal, 0.01, "empirical")
+    assert c.nominal_exceedances == np.count_nonzero(v >= nominal) and c.null_values == v.size
+    assert c.nominal_pfa_low < c.nominal_pfa < c.nominal_pfa_high
+    # the nominal threshold is exact here: its measured Pfa is 0.01 up to binomial sampling (4 sigma)
+    assert abs(c.nominal_pfa - 0.01) < 4 * np.sqrt(0.01 * 0.99 / v.size)
+    assert np.mean(v >= c.used) <= 0.01
+    assert calibrate("s", "m", v, nominal, 0.01, "nominal").used == nominal
+
+
+def test_crossing_interpolates_and_reports_missing():
+    assert crossing([0, 1, 2], [0.0, 0.4, 0.8]) == pytest.approx(1.25)
+    assert np.isnan(crossing([0, 1], [0.1, 0.2]))
+    assert crossing([0, 1], [0.6, 0.9]) == -np.inf
+    mid, low, high = snr_at_pd([0, 1, 2], [0.0, 0.4, 0.8], [0.0, 0.2, 0.6], [0.1, 0.6, 0.9])
+    assert low < mid < high
