@@ -51,16 +51,25 @@ class CalibrationResult:
     nominal_pfa: float          # measured Pfa of the nominal threshold
     nominal_pfa_low: float
     nominal_pfa_high: float
+    chance_pd: float = float("nan")   # Pd under the null at the threshold used
+    chance_pd_low: float = float("nan")
+    chance_pd_high: float = float("nan")
 
     def as_row(self) -> dict:
         return asdict(self)
 
 
 def calibrate(scenario: str, method: str, null_values: np.ndarray, nominal: float,
-              pfa: float, mode: str) -> CalibrationResult:
+              pfa: float, mode: str, null_peaks: np.ndarray | None = None) -> CalibrationResult:
+    """Choose the threshold; measure the nominal one's Pfa and, given the null
+    trials' window peaks, the chance detection rate at the threshold used."""
     values = np.asarray(null_values, dtype=float)
     used = empirical_threshold(values, pfa) if mode == "empirical" else float(nominal)
     exceed = int(np.count_nonzero(values >= nominal))
     low, high = binomial_interval(exceed, values.size)
+    chance = (np.nan, np.nan, np.nan)
+    if null_peaks is not None and len(null_peaks):
+        hits = int(np.count_nonzero(np.asarray(null_peaks) >= used))
+        chance = (hits / len(null_peaks), *binomial_interval(hits, len(null_peaks)))
     return CalibrationResult(scenario, method, mode, pfa, float(nominal), used, int(values.size),
-                             exceed, exceed / values.size if values.size else np.nan, low, high)
+                             exceed, exceed / values.size if values.size else np.nan, low, high, *chance)

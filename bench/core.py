@@ -43,7 +43,9 @@ class Batch:
     meta : dict
         Scenario facts the methods and metrics need. Keys used by the harness:
         ``onset_step`` / ``offset_step`` (maneuver step indices, ``None``
-        under the null), ``detect_window_steps``, ``warmup_steps``,
+        under the null), ``null_onset_step`` (under the null, the step where
+        the maneuver would start: the harness measures there how often a
+        detector "detects" by chance), ``detect_window_steps``, ``warmup_steps``,
         ``snr_definition`` (one sentence), ``realised_snr_db`` ((n,) array),
         ``position_index`` (indices of the position components of the state).
         A scenario may add a ``filter`` model for methods that run a filter.

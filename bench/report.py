@@ -136,7 +136,9 @@ def _section_calibration(cals, summary: pd.DataFrame) -> str:
         used_pfa = measured.fa_pfa.get(c.method, np.nan)
         rows.append([f"`{c.method}`", c.mode, f"{c.pfa:g}", _fmt(c.nominal, 4),
                      f"{_fmt(c.nominal_pfa)} [{_fmt(c.nominal_pfa_low)}, {_fmt(c.nominal_pfa_high)}]",
-                     _fmt(c.used, 4), _fmt(used_pfa), f"{c.null_values:,}"])
+                     _fmt(c.used, 4), _fmt(used_pfa),
+                     f"{_fmt(c.chance_pd)} [{_fmt(c.chance_pd_low)}, {_fmt(c.chance_pd_high)}]",
+                     f"{c.null_values:,}"])
     return "\n\n".join([
         "## Calibration",
         "Thresholds are applied by the harness, so every detector is compared at the same false-alarm "
@@ -144,18 +146,21 @@ def _section_calibration(cals, summary: pd.DataFrame) -> str:
         "calibration trials, all steps after warm-up) at or above the method's own analytic threshold, "
         "with its 95% Wilson interval; *empirical* thresholds are the (1 − Pfa) quantile of the same "
         "values. *Pfa in evaluation* is the per-step false-alarm rate measured before the maneuver onset "
-        "in the evaluation trials, at the threshold used, averaged over SNR levels.",
+        "in the evaluation trials, at the threshold used, averaged over SNR levels. *Chance Pd* is how "
+        "often the detection rule fires on null trials (no maneuver) within the detection window: the "
+        "floor Pd falls to as SNR goes down, drawn as a dotted line in the Pd figure.",
         _table(["config", "mode", "requested Pfa", "nominal threshold", "measured Pfa of nominal [95% CI]",
-                "threshold used", "Pfa in evaluation", "null values"], rows),
+                "threshold used", "Pfa in evaluation", "chance Pd [95% CI]", "null values"], rows),
         "Window statistics are correlated from step to step, so the intervals, which treat steps as "
         "independent, are narrower than the truth for them.",
     ])
 
 
-def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: float) -> str:
+def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: float,
+                       chance: dict[str, float]) -> str:
     if summary.empty:
         return "## Detection\n\nNo results."
-    figures.pd_vs_snr(summary, fig_dir / "pd_vs_snr.png", pfa, title)
+    figures.pd_vs_snr(summary, fig_dir / "pd_vs_snr.png", pfa, title, chance)
     figures.delay_vs_snr(summary, fig_dir / "delay_vs_snr.png", title)
     rows = []
     for label, g in summary.groupby("config", sort=False):
@@ -262,7 +267,8 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
              ("" if done >= total else f" **Incomplete run: {done} of {total} units stored.**"),
              _section_plan(record, store),
              _section_calibration(cals, summary),
-             _section_detection(summary, fig_dir, title, sweep["calibration"]["pfa"])]
+             _section_detection(summary, fig_dir, title, sweep["calibration"]["pfa"],
+                                {c.method: c.chance_pd for c in cals})]
     if records:
         top = max(records, key=lambda r: (r.snr_db if r.snr_db is not None else -np.inf, -r.trial))
         figures.trial_timeline(top, fig_dir / "trial_timeline.png",

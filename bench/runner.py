@@ -135,6 +135,7 @@ def execute_unit(task: UnitTask) -> UnitResult:
             out = task_handler.check_output(method.run(batch, mc.params), batch)
             if unit.phase == "calibration":
                 run.null_values = task_handler.null_values(batch, out)
+                run.null_peaks = task_handler.null_peaks(batch, out)
                 run.nominal_threshold = float(method.nominal_threshold(mc.params, plan.calibration.pfa, batch))
             else:
                 threshold = float(task.thresholds[mc.label])
@@ -166,10 +167,10 @@ def calibrations(store: Store, scenarios: list[str], methods: list[str], pfa: fl
     out = []
     for sc in scenarios:
         for m in methods:
-            values, nominal = store.null_values(sc, m)
+            values, peaks, nominal = store.null_values(sc, m)
             if (sc, m) in failed_pairs or values.size == 0 or nominal is None:
                 continue
-            out.append(calibrate(sc, m, values, nominal, pfa, mode))
+            out.append(calibrate(sc, m, values, nominal, pfa, mode, peaks))
     return out
 
 

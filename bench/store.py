@@ -46,7 +46,7 @@ CREATE TABLE IF NOT EXISTS metrics (
     unit TEXT NOT NULL, method TEXT NOT NULL, data BLOB NOT NULL, PRIMARY KEY (unit, method));
 CREATE TABLE IF NOT EXISTS null_stats (
     unit TEXT NOT NULL, scenario TEXT NOT NULL, method TEXT NOT NULL, nominal REAL,
-    data BLOB NOT NULL, PRIMARY KEY (unit, method));
+    data BLOB NOT NULL, peaks BLOB, PRIMARY KEY (unit, method));
 CREATE TABLE IF NOT EXISTS records (
     unit TEXT NOT NULL, trial INTEGER NOT NULL, data BLOB NOT NULL, PRIMARY KEY (unit, trial));
 """
@@ -61,6 +61,7 @@ class MethodRun:
     error: str | None = None
     metrics: dict[str, np.ndarray] | None = None   # evaluation units: per-trial columns
     null_values: np.ndarray | None = None          # calibration units: null statistic values
+    null_peaks: np.ndarray | None = None           # calibration units: per-trial window peaks
     nominal_threshold: float | None = None         # calibration units
 
 
@@ -156,9 +157,10 @@ class Store:
                     self.db.execute("INSERT INTO metrics VALUES (?,?,?)",
                                     (r.key, run.label, columns_to_bytes(cols)))
                 if run.null_values is not None:
-                    self.db.execute("INSERT INTO null_stats VALUES (?,?,?,?,?)",
+                    peaks = None if run.null_peaks is None else array_to_bytes(run.null_peaks)
+                    self.db.execute("INSERT INTO null_stats VALUES (?,?,?,?,?,?)",
                                     (r.key, r.scenario, run.label, run.nominal_threshold,
-                                     array_to_bytes(run.null_values)))
+                                     array_to_bytes(run.null_values), peaks))
             for trial, blob in r.records:
                 self.db.execute("INSERT INTO records VALUES (?,?,?)", (r.key, trial, blob))
 
@@ -180,14 +182,17 @@ class Store:
         for unit, method, scenario, snr, blob in self.db.execute(q):
             yield unit, method, scenario, snr, bytes_to_columns(blob)
 
-    def null_values(self, scenario: str, method: str) -> tuple[np.ndarray, float | None]:
-        """Pooled null statistic values of a method config, in unit order, and its nominal threshold."""
-        rows = self.db.execute("SELECT data, nominal FROM null_stats WHERE scenario=? AND method=? "
+    def null_values(self, scenario: str, method: str) -> tuple[np.ndarray, np.ndarray | None, float | None]:
+        """Pooled null statistic values of a method config (in unit order), its
+        per-trial window peaks (None if the scenario gives no window) and its
+        nominal threshold."""
+        rows = self.db.execute("SELECT data, peaks, nominal FROM null_stats WHERE scenario=? AND method=? "
                                "ORDER BY unit", (scenario, method)).fetchall()
         if not rows:
-            return np.empty(0), None
-        values = np.concatenate([bytes_to_array(b) for b, _ in rows])
-        return values, rows[0][1]
+            return np.empty(0), None, None
+        values = np.concatenate([bytes_to_array(r[0]) for r in rows])
+        peaks = None if any(r[1] is None for r in rows) else np.concatenate([bytes_to_array(r[1]) for r in rows])
+        return values, peaks, rows[0][2]
 
     def records(self) -> list[bytes]:
         q = ("SELECT records.data FROM records JOIN units ON records.unit = units.key "

@@ -45,6 +45,16 @@ class DetectionTask:
         """Per-step statistic values of a null batch, after warm-up: the calibration sample."""
         return out.statistic[:, self.null_start(batch, out):].ravel()
 
+    def null_peaks(self, batch: Batch, out: DetectionOutput) -> np.ndarray | None:
+        """Per null trial, the largest statistic in the detection window placed
+        where the maneuver would start: ``mean(peaks >= threshold)`` is the
+        chance detection rate, the floor Pd falls to as SNR goes down."""
+        onset = batch.meta.get("null_onset_step")
+        if onset is None:
+            return None
+        window = out.statistic[:, onset:onset + int(batch.meta["detect_window_steps"])]
+        return window.max(axis=1)
+
     def trial_metrics(self, batch: Batch, out: DetectionOutput, threshold: float) -> dict[str, np.ndarray]:
         return detection_trial_metrics(out.statistic, threshold, onset=int(batch.meta["onset_step"]),
                                        detect_window=int(batch.meta["detect_window_steps"]),

@@ -11,13 +11,7 @@ from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Method
 from bench.kalman import innovations
 from bench.params import param
 from bench.registry import register_method
-
-
-def _window_sum(c: np.ndarray, M: int) -> np.ndarray:
-    """Sum over the last ``M`` samples from a cumulative sum ``c`` along axis 1."""
-    out = c.copy()
-    out[:, M:] -= c[:, :-M]
-    return out
+from bench.windows import sliding_sum
 
 
 def window_lengths(steps: int, M: int) -> np.ndarray:
@@ -40,11 +34,11 @@ def window_third_moment(x: np.ndarray, M: int, centred: bool) -> np.ndarray:
     """
     x = np.asarray(x, dtype=np.float64)
     L = window_lengths(x.shape[1], M)
-    S3 = _window_sum(np.cumsum(x ** 3, axis=1), M)
+    S3 = sliding_sum(x ** 3, M)
     if not centred:
         return S3 / L
-    S1 = _window_sum(np.cumsum(x, axis=1), M)
-    S2 = _window_sum(np.cumsum(x ** 2, axis=1), M)
+    S1 = sliding_sum(x, M)
+    S2 = sliding_sum(x ** 2, M)
     xbar = S1 / L
     return (S3 - 3.0 * xbar * S2 + 2.0 * L * xbar ** 3) / L
 

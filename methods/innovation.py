@@ -13,19 +13,11 @@ from bench.errors import ConfigError
 from bench.kalman import innovations
 from bench.params import param
 from bench.registry import register_method
+from bench.windows import sliding_sum
 
 #: the fading-memory statistic counts as formed once the weight of the
 #: missing (pre-start) past is below this fraction of its steady total
 FADING_SETTLE = 0.01
-
-
-def sliding_sum(x: np.ndarray, window: int) -> np.ndarray:
-    """Sum of the last ``window`` values along axis 1 (partial sums before
-    the window fills), via a cumulative sum."""
-    c = np.cumsum(x, axis=1)
-    out = c.copy()
-    out[:, window:] -= c[:, :-window]
-    return out
 
 
 def fading_sum(x: np.ndarray, delta: float) -> np.ndarray:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -91,10 +92,18 @@ def filter_response(model: LinearGaussianModel, track: np.ndarray) -> np.ndarray
     return kalman_filter(model, z, track[None, 0], P_prior).nu[0]
 
 
+@functools.lru_cache(maxsize=64)
+def maneuver_innovation(p) -> np.ndarray:
+    """nu_m (K, 2) of the turn for params ``p``; independent of sigma_w, so
+    computed once per params (they are frozen, hence hashable)."""
+    nu_m = filter_response(cv_model(p.dt_s, 1.0, p.tracking_index), deterministic_track(p, turn=True))
+    nu_m.setflags(write=False)
+    return nu_m
+
+
 def maneuver_power(p) -> float:
     """P_m: mean over the turn steps of ||nu_m(k)||^2 / m (m^2)."""
-    nu_m = filter_response(cv_model(p.dt_s, 1.0, p.tracking_index),
-                           deterministic_track(p, turn=True))
+    nu_m = maneuver_innovation(p)
     turn = slice(p.onset_step, p.onset_step + p.turn_steps)
     return float(np.mean(np.sum(nu_m[turn] ** 2, axis=-1)) / nu_m.shape[-1])
 
@@ -193,6 +202,7 @@ class CvTurnCv(Scenario):
 
         meta = {
             "onset_step": None if null else p.onset_step,
+            "null_onset_step": p.onset_step,
             "offset_step": None if null else p.onset_step + p.turn_steps,
             "detect_window_steps": p.detect_window_steps,
             "warmup_steps": p.warmup_steps,
@@ -231,7 +241,7 @@ class CvTurnCv(Scenario):
         if null:
             return np.full(z.shape[0], np.nan)
         nu = kalman_filter(model, z, x0, P0).nu
-        nu_m = filter_response(model, track)
+        nu_m = maneuver_innovation(p)
         turn = slice(p.onset_step, p.onset_step + p.turn_steps)
         noise_power = np.mean(np.sum((nu - nu_m)[:, turn] ** 2, axis=-1), axis=-1) / 2.0
         return 10.0 * np.log10(maneuver_power(p) / noise_power)

@@ -40,11 +40,42 @@ def test_run_writes_every_output_and_report_rebuilds_them(bench_cli, write_sweep
     for section in ("## Calibration", "## Detection probability", "## Runtime", "## Failures", "## Provenance"):
         assert section in report
 
+    _check_recording(out / "recording.rrd", trials)
+
     before = {n: (out / n).read_text() for n in ("trials.csv", "summary.csv", "calibration.csv")}
     for n in before:
         (out / n).unlink()
     bench_cli("report", out, check=True)
     assert {n: (out / n).read_text() for n in before} == before
+
+
+def _check_recording(rrd, trials):
+    """The recording holds, per SNR level, trial 0's truth, measurements and, per
+    method config, the statistic, the threshold in force and the alarms."""
+    import numpy as np
+    from rerun.chunk import RrdReader
+
+    from bench.recording import entity_root, method_entity_names, rerun_path
+
+    reader = RrdReader(rrd)
+    paths = set(reader.store().schema().entity_paths())
+    names = method_entity_names(trials.config.unique())
+    for snr in trials.snr_db.unique():
+        root = entity_root("cv-turn-cv", snr, 0)
+        assert rerun_path(f"{root}/truth") in paths and rerun_path(f"{root}/measurements") in paths
+        for config, name in names.items():
+            for leaf in ("statistic", "threshold"):
+                assert rerun_path(f"{root}/{name}/{leaf}") in paths, (root, name, leaf)
+            chunks = reader.stream().filter(content=rerun_path(f"{root}/{name}/threshold"), is_static=False,
+                                            components="Scalars:scalars").to_chunks()
+            logged = np.concatenate([np.concatenate(c.to_record_batch().column("Scalars:scalars").to_pylist())
+                                     for c in chunks])
+            row = trials[(trials.config == config) & (trials.snr_db == snr) & (trials.trial == 0)].iloc[0]
+            np.testing.assert_array_equal(np.unique(logged), [row.threshold])
+    assert rerun_path("/summary/table") in paths
+    proc = subprocess.run([os.path.join(os.path.dirname(sys.executable), "rerun"), "rrd", "verify", str(rrd)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
 
 
 def test_plan_toml_reruns_to_the_same_results(bench_cli, write_sweep, tmp_path):

@@ -11,7 +11,8 @@ from bench.params import build_params
 from bench.registry import get_method
 from bench.rng import TrialRNG
 from methods.cumulant import Cumulant, window_third_moment
-from methods.innovation import Innovation, fading_sum, fading_valid_from, sliding_sum
+from bench.windows import sliding_sum
+from methods.innovation import Innovation, fading_sum, fading_valid_from
 from scenarios.cv_turn_cv import CvTurnCv
 
 CONFIGS = [
