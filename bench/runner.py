@@ -20,6 +20,7 @@ the store are skipped, which is what makes an interrupted run resumable.
 from __future__ import annotations
 
 import shutil
+import sys
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -205,9 +206,10 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
     done = store.done_units()
     total = len(cal_units) + len(eval_units)
     progress = Progress(total, sum(u.key in done for u in cal_units + eval_units), quiet=quiet)
-    ex = make_executor(executor, workers)
+    ex = None
     started = time.monotonic()
     try:
+        ex = make_executor(executor, workers)
         _run_phase(ex, [UnitTask(plan, u) for u in cal_units if u.key not in done], store, progress)
         thresholds: dict[str, dict[str, float | None]] = {sc.label: {m.label: None for m in plan.methods}
                                                           for sc in plan.scenarios}
@@ -218,8 +220,12 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
         _run_phase(ex, tasks, store, progress, on_result)
     except KeyboardInterrupt:
         progress.close()
-        if hasattr(ex, "pool"):
-            ex.shutdown(cancel=True)
+        if ex is not None:
+            print("stopping: letting the units in flight end (Ctrl-C again to kill them)", file=sys.stderr)
+            try:
+                ex.shutdown(cancel=True)
+            except KeyboardInterrupt:
+                ex.kill()
         raise Interrupted(len(store.done_units()), total) from None
     ex.shutdown()
     progress.close()

@@ -134,25 +134,40 @@ def _stored_units(db) -> int:
         return 0
 
 
-def test_killed_run_resumes_to_the_uninterrupted_results(bench_cli, write_sweep, tmp_path):
-    sweep = write_sweep(trials=40, snr="[-3, 0, 3, 6, 9]", chunk=4, h0=200)
-    whole = tmp_path / "whole"
-    bench_cli("run", sweep, "--out", whole, "--workers", 1, "--quiet", "--no-record", check=True)
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    """A sweep long enough to interrupt, and its uninterrupted results."""
+    from conftest import SMALL_SWEEP
+    root = tmp_path_factory.mktemp("resume")
+    sweep = root / "sweep.toml"
+    sweep.write_text(SMALL_SWEEP.format(trials=40, snr="[-3, 0, 3, 6, 9]", chunk=4, h0=200))
+    from conftest import run_bench
+    run_bench("run", sweep, "--out", root / "whole", "--workers", 1, "--quiet", "--no-record", check=True)
+    return sweep, root / "whole"
 
+
+@pytest.mark.parametrize("sig, workers", [(signal.SIGKILL, 1), (signal.SIGINT, 2)])
+def test_interrupted_run_resumes_to_the_uninterrupted_results(bench_cli, uninterrupted, tmp_path, sig, workers):
+    sweep, whole = uninterrupted
     part = tmp_path / "part"
-    proc = subprocess.Popen([sys.executable, "-m", "bench", "run", str(sweep), "--out", str(part), "--workers", "1",
-                             "--quiet", "--no-record"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    # a session of its own, so the signal goes to the whole group as a terminal's Ctrl-C does
+    proc = subprocess.Popen([sys.executable, "-m", "bench", "run", str(sweep), "--out", str(part), "--workers",
+                             str(workers), "--quiet", "--no-record"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
     deadline = time.monotonic() + 120
     while _stored_units(part / "results.sqlite") < 60 and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.02)
-    assert proc.poll() is None, "the run finished before it could be killed; make the sweep larger"
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
+    assert proc.poll() is None, "the run finished before it could be interrupted; make the sweep larger"
+    os.killpg(proc.pid, sig)
+    err = proc.communicate(timeout=60)[1]
     stored = _stored_units(part / "results.sqlite")
     assert 60 <= stored < 100, stored       # 50 calibration + 50 evaluation units in all
     assert not (part / "summary.csv").exists()
+    if sig == signal.SIGINT:
+        assert proc.returncode == 130 and "Traceback" not in err, err
+        assert "again to resume" in err.strip().splitlines()[-1]
 
-    bench_cli("run", sweep, "--out", part, "--workers", 1, "--quiet", "--no-record", check=True)
+    bench_cli("run", sweep, "--out", part, "--workers", workers, "--quiet", "--no-record", check=True)
     assert (part / "trials.csv").read_text() == (whole / "trials.csv").read_text()
     # every column but the timing is a result and must be identical
     results = lambda d: pd.read_csv(d / "summary.csv").drop(columns="seconds_per_trial")  # noqa: E731
