@@ -23,6 +23,10 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
+def _legend_outside(ax) -> None:
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+
+
 STYLES = ("o-", "s--", "^-.", "D:", "v-", "P--", "X-.", "*:")
 
 
@@ -47,7 +51,7 @@ def pd_vs_snr(summary: pd.DataFrame, path: Path, pfa: float, title: str,
     ax.set(xlabel="SNR (dB)", ylabel="probability of detection $P_D$", ylim=(-0.02, 1.02),
            title=f"{title}: $P_D$ vs SNR at $P_{{FA}}$ = {pfa:g} (95% bands)")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="lower right")
+    _legend_outside(ax)
     return _save(fig, path)
 
 
@@ -58,10 +62,26 @@ def delay_vs_snr(summary: pd.DataFrame, path: Path, title: str) -> Path:
         ok = g.delay_mean.notna()
         ax.plot(g.snr_db[ok], g.delay_mean[ok], style, color=color, ms=4, lw=1.5, label=label, mfc="none")
         ax.fill_between(g.snr_db[ok], g.delay_low[ok], g.delay_high[ok], color=color, alpha=0.18, lw=0)
-    ax.set(xlabel="SNR (dB)", ylabel="mean delay of detected trials (steps)",
-           title=f"{title}: detection delay (95% bootstrap bands)")
+        ax.plot(g.snr_db[ok], g.delay_median[ok], "_", color=color, ms=9, mew=1.5)
+    ax.set(xlabel="SNR (dB)", ylabel="delay of detected trials (steps)",
+           title=f"{title}: mean detection delay (95% bootstrap bands), median as –")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    _legend_outside(ax)
+    return _save(fig, path)
+
+
+def roc(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, snr_db: float, pfa: float,
+        title: str) -> Path:
+    """Pd against per-step Pfa at one SNR, per method config (log Pfa axis)."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    for i, (label, (x, y)) in enumerate(curves.items()):
+        ax.plot(x, y, STYLES[i % len(STYLES)][1:] or "-", color=f"C{i % 10}", lw=1.5, label=label)
+    ax.axvline(pfa, color="0.5", lw=0.8, ls=":")
+    ax.set_xscale("log")
+    ax.set(xlabel="per-step $P_{FA}$ (null trials)", ylabel="$P_D$", ylim=(-0.02, 1.02),
+           title=f"{title}: ROC at {snr_db:g} dB (dotted: requested $P_{{FA}}$)")
+    ax.grid(alpha=0.3, which="both")
+    _legend_outside(ax)
     return _save(fig, path)
 
 

@@ -101,6 +101,24 @@ def summarise_detection(trials: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def roc_curve(null_values: np.ndarray, peaks: np.ndarray, points: int = 80) -> tuple[np.ndarray, np.ndarray]:
+    """(per-step Pfa, Pd) over thresholds, from stored statistics only.
+
+    Pfa(t) is the fraction of null-hypothesis statistic values >= t; Pd(t) the
+    fraction of trials whose peak statistic in the detection window is >= t,
+    which is exactly the detection rule at threshold t. Thresholds are the
+    null quantiles at log-spaced Pfa from 1/N to 1.
+    """
+    null = np.sort(np.asarray(null_values, float))
+    peaks = np.asarray(peaks, float)
+    n = null.size
+    levels = np.unique(np.concatenate([np.logspace(np.log10(1.0 / n), 0.0, points), [1.0]]))
+    thresholds = null[np.clip(np.ceil(n * (1.0 - levels)).astype(int), 0, n - 1)]
+    pfa = 1.0 - np.searchsorted(null, thresholds, side="left") / n
+    pd = (peaks[None, :] >= thresholds[:, None]).mean(axis=1)
+    return pfa, pd
+
+
 def crossing(x: np.ndarray, y: np.ndarray, level: float = 0.5) -> float:
     """The first x at which the piecewise-linear y(x) reaches ``level`` from below.
 

@@ -16,7 +16,7 @@ import pandas as pd
 
 from bench import figures
 from bench.errors import ConfigError
-from bench.metrics import snr_at_pd
+from bench.metrics import roc_curve, snr_at_pd
 from bench.provenance import provenance
 from bench.recording import TrialRecord, write_recording
 from bench.runner import calibrations
@@ -186,6 +186,55 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
     ])
 
 
+def _section_ranking(summary: pd.DataFrame) -> str:
+    """Method families ordered by the lowest SNR at which any of their configs reaches Pd = 0.5."""
+    rows = []
+    for method, g in summary.groupby("method", sort=False):
+        best = (np.inf, None)
+        for label, c in g.groupby("config", sort=False):
+            c = c.sort_values("snr_db")
+            x = snr_at_pd(c.snr_db, c.pd, c.pd_low, c.pd_high)[0]
+            key = -np.inf if np.isneginf(x) else (np.inf if np.isnan(x) else x)
+            if best[1] is None or key < best[0]:
+                best = (key, label, c.snr_db)
+        rows.append((best[0], method, best[1], best[2]))
+    rows.sort(key=lambda r: r[0])
+    lead = rows[0][0]
+    table = [[f"{i + 1}", f"`{m}`", f"`{label}`", _fmt_crossing(x if np.isfinite(x) or np.isneginf(x) else np.nan, snr),
+              "–" if not (np.isfinite(x) and np.isfinite(lead)) else f"{x - lead:+.2g}"]
+             for i, (x, m, label, snr) in enumerate(rows)]
+    return "\n\n".join([
+        "## Ranking of methods",
+        "Each method at its best config in this sweep, by the SNR at which Pd reaches 0.5 "
+        "(all at the same calibrated per-step Pfa).",
+        _table(["rank", "method", "best config", "SNR at Pd = 0.5 (dB)", "dB behind the first"], table),
+    ])
+
+
+def _section_roc(store: Store, trials: pd.DataFrame, summary: pd.DataFrame, fig_dir: Path, title: str,
+                 pfa: float) -> str:
+    """ROC at the SNR level where the configs' mean Pd is closest to 0.5."""
+    if summary.empty or "peak_statistic" not in trials:
+        return ""
+    mean_pd = summary.groupby("snr_db").pd.mean()
+    snr = float((mean_pd - 0.5).abs().idxmin())
+    curves = {}
+    for (scenario, label), g in trials[trials.snr_db == snr].groupby(["scenario", "config"], sort=False):
+        null, _peaks, _nominal = store.null_values(scenario, label)
+        if null.size:
+            curves[label] = roc_curve(null, g.peak_statistic.to_numpy())
+    if not curves:
+        return ""
+    figures.roc(curves, fig_dir / "roc.png", snr, pfa, title)
+    return "\n\n".join([
+        "## ROC",
+        f"Pd against per-step Pfa at {_fmt(snr)} dB, the level where the configs' mean Pd is closest to "
+        "0.5, computed from the stored statistics without re-running: Pfa from the calibration null "
+        "values, Pd from each trial's peak statistic in the detection window.",
+        "![ROC](figures/roc.png)",
+    ])
+
+
 def _section_runtime(runs: pd.DataFrame, units: pd.DataFrame, fig_dir: Path, record: dict) -> str:
     ev = runs[runs.error.isna()]
     if ev.empty:
@@ -234,6 +283,15 @@ force and the alarms, on the timelines `step` and `time`, plus Pd-vs-SNR per con
 `/summary`. Open it with `bench view {out}` or `rerun {out}/recording.rrd`."""
 
 
+def preset_notes(source: str) -> str:
+    """The packaged notes of a preset (``bench/presets/NAME.md``), if any."""
+    import importlib.resources
+    if not source.startswith("preset "):
+        return ""
+    path = importlib.resources.files("bench") / "presets" / f"{source.split(' ', 1)[1]}.md"
+    return path.read_text(encoding="utf-8").strip() if path.is_file() else ""
+
+
 def build_outputs(out_dir: Path, *, recording: bool = True) -> Path:
     """(Re)build every output of a run folder from its store; returns report.md's path."""
     out_dir = Path(out_dir)
@@ -269,6 +327,12 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
              _section_calibration(cals, summary),
              _section_detection(summary, fig_dir, title, sweep["calibration"]["pfa"],
                                 {c.method: c.chance_pd for c in cals})]
+    if not summary.empty:
+        parts += [_section_ranking(summary),
+                  _section_roc(store, trials, summary, fig_dir, title, sweep["calibration"]["pfa"])]
+    notes = preset_notes(record.get("source", ""))
+    if notes:
+        parts.append(notes)
     if records:
         top = max(records, key=lambda r: (r.snr_db if r.snr_db is not None else -np.inf, -r.trial))
         figures.trial_timeline(top, fig_dir / "trial_timeline.png",
