@@ -270,7 +270,8 @@ def _section_provenance(record: dict, store: Store, prov: dict) -> str:
             ["plan fingerprint", f"`{store.meta('fingerprint')}`"]]
     wall = store.meta("last_wall_seconds")
     if wall:
-        rows.append(["wall time of the last `bench run`", f"{float(wall):.1f} s"])
+        rows.append(["wall time of the units in the last `bench run` (before report and recording)",
+                     f"{float(wall):.1f} s"])
     rows += [[k, v] for k, v in prov.items()]
     return "## Provenance\n\n" + _table(["", ""], rows)
 
