@@ -97,16 +97,16 @@ def _load_plan(args):
             raise ConfigError("--preset", f"unknown preset {args.preset!r} (known: {', '.join(sorted(presets))})")
         source = f"preset {args.preset}"
         try:
-            return parse_sweep_text(presets[args.preset].read_bytes(), source, allow_large=args.yes), source
+            return parse_sweep_text(presets[args.preset].read_bytes(), source, allow_large=args.yes)
         except ConfigError as err:
             raise ConfigError(f"{source}: {err.field}" if err.field else source, err.problem) from None
     try:
-        return load_sweep(args.sweep, allow_large=args.yes), args.sweep
+        return load_sweep(args.sweep, allow_large=args.yes)
     except ConfigError as err:
         raise ConfigError(f"{args.sweep}: {err.field}" if err.field else args.sweep, err.problem) from None
 
 
-def _command_line(args, plan) -> str:
+def _command_line(args) -> str:
     words = ["bench", "run"] + (["--preset", args.preset] if args.preset else [args.sweep])
     if args.out:
         words += ["--out", args.out]
@@ -116,11 +116,11 @@ def _command_line(args, plan) -> str:
 def cmd_run(args) -> int:
     from bench.report import build_outputs
     from bench.runner import Interrupted, plan_record, run_sweep, write_plan_toml
-    plan, _source = _load_plan(args)
+    plan = _load_plan(args)
     out_dir = Path(args.out) if args.out else Path("reports") / plan.name
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError("--out", f"{out_dir} exists and is not a folder")
-    command = _command_line(args, plan)
+    command = _command_line(args)
     viewer = None
     if args.viewer:
         from bench.recording import LiveViewer

@@ -15,7 +15,6 @@ detector is compared at the same false-alarm rate.
 
 from __future__ import annotations
 
-import dataclasses
 import inspect
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -135,6 +134,3 @@ class Method(Component):
         ``pfa`` (detectors) or per-scene rate (TBD)."""
         raise NotImplementedError
 
-
-def params_fields(cls: type) -> list[str]:
-    return [f.name for f in dataclasses.fields(cls)]

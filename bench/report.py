@@ -8,7 +8,6 @@ name and renamed, so no reader ever sees a half-written output.
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -162,13 +161,13 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
         return "## Detection\n\nNo results."
     figures.pd_vs_snr(summary, fig_dir / "pd_vs_snr.png", pfa, title, chance)
     figures.delay_vs_snr(summary, fig_dir / "delay_vs_snr.png", title)
+    snr = summary.snr_db
     rows = []
-    for label, g in summary.groupby("config", sort=False):
-        g = g.sort_values("snr_db")
-        mid, low, high = (_fmt_crossing(x, g.snr_db) for x in snr_at_pd(g.snr_db, g.pd, g.pd_low, g.pd_high))
-        best = g.iloc[-1]
-        rows.append([f"`{label}`", mid, f"[{low}, {high}]",
-                     f"{_fmt(best.pd)} at {_fmt(best.snr_db)} dB", _fmt(best.delay_mean)])
+    for c in _snr50(summary).itertuples():
+        last = summary[summary.config == c.config].sort_values("snr_db").iloc[-1]
+        rows.append([f"`{c.config}`", _fmt_crossing(c.mid, snr), f"[{_fmt_crossing(c.low, snr)}, "
+                     f"{_fmt_crossing(c.high, snr)}]", f"{_fmt(last.pd)} at {_fmt(last.snr_db)} dB",
+                     _fmt(last.delay_mean)])
     detail = summary.pivot_table(index="snr_db", columns="config", values="pd", sort=False)
     detail_rows = [[_fmt(s)] + [_fmt(v) for v in r] for s, r in zip(detail.index, detail.to_numpy())]
     return "\n\n".join([
@@ -186,23 +185,26 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
     ])
 
 
+def _snr50(summary: pd.DataFrame) -> pd.DataFrame:
+    """Per config: the SNR at Pd = 0.5 (``mid``) and its interval (``low``, ``high``),
+    see :func:`bench.metrics.snr_at_pd`; ``order`` sorts them, a crossing above
+    the swept range (NaN) last."""
+    rows = []
+    for (method, config), g in summary.groupby(["method", "config"], sort=False):
+        g = g.sort_values("snr_db")
+        mid, low, high = snr_at_pd(g.snr_db, g.pd, g.pd_low, g.pd_high)
+        rows.append({"method": method, "config": config, "mid": mid, "low": low, "high": high,
+                     "order": np.inf if np.isnan(mid) else mid})
+    return pd.DataFrame(rows)
+
+
 def _section_ranking(summary: pd.DataFrame) -> str:
     """Method families ordered by the lowest SNR at which any of their configs reaches Pd = 0.5."""
-    rows = []
-    for method, g in summary.groupby("method", sort=False):
-        best = (np.inf, None)
-        for label, c in g.groupby("config", sort=False):
-            c = c.sort_values("snr_db")
-            x = snr_at_pd(c.snr_db, c.pd, c.pd_low, c.pd_high)[0]
-            key = -np.inf if np.isneginf(x) else (np.inf if np.isnan(x) else x)
-            if best[1] is None or key < best[0]:
-                best = (key, label, c.snr_db)
-        rows.append((best[0], method, best[1], best[2]))
-    rows.sort(key=lambda r: r[0])
-    lead = rows[0][0]
-    table = [[f"{i + 1}", f"`{m}`", f"`{label}`", _fmt_crossing(x if np.isfinite(x) or np.isneginf(x) else np.nan, snr),
-              "–" if not (np.isfinite(x) and np.isfinite(lead)) else f"{x - lead:+.2g}"]
-             for i, (x, m, label, snr) in enumerate(rows)]
+    best = _snr50(summary).sort_values("order", kind="stable").drop_duplicates("method")
+    lead = best.order.iloc[0]
+    table = [[f"{rank}", f"`{b.method}`", f"`{b.config}`", _fmt_crossing(b.mid, summary.snr_db),
+              f"{b.order - lead:+.2g}" if np.isfinite(b.order) and np.isfinite(lead) else "–"]
+             for rank, b in enumerate(best.itertuples(), start=1)]
     return "\n\n".join([
         "## Ranking of methods",
         "Each method at its best config in this sweep, by the SNR at which Pd reaches 0.5 "
