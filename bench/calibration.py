@@ -4,7 +4,12 @@
   quantile), taken as is.
 * ``empirical``: the smallest threshold whose exceedance fraction on the
   null-hypothesis statistic values does not exceed the requested Pfa
-  (per step for detectors).
+  (per step for detectors, per scene for TBD).
+* ``gumbel``: for scene maxima (TBD), a Gumbel law fitted by maximum
+  likelihood to the null scene scores, and the threshold its (1 − Pfa)
+  quantile: extreme-value theory for the maximum over many cells (Johnston &
+  Krishnamurthy, IEEE TAES 38(1), 2002), which reaches Pfa = 1e-3 with a few
+  thousand null scenes where the empirical quantile would need ~1e5.
 
 Whatever the mode, the nominal threshold's *measured* Pfa on the same null
 values is reported with its binomial interval: a miscalibrated nominal
@@ -16,6 +21,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from scipy import stats
 
 from bench.metrics import binomial_interval
 
@@ -36,6 +42,18 @@ def empirical_threshold(null_values: np.ndarray, pfa: float) -> float:
     return float(np.nextafter(kth_largest, np.inf))
 
 
+def gumbel_fit(null_values: np.ndarray) -> tuple[float, float]:
+    """Maximum-likelihood Gumbel (max) location and scale of the null scene scores."""
+    loc, scale = stats.gumbel_r.fit(np.asarray(null_values, float))
+    return float(loc), float(scale)
+
+
+def gumbel_threshold(null_values: np.ndarray, pfa: float) -> float:
+    """The (1 − pfa) quantile of the fitted Gumbel law: t = μ − β·ln(−ln(1 − pfa))."""
+    loc, scale = gumbel_fit(null_values)
+    return float(stats.gumbel_r.isf(pfa, loc, scale))
+
+
 @dataclass(frozen=True)
 class CalibrationResult:
     """The calibration of one method config on one scenario config."""
@@ -54,6 +72,12 @@ class CalibrationResult:
     chance_pd: float = float("nan")   # Pd under the null at the threshold used
     chance_pd_low: float = float("nan")
     chance_pd_high: float = float("nan")
+    used_exceedances: int = 0          # null values at or above the threshold used
+    used_pfa: float = float("nan")     # their fraction: the measured Pfa of the threshold used
+    used_pfa_low: float = float("nan")
+    used_pfa_high: float = float("nan")
+    gumbel_loc: float = float("nan")   # the fit, in gumbel mode
+    gumbel_scale: float = float("nan")
 
     def as_row(self) -> dict:
         return asdict(self)
@@ -64,12 +88,24 @@ def calibrate(scenario: str, method: str, null_values: np.ndarray, nominal: floa
     """Choose the threshold; measure the nominal one's Pfa and, given the null
     trials' window peaks, the chance detection rate at the threshold used."""
     values = np.asarray(null_values, dtype=float)
-    used = empirical_threshold(values, pfa) if mode == "empirical" else float(nominal)
-    exceed = int(np.count_nonzero(values >= nominal))
-    low, high = binomial_interval(exceed, values.size)
+    fit = (np.nan, np.nan)
+    if mode == "empirical":
+        used = empirical_threshold(values, pfa)
+    elif mode == "gumbel":
+        fit = gumbel_fit(values)
+        used = float(stats.gumbel_r.isf(pfa, *fit))
+    else:
+        used = float(nominal)
+    if np.isfinite(nominal):
+        exceed = int(np.count_nonzero(values >= nominal))
+        measured = (exceed / values.size, *binomial_interval(exceed, values.size))
+    else:   # the method has no analytic threshold
+        exceed, measured = 0, (np.nan, np.nan, np.nan)
     chance = (np.nan, np.nan, np.nan)
     if null_peaks is not None and len(null_peaks):
         hits = int(np.count_nonzero(np.asarray(null_peaks) >= used))
         chance = (hits / len(null_peaks), *binomial_interval(hits, len(null_peaks)))
+    used_exceed = int(np.count_nonzero(values >= used))
     return CalibrationResult(scenario, method, mode, pfa, float(nominal), used, int(values.size),
-                             exceed, exceed / values.size if values.size else np.nan, low, high, *chance)
+                             exceed, *measured, *chance, used_exceed, used_exceed / values.size,
+                             *binomial_interval(used_exceed, values.size), *fit)

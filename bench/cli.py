@@ -1,4 +1,4 @@
-"""The ``bench`` command: ``list``, ``run``, ``report``, ``view``.
+"""The ``bench`` command: ``list``, ``run``, ``report``, ``view``, ``perf``.
 
 Bad input ends with one line on stderr (``error: FILE: FIELD: PROBLEM``) and
 exit code 2, before anything is written.
@@ -64,6 +64,13 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--no-record", action="store_true", help="do not rewrite recording.rrd")
     view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
     view.add_argument("dir")
+    perf = sub.add_parser("perf", help="measure every method's speed and memory against its reference")
+    perf.add_argument("--out", default="reports/perf", help="output folder (default: reports/perf)")
+    perf.add_argument("--methods", nargs="+", help="only these methods")
+    perf.add_argument("--sizes", nargs="+", help="only these named sizes (e.g. small paper)")
+    perf.add_argument("--executors", action="store_true",
+                      help="also time one compute-bound sweep per executor (local x1, local xN, dask xN)")
+    perf.add_argument("--workers", type=_positive_int, default=default_workers(), help="N for --executors")
     return p
 
 
@@ -167,7 +174,19 @@ def cmd_view(args) -> int:
     return subprocess.call(cmd)
 
 
-COMMANDS = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "view": cmd_view}
+def cmd_perf(args) -> int:
+    from bench.perf import run_perf
+    known = set(registry.methods())
+    for name in args.methods or []:
+        if name not in known:
+            raise ConfigError("--methods", f"unknown method {name!r} (known: {', '.join(sorted(known))})")
+    report = run_perf(Path(args.out), methods=args.methods, sizes=args.sizes, executors=args.executors,
+                      workers=args.workers, progress=lambda line: print(line, file=sys.stderr))
+    print(f"wrote {report}")
+    return 0
+
+
+COMMANDS = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "view": cmd_view, "perf": cmd_perf}
 
 
 def main(argv: list[str] | None = None) -> int:

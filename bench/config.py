@@ -14,6 +14,14 @@ A config's identity is a readable label in the style of benchopt:
 (for scenarios, only the grid axes: a single scenario config is its name).
 ``plan.toml`` keeps each method's label, so re-running it gives the same
 identities and the same results.
+
+Scenarios: either one ``scenario`` name with ``[scenario_params]`` (DESIGN.md
+section 4), or several ``[[scenarios]]`` tables, each with ``name``,
+``params`` (grid axes allowed) and optionally its own ``snr_db``, ``trials``
+and ``label``; the top-level ``snr_db`` and ``trials`` are their defaults.
+Each method config runs on every scenario config that serves its task
+(``Scenario.tasks``), so one sweep (the ``quick`` preset) can cover
+detection, tracking and track-before-detect.
 """
 
 from __future__ import annotations
@@ -30,9 +38,11 @@ from bench import registry
 from bench.errors import ConfigError
 from bench.params import build_params, is_tuple_field, params_as_dict
 from bench.rng import stable_key
+from bench.tasks import handler
 
-TOP_KEYS = {"name", "description", "scenario", "trials", "seed", "snr_db", "chunk",
+TOP_KEYS = {"name", "description", "scenario", "scenarios", "trials", "seed", "snr_db", "chunk",
             "scenario_params", "methods", "calibration", "record", "provenance"}
+SCENARIO_KEYS = {"name", "params", "label", "snr_db", "trials"}
 METHOD_KEYS = {"name", "params", "label"}
 CALIBRATION_MODES = ("nominal", "empirical", "gumbel")
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
@@ -58,6 +68,15 @@ class ComponentConfig:
 
 
 @dataclass(frozen=True)
+class ScenarioConfig(ComponentConfig):
+    """A scenario config with the SNR levels and trials it is run at."""
+
+    snr_db: tuple[float, ...] = ()
+    trials: int = 0
+    tasks: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class CalibrationConfig:
     pfa: float = 0.01
     mode: str = "empirical"
@@ -70,8 +89,8 @@ class Plan:
 
     name: str
     description: str
-    scenario: str
-    scenarios: tuple[ComponentConfig, ...]
+    scenario: str               # the scenario name; "" for a [[scenarios]] list
+    scenarios: tuple[ScenarioConfig, ...]
     trials: int
     seed: int
     snr_db: tuple[float, ...]
@@ -80,23 +99,29 @@ class Plan:
     calibration: CalibrationConfig
     record_trials: int
     source: str
+    method_tasks: tuple[str, ...] = ()   # task of each method config, in order
+
+    def pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
+        """The method configs that run on ``scenario`` (those whose task it serves)."""
+        return [m for m, task in zip(self.methods, self.method_tasks) if task in scenario.tasks]
 
     @property
     def trial_runs(self) -> int:
-        return self.trials * len(self.snr_db) * len(self.methods) * len(self.scenarios)
+        return sum(s.trials * len(s.snr_db) * len(self.pairs(s)) for s in self.scenarios)
 
     def to_dict(self) -> dict[str, Any]:
         """The plan as a sweep file that reproduces it (written as plan.toml)."""
-        scenario_params = _merge_scenario_grid(self.scenarios)
-        return {
-            "name": self.name,
-            "description": self.description,
-            "scenario": self.scenario,
-            "trials": self.trials,
-            "seed": self.seed,
-            "snr_db": list(self.snr_db),
-            "chunk": self.chunk,
-            "scenario_params": scenario_params,
+        head = {"name": self.name, "description": self.description}
+        if self.scenario:
+            head |= {"scenario": self.scenario, "trials": self.trials, "seed": self.seed,
+                     "snr_db": list(self.snr_db), "chunk": self.chunk,
+                     "scenario_params": _merge_scenario_grid(self.scenarios)}
+        else:
+            head |= {"trials": self.trials, "seed": self.seed, "snr_db": list(self.snr_db),
+                     "chunk": self.chunk,
+                     "scenarios": [{"name": s.name, "label": s.label, "params": params_as_dict(s.params),
+                                    "snr_db": list(s.snr_db), "trials": s.trials} for s in self.scenarios]}
+        return head | {
             "methods": [{"name": m.name, "label": m.label, "params": params_as_dict(m.params)}
                         for m in self.methods],
             "calibration": {"pfa": self.calibration.pfa, "mode": self.calibration.mode,
@@ -159,8 +184,7 @@ def _reject_unknown(table: Mapping, allowed: set, field: str) -> None:
             raise ConfigError(where, f"unknown key (allowed: {', '.join(sorted(allowed))})")
 
 
-def _parse_snr(value: Any) -> tuple[float, ...]:
-    field = "snr_db"
+def _parse_snr(value: Any, field: str = "snr_db") -> tuple[float, ...]:
     if isinstance(value, dict):
         _reject_unknown(value, {"start", "stop", "step"}, field)
         for key in ("start", "stop", "step"):
@@ -238,7 +262,7 @@ def _params_text_of_label(name: str, label: str) -> str:
     return label
 
 
-def _parse_methods(value: Any, scenario_cls) -> tuple[ComponentConfig, ...]:
+def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]) -> tuple[ComponentConfig, ...]:
     if not isinstance(value, list) or not value:
         raise ConfigError("methods", "expected at least one [[methods]] table")
     configs: list[ComponentConfig] = []
@@ -250,9 +274,10 @@ def _parse_methods(value: Any, scenario_cls) -> tuple[ComponentConfig, ...]:
         if "name" not in entry or not isinstance(entry["name"], str):
             raise ConfigError(f"{field}.name", "missing method name (a string)")
         cls = registry.get_method(entry["name"], f"{field}.name")
-        if scenario_cls.tasks and cls.task not in scenario_cls.tasks:
+        if not any(cls.task in s.tasks for s in scenarios):
+            names = ", ".join(sorted({f"{s.name!r} ({'/'.join(s.tasks)})" for s in scenarios}))
             raise ConfigError(f"{field}.name", f"method {cls.name!r} ({cls.task}) cannot run on "
-                                               f"scenario {scenario_cls.name!r} ({', '.join(scenario_cls.tasks)})")
+                                               f"any scenario of the sweep: {names}")
         params = _expect_table(entry.get("params", {}), f"{field}.params")
         expanded = _expand(cls.name, cls.Params, params, f"{field}.params")
         if "label" in entry:
@@ -273,6 +298,66 @@ def _parse_methods(value: Any, scenario_cls) -> tuple[ComponentConfig, ...]:
     return tuple(configs)
 
 
+def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, ...], trials: int,
+                      identity: str, label: Any = None) -> list[ScenarioConfig]:
+    cls = registry.get_scenario(name, f"{field}.name" if field != "scenario_params" else "scenario")
+    table = _expect_table(params, field)
+    expanded = _expand(cls.name, cls.Params, table, field, identity=identity)
+    if label is not None:
+        if not isinstance(label, str) or not NAME_PATTERN.match(label):
+            raise ConfigError(field.replace(".params", ".label"), "expected letters, digits, '_', '-' or '.' "
+                                                                  f"(at most 64), got {label!r}"[:200])
+        if len(expanded) != 1:
+            raise ConfigError(field.replace(".params", ".label"), "a label names one config; remove the grid")
+        expanded = [ComponentConfig(cls.name, expanded[0].params, label, expanded[0].params_text)]
+    return [ScenarioConfig(c.name, c.params, c.label, c.params_text, snr_db, trials, tuple(cls.tasks))
+            for c in expanded]
+
+
+def _parse_scenarios(data: Mapping[str, Any], trials: int) -> tuple[str, tuple[ScenarioConfig, ...]]:
+    """``(scenario name or "", configs)`` from either scenario form."""
+    if "scenarios" in data:
+        for key in ("scenario", "scenario_params"):
+            if key in data:
+                raise ConfigError(key, "give either 'scenario' (+ 'scenario_params') or [[scenarios]], not both")
+        entries = data["scenarios"]
+        if not isinstance(entries, list) or not entries:
+            raise ConfigError("scenarios", "expected at least one [[scenarios]] table")
+        if len(entries) > MAX_CONFIGS:
+            raise ConfigError("scenarios", f"{len(entries)} entries; at most {MAX_CONFIGS}")
+        names = [e.get("name") if isinstance(e, dict) else None for e in entries]
+        configs: list[ScenarioConfig] = []
+        for i, entry in enumerate(entries):
+            field = f"scenarios[{i}]"
+            entry = _expect_table(entry, field)
+            _reject_unknown(entry, SCENARIO_KEYS, field)
+            if not isinstance(entry.get("name"), str):
+                raise ConfigError(f"{field}.name", "missing scenario name (a string)")
+            if "snr_db" not in entry and "snr_db" not in data:
+                raise ConfigError(f"{field}.snr_db", "missing (and no top-level snr_db to default to)")
+            snr = _parse_snr(entry["snr_db"], f"{field}.snr_db") if "snr_db" in entry \
+                else _parse_snr(data["snr_db"])
+            n = _expect_int(entry.get("trials", trials), f"{field}.trials", 1, 10_000_000)
+            identity = "explicit" if names.count(entry["name"]) > 1 else "grid"
+            configs += _scenario_configs(entry["name"], entry.get("params", {}), f"{field}.params", snr, n,
+                                         identity, entry.get("label"))
+        seen: set[str] = set()
+        for c in configs:
+            if c.label in seen:
+                raise ConfigError("scenarios", f"two scenario configs are both named {c.label!r}; "
+                                               "give one of them a 'label'")
+            seen.add(c.label)
+        return "", tuple(configs)
+    for key in ("scenario", "snr_db"):
+        if key not in data:
+            raise ConfigError(key, "missing")
+    if not isinstance(data["scenario"], str):
+        raise ConfigError("scenario", f"expected a scenario name, got {data['scenario']!r}"[:200])
+    configs = _scenario_configs(data["scenario"], data.get("scenario_params", {}), "scenario_params",
+                                _parse_snr(data["snr_db"]), trials, "grid")
+    return configs[0].name, tuple(configs)
+
+
 def _parse_calibration(value: Any) -> CalibrationConfig:
     table = _expect_table(value, "calibration")
     _reject_unknown(table, {"pfa", "mode", "h0_trials"}, "calibration")
@@ -283,9 +368,6 @@ def _parse_calibration(value: Any) -> CalibrationConfig:
     mode = table.get("mode", default.mode)
     if mode not in CALIBRATION_MODES:
         raise ConfigError("calibration.mode", f"expected one of {', '.join(map(repr, CALIBRATION_MODES))}, got {mode!r}"[:200])
-    if mode == "gumbel":
-        raise ConfigError("calibration.mode", "'gumbel' is the scene-level tail fit for TBD methods, "
-                                              "not available for per-step detectors; use 'empirical'")
     h0 = _expect_int(table.get("h0_trials", default.h0_trials), "calibration.h0_trials", 10, 10_000_000)
     return CalibrationConfig(pfa, mode, h0)
 
@@ -293,7 +375,7 @@ def _parse_calibration(value: Any) -> CalibrationConfig:
 def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large: bool = False) -> Plan:
     """Validate a parsed sweep mapping and resolve it into a :class:`Plan`."""
     _reject_unknown(data, TOP_KEYS, "")
-    for key in ("name", "scenario", "snr_db", "methods"):
+    for key in ("name", "methods"):
         if key not in data:
             raise ConfigError(key, "missing")
     name = data["name"]
@@ -303,23 +385,26 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     description = data.get("description", "")
     if not isinstance(description, str):
         raise ConfigError("description", f"expected a string, got {description!r}"[:200])
-    if not isinstance(data["scenario"], str):
-        raise ConfigError("scenario", f"expected a scenario name, got {data['scenario']!r}"[:200])
-    scenario_cls = registry.get_scenario(data["scenario"], "scenario")
-    scenario_params = _expect_table(data.get("scenario_params", {}), "scenario_params")
-    scenarios = _expand(scenario_cls.name, scenario_cls.Params, scenario_params, "scenario_params",
-                        identity="grid")
     trials = _expect_int(data.get("trials", 100), "trials", 1, 10_000_000)
+    scenario, scenarios = _parse_scenarios(data, trials)
     seed = _expect_int(data.get("seed", 0), "seed", 0, 2**63 - 1)
     chunk = _expect_int(data.get("chunk", 50), "chunk", 1, 1_000_000)
-    snr_db = _parse_snr(data["snr_db"])
-    methods = _parse_methods(data["methods"], scenario_cls)
+    snr_db = _parse_snr(data["snr_db"]) if "snr_db" in data else scenarios[0].snr_db
+    methods = _parse_methods(data["methods"], scenarios)
+    method_tasks = tuple(registry.get_method(m.name).task for m in methods)
     calibration = _parse_calibration(data.get("calibration", {}))
+    for i, (m, task) in enumerate(zip(methods, method_tasks)):
+        if calibration.mode not in handler(task).calibration_modes:
+            raise ConfigError("calibration.mode", f"{calibration.mode!r} does not apply to {m.label!r} ({task}); "
+                                                  f"use one of {', '.join(map(repr, handler(task).calibration_modes))}")
     record = _expect_table(data.get("record", {}), "record")
     _reject_unknown(record, {"trials"}, "record")
     record_trials = _expect_int(record.get("trials", 1), "record.trials", 0, 1000)
-    plan = Plan(name, description, scenario_cls.name, tuple(scenarios), trials, seed, snr_db, chunk,
-                methods, calibration, record_trials, source)
+    plan = Plan(name, description, scenario, scenarios, trials, seed, snr_db, chunk,
+                methods, calibration, record_trials, source, method_tasks)
+    idle = [s.label for s in scenarios if not plan.pairs(s)]
+    if idle:
+        raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0]!r}")
     if plan.trial_runs > LARGE_SWEEP_TRIAL_RUNS and not allow_large:
         raise ConfigError("trials", f"the sweep asks for {plan.trial_runs:,} trial-runs "
                                     f"(trials x SNR levels x configs); pass --yes to run it anyway")

@@ -6,7 +6,8 @@ axis ``n``.
 * A :class:`Scenario` generates a :class:`Batch` of ``n`` trials at one SNR
   (or under the null hypothesis, ``snr_db=None``).
 * A :class:`Method` turns a Batch into an output for its task:
-  :class:`DetectionOutput` for ``maneuver-detection``.
+  :class:`DetectionOutput` for ``maneuver-detection``, :class:`TrackingOutput`
+  for ``tracking``, :class:`TBDOutput` for ``tbd``.
 
 Methods are pure: the same batch and params give the same output. They never
 decide alarms; the harness applies a threshold (nominal or calibrated) so every
@@ -83,6 +84,39 @@ class DetectionOutput:
     statistic: np.ndarray
     valid_from: int = 0
     traces: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+@dataclass
+class TrackingOutput:
+    """Output of a tracker.
+
+    estimate : (n, K, d) float — the state estimate per trial and step, in the
+        state space of ``batch.truth`` (same components, same order).
+    covariance : (n, K, d, d) float or None — the tracker's own error
+        covariance, when it has one (used for NEES).
+    traces : dict of (n, K) arrays — extra per-step series worth recording.
+    """
+
+    estimate: np.ndarray
+    covariance: np.ndarray | None = None
+    traces: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+@dataclass
+class TBDOutput:
+    """Output of a track-before-detect method.
+
+    score : (n,) float — the scene statistic (e.g. the largest merit at the
+        last frame); the harness thresholds it at a scene-level Pfa.
+    track : (n, K, 2) int — the backtracked cell per frame, ``(row, col)``
+        of the batch's grid (row ↔ y, col ↔ x; see ``meta["grid"]``).
+    value : (n, H, W) float32 or None — the merit (value) map at the last
+        frame, for recordings.
+    """
+
+    score: np.ndarray
+    track: np.ndarray
+    value: np.ndarray | None = None
 
 
 def _summary(cls: type) -> str:

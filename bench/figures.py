@@ -115,3 +115,94 @@ def trial_timeline(record, path: Path, title: str) -> Path:
     axes[-1, 0].set_xlabel("time (s)")
     fig.suptitle(title, fontsize=10)
     return _save(fig, path)
+
+
+def rmse_per_step(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, title: str,
+                  xlabel: str = "frame", ylabel: str = "position RMSE (m)") -> Path:
+    """Per-step RMSE curves, one per label."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    for i, (label, (x, y)) in enumerate(curves.items()):
+        ax.plot(x, y, STYLES[i % len(STYLES)], color=f"C{i % 10}", ms=3.5, lw=1.4, label=label, mfc="none")
+    ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
+    ax.grid(alpha=0.3)
+    _legend_outside(ax)
+    return _save(fig, path)
+
+
+def metric_vs_snr(summary: pd.DataFrame, path: Path, title: str, column: str = "rmse_mean",
+                  ylabel: str = "time-averaged position RMSE (m)", log: bool = False) -> Path:
+    """A summary metric against SNR per config, with its interval band when present."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    for color, style, label, g in _curves(summary):
+        ok = g[column].notna()
+        ax.plot(g.snr_db[ok], g[column][ok], style, color=color, ms=4, lw=1.5, label=label, mfc="none")
+        low, high = column.replace("_mean", "_low"), column.replace("_mean", "_high")
+        if low in g and high in g:
+            ax.fill_between(g.snr_db[ok], g[low][ok], g[high][ok], color=color, alpha=0.18, lw=0)
+    if log:
+        ax.set_yscale("log")
+    ax.set(xlabel="SNR (dB)", ylabel=ylabel, title=title)
+    ax.grid(alpha=0.3, which="both")
+    _legend_outside(ax)
+    return _save(fig, path)
+
+
+def grouped_bars(values: pd.DataFrame, low: pd.DataFrame, high: pd.DataFrame, path: Path, title: str,
+                 ylabel: str, log: bool = False) -> Path:
+    """Bars per (row = group, column = series) with interval whiskers."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    groups, series = list(values.index), list(values.columns)
+    width = 0.8 / max(len(series), 1)
+    x = np.arange(len(groups))
+    for j, name in enumerate(series):
+        v = values[name].to_numpy(float)
+        err = np.vstack([v - low[name].to_numpy(float), high[name].to_numpy(float) - v])
+        ax.bar(x + (j - (len(series) - 1) / 2) * width, v, width, yerr=np.nan_to_num(err), capsize=3,
+               color=f"C{j % 10}", label=name)
+    ax.set_xticks(x, groups, fontsize=8, rotation=15)
+    if log:
+        ax.set_yscale("log")
+    ax.set(ylabel=ylabel, title=title)
+    ax.grid(alpha=0.3, axis="y", which="both")
+    _legend_outside(ax)
+    return _save(fig, path)
+
+
+def mean_estimate(t: np.ndarray, truth: np.ndarray, estimates: dict[str, np.ndarray], path: Path,
+                  title: str, ylabel: str) -> Path:
+    """Mean estimate across trials against the mean truth, per step (one state component)."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    ax.plot(t, truth, "-", color="k", lw=2.2, label="truth (mean)")
+    for i, (label, y) in enumerate(estimates.items()):
+        ax.plot(t, y, STYLES[i % len(STYLES)][1:] or "-", color=f"C{i % 10}", lw=1.4, label=label)
+    ax.set(xlabel="time (s)", ylabel=ylabel, title=title)
+    ax.grid(alpha=0.3)
+    _legend_outside(ax)
+    return _save(fig, path)
+
+
+def gumbel_fits(fits: dict[str, tuple[np.ndarray, float, float, float]], path: Path, pfa: float,
+                title: str) -> Path:
+    """Empirical survival function of the null scene scores (steps) against
+    the fitted Gumbel tail (dashed), with the threshold used (dotted)."""
+    from scipy import stats
+
+    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    for i, (label, (values, loc, scale, used)) in enumerate(fits.items()):
+        color = f"C{i % 10}"
+        v = np.sort(values)
+        survival = 1.0 - np.arange(v.size) / v.size
+        ax.step(v, survival, where="post", color=color, lw=1.3, label=f"{label} (null scenes)")
+        if np.isfinite(loc):
+            grid = np.linspace(v[0], max(v[-1], used) + scale, 300)
+            ax.plot(grid, stats.gumbel_r.sf(grid, loc, scale), "--", color=color, lw=1.2,
+                    label=f"{label} Gumbel fit")
+        ax.axvline(used, color=color, ls=":", lw=1)
+    ax.axhline(pfa, color="0.5", lw=0.8, ls=":")
+    ax.set_yscale("log")
+    ax.set_ylim(bottom=min(pfa / 3, 0.5 / max(len(v), 1)))
+    ax.set(xlabel="scene score (largest merit at the last frame)", ylabel="P(score ≥ x) under the null",
+           title=title)
+    ax.grid(alpha=0.3, which="both")
+    _legend_outside(ax)
+    return _save(fig, path)

@@ -181,6 +181,31 @@ def innovations(batch) -> InnovationSequence:
     step 0 (see :func:`kalman_filter`).
     """
     meta = batch.meta
-    result = kalman_filter(meta["filter"], batch.z, meta["x0"], meta["P0"])
-    whitened, nis = whiten(result.nu, result.S)
-    return InnovationSequence(nu=result.nu, S=result.S, whitened=whitened, nis=nis)
+    if meta.get("kalman_backend") == "filterpy":
+        nu, S = filterpy_innovations(meta["filter"], batch.z, meta["x0"], meta["P0"])
+    else:
+        result = kalman_filter(meta["filter"], batch.z, meta["x0"], meta["P0"])
+        nu, S = result.nu, result.S
+    whitened, nis = whiten(nu, S)
+    return InnovationSequence(nu=nu, S=S, whitened=whitened, nis=nis)
+
+
+def filterpy_innovations(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
+    """The reference: innovations by a per-trial, per-step filterpy ``KalmanFilter``
+    loop, same conventions as :func:`kalman_filter` (update, then predict).
+    Used by ``bench perf`` as the baseline and by the tests as the oracle;
+    ``meta["kalman_backend"] = "filterpy"`` makes :func:`innovations` use it."""
+    from filterpy.kalman import KalmanFilter
+
+    n, steps, m = z.shape
+    x0 = np.broadcast_to(np.asarray(x0, float), (n, model.dim_x))
+    nu, S = np.empty_like(z, dtype=float), np.empty((steps, m, m))
+    for i in range(n):
+        kf = KalmanFilter(dim_x=model.dim_x, dim_z=m)
+        kf.F, kf.H, kf.Q, kf.R = model.F, model.H, model.Q, model.R
+        kf.x, kf.P = x0[i].copy(), np.array(P0, float)
+        for k in range(steps):
+            kf.update(z[i, k])
+            nu[i, k], S[k] = kf.y, kf.S
+            kf.predict()
+    return nu, S

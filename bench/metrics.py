@@ -10,6 +10,10 @@ Per trial (maneuver detection), with alarm = statistic >= threshold:
 * ``peak_statistic``: the largest statistic in the detection window, so that a
   ROC curve (Pd at any threshold) can be computed later without re-running.
 
+Track-before-detect and tracking metrics follow (``tbd_trial_metrics``,
+``tracking_trial_metrics``); per-trial arrays of shape (n, K) are *series*:
+stored with the trial but kept out of trials.csv, they feed per-step RMSE.
+
 Per cell (scenario config, method config, SNR): Pd with a 95% Wilson interval
 (``scipy.stats.binomtest``), per-step Pfa = false alarms / null steps with its
 Wilson interval, mean delay with a percentile-bootstrap interval, median
@@ -99,6 +103,142 @@ def summarise_detection(trials: pd.DataFrame) -> pd.DataFrame:
             "realised_snr_db": float(np.nanmean(g["realised_snr_db"])) if g["realised_snr_db"].notna().any() else np.nan,
         })
     return pd.DataFrame(rows)
+
+
+# ------------------------------------------------------------------ track-before-detect
+
+def cell_centres_m(cells: np.ndarray, grid: dict) -> np.ndarray:
+    """(x, y) in metres of the centres of ``(row, col)`` cells (…, 2)."""
+    cells = np.asarray(cells, float)
+    x = grid["x_min_m"] + (cells[..., 1] + 0.5) * grid["cell_m"]
+    y = grid["y_min_m"] + (cells[..., 0] + 0.5) * grid["cell_m"]
+    return np.stack([x, y], axis=-1)
+
+
+def tbd_trial_metrics(score: np.ndarray, track: np.ndarray, threshold: float, *, target_cells: np.ndarray,
+                      truth_xy_m: np.ndarray, grid: dict, tolerance_cells: int,
+                      min_hits: int = 2) -> dict[str, np.ndarray]:
+    """Per-trial TBD metrics (DESIGN.md section 7).
+
+    A frame is a *hit* when the backtracked cell is within ``tolerance_cells``
+    of the true cell in both row and column (Chebyshev distance). The trial is
+    *detected* when ``score >= threshold`` and the track has at least
+    ``min_hits`` hits. ``sq_err_m2`` (n, K) is the squared distance between
+    the backtracked cell's centre and the true position, per frame: the
+    per-frame RMSE over detected trials is computed from it.
+    """
+    score = np.asarray(score, float)
+    off = np.abs(np.asarray(track, np.int64) - np.asarray(target_cells, np.int64)).max(axis=-1)
+    hits = (off <= tolerance_cells).sum(axis=1)
+    above = score >= threshold
+    detected = above & (hits >= min_hits)
+    sq_err = ((cell_centres_m(track, grid) - truth_xy_m) ** 2).sum(axis=-1)
+    return {"detected": detected, "above_threshold": above, "hits": hits.astype(np.int64),
+            "score": score, "rmse": np.sqrt(sq_err.mean(axis=1)), "sq_err_m2": sq_err}
+
+
+def per_step_rmse(sq_err: np.ndarray) -> np.ndarray:
+    """RMSE per step across trials, from squared errors (n, K)."""
+    return np.sqrt(np.mean(sq_err, axis=0)) if len(sq_err) else np.full(sq_err.shape[1:], np.nan)
+
+
+def bootstrap_statistic_interval(samples: np.ndarray, statistic, level: float = CONFIDENCE,
+                                 resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float]:
+    """Percentile bootstrap interval of ``statistic(samples[idx])`` over trials
+    (the first axis), with a fixed seed."""
+    samples = np.asarray(samples, float)
+    if len(samples) < 2:
+        value = statistic(samples) if len(samples) else np.nan
+        return (float(value), float(value))
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    idx = rng.integers(0, len(samples), size=(resamples, len(samples)))
+    values = np.array([statistic(samples[i]) for i in idx])
+    alpha = (1 - level) / 2
+    return float(np.quantile(values, alpha)), float(np.quantile(values, 1 - alpha))
+
+
+def time_averaged_rmse(sq_err: np.ndarray) -> float:
+    """Mean over steps of the per-step RMSE across trials (the papers' "average RMSE")."""
+    return float(np.mean(per_step_rmse(sq_err))) if len(sq_err) else float("nan")
+
+
+def summarise_tbd(trials: pd.DataFrame, series: dict) -> pd.DataFrame:
+    """One row per cell: Pd (Wilson), average per-frame RMSE over detected
+    trials (bootstrap interval over trials)."""
+    rows = []
+    keys = ["scenario", "method", "config", "params", "snr_db"]
+    for key, g in trials.groupby(keys, sort=False, dropna=False):
+        n, hits = len(g), int(g["detected"].sum())
+        lo, hi = binomial_interval(hits, n)
+        sq = series[(key[0], key[2], key[4])]["sq_err_m2"][g["detected"].to_numpy(bool)]
+        r_lo, r_hi = bootstrap_statistic_interval(sq, time_averaged_rmse, resamples=500)
+        rows.append({**dict(zip(keys, key)), "n_trials": n, "pd": hits / n, "pd_low": lo, "pd_high": hi,
+                     "rmse_mean": time_averaged_rmse(sq), "rmse_low": r_lo, "rmse_high": r_hi,
+                     "threshold": float(g["threshold"].iloc[0]),
+                     "realised_snr_db": float(np.nanmean(g["realised_snr_db"]))
+                     if g["realised_snr_db"].notna().any() else np.nan})
+    return pd.DataFrame(rows)
+
+
+# ------------------------------------------------------------------ tracking
+
+def tracking_trial_metrics(estimate: np.ndarray, truth: np.ndarray, *, position_index, labels,
+                           covariance: np.ndarray | None, divergence_bound_m: float) -> dict[str, np.ndarray]:
+    """Per-trial tracking metrics (DESIGN.md section 7).
+
+    ``rmse``: the trial's position RMSE over time; ``final_error_m``;
+    ``diverged``: the position error exceeded ``divergence_bound_m`` at some
+    step; ``nees_mean``: the trial's mean normalised estimation error squared
+    (NaN without a covariance). Series (n, K), kept for per-step statistics:
+    ``sq_err_position``, ``sq_err_<component>``, ``est_<component>``,
+    ``true_<component>`` and ``nees``.
+    """
+    err = np.asarray(estimate, float) - np.asarray(truth, float)
+    pos_sq = (err[..., list(position_index)] ** 2).sum(axis=-1)
+    pos_err = np.sqrt(pos_sq)
+    out = {"rmse": np.sqrt(pos_sq.mean(axis=1)), "final_error_m": pos_err[:, -1],
+           "diverged": (pos_err > divergence_bound_m).any(axis=1), "sq_err_position": pos_sq}
+    if covariance is not None:
+        nees = np.einsum("nki,nki->nk", err, np.linalg.solve(covariance, err[..., None])[..., 0])
+        out["nees_mean"], out["nees"] = nees.mean(axis=1), nees
+    else:
+        out["nees_mean"] = np.full(len(err), np.nan)
+    for j, label in enumerate(labels):
+        out[f"sq_err_{label}"] = err[..., j] ** 2
+        out[f"est_{label}"] = np.asarray(estimate, float)[..., j]
+        out[f"true_{label}"] = np.asarray(truth, float)[..., j]
+    return out
+
+
+def summarise_tracking(trials: pd.DataFrame, series: dict) -> pd.DataFrame:
+    """One row per cell: time-averaged position RMSE with a bootstrap interval
+    over trials, divergence rate (Wilson), mean NEES."""
+    rows = []
+    keys = ["scenario", "method", "config", "params", "snr_db"]
+    for key, g in trials.groupby(keys, sort=False, dropna=False):
+        n, div = len(g), int(g["diverged"].sum())
+        sq = series[(key[0], key[2], key[4])]["sq_err_position"]
+        lo, hi = bootstrap_statistic_interval(sq, time_averaged_rmse, resamples=500)
+        d_lo, d_hi = binomial_interval(div, n)
+        rows.append({**dict(zip(keys, key)), "n_trials": n, "rmse_mean": time_averaged_rmse(sq),
+                     "rmse_low": lo, "rmse_high": hi, "divergence_rate": div / n,
+                     "divergence_low": d_lo, "divergence_high": d_hi,
+                     "nees_mean": float(np.nanmean(g["nees_mean"])) if g["nees_mean"].notna().any() else np.nan,
+                     "realised_snr_db": float(np.nanmean(g["realised_snr_db"]))
+                     if g["realised_snr_db"].notna().any() else np.nan})
+    return pd.DataFrame(rows)
+
+
+def tracking_steps(series: dict, labels) -> pd.DataFrame:
+    """Per step: position RMSE, RMSE and mean estimate vs truth per component."""
+    cols = {"rmse_position": per_step_rmse(series["sq_err_position"])}
+    for label in labels:
+        cols[f"rmse_{label}"] = per_step_rmse(series[f"sq_err_{label}"])
+        cols[f"mean_est_{label}"] = series[f"est_{label}"].mean(axis=0)
+        cols[f"mean_true_{label}"] = series[f"true_{label}"].mean(axis=0)
+    if "nees" in series:
+        cols["nees"] = series["nees"].mean(axis=0)
+    return pd.DataFrame(cols)
 
 
 def roc_curve(null_values: np.ndarray, peaks: np.ndarray, points: int = 80) -> tuple[np.ndarray, np.ndarray]:

@@ -1,21 +1,27 @@
 """Outputs of a run, all rebuilt from ``results.sqlite`` (``bench report DIR``).
 
-Writes ``trials.csv``, ``summary.csv``, ``calibration.csv``, ``report.md``,
-``figures/*.png`` and ``recording.rrd``. Every file is written to a temporary
+Writes ``trials.csv``, ``summary.csv``, ``calibration.csv``, ``steps.csv``
+(per-step RMSE of trackers and TBD methods), ``report.md``, ``figures/*.png``
+and ``recording.rrd``. The sections of each task live with it: detection
+here, :mod:`bench.report_tbd`, :mod:`bench.report_tracking`. Every file is written to a temporary
 name and renamed, so no reader ever sees a half-written output.
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from bench import figures
+from bench import figures, report_tbd, report_tracking
+from bench.core import MANEUVER_DETECTION, TBD, TRACKING
 from bench.errors import ConfigError
-from bench.metrics import roc_curve, snr_at_pd
+from bench.markdown import fmt as _fmt
+from bench.markdown import fmt_crossing as _fmt_crossing
+from bench.markdown import snr50 as _snr50
+from bench.markdown import table as _table
+from bench.metrics import per_step_rmse, roc_curve, tracking_steps
 from bench.provenance import provenance
 from bench.recording import TrialRecord, write_recording
 from bench.runner import calibrations
@@ -26,7 +32,8 @@ TRIAL_KEYS = ["scenario", "method", "config", "params", "snr_db", "trial", "seed
               "threshold"]
 SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials", "pd", "pd_low", "pd_high",
                    "pfa", "pfa_low", "pfa_high", "delay_mean", "delay_low", "delay_high", "delay_median",
-                   "rmse_mean", "seconds_per_trial", "threshold", "realised_snr_db"]
+                   "rmse_mean", "rmse_low", "rmse_high", "seconds_per_trial", "threshold", "realised_snr_db",
+                   "divergence_rate", "divergence_low", "divergence_high", "nees_mean"]
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -39,119 +46,157 @@ def _write_csv(df: pd.DataFrame, path: Path) -> None:
     _write_text(path, df.to_csv(index=False, float_format=None, lineterminator="\n"))
 
 
-def trials_frame(store: Store, record: dict) -> pd.DataFrame:
-    """One row per (scenario config, method config, SNR, trial), in a fixed order."""
+def trials_frame(store: Store, record: dict) -> tuple[pd.DataFrame, dict]:
+    """One row per (scenario config, method config, SNR, trial), in a fixed
+    order, and the series: ``{(scenario, config, snr_db): {name: (n, K)}}``
+    with rows in trial order."""
     info = {m["label"]: m for m in record["methods"]}
     frames = []
+    parts: dict[tuple, list] = {}
     for _unit, label, scenario, snr, cols in store.iter_metrics():
-        df = pd.DataFrame(cols)
+        two_d = {k: v for k, v in cols.items() if np.ndim(v) == 2}
+        if two_d:
+            parts.setdefault((scenario, label, snr), []).append((cols["trial"], two_d))
+        df = pd.DataFrame({k: v for k, v in cols.items() if np.ndim(v) == 1})
         df.insert(0, "scenario", scenario)
         df.insert(1, "method", info[label]["name"])
         df.insert(2, "config", label)
         df.insert(3, "params", info[label]["params"])
         df.insert(4, "snr_db", snr)
         frames.append(df)
+    series = {}
+    for key, chunks in parts.items():
+        order = np.argsort(np.concatenate([t for t, _ in chunks]), kind="stable")
+        series[key] = {name: np.concatenate([c[name] for _, c in chunks])[order] for name in chunks[0][1]}
     if not frames:
-        return pd.DataFrame(columns=TRIAL_KEYS)
+        return pd.DataFrame(columns=TRIAL_KEYS), series
     df = pd.concat(frames, ignore_index=True)
     order = {m["label"]: i for i, m in enumerate(record["methods"])}
     df = df.assign(_o=df.config.map(order)).sort_values(["scenario", "_o", "snr_db", "trial"])
     rest = [c for c in df.columns if c not in TRIAL_KEYS and c != "_o"]
-    return df[TRIAL_KEYS + rest].reset_index(drop=True)
+    return df[TRIAL_KEYS + rest].reset_index(drop=True), series
 
 
-def summary_frame(trials: pd.DataFrame, runs: pd.DataFrame, record: dict) -> pd.DataFrame:
+def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record: dict,
+                  cals=()) -> pd.DataFrame:
+    """One row per (scenario config, method config, SNR). For TBD configs the
+    Pfa columns are the scene Pfa of the threshold used, measured on the
+    calibration null scenes."""
     tasks = {m["label"]: m["task"] for m in record["methods"]}
-    parts = [handler(task).summarise(g) for task, g in trials.groupby(trials.config.map(tasks))] \
+    parts = [handler(task).summarise(g, series) for task, g in trials.groupby(trials.config.map(tasks))] \
         if len(trials) else []
     summary = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=SUMMARY_COLUMNS)
+    summary = summary.reindex(columns=list(dict.fromkeys([*SUMMARY_COLUMNS, *summary.columns])))
+    for c in cals:
+        rows = (summary.scenario == c.scenario) & (summary.config == c.method)
+        if tasks.get(c.method) == TBD and rows.any():
+            summary.loc[rows, ["pfa", "pfa_low", "pfa_high"]] = [c.used_pfa, c.used_pfa_low, c.used_pfa_high]
     ev = runs[(runs.phase == "evaluation") & runs.error.isna()]
     speed = ev.groupby(["scenario", "method", "snr_db"]).agg(s=("seconds", "sum"), n=("n", "sum"))
     speed = (speed.s / speed.n).rename("seconds_per_trial").reset_index().rename(columns={"method": "config"})
-    summary = summary.merge(speed, on=["scenario", "config", "snr_db"], how="left")
+    summary = summary.drop(columns="seconds_per_trial").merge(speed, on=["scenario", "config", "snr_db"],
+                                                              how="left")
     order = {m["label"]: i for i, m in enumerate(record["methods"])}
     summary = summary.assign(_o=summary.config.map(order)).sort_values(["scenario", "_o", "snr_db"])
     return summary[SUMMARY_COLUMNS].reset_index(drop=True)
 
 
-# ------------------------------------------------------------------ markdown helpers
-
-def _fmt(x, digits: int = 3) -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "–"
-    if isinstance(x, (int, np.integer)):
-        return str(x)
-    ax = abs(x)
-    return f"{x:.{digits}g}" if (ax >= 1e-3 or ax == 0) else f"{x:.2e}"
-
-
-def _fmt_crossing(x: float, snr) -> str:
-    if np.isneginf(x):
-        return f"< {_fmt(float(np.min(snr)))}"
-    if np.isnan(x):
-        return f"> {_fmt(float(np.max(snr)))}"
-    return _fmt(x)
-
-
-def _table(header: list[str], rows: list[list]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
-    return "\n".join(lines)
+def steps_frame(trials: pd.DataFrame, series: dict, record: dict, t_of: dict) -> pd.DataFrame:
+    """Per (scenario, config, SNR, step): position RMSE (TBD: over detected
+    trials) and, for trackers, RMSE and mean estimate vs truth per component."""
+    tasks = {m["label"]: m["task"] for m in record["methods"]}
+    rows = []
+    for (scenario, config, snr), cols in series.items():
+        g = trials[(trials.scenario == scenario) & (trials.config == config) & (trials.snr_db == snr)]
+        if tasks.get(config) == TBD:
+            detected = g["detected"].to_numpy(bool)
+            df = pd.DataFrame({"rmse_position": per_step_rmse(cols["sq_err_m2"][detected]),
+                               "n_trials": int(detected.sum())})
+        elif tasks.get(config) == TRACKING:
+            labels = [k[len("est_"):] for k in cols if k.startswith("est_")]
+            df = tracking_steps(cols, labels).assign(n_trials=len(g))
+        else:
+            continue
+        t = t_of.get(scenario)
+        df.insert(0, "t", t[:len(df)] if t is not None and len(t) >= len(df) else np.nan)
+        df.insert(0, "step", np.arange(len(df)))
+        for i, (k, v) in enumerate([("scenario", scenario), ("method", g.method.iloc[0] if len(g) else ""),
+                                    ("config", config), ("snr_db", snr)]):
+            df.insert(i, k, v)
+        rows.append(df)
+    if not rows:
+        return pd.DataFrame()
+    order = {m["label"]: i for i, m in enumerate(record["methods"])}
+    out = pd.concat(rows, ignore_index=True)
+    out = out.assign(_o=out.config.map(order)).sort_values(["scenario", "_o", "snr_db", "step"])
+    return out.drop(columns="_o").reset_index(drop=True)
 
 
 # ------------------------------------------------------------------ report sections
 
+def _snr_text(snr: list) -> str:
+    if len(snr) > 2:
+        return f"{_fmt(snr[0])} to {_fmt(snr[-1])} dB ({len(snr)} levels)"
+    return ", ".join(f"{_fmt(x)} dB" for x in snr)
+
+
 def _section_plan(record: dict, store: Store) -> str:
     sweep = record["sweep"]
-    snr = sweep["snr_db"]
-    snr_text = f"{_fmt(snr[0])} to {_fmt(snr[-1])} dB ({len(snr)} levels)" if len(snr) > 2 else \
-        ", ".join(f"{_fmt(s)} dB" for s in snr)
-    rows = [["scenario", f"`{sweep['scenario']}`"],
-            ["scenario params", ", ".join(f"{k} = {v}" for k, v in sweep["scenario_params"].items())],
-            ["SNR", snr_text], ["trials per SNR level", sweep["trials"]], ["seed", sweep["seed"]],
-            ["trials per unit (chunk)", sweep["chunk"]],
-            ["calibration", f"{sweep['calibration']['mode']}, requested Pfa {sweep['calibration']['pfa']:g} "
-                            f"per step, {sweep['calibration']['h0_trials']} null trials"]]
+    cal = sweep["calibration"]
+    rows = [["seed", sweep["seed"]], ["trials per unit (chunk)", sweep["chunk"]],
+            ["calibration", f"{cal['mode']}, requested Pfa {cal['pfa']:g} (per step for detectors, per scene "
+                            f"for TBD), {cal['h0_trials']} null trials per scenario config"]]
+    scenarios = [[f"`{sc['label']}`", sc["name"], ", ".join(sc.get("tasks", [])), sc["params"] or "defaults",
+                  _snr_text(sc.get("snr_db", sweep.get("snr_db", []))), sc.get("trials", sweep.get("trials"))]
+                 for sc in record["scenarios"]]
     methods = [[f"`{m['label']}`", m["name"], m["task"],
                 ", ".join(f"{k}={v}" for k, v in sweep["methods"][i]["params"].items())]
                for i, m in enumerate(record["methods"])]
     definition = store.meta("snr_definition") or "see the scenario's documentation"
     return "\n\n".join([
         "## What was run",
+        _table(["scenario config", "scenario", "tasks", "parameters set", "SNR", "trials per level"], scenarios),
         _table(["", ""], rows),
         f"**SNR definition.** {definition}",
-        "Every method config runs on the same generated trials (common random numbers); trial *i* sees "
-        "the same noise at every SNR level. The resolved sweep is `plan.toml` next to this report.",
+        "Every method config runs on the same generated trials of each scenario config that serves its "
+        "task (common random numbers); trial *i* sees the same noise at every SNR level. The resolved "
+        "sweep is `plan.toml` next to this report.",
         _table(["config", "method", "task", "resolved parameters"], methods),
     ])
 
 
-def _section_calibration(cals, summary: pd.DataFrame) -> str:
+def _section_calibration(cals, summary: pd.DataFrame, tasks: dict[str, str]) -> str:
     if not cals:
-        return "## Calibration\n\nNo method config was calibrated (see Failures)."
+        return ""
     measured = summary.groupby("config").agg(fa_pfa=("pfa", "mean"))
     rows = []
     for c in cals:
-        used_pfa = measured.fa_pfa.get(c.method, np.nan)
-        rows.append([f"`{c.method}`", c.mode, f"{c.pfa:g}", _fmt(c.nominal, 4),
+        in_eval = measured.fa_pfa.get(c.method, np.nan) if tasks.get(c.method) == MANEUVER_DETECTION else np.nan
+        rows.append([f"`{c.method}`", c.mode, f"{c.pfa:g} {handler(tasks[c.method]).pfa_unit}",
+                     _fmt(c.nominal, 4),
                      f"{_fmt(c.nominal_pfa)} [{_fmt(c.nominal_pfa_low)}, {_fmt(c.nominal_pfa_high)}]",
-                     _fmt(c.used, 4), _fmt(used_pfa),
-                     f"{_fmt(c.chance_pd)} [{_fmt(c.chance_pd_low)}, {_fmt(c.chance_pd_high)}]",
+                     _fmt(c.used, 4), f"{_fmt(c.used_pfa)} [{_fmt(c.used_pfa_low)}, {_fmt(c.used_pfa_high)}]",
+                     _fmt(in_eval), f"{_fmt(c.chance_pd)} [{_fmt(c.chance_pd_low)}, {_fmt(c.chance_pd_high)}]",
                      f"{c.null_values:,}"])
     return "\n\n".join([
         "## Calibration",
-        "Thresholds are applied by the harness, so every detector is compared at the same false-alarm "
-        "rate. *Measured Pfa of nominal* is the fraction of null-hypothesis statistic values (separate "
-        "calibration trials, all steps after warm-up) at or above the method's own analytic threshold, "
-        "with its 95% Wilson interval; *empirical* thresholds are the (1 − Pfa) quantile of the same "
-        "values. *Pfa in evaluation* is the per-step false-alarm rate measured before the maneuver onset "
-        "in the evaluation trials, at the threshold used, averaged over SNR levels. *Chance Pd* is how "
-        "often the detection rule fires on null trials (no maneuver) within the detection window: the "
-        "floor Pd falls to as SNR goes down, drawn as a dotted line in the Pd figure.",
+        "Thresholds are applied by the harness, so every method is compared at the same false-alarm "
+        "rate: per step for detectors, per scene for track-before-detect. *Measured Pfa of nominal* is "
+        "the fraction of null-hypothesis values (separate calibration trials; detectors: all steps after "
+        "warm-up; TBD: one scene score per null scene) at or above the method's own analytic threshold "
+        "(– where the method has none), with its 95% Wilson interval; *empirical* thresholds are the "
+        "(1 − Pfa) quantile of the same values, *gumbel* ones the quantile of a Gumbel law fitted to them. "
+        "*Measured Pfa of the threshold used* is on the same null values (by construction at most the "
+        "requested Pfa for *empirical*; an honest check of the tail fit for *gumbel*). *Pfa in "
+        "evaluation* is the per-step false-alarm rate measured before the maneuver onset in the "
+        "evaluation trials, averaged over SNR levels. *Chance Pd* is how often the detection rule fires "
+        "on null trials (no maneuver) within the detection window: the floor Pd falls to as SNR goes "
+        "down, drawn as a dotted line in the Pd figure.",
         _table(["config", "mode", "requested Pfa", "nominal threshold", "measured Pfa of nominal [95% CI]",
-                "threshold used", "Pfa in evaluation", "chance Pd [95% CI]", "null values"], rows),
-        "Window statistics are correlated from step to step, so the intervals, which treat steps as "
-        "independent, are narrower than the truth for them.",
+                "threshold used", "measured Pfa of the threshold used [95% CI]", "Pfa in evaluation",
+                "chance Pd [95% CI]", "null values"], rows),
+        "Window statistics are correlated from step to step, so the per-step intervals, which treat "
+        "steps as independent, are narrower than the truth for them.",
     ])
 
 
@@ -183,19 +228,6 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
         "![delay vs SNR](figures/delay_vs_snr.png)",
         "Delay = first alarm at or after the onset minus the onset, over detected trials only.",
     ])
-
-
-def _snr50(summary: pd.DataFrame) -> pd.DataFrame:
-    """Per config: the SNR at Pd = 0.5 (``mid``) and its interval (``low``, ``high``),
-    see :func:`bench.metrics.snr_at_pd`; ``order`` sorts them, a crossing above
-    the swept range (NaN) last."""
-    rows = []
-    for (method, config), g in summary.groupby(["method", "config"], sort=False):
-        g = g.sort_values("snr_db")
-        mid, low, high = snr_at_pd(g.snr_db, g.pd, g.pd_low, g.pd_high)
-        rows.append({"method": method, "config": config, "mid": mid, "low": low, "high": high,
-                     "order": np.inf if np.isnan(mid) else mid})
-    return pd.DataFrame(rows)
 
 
 def _section_ranking(summary: pd.DataFrame) -> str:
@@ -308,42 +340,58 @@ def build_outputs(out_dir: Path, *, recording: bool = True) -> Path:
         store.close()
 
 
+def _detection_parts(store, trials, summary, cals, fig_dir, title, pfa) -> list[str]:
+    if summary.empty:
+        return []
+    return [_section_detection(summary, fig_dir, title, pfa, {c.method: c.chance_pd for c in cals}),
+            _section_ranking(summary), _section_roc(store, trials, summary, fig_dir, title, pfa)]
+
+
+def _timeline_parts(records, fig_dir: Path, title: str) -> list[str]:
+    """The statistic of each detector on one recorded trial (the highest SNR)."""
+    records = [r for r in records if r.methods and all(m.statistic is not None for m in r.methods.values())]
+    if not records:
+        return []
+    top = max(records, key=lambda r: (r.snr_db if r.snr_db is not None else -np.inf, -r.trial))
+    figures.trial_timeline(top, fig_dir / "trial_timeline.png",
+                           f"{title}: trial {top.trial} at {_fmt(top.snr_db)} dB")
+    return ["## One trial over time",
+            f"Statistic, threshold in force and alarms of each method on trial {top.trial} at "
+            f"{_fmt(top.snr_db)} dB (symmetric-log scale).",
+            "![one trial](figures/trial_timeline.png)"]
+
+
 def _build(store: Store, out_dir: Path, recording: bool) -> Path:
     record = store.plan()
     sweep = record["sweep"]
     runs, units = store.runs(), store.units()
-    trials = trials_frame(store, record)
-    summary = summary_frame(trials, runs, record)
+    trials, series = trials_frame(store, record)
     cals = calibrations(store, [s["label"] for s in record["scenarios"]], [m["label"] for m in record["methods"]],
                         sweep["calibration"]["pfa"], sweep["calibration"]["mode"])
+    summary = summary_frame(trials, series, runs, record, cals)
+    t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}
+    steps = steps_frame(trials, series, record, t_of)
     _write_csv(trials, out_dir / "trials.csv")
     _write_csv(summary, out_dir / "summary.csv")
     _write_csv(pd.DataFrame([c.as_row() for c in cals]), out_dir / "calibration.csv")
+    if not steps.empty:
+        _write_csv(steps, out_dir / "steps.csv")
     fig_dir = out_dir / "figures"
     title = sweep["name"]
+    pfa = sweep["calibration"]["pfa"]
+    tasks = {m["label"]: m["task"] for m in record["methods"]}
+    of_task = {task: summary[summary.config.map(tasks) == task] for task in (MANEUVER_DETECTION, TBD, TRACKING)}
     records = [TrialRecord.from_bytes(b) for b in store.records()]
     done, total = len(units), int(store.meta("units_total") or len(units))
     parts = [f"# {title}", sweep.get("description") or "",
              f"Reproduce with `{record.get('command', '')}`." +
              ("" if done >= total else f" **Incomplete run: {done} of {total} units stored.**"),
-             _section_plan(record, store),
-             _section_calibration(cals, summary),
-             _section_detection(summary, fig_dir, title, sweep["calibration"]["pfa"],
-                                {c.method: c.chance_pd for c in cals})]
-    if not summary.empty:
-        parts += [_section_ranking(summary),
-                  _section_roc(store, trials, summary, fig_dir, title, sweep["calibration"]["pfa"])]
-    notes = preset_notes(record.get("source", ""))
-    if notes:
-        parts.append(notes)
-    if records:
-        top = max(records, key=lambda r: (r.snr_db if r.snr_db is not None else -np.inf, -r.trial))
-        figures.trial_timeline(top, fig_dir / "trial_timeline.png",
-                               f"{title}: trial {top.trial} at {_fmt(top.snr_db)} dB")
-        parts += ["## One trial over time",
-                  f"Statistic, threshold in force and alarms of each method on trial {top.trial} at "
-                  f"{_fmt(top.snr_db)} dB (symmetric-log scale).",
-                  "![one trial](figures/trial_timeline.png)"]
+             _section_plan(record, store), _section_calibration(cals, summary, tasks)]
+    parts += _detection_parts(store, trials, of_task[MANEUVER_DETECTION], cals, fig_dir, title, pfa)
+    parts += report_tbd.sections(of_task[TBD], steps, store, cals, fig_dir, title, pfa)
+    parts += report_tracking.sections(of_task[TRACKING], steps, fig_dir, title)
+    parts.append(preset_notes(record.get("source", "")))
+    parts += _timeline_parts(records, fig_dir, title)
     parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
     if recording and records:
         write_recording(out_dir / "recording.rrd", records, summary.assign(method=summary.config),
@@ -353,4 +401,3 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
     report = out_dir / "report.md"
     _write_text(report, "\n\n".join(p for p in parts if p) + "\n")
     return report
-

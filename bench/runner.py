@@ -40,7 +40,7 @@ from bench.store import MethodRun, Store, UnitResult
 from bench.tasks import handler
 
 RUN_FILES = ("results.sqlite", "results.sqlite-wal", "results.sqlite-shm", "plan.toml", "trials.csv",
-             "summary.csv", "calibration.csv", "report.md", "recording.rrd")
+             "summary.csv", "calibration.csv", "steps.csv", "report.md", "recording.rrd")
 
 
 @dataclass(frozen=True)
@@ -78,13 +78,21 @@ def _chunks(total: int, chunk: int):
         yield start, min(chunk, total - start)
 
 
+def _calibrated(plan: Plan, sc) -> list:
+    """The method configs on scenario config ``sc`` whose task thresholds a statistic."""
+    return [m for m in plan.pairs(sc) if handler(registry.get_method(m.name).task).calibrated]
+
+
 def plan_units(plan: Plan) -> tuple[list[Unit], list[Unit]]:
+    """Calibration units (null trials, only where some method needs a threshold)
+    and evaluation units, per scenario config at its own SNR levels and trials."""
     calibration, evaluation = [], []
     for i, sc in enumerate(plan.scenarios):
-        for start, n in _chunks(plan.calibration.h0_trials, plan.chunk):
-            calibration.append(Unit("calibration", i, sc.label, None, start, n))
-        for snr in plan.snr_db:
-            for start, n in _chunks(plan.trials, plan.chunk):
+        if _calibrated(plan, sc):
+            for start, n in _chunks(plan.calibration.h0_trials, plan.chunk):
+                calibration.append(Unit("calibration", i, sc.label, None, start, n))
+        for snr in sc.snr_db:
+            for start, n in _chunks(sc.trials, plan.chunk):
                 evaluation.append(Unit("evaluation", i, sc.label, snr, start, n))
     return calibration, evaluation
 
@@ -101,9 +109,16 @@ def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict) -> bytes:
     sc = plan.scenarios[unit.scenario_index]
     pos = list(batch.meta.get("position_index", (0, 1)))
     z_xy = batch.meta.get("z_xy")
-    measured = z_xy[i] if z_xy is not None else batch.z[i][:, :2]
-    rec = TrialRecord(scenario=sc.name, snr_db=unit.snr_db, trial=int(batch.trials[i]), t=batch.t,
-                      truth_xy=batch.truth[i][:, pos], measurements_xy=measured, methods=traces)
+    measured = z_xy[i] if z_xy is not None else (batch.z[i][:, :2] if batch.z.ndim == 3 else None)
+    extras = {}
+    if batch.z.ndim == 4:                       # TBD frames (n, K, H, W)
+        cells = batch.meta.get("target_cells")
+        extras = {"frames": batch.z[i], "grid": dict(batch.meta["grid"]),
+                  "truth_cells": None if cells is None else np.asarray(cells[i])}
+    elif batch.meta.get("glint_outlier") is not None:
+        extras = {"measurement_flags": np.asarray(batch.meta["glint_outlier"][i]).reshape(batch.steps, -1).any(axis=1)}
+    rec = TrialRecord(scenario=sc.label, snr_db=unit.snr_db, trial=int(batch.trials[i]), t=batch.t,
+                      truth_xy=batch.truth[i][:, pos[:2]], measurements_xy=measured, methods=traces, **extras)
     return rec.to_bytes()
 
 
@@ -124,14 +139,15 @@ def execute_unit(task: UnitTask) -> UnitResult:
     recorded = [i for i, t in enumerate(batch.trials) if t < plan.record_trials] \
         if unit.phase == "evaluation" else []
     traces: dict[int, dict] = {i: {} for i in recorded}
-    for mc in plan.methods:
+    methods = _calibrated(plan, sc) if unit.phase == "calibration" else plan.pairs(sc)
+    for mc in methods:
         method_cls = registry.get_method(mc.name)
         run = MethodRun(mc.label, 0.0)
         t1 = time.perf_counter()
         try:
             task_handler = handler(method_cls.task)
             method = method_cls()
-            if unit.phase == "evaluation" and task.thresholds.get(mc.label) is None:
+            if unit.phase == "evaluation" and task_handler.calibrated and task.thresholds.get(mc.label) is None:
                 raise RuntimeError("no threshold: the calibration of this method failed")
             out = task_handler.check_output(method.run(batch, mc.params), batch)
             if unit.phase == "calibration":
@@ -139,11 +155,12 @@ def execute_unit(task: UnitTask) -> UnitResult:
                 run.null_peaks = task_handler.null_peaks(batch, out)
                 run.nominal_threshold = float(method.nominal_threshold(mc.params, plan.calibration.pfa, batch))
             else:
-                threshold = float(task.thresholds[mc.label])
+                threshold = task.thresholds.get(mc.label)
+                threshold = float("nan") if threshold is None else float(threshold)
                 run.metrics = task_handler.trial_metrics(batch, out, threshold)
                 run.metrics["threshold"] = np.full(unit.n, threshold)
                 for i in recorded:
-                    traces[i][mc.label] = task_handler.trace(out, i, threshold)
+                    traces[i][mc.label] = task_handler.trace(batch, out, i, threshold)
         except Exception as exc:  # noqa: BLE001 - one method's failure never stops the others
             run.error = _error_text(exc)
         run.seconds = time.perf_counter() - t1
@@ -169,9 +186,9 @@ def calibrations(store: Store, scenarios: list[str], methods: list[str], pfa: fl
     for sc in scenarios:
         for m in methods:
             values, peaks, nominal = store.null_values(sc, m)
-            if (sc, m) in failed_pairs or values.size == 0 or nominal is None:
+            if (sc, m) in failed_pairs or values.size == 0:
                 continue
-            out.append(calibrate(sc, m, values, nominal, pfa, mode, peaks))
+            out.append(calibrate(sc, m, values, np.nan if nominal is None else nominal, pfa, mode, peaks))
     return out
 
 
@@ -215,7 +232,7 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
                                                           for sc in plan.scenarios}
         for c in calibrations(store, [s.label for s in plan.scenarios], [m.label for m in plan.methods],
                               plan.calibration.pfa, plan.calibration.mode):
-            thresholds[c.scenario][c.method] = c.used
+            thresholds[c.scenario][c.method] = c.used if np.isfinite(c.used) else None
         tasks = [UnitTask(plan, u, thresholds[u.scenario_label]) for u in eval_units if u.key not in done]
         _run_phase(ex, tasks, store, progress, on_result)
     except KeyboardInterrupt:
@@ -242,7 +259,8 @@ def plan_record(plan: Plan, command: str) -> dict:
         "command": command,
         "methods": [{"label": m.label, "name": m.name, "params": m.params_text,
                      "task": registry.get_method(m.name).task} for m in plan.methods],
-        "scenarios": [{"label": s.label, "name": s.name, "params": s.params_text} for s in plan.scenarios],
+        "scenarios": [{"label": s.label, "name": s.name, "params": s.params_text, "tasks": list(s.tasks),
+                       "snr_db": list(s.snr_db), "trials": s.trials} for s in plan.scenarios],
     }
 
 

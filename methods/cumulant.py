@@ -97,6 +97,9 @@ class Cumulant(Method):
 
     name = "cumulant"
     task = MANEUVER_DETECTION
+    #: ``bench perf``: the reference is the per-trial filterpy loop (issue 6 target)
+    perf_targets = {"*": {"speedup": 50.0}}
+    reference_trials = 100
 
     @dataclass(frozen=True)
     class Params:

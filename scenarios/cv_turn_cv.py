@@ -146,6 +146,8 @@ class CvTurnCv(Scenario):
 
     name = "cv-turn-cv"
     tasks = (MANEUVER_DETECTION,)
+    #: ``bench perf`` sizes: name -> (scenario params, trials)
+    perf_sizes = {"paper": ({}, 1000)}
 
     @dataclass(frozen=True)
     class Params:

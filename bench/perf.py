@@ -1,0 +1,268 @@
+"""``bench perf``: throughput and peak memory of every registered method.
+
+For each method and each named size of its scenario (``Scenario.perf_sizes``:
+``name -> (scenario params, trials)``), one batch is generated and the method
+runs on it after a warm-up on one trial (so JIT compilation is not timed); the
+best of a few repetitions is kept. In the same run, the method's *reference
+implementation* runs on the same kind of batch:
+
+* a method may define ``reference_run(batch, params)`` (and
+  ``reference_name``), e.g. the straightforward SciPy DP-TBD;
+* otherwise, for a method that reads the scenario's linear filter
+  (``batch.meta["filter"]``), the reference is the same method with its
+  innovations computed by a per-trial ``filterpy`` ``KalmanFilter`` loop
+  (:func:`bench.kalman.innovations` honours ``meta["kalman_backend"]``).
+
+Each measurement runs in a fresh process, so ``peak_rss_mb`` (the process's
+maximum resident set size, including the interpreter, the libraries and the
+batch) is the method's alone. DP methods may define ``transitions(batch,
+params)`` (state transitions evaluated per trial) and methods may declare
+``perf_targets`` (``speedup``, ``transitions_per_second``,
+``seconds_per_trial``), which the report shows against the measurements.
+Nothing here is asserted by tests: speed is measured, never a pass/fail gate.
+
+Optionally (``--executors``) a compute-bound sweep is run with one local
+worker, N local workers and N Dask workers, to measure the executors' scaling.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing
+import os
+import platform
+import resource
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bench import registry
+from bench.markdown import fmt, table
+from bench.params import build_params
+from bench.rng import EVALUATION, TrialRNG, stable_key
+
+PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "reference", "reference_seconds_per_trial",
+                "speedup", "peak_rss_mb"]
+SEED = 20261121
+REPEATS = 3
+
+
+@dataclass(frozen=True)
+class Job:
+    method: str
+    scenario: str
+    size: str
+    scenario_params: dict
+    trials: int
+    reference: bool          # time the reference implementation instead of the method
+
+
+def _peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # Linux: kB
+
+
+def _batch(job: Job, n: int):
+    cls = registry.get_scenario(job.scenario)
+    params = build_params(cls.Params, job.scenario_params)
+    rng = TrialRNG(SEED, EVALUATION, stable_key([job.scenario, job.scenario_params]), range(n))
+    return cls().generate(params, float(getattr(cls, "perf_snr_db", 10.0)), n, rng)
+
+
+def reference_of(method, batch):
+    """``(name, callable(batch, params))`` of the method's reference, or None."""
+    if hasattr(method, "reference_run"):
+        return getattr(method, "reference_name", "reference implementation"), method.reference_run
+    if "filter" in batch.meta:
+        def run(b, params):
+            b.meta = {**b.meta, "kalman_backend": "filterpy"}
+            return method.run(b, params)
+        return "same detector, per-trial filterpy KalmanFilter loop", run
+    return None
+
+
+def _timed(fn, repeats: int) -> float:
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def measure(job: Job) -> dict:
+    """Run in a fresh process: seconds per trial (best of REPEATS), peak RSS."""
+    registry.discover()
+    method = registry.get_method(job.method)()
+    params = method.Params()
+    warm = _batch(job, 1)
+    batch = _batch(job, job.trials)
+    out = {"name": None, "transitions": None}
+    if job.reference:
+        ref = reference_of(method, warm)
+        if ref is None:
+            return {**out, "seconds_per_trial": np.nan, "peak_rss_mb": np.nan}
+        out["name"], fn = ref
+        fn(warm, params)
+        seconds = _timed(lambda: fn(batch, params), 1)
+    else:
+        method.run(warm, params)
+        seconds = _timed(lambda: method.run(batch, params), REPEATS)
+        if hasattr(method, "transitions"):
+            out["transitions"] = float(method.transitions(batch, params))
+    return {**out, "seconds_per_trial": seconds / job.trials, "peak_rss_mb": _peak_rss_mb()}
+
+
+def _in_fresh_process(job: Job) -> dict:
+    ctx = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
+        return pool.submit(measure, job).result()
+
+
+def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> list[tuple[Job, int]]:
+    """(job, reference trials) for every method x its scenario's sizes."""
+    registry.discover()
+    out = []
+    for name, cls in registry.methods().items():
+        if methods and name not in methods:
+            continue
+        scenario = next((s for s in registry.scenarios().values() if cls.task in s.tasks), None)
+        if scenario is None:
+            continue
+        for size, (params, trials) in getattr(scenario, "perf_sizes", {"default": ({}, 100)}).items():
+            if sizes and size not in sizes:
+                continue
+            ref_trials = max(1, min(trials, int(getattr(cls, "reference_trials", trials))))
+            out.append((Job(name, scenario.name, size, dict(params), int(trials), False), ref_trials))
+    return out
+
+
+def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False, workers: int = 2,
+             progress=print) -> Path:
+    rows, extra = [], []
+    for job, ref_trials in jobs(methods, sizes):
+        progress(f"perf: {job.method} at {job.size} ({job.trials} trials)")
+        m = _in_fresh_process(job)
+        r = _in_fresh_process(Job(job.method, job.scenario, job.size, job.scenario_params, ref_trials, True))
+        speedup = r["seconds_per_trial"] / m["seconds_per_trial"] if np.isfinite(r["seconds_per_trial"]) else np.nan
+        rows.append({"method": job.method, "size": job.size, "trials": job.trials,
+                     "seconds_per_trial": m["seconds_per_trial"], "reference": r["name"] or "",
+                     "reference_seconds_per_trial": r["seconds_per_trial"], "speedup": speedup,
+                     "peak_rss_mb": m["peak_rss_mb"]})
+        tps = m["transitions"] / m["seconds_per_trial"] if m["transitions"] else np.nan
+        extra.append({"scenario": job.scenario, "params": job.scenario_params, "reference_trials": ref_trials,
+                      "transitions_per_second": tps,
+                      "targets": getattr(registry.get_method(job.method), "perf_targets", {})})
+    scaling = executor_scaling(workers, progress) if executors else None
+    return write_report(Path(out_dir), pd.DataFrame(rows, columns=PERF_COLUMNS), extra, scaling)
+
+
+# ------------------------------------------------------------------ executors
+
+SCALING_SWEEP = """
+name = "perf-scaling"
+scenario = "cv-turn-cv"
+trials = {trials}
+seed = 7
+snr_db = [0.0, 3.0, 6.0]
+chunk = 25
+[scenario_params]
+steps = 400
+[[methods]]
+name = "cumulant"
+params = {{ window = [16, 32, 64] }}
+[[methods]]
+name = "wavelet"
+params = {{ levels = [3, 4, 5] }}
+[calibration]
+h0_trials = {h0}
+[record]
+trials = 0
+"""
+
+
+def executor_scaling(workers: int, progress=print, trials: int = 400) -> pd.DataFrame:
+    """Wall time of one compute-bound sweep per executor (units only, no report)."""
+    import tempfile
+
+    from bench.config import parse_sweep_text
+    from bench.runner import plan_record, run_sweep
+    plan = parse_sweep_text(SCALING_SWEEP.format(trials=trials, h0=trials).encode(), "perf scaling sweep")
+    rows = []
+    for executor, n in (("local", 1), ("local", workers), ("dask", workers)):
+        progress(f"perf: scaling sweep with {executor} x {n}")
+        with tempfile.TemporaryDirectory() as tmp:
+            t0 = time.perf_counter()
+            try:
+                store = run_sweep(plan, Path(tmp), plan_record=plan_record(plan, "bench perf"), workers=n,
+                                  executor=executor, quiet=True)
+                store.close()
+            except Exception as exc:  # noqa: BLE001 - e.g. dask not installed: reported, not fatal
+                rows.append({"executor": executor, "workers": n, "seconds": np.nan, "error": str(exc)})
+                continue
+            rows.append({"executor": executor, "workers": n, "seconds": time.perf_counter() - t0, "error": ""})
+    df = pd.DataFrame(rows)
+    base = df.seconds.iloc[0]
+    df["speedup"] = base / df.seconds
+    df["efficiency"] = df.speedup / df.workers
+    return df
+
+
+# ------------------------------------------------------------------ report
+
+def _target_text(targets: dict, row: dict, tps: float) -> str:
+    checks = []
+    for key, goal in targets.items():
+        if key == "speedup":
+            value, ok = row["speedup"], row["speedup"] >= goal
+            checks.append(f"speed-up ≥ {goal:g}: {fmt(value)} {'✓' if ok else '✗'}")
+        elif key == "transitions_per_second":
+            checks.append(f"≥ {goal:.0e} transitions/s: {tps:.2e} {'✓' if tps >= goal else '✗'}")
+        elif key == "seconds_per_trial":
+            value = row["seconds_per_trial"]
+            checks.append(f"≤ {goal:g} s/trial: {fmt(value)} {'✓' if value <= goal else '✗'}")
+    return "; ".join(checks) or "–"
+
+
+def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: pd.DataFrame | None) -> Path:
+    from bench.provenance import provenance
+    out_dir.mkdir(parents=True, exist_ok=True)
+    tmp = out_dir / "perf.csv.tmp"
+    perf.to_csv(tmp, index=False, lineterminator="\n")
+    tmp.replace(out_dir / "perf.csv")
+    rows = []
+    for row, info in zip(perf.to_dict("records"), extra):
+        tps = info["transitions_per_second"]
+        targets = info["targets"].get(row["size"], info["targets"].get("*", {}))
+        rows.append([f"`{row['method']}`", row["size"], row["trials"], f"{row['seconds_per_trial'] * 1e3:.3g}",
+                     f"{1.0 / row['seconds_per_trial']:.3g}", "–" if not np.isfinite(tps) else f"{tps:.3g}",
+                     row["reference"] or "–",
+                     "–" if not np.isfinite(row["reference_seconds_per_trial"])
+                     else f"{row['reference_seconds_per_trial'] * 1e3:.3g} ({info['reference_trials']} trials)",
+                     fmt(row["speedup"]), f"{row['peak_rss_mb']:.0f}", _target_text(targets, row, tps)])
+    parts = ["# Performance", "Written by `bench perf`; `perf.csv` holds the same numbers. One core per "
+             "measurement, best of 3 runs after a one-trial warm-up (JIT compilation is not timed); the "
+             "reference runs once on its trials in a separate fresh process. Peak RSS is the whole "
+             "measuring process's (interpreter and libraries included).",
+             table(["method", "size", "trials", "ms per trial", "trials/s", "transitions/s", "reference",
+                    "reference ms per trial", "speed-up", "peak RSS (MB)", "targets"], rows),
+             "Sizes: " + "; ".join(sorted({f"`{i['scenario']}` {r['size']} = {i['params'] or 'defaults'}"
+                                          for r, i in zip(perf.to_dict("records"), extra)}))]
+    if scaling is not None:
+        srows = [[r.executor, r.workers, fmt(r.seconds), fmt(r.speedup), fmt(r.efficiency), r.error or ""]
+                 for r in scaling.itertuples()]
+        parts += ["## Executor scaling", "One compute-bound sweep (`cv-turn-cv`, 400 steps, 6 detector configs, "
+                  "3 SNR levels, 400 trials each plus 400 null trials), wall time of the units; speed-up "
+                  "against one local worker. Target for Dask: ≥ 0.8·N on N local workers.",
+                  table(["executor", "workers", "seconds", "speed-up", "speed-up / workers", "error"], srows)]
+    prov = provenance()
+    parts.append("## Machine\n\n" + table(["", ""], [["CPU count", os.cpu_count()], ["platform", platform.platform()],
+                                                    ["python", platform.python_version()]] +
+                                          [[k, v] for k, v in prov.items()]))
+    report = out_dir / "report.md"
+    tmp = out_dir / "report.md.tmp"
+    tmp.write_text("\n\n".join(parts) + "\n", encoding="utf-8")
+    tmp.replace(report)
+    return report

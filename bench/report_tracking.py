@@ -1,0 +1,106 @@
+"""Report sections of the tracking task (DESIGN.md sections 7–8).
+
+Time-averaged position RMSE with bootstrap intervals per scenario config and
+SNR, divergence rate and NEES, RMSE against SNR, per-step RMSE and the mean
+estimate against the truth per step (the usual figure of tracking papers).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bench import figures
+from bench.markdown import fmt, fmt_interval, table
+from bench.recording import entity_name as slug
+
+
+def _reference_snr(g: pd.DataFrame) -> float:
+    """The scenario config's SNR level closest to 0 dB (its reference level)."""
+    levels = np.unique(g.snr_db.to_numpy(float))
+    return float(levels[np.argmin(np.abs(levels))])
+
+
+def _overview(summary: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
+    configs = list(dict.fromkeys(summary.config))
+    rows, ref = [], {}
+    for scenario, g in summary.groupby("scenario", sort=False):
+        ref[scenario] = snr = _reference_snr(g)
+        at = g[g.snr_db == snr].set_index("config")
+        rows.append([f"`{scenario}`", fmt(snr)] +
+                    [fmt_interval(at.rmse_mean.get(c), at.rmse_low.get(c), at.rmse_high.get(c))
+                     if c in at.index else "–" for c in configs])
+    parts = ["## Tracking: position RMSE",
+             "*Time-averaged RMSE* = mean over steps of the per-step position RMSE across trials (metres), "
+             "with a 95% bootstrap interval over trials; every method runs on the same trials.",
+             table(["scenario config", "SNR (dB)"] + [f"`{c}`" for c in configs], rows)]
+    if summary.scenario.nunique() > 1:
+        pick = pd.concat([g[g.snr_db == ref[s]] for s, g in summary.groupby("scenario", sort=False)])
+        values = pick.pivot_table(index="scenario", columns="config", values="rmse_mean", sort=False)
+        low = pick.pivot_table(index="scenario", columns="config", values="rmse_low", sort=False)
+        high = pick.pivot_table(index="scenario", columns="config", values="rmse_high", sort=False)
+        figures.grouped_bars(values, low, high, fig_dir / "tracking_rmse_by_scenario.png",
+                             f"{title}: time-averaged position RMSE (95% CI)", "RMSE (m)", log=True)
+        parts.append("![RMSE by scenario config](figures/tracking_rmse_by_scenario.png)")
+    health = [[f"`{r.scenario}`", fmt(r.snr_db), f"`{r.config}`",
+               fmt_interval(r.divergence_rate, r.divergence_low, r.divergence_high), fmt(r.nees_mean)]
+              for r in summary.itertuples()]
+    parts.append("<details><summary>Divergence rate and NEES per cell</summary>\n\n"
+                 "*Divergence*: the position error exceeded the scenario's `divergence_bound_m` at some step. "
+                 "*NEES*: mean normalised estimation error squared (equals the state dimension for a "
+                 "consistent filter; – without a covariance).\n\n" +
+                 table(["scenario config", "SNR (dB)", "config", "divergence rate [95% CI]", "mean NEES"], health)
+                 + "\n\n</details>")
+    return parts
+
+
+def _versus_snr(summary: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
+    parts = []
+    for scenario, g in summary.groupby("scenario", sort=False):
+        if g.snr_db.nunique() < 2:
+            continue
+        name = f"tracking_rmse_vs_snr_{slug(scenario)}.png"
+        figures.metric_vs_snr(g, fig_dir / name, f"{title}: {scenario}", log=True)
+        parts.append(f"RMSE against SNR on `{scenario}`:\n\n![RMSE vs SNR]({'figures/' + name})")
+    return parts
+
+
+def _per_step(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
+    parts = []
+    for scenario, g in summary.groupby("scenario", sort=False):
+        snr = _reference_snr(g)
+        at = steps[(steps.scenario == scenario) & (steps.snr_db == snr)]
+        if at.empty:
+            continue
+        curves = {c: (s.t.to_numpy(), s.rmse_position.to_numpy()) for c, s in at.groupby("config", sort=False)}
+        name = f"tracking_rmse_per_step_{slug(scenario)}.png"
+        figures.rmse_per_step(curves, fig_dir / name, f"{title}: {scenario} at {fmt(snr)} dB", xlabel="time (s)")
+        parts.append(f"![per-step RMSE on {scenario}](figures/{name})")
+    first = summary.scenario.iloc[0]
+    snr = _reference_snr(summary[summary.scenario == first])
+    at = steps[(steps.scenario == first) & (steps.snr_db == snr)]
+    components = [c[len("mean_est_"):] for c in at.columns if c.startswith("mean_est_") and at[c].notna().any()]
+    if not at.empty and components:
+        comp = components[0]
+        one = at[at.config == at.config.iloc[0]]
+        figures.mean_estimate(one.t.to_numpy(), one[f"mean_true_{comp}"].to_numpy(),
+                              {c: s[f"mean_est_{comp}"].to_numpy() for c, s in at.groupby("config", sort=False)},
+                              fig_dir / "tracking_mean_estimate.png",
+                              f"{title}: mean estimate of {comp} on {first} at {fmt(snr)} dB", comp)
+        parts.append(f"Mean estimate of `{comp}` across trials against the truth, per step:\n\n"
+                     "![mean estimate](figures/tracking_mean_estimate.png)")
+    if parts:
+        parts.insert(0, "## Tracking: error over time\n\nPer-step position RMSE across trials at each "
+                        "scenario config's reference SNR (closest to 0 dB); `steps.csv` has every level "
+                        "and component.")
+    return parts
+
+
+def sections(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
+    if summary.empty:
+        return []
+    tr_steps = steps[steps.config.isin(set(summary.config))] if not steps.empty else steps
+    return _overview(summary, fig_dir, title) + _versus_snr(summary, fig_dir, title) + \
+        _per_step(summary, tr_steps, fig_dir, title)
