@@ -46,6 +46,8 @@ SCENARIO_KEYS = {"name", "params", "label", "snr_db", "trials"}
 METHOD_KEYS = {"name", "params", "label"}
 CALIBRATION_MODES = ("nominal", "empirical", "gumbel")
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+#: scenario config labels: readable like "glint[epsilon=0.05]", never path-like
+LABEL_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.,=+\-\[\]() ]{0,199}$")
 MAX_SNR_LEVELS = 1000
 MAX_CONFIGS = 1000
 #: trial-runs (trials x SNR levels x configs) above which a sweep needs --yes
@@ -304,9 +306,9 @@ def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, .
     table = _expect_table(params, field)
     expanded = _expand(cls.name, cls.Params, table, field, identity=identity)
     if label is not None:
-        if not isinstance(label, str) or not NAME_PATTERN.match(label):
-            raise ConfigError(field.replace(".params", ".label"), "expected letters, digits, '_', '-' or '.' "
-                                                                  f"(at most 64), got {label!r}"[:200])
+        if not isinstance(label, str) or not LABEL_PATTERN.match(label):
+            raise ConfigError(field.replace(".params", ".label"), "expected letters, digits, spaces or "
+                                                                  f"'_.,=+-[]()' (at most 200), got {label!r}"[:200])
         if len(expanded) != 1:
             raise ConfigError(field.replace(".params", ".label"), "a label names one config; remove the grid")
         expanded = [ComponentConfig(cls.name, expanded[0].params, label, expanded[0].params_text)]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import shutil
 import subprocess
 import sys
@@ -14,6 +15,7 @@ import pytest
 from bench.recording import (
     LiveViewer,
     MethodTrace,
+    Quantised,
     TrialRecord,
     entity_name,
     entity_root,
@@ -247,12 +249,12 @@ def _rerun_cli() -> list[str]:
 
 def test_rrd_verify(rrd):
     proc = subprocess.run([*_rerun_cli(), "rrd", "verify", str(rrd)],
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=60, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
 
 
 def test_failed_write_leaves_nothing(tmp_path, records, monkeypatch):
-    import bench.recording as recording
+    from bench import recording
 
     def boom(*_a, **_k):
         raise RuntimeError("boom")
@@ -273,7 +275,7 @@ def test_empty_recording(tmp_path):
 
 
 def test_live_viewer_without_display_raises_one_line(monkeypatch):
-    import bench.recording as recording
+    from bench import recording
 
     monkeypatch.setattr(recording, "_has_display", lambda: False)
     with pytest.raises(RuntimeError) as err:
@@ -299,3 +301,316 @@ def test_live_viewer_logs_like_the_file_writer(tmp_path, records, rrd):
         return {x for x in RrdReader(p).store().schema().entity_paths() if not x.startswith("/__")}
 
     assert data_paths(out) == data_paths(rrd)
+
+
+# -- track-before-detect and tracking records ---------------------------------
+
+H, W, KT = 32, 32, 6
+GRID = {"rows": H, "cols": W, "cell_m": 25.0, "x_min_m": -400.0, "y_min_m": 1000.0}
+DP = "dp-tbd[pfa=0.001]"
+HOUGH = "hough[bins=64]"
+EKF = "ekf"
+IMM = "imm[models=3]"
+
+
+def _cell_xy(cells: np.ndarray) -> np.ndarray:
+    return np.column_stack([GRID["x_min_m"] + (cells[:, 1] + 0.5) * GRID["cell_m"],
+                            GRID["y_min_m"] + (cells[:, 0] + 0.5) * GRID["cell_m"]])
+
+
+def _tbd_record(snr_db=9.0, trial=0, *, seed=5, null=False) -> TrialRecord:
+    """32x32x6 frames, a target moving up-right, two TBD methods with tracks and value maps."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(KT) * 0.8
+    cells = np.column_stack([4 + 3 * np.arange(KT), 2 + 2 * np.arange(KT)])
+    frames = rng.normal(size=(KT, H, W)).astype(np.float32)
+    if not null:
+        frames[np.arange(KT), cells[:, 0], cells[:, 1]] += 5.0
+    off = cells + [0, 1]
+    off[2] = -1  # a cell outside the grid: not drawn
+    methods = {
+        DP: MethodTrace(None, 20.0, None, track_cells=cells, score=35.5,
+                        value=rng.gamma(2.0, 3.0, (H, W)).astype(np.float32)),
+        HOUGH: MethodTrace(None, 50.0, None, track_cells=off, score=float("nan"),
+                           value=rng.normal(size=(H, W))),
+    }
+    return TrialRecord("tbd-line", None if null else snr_db, trial, t,
+                       None if null else _cell_xy(cells), None, methods,
+                       frames=frames, grid=GRID, truth_cells=None if null else cells)
+
+
+GLINT_STEPS = [5, 17, 30]
+
+
+def _tracking_record(snr_db=10.0, trial=2, *, seed=7) -> TrialRecord:
+    """A tracking trial: two trackers with error traces, glint outliers at GLINT_STEPS."""
+    rng = np.random.default_rng(seed)
+    k = 40
+    t = np.arange(k) * 0.5
+    truth = np.column_stack([2000 + 150.0 * t, 3000 - 80.0 * t])
+    z = truth + rng.normal(0, 15, (k, 2))
+    z[GLINT_STEPS] += 300.0
+    z[10] = np.nan
+    flags = np.zeros(k, bool)
+    flags[GLINT_STEPS] = True
+    methods = {}
+    for label, noise in ((EKF, 20.0), (IMM, 10.0)):
+        est = truth + rng.normal(0, noise, (k, 2))
+        err = est - truth
+        methods[label] = MethodTrace(None, None, None, estimate_xy=est, traces={
+            "error_x": err[:, 0], "error_y": err[:, 1], "error_pos": np.hypot(*err.T)})
+    return TrialRecord("glint-cv", snr_db, trial, t, truth, z, methods, measurement_flags=flags)
+
+
+def _tracking_summary() -> pd.DataFrame:
+    rows = [(m, s, r) for m in (EKF, IMM) for s, r in ((0.0, 40.0), (10.0, 20.0))]
+    df = pd.DataFrame(rows, columns=["method", "snr_db", "rmse_mean"])
+    df["pd"] = np.nan  # a tracking summary: no detection
+    df["scenario"] = "glint-cv"
+    return df
+
+
+def test_tbd_round_trip_quantises_frames_and_values():
+    rec = _tbd_record()
+    back = TrialRecord.from_bytes(rec.to_bytes())
+    assert back.grid == GRID and back.snr_db == 9.0 and back.truth_xy.shape == (KT, 2)
+    assert back.measurements_xy is None and back.measurement_flags is None
+    assert back.truth_cells.dtype == np.int32
+    np.testing.assert_array_equal(back.truth_cells, rec.truth_cells)
+    q = Quantised.of(rec.frames)
+    assert back.frames.dtype == np.float32 and back.frames.shape == (KT, H, W)
+    # Exact inside [lo, hi] up to half a code; clipped outside.
+    clipped = np.clip(rec.frames, q.lo, q.hi)
+    assert np.abs(back.frames - clipped).max() <= (q.hi - q.lo) / 508 * 1.001
+    mean, std = rec.frames.mean(), rec.frames.std()
+    assert q.lo == pytest.approx(max(rec.frames.min(), mean - 3 * std), rel=1e-5)
+    assert q.hi == pytest.approx(min(rec.frames.max(), mean + 6 * std), rel=1e-5)
+    for label in (DP, HOUGH):
+        a, b = rec.methods[label], back.methods[label]
+        np.testing.assert_array_equal(a.track_cells, b.track_cells)
+        assert b.value.shape == (H, W) and b.value.dtype == np.float32
+        qv = Quantised.of(a.value)
+        assert np.abs(b.value - np.clip(a.value, qv.lo, qv.hi)).max() <= (qv.hi - qv.lo) / 508 * 1.001
+    assert back.methods[DP].score == 35.5 and math.isnan(back.methods[HOUGH].score)
+    assert back.methods[DP].threshold == 20.0
+    # The codes travel unchanged: a second round trip gives the same bytes.
+    assert back.to_bytes() == TrialRecord.from_bytes(back.to_bytes()).to_bytes()
+
+
+def test_tracking_round_trip():
+    rec = _tracking_record()
+    back = TrialRecord.from_bytes(rec.to_bytes())
+    _assert_records_equal(rec, back)
+    assert back.measurement_flags.dtype == bool
+    np.testing.assert_array_equal(np.flatnonzero(back.measurement_flags), GLINT_STEPS)
+    assert back.frames is None and back.grid is None and back.truth_cells is None
+    null = TrialRecord.from_bytes(_tbd_record(null=True).to_bytes())
+    assert null.snr_db is None and null.truth_xy is None and null.truth_cells is None
+
+
+def test_version_1_bytes_still_load():
+    """Bytes written before the TBD/tracking fields (format version 1)."""
+    import io
+    import json
+
+    t, xy = np.arange(3.0), np.ones((3, 2))
+    header = {"version": 1, "scenario": "cv-turn-cv", "snr_db": 5.0, "trial": 2, "methods": [
+        {"label": CUM, "threshold": 6.63, "has": ["statistic", "alarms"], "traces": ["innovation"]}]}
+    buf = io.BytesIO()
+    np.savez_compressed(buf, t=t, truth_xy=xy, measurements_xy=xy * 2, m0_statistic=t,
+                        m0_alarms=t > 1, m0_trace0=-t,
+                        header=np.frombuffer(json.dumps(header).encode(), np.uint8))
+    rec = TrialRecord.from_bytes(buf.getvalue())
+    np.testing.assert_array_equal(rec.measurements_xy, xy * 2)
+    np.testing.assert_array_equal(rec.methods[CUM].traces["innovation"], -t)
+    assert rec.frames is None and rec.methods[CUM].value is None and rec.methods[CUM].score is None
+
+
+def test_quantised_edge_cases():
+    q = Quantised.of(np.array([1.0, np.nan, 2.0, np.inf]))
+    np.testing.assert_array_equal(q.codes, [1, 0, 255, 0])
+    np.testing.assert_array_equal(q.values(), [1.0, np.nan, 2.0, np.nan])
+    q = Quantised.of(np.full((2, 2), 5.0))  # constant: every value exact
+    np.testing.assert_array_equal(q.values(), np.full((2, 2), 5.0))
+    assert Quantised.of(np.full(3, np.nan)).codes.tolist() == [0, 0, 0]
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"frames": np.zeros((KT, 4, 4))}, r"grid: rows x cols = 32 x 32 does not match frames 4 x 4"),
+    ({"truth_cells": np.zeros((KT, 2))}, r"truth_cells: expected an integer array"),
+    ({"measurement_flags": np.zeros(KT + 1)}, r"measurement_flags: expected shape \(K,\)|expected shape \(6,\)"),
+    ({"grid": {"rows": 32}}, r"grid: missing key\(s\) cols, cell_m"),
+])
+def test_bad_task_fields_are_named(kwargs, message):
+    fields = {"frames": np.zeros((KT, H, W)), "grid": GRID, **kwargs}
+    with pytest.raises(ValueError, match=message):
+        TrialRecord("s", 0, 0, np.zeros(KT), None, None, **fields)
+
+
+def test_bad_value_map_is_named():
+    with pytest.raises(ValueError, match=r"methods\['m'\]\.value: expected shape \(32, 32\)"):
+        TrialRecord("s", 0, 0, np.zeros(KT), frames=np.zeros((KT, H, W)), grid=GRID,
+                    methods={"m": MethodTrace(None, None, None, value=np.zeros((4, 4)))})
+
+
+def test_large_tbd_record_is_compact():
+    """A 500x500x20 TBD trial (frames + a value map) stays around 5 MB."""
+    rng = np.random.default_rng(0)
+    k, n = 20, 500
+    frames = rng.rayleigh(1.0, (k, n, n)).astype(np.float32)
+    cells = np.column_stack([100 + np.arange(k), 50 + 3 * np.arange(k)])
+    frames[np.arange(k), cells[:, 0], cells[:, 1]] += 6.0
+    grid = {"rows": n, "cols": n, "cell_m": 10.0, "x_min_m": 0.0, "y_min_m": 0.0}
+    dp = MethodTrace(None, 30.0, None, track_cells=cells, score=44.0,
+                     value=rng.gamma(4.0, 5.0, (n, n)).astype(np.float32))
+    rec = TrialRecord("tbd-big", 6.0, 0, np.arange(k) * 1.0, np.zeros((k, 2)), None, {DP: dp},
+                      frames=frames, grid=grid, truth_cells=cells)
+    data = rec.to_bytes()
+    assert len(data) <= 6_000_000, len(data) / 1e6
+
+
+@pytest.fixture(scope="module")
+def task_records() -> list[TrialRecord]:
+    return [_tbd_record(), _tbd_record(null=True, trial=1, seed=6), _tracking_record()]
+
+
+@pytest.fixture(scope="module")
+def task_rrd(task_records, tmp_path_factory):
+    out = tmp_path_factory.mktemp("tasks") / "recording.rrd"
+    # Through the bytes, as in the driver: frames and value maps arrive quantised.
+    records = [TrialRecord.from_bytes(r.to_bytes()) for r in task_records]
+    return write_recording(out, records, _tracking_summary(), recording_id="test-tasks")
+
+
+def _static(reader, path: str, component: str) -> list:
+    chunks = reader.stream().filter(content=path, is_static=True, components=component).to_chunks()
+    table = pa.Table.from_batches([c.to_record_batch() for c in chunks])
+    return table.column(component).to_pylist()
+
+
+def test_task_entity_paths(task_rrd):
+    from rerun.chunk import RrdReader
+
+    paths = set(RrdReader(task_rrd).store().schema().entity_paths())
+    tbd = entity_root("tbd-line", 9.0, 0)
+    dp, hough = f"{tbd}/dp-tbd_pfa-0.001", f"{tbd}/hough_bins-64"
+    null = entity_root("tbd-line", None, 1)
+    trk = entity_root("glint-cv", 10.0, 2)
+    expected = [
+        f"{tbd}/frames", f"{tbd}/frames/truth_track", f"{tbd}/frames/dp-tbd_pfa-0.001_track",
+        f"{tbd}/frames/hough_bins-64_track", f"{tbd}/truth",
+        f"{dp}/value", f"{dp}/score", f"{dp}/threshold", f"{hough}/value",
+        f"{null}/frames", f"{null}/dp-tbd_pfa-0.001/value",
+        f"{trk}/truth", f"{trk}/measurements", f"{trk}/measurements/all", f"{trk}/measurements/glint",
+        f"{trk}/ekf/estimate", f"{trk}/ekf/error_x", f"{trk}/ekf/error_y", f"{trk}/ekf/error_pos",
+        f"{trk}/imm_models-3/estimate", f"{trk}/imm_models-3/error_pos",
+        "/summary/table", "/summary/rmse_vs_snr/ekf", "/summary/rmse_vs_snr/imm_models-3",
+    ]
+    for p in expected:
+        assert rerun_path(p) in paths, p
+    # NaN score: not drawn, so its threshold has nothing to compare with either.
+    assert rerun_path(f"{hough}/score") not in paths
+    assert rerun_path(f"{hough}/threshold") not in paths
+    # Null trial: no truth at all; NaN pd everywhere: no Pd chart.
+    assert rerun_path(f"{null}/frames/truth_track") not in paths
+    assert rerun_path(f"{null}/truth") not in paths
+    assert not any(p.startswith("/summary/pd_vs_snr") for p in paths)
+
+
+def test_frames_read_back_north_up(task_rrd, task_records):
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(task_rrd)
+    rec = task_records[0]
+    path = rerun_path(entity_root("tbd-line", 9.0, 0)) + "/frames"
+    steps, buffers = _column(reader, path, "DepthImage:buffer")
+    np.testing.assert_array_equal(steps, np.arange(KT))
+    codes = np.array([np.asarray(b[0], np.uint8).reshape(H, W) for b in buffers])
+    np.testing.assert_array_equal(codes, Quantised.of(rec.frames).codes[:, ::-1, :])
+    fmt = _static(reader, path, "DepthImage:format")[0][0]
+    assert (fmt["width"], fmt["height"]) == (W, H)
+    # The true cells, as pixel centres of the north-up image.
+    steps, pts = _column(reader, path + "/truth_track", "Points2D:positions")
+    xy = np.array([p[0] for p in pts])
+    np.testing.assert_allclose(xy, np.column_stack([rec.truth_cells[:, 1] + 0.5, H - rec.truth_cells[:, 0] - 0.5]))
+    # The strip overlays the image: the pixel under each point is the target's (+5: bright).
+    under = codes[steps, np.floor(xy[:, 1]).astype(int), np.floor(xy[:, 0]).astype(int)]
+    assert (under >= 150).all(), under  # the noise median is near code 90
+
+
+def test_track_cells_outside_grid_skipped(task_rrd):
+    from rerun.chunk import RrdReader
+
+    path = rerun_path(entity_root("tbd-line", 9.0, 0)) + "/frames/hough_bins-64_track"
+    steps, _ = _column(RrdReader(task_rrd), path, "Points2D:positions")
+    np.testing.assert_array_equal(steps, [0, 1, 3, 4, 5])
+
+
+def test_score_and_value_read_back(task_rrd, task_records):
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(task_rrd)
+    base = rerun_path(entity_root("tbd-line", 9.0, 0)) + "/dp-tbd_pfa-0.001"
+    _, values = _column(reader, f"{base}/score", "Scalars:scalars")
+    np.testing.assert_array_equal(np.concatenate(values), np.full(KT, 35.5))
+    buf = _static(reader, f"{base}/value", "DepthImage:buffer")[0][0]
+    q = Quantised.of(task_records[0].methods[DP].value)
+    np.testing.assert_array_equal(np.asarray(buf, np.uint8).reshape(H, W), q.codes[::-1])
+    assert _static(reader, f"{base}/value", "code_lo")[0][0] == pytest.approx(q.lo)
+
+
+def test_glint_points_read_back(task_rrd, task_records):
+    from rerun.chunk import RrdReader
+
+    rec = task_records[2]
+    path = rerun_path(entity_root("glint-cv", 10.0, 2)) + "/measurements/glint"
+    xy = np.array(_static(RrdReader(task_rrd), path, "Points2D:positions")[0])
+    z = rec.measurements_xy[GLINT_STEPS]
+    np.testing.assert_allclose(xy, np.column_stack([z[:, 0], -z[:, 1]]), rtol=1e-6)
+
+
+def test_error_traces_are_time_series(task_rrd, task_records):
+    from rerun.chunk import RrdReader
+
+    rec = task_records[2]
+    path = rerun_path(entity_root("glint-cv", 10.0, 2)) + "/imm_models-3/error_x"
+    steps, values = _column(RrdReader(task_rrd), path, "Scalars:scalars")
+    np.testing.assert_array_equal(steps, np.arange(rec.steps))
+    np.testing.assert_array_equal(np.concatenate(values), rec.methods[IMM].traces["error_x"])
+
+
+def test_task_rrd_verify_and_blueprint(task_rrd):
+    from rerun.chunk import RrdReader
+
+    assert len(RrdReader(task_rrd).blueprints()) == 1
+    proc = subprocess.run([*_rerun_cli(), "rrd", "verify", str(task_rrd)],
+                          capture_output=True, text=True, timeout=60, check=False)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+
+
+def test_summary_without_pd_column(tmp_path, task_records):
+    from rerun.chunk import RrdReader
+
+    summary = _tracking_summary().drop(columns=["pd"])
+    out = write_recording(tmp_path / "r.rrd", task_records[2:], summary, recording_id="no-pd")
+    paths = set(RrdReader(out).store().schema().entity_paths())
+    assert "/summary/rmse_vs_snr/ekf" in paths and "/summary/table" in paths
+    with pytest.raises(ValueError, match="missing column"):
+        write_recording(tmp_path / "bad.rrd", [], summary.drop(columns=["snr_db"]), recording_id="x")
+
+
+def test_live_viewer_logs_tasks_like_the_file_writer(tmp_path, task_records, task_rrd):
+    import rerun as rr
+    from rerun.chunk import RrdReader
+
+    out = tmp_path / "live.rrd"
+    stream = rr.RecordingStream("radar-bench", recording_id="live-tasks")
+    stream.save(out)
+    with LiveViewer.from_stream(stream) as viewer:
+        viewer.log_records(TrialRecord.from_bytes(r.to_bytes()) for r in task_records)
+        viewer.log_summary(_tracking_summary())
+
+    def data_paths(p):
+        return {x for x in RrdReader(p).store().schema().entity_paths() if not x.startswith("/__")}
+
+    assert data_paths(out) == data_paths(task_rrd)

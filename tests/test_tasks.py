@@ -1,0 +1,92 @@
+"""Task handlers and metrics of the tracking and TBD tasks, and multi-scenario sweeps."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench.config import parse_sweep
+from bench.errors import ConfigError
+from bench.metrics import (cell_centres_m, per_step_rmse, summarise_tracking, tbd_trial_metrics,
+                           time_averaged_rmse, tracking_trial_metrics)
+
+GRID = {"rows": 10, "cols": 10, "cell_m": 100.0, "x_min_m": 1000.0, "y_min_m": 2000.0}
+
+
+def test_cell_centres_follow_the_grid_convention():
+    assert np.allclose(cell_centres_m(np.array([[0, 0], [2, 5]]), GRID), [[1050, 2050], [1550, 2250]])
+
+
+def test_tbd_detection_needs_the_threshold_and_two_hits_on_the_true_cells():
+    truth_cells = np.array([[[1, 1], [2, 2], [3, 3], [4, 4]]] * 3)
+    truth_xy = cell_centres_m(truth_cells, GRID)
+    track = truth_cells.copy()
+    track[1, :3] += 2                          # trial 1: one frame within tolerance only
+    track[2, :, 1] += 1                        # trial 2: off by one column everywhere
+    m = tbd_trial_metrics(np.array([5.0, 5.0, 5.0]), track, 4.0, target_cells=truth_cells, truth_xy_m=truth_xy,
+                          grid=GRID, tolerance_cells=1)
+    assert m["detected"].tolist() == [True, False, True]
+    assert m["hits"].tolist() == [4, 1, 4]
+    assert np.allclose(m["sq_err_m2"][2], 100.0 ** 2)
+    assert np.allclose(m["rmse"], [0.0, np.sqrt(3 * 2 * 200.0 ** 2 / 4), 100.0])
+    below = tbd_trial_metrics(np.array([3.9, 3.9, 3.9]), track, 4.0, target_cells=truth_cells,
+                              truth_xy_m=truth_xy, grid=GRID, tolerance_cells=1)
+    assert not below["detected"].any()
+
+
+def test_time_averaged_rmse_is_the_mean_of_per_step_rmse():
+    sq = np.array([[1.0, 4.0], [9.0, 16.0]])
+    assert np.allclose(per_step_rmse(sq), [np.sqrt(5), np.sqrt(10)])
+    assert time_averaged_rmse(sq) == pytest.approx((np.sqrt(5) + np.sqrt(10)) / 2)
+
+
+def test_tracking_metrics_nees_and_divergence():
+    rng = np.random.default_rng(1)
+    n, k, d = 400, 30, 2
+    cov = np.array([[4.0, 1.0], [1.0, 2.0]])
+    err = rng.multivariate_normal(np.zeros(d), cov, size=(n, k))
+    truth = rng.normal(size=(n, k, d))
+    m = tracking_trial_metrics(truth + err, truth, position_index=(0,), labels=["x", "v"],
+                               covariance=np.broadcast_to(cov, (n, k, d, d)), divergence_bound_m=6.0)
+    # NEES of a consistent covariance ~ chi2(2): mean 2, sd of the grand mean sqrt(4 / (n k))
+    assert abs(m["nees_mean"].mean() - 2.0) < 4.5 * np.sqrt(4.0 / (n * k))
+    assert np.array_equal(m["diverged"], (np.abs(err[..., 0]) > 6.0).any(axis=1))
+    assert np.allclose(m["sq_err_x"], err[..., 0] ** 2) and np.allclose(m["est_v"], truth[..., 1] + err[..., 1])
+    trials = pd.DataFrame({"scenario": "s", "method": "m", "config": "m", "params": "", "snr_db": 0.0,
+                           "diverged": m["diverged"], "nees_mean": m["nees_mean"], "realised_snr_db": 0.0})
+    row = summarise_tracking(trials, {("s", "m", 0.0): m}).iloc[0]
+    assert row.rmse_low <= row.rmse_mean <= row.rmse_high
+    assert row.rmse_mean == pytest.approx(np.mean(np.sqrt((err[..., 0] ** 2).mean(axis=0))))
+
+
+def _multi(**over):
+    base = {"name": "multi", "trials": 10, "snr_db": [0, 5],
+            "scenarios": [{"name": "cv-turn-cv"},
+                          {"name": "cv-turn-cv", "params": {"steps": [120, 140]}, "snr_db": [1], "trials": 4}],
+            "methods": [{"name": "innovation"}]}
+    base.update(over)
+    return base
+
+
+def test_scenarios_tables_carry_their_own_snr_and_trials():
+    plan = parse_sweep(_multi())
+    assert [s.label for s in plan.scenarios] == ["cv-turn-cv", "cv-turn-cv[steps=120]", "cv-turn-cv[steps=140]"]
+    assert plan.scenarios[0].snr_db == (0.0, 5.0) and plan.scenarios[0].trials == 10
+    assert plan.scenarios[1].snr_db == (1.0,) and plan.scenarios[1].trials == 4
+    assert plan.trial_runs == 10 * 2 + 2 * 4
+    again = parse_sweep(plan.to_dict())
+    assert again.fingerprint() == plan.fingerprint()
+
+
+@pytest.mark.parametrize("over, field", [
+    ({"scenario": "cv-turn-cv"}, "scenario"),
+    ({"scenarios": []}, "scenarios"),
+    ({"scenarios": [{"params": {}}]}, "scenarios[0].name"),
+    ({"scenarios": [{"name": "cv-turn-cv", "bogus": 1}]}, "scenarios[0].bogus"),
+    ({"scenarios": [{"name": "cv-turn-cv", "snr_db": "x"}]}, "scenarios[0].snr_db"),
+    ({"scenarios": [{"name": "cv-turn-cv", "label": "../x"}]}, "scenarios[0].label"),
+    ({"scenarios": [{"name": "cv-turn-cv", "label": "a"}, {"name": "cv-turn-cv", "label": "a"}]}, "scenarios"),
+])
+def test_bad_scenarios_tables_name_the_field(over, field):
+    with pytest.raises(ConfigError) as exc:
+        parse_sweep(_multi(**over))
+    assert str(exc.value).startswith(f"{field}:"), str(exc.value)
