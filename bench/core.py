@@ -145,6 +145,12 @@ class Scenario(Component):
 
     #: tasks whose methods can run on this scenario
     tasks: ClassVar[tuple[str, ...]] = ()
+    #: parameters of a small instance (tests, quick looks); the defaults if empty
+    small_params: ClassVar[dict] = {}
+    #: ``bench perf`` sizes: name -> (scenario params, trials)
+    perf_sizes: ClassVar[dict] = {"default": ({}, 100)}
+    #: SNR (dB) at which ``bench perf`` generates its batches
+    perf_snr_db: ClassVar[float] = 10.0
 
     def generate(self, params, snr_db: float | None, n: int, rng) -> Batch:
         """``n`` trials at ``snr_db`` (``None``: the null hypothesis).

@@ -178,6 +178,12 @@ def _section_calibration(cals, summary: pd.DataFrame, tasks: dict[str, str]) -> 
                      _fmt(c.used, 4), f"{_fmt(c.used_pfa)} [{_fmt(c.used_pfa_low)}, {_fmt(c.used_pfa_high)}]",
                      _fmt(in_eval), f"{_fmt(c.chance_pd)} [{_fmt(c.chance_pd_low)}, {_fmt(c.chance_pd_high)}]",
                      f"{c.null_values:,}"])
+    header = ["config", "mode", "requested Pfa", "nominal threshold", "measured Pfa of nominal [95% CI]",
+              "threshold used", "measured Pfa of the threshold used [95% CI]", "Pfa in evaluation",
+              "chance Pd [95% CI]", "null values"]
+    empty = {"–", "– [–, –]"}
+    keep = [j for j in range(len(header)) if any(r[j] not in empty for r in rows)]
+    detectors = any(tasks.get(c.method) == MANEUVER_DETECTION for c in cals)
     return "\n\n".join([
         "## Calibration",
         "Thresholds are applied by the harness, so every method is compared at the same false-alarm "
@@ -192,11 +198,9 @@ def _section_calibration(cals, summary: pd.DataFrame, tasks: dict[str, str]) -> 
         "evaluation trials, averaged over SNR levels. *Chance Pd* is how often the detection rule fires "
         "on null trials (no maneuver) within the detection window: the floor Pd falls to as SNR goes "
         "down, drawn as a dotted line in the Pd figure.",
-        _table(["config", "mode", "requested Pfa", "nominal threshold", "measured Pfa of nominal [95% CI]",
-                "threshold used", "measured Pfa of the threshold used [95% CI]", "Pfa in evaluation",
-                "chance Pd [95% CI]", "null values"], rows),
+        _table([header[j] for j in keep], [[r[j] for j in keep] for r in rows]),
         "Window statistics are correlated from step to step, so the per-step intervals, which treat "
-        "steps as independent, are narrower than the truth for them.",
+        "steps as independent, are narrower than the truth for them." if detectors else "",
     ])
 
 
@@ -312,10 +316,13 @@ def _section_provenance(record: dict, store: Store, prov: dict) -> str:
 
 RECORDING_TEXT = """## Recording
 
-`recording.rrd` holds, for the first {n} trial(s) of every SNR level, the true and measured
-positions (2D, y negated so north is up), and per method config the statistic, the threshold in
-force and the alarms, on the timelines `step` and `time`, plus Pd-vs-SNR per config under
-`/summary`. Open it with `bench view {out}` or `rerun {out}/recording.rrd`."""
+`recording.rrd` holds the first {n} trial(s) of every SNR level of each scenario config, on the
+timelines `step` and `time`: the true and measured positions (2D, y negated so north is up); per
+detector the statistic, the threshold in force and the alarms; per tracker the estimated trajectory
+and its error per state component, with glint-corrupted measurements marked; per TBD method the
+frames as heatmaps with the true and backtracked tracks, the last-frame value map and the scene
+score against its threshold. Pd and RMSE against SNR per config are under `/summary`. Open it with
+`bench view {out}` or `rerun {out}/recording.rrd`."""
 
 
 def preset_notes(source: str) -> str:

@@ -1,9 +1,13 @@
 """Every registered method on every compatible scenario: shapes, no NaN, determinism."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from bench import registry
+from bench.core import MANEUVER_DETECTION
+from bench.params import build_params
 from bench.rng import TrialRNG
 from bench.tasks import handler
 
@@ -17,28 +21,47 @@ def test_every_method_has_a_scenario_and_nothing_is_unavailable():
     assert runnable == set(registry.methods())
 
 
+def _params(cls):
+    """A small instance of the scenario (``small_params``), so the test stays quick."""
+    return build_params(cls.Params, getattr(cls, "small_params", {}))
+
+
 def _batch(scenario, snr_db, seed=3):
     cls = registry.get_scenario(scenario)
-    return cls().generate(cls.Params(), snr_db, 3, TrialRNG(seed, 0, 11, range(5, 8)))
+    return cls().generate(_params(cls), snr_db, 3, TrialRNG(seed, 0, 11, range(5, 8)))
+
+
+def _arrays(out) -> dict:
+    return {f.name: getattr(out, f.name) for f in dataclasses.fields(out)
+            if isinstance(getattr(out, f.name), np.ndarray)}
 
 
 @pytest.mark.parametrize("scenario, method", PAIRS)
 def test_method_conforms(scenario, method):
     cls = registry.get_method(method)
     task = handler(cls.task)
-    for snr in (None, 0.0, 10.0):
+    levels = (None, 0.0, 10.0) if task.calibrated else (0.0, 10.0)     # null trials only where calibrated
+    for snr in levels:
         batch = _batch(scenario, snr)
         out = task.check_output(cls().run(batch, cls.Params()), batch)      # shape and finiteness
         again = cls().run(_batch(scenario, snr), cls.Params())
-        np.testing.assert_array_equal(out.statistic, again.statistic)       # pure and deterministic
-        assert np.isfinite(cls().nominal_threshold(cls.Params(), 0.01, batch))
+        first, second = _arrays(out), _arrays(again)
+        assert first and first.keys() == second.keys()
+        for name in first:                                                  # pure and deterministic
+            np.testing.assert_array_equal(first[name], second[name], err_msg=name)
+        if snr is not None:
+            metrics = task.trial_metrics(batch, out, 1.0)
+            assert all(len(v) == batch.n for v in metrics.values())
+        if task.calibrated:
+            nominal = cls().nominal_threshold(cls.Params(), 0.01, batch)
+            assert np.isfinite(nominal) if cls.task == MANEUVER_DETECTION else not np.isinf(nominal)
 
 
 @pytest.mark.parametrize("scenario", list(registry.scenarios()))
 def test_scenario_streams_are_per_trial(scenario):
     """A trial's draws do not depend on which other trials share its batch."""
     cls = registry.get_scenario(scenario)
-    whole = cls().generate(cls.Params(), 5.0, 4, TrialRNG(9, 0, 1, range(4)))
-    part = cls().generate(cls.Params(), 5.0, 2, TrialRNG(9, 0, 1, range(2, 4)))
+    whole = cls().generate(_params(cls), 5.0, 4, TrialRNG(9, 0, 1, range(4)))
+    part = cls().generate(_params(cls), 5.0, 2, TrialRNG(9, 0, 1, range(2, 4)))
     np.testing.assert_array_equal(whole.z[2:], part.z)
     np.testing.assert_array_equal(whole.truth[2:], part.truth)

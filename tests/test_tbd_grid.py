@@ -1,0 +1,191 @@
+"""Scenario tbd-grid: geometry, noise model, SNR definition, null, per-trial streams."""
+
+import numpy as np
+import pytest
+
+from bench.core import TBD
+from bench.errors import ConfigError
+from bench.params import build_params
+from bench.registry import get_scenario
+from bench.rng import TrialRNG
+from scenarios.tbd_grid import (
+    EDGE_MARGIN_CELLS,
+    TbdGrid,
+    ar_autocovariance,
+    ar_roots,
+    scene_geometry,
+    true_track,
+)
+
+DEFAULT = build_params(TbdGrid.Params, {})
+META_KEYS = {"grid", "target_cells", "target_present", "frame_period_s", "noise_std", "noise_autocovariance",
+             "ar_coefficients", "hit_tolerance_cells", "snr_definition", "realised_snr_db", "position_index",
+             "null_onset_step"}
+
+
+def make(snr_db, n=3, seed=1, trials=None, **values):
+    params = build_params(TbdGrid.Params, {"cells": 32, **values})
+    rng = TrialRNG(seed=seed, domain=0, scenario_key=0, trials=range(n) if trials is None else trials)
+    return TbdGrid().generate(params, snr_db, rng.n, rng)
+
+
+def test_registered():
+    assert get_scenario("tbd-grid") is TbdGrid
+    assert TbdGrid.tasks == (TBD,)
+    assert TbdGrid.summary().startswith("DP track-before-detect surveillance scene")
+    assert (DEFAULT.cells, DEFAULT.frames, DEFAULT.noise, DEFAULT.ar_coefficients) == \
+        (500, 20, "ar", (-2.0, 1.7, -0.64))
+
+
+def test_shapes_and_meta():
+    b = make(6.0, n=3, frames=12)
+    assert b.t.shape == (12,) and np.allclose(np.diff(b.t), 1.0)
+    assert b.z.shape == (3, 12, 32, 32) and b.z.dtype == np.float32
+    assert b.truth.shape == (3, 12, 4)
+    np.testing.assert_array_equal(b.trials, np.arange(3))
+    assert META_KEYS <= set(b.meta)
+    grid = b.meta["grid"]
+    assert set(grid) == {"rows", "cols", "cell_m", "x_min_m", "y_min_m"}
+    assert (grid["rows"], grid["cols"], grid["cell_m"]) == (32, 32, 100.0)
+    cells = b.meta["target_cells"]
+    assert cells.shape == (3, 12, 2) and np.issubdtype(cells.dtype, np.integer)
+    assert b.meta["target_present"] is True
+    assert b.meta["position_index"] == (0, 1) and b.meta["null_onset_step"] is None
+    assert b.meta["hit_tolerance_cells"] == 1 and b.meta["frame_period_s"] == 1.0
+    np.testing.assert_allclose(b.meta["realised_snr_db"], 6.0)
+    gamma = np.asarray(b.meta["noise_autocovariance"])
+    assert gamma.shape == (12,) and gamma[0] == pytest.approx(b.meta["noise_std"] ** 2)
+    np.testing.assert_allclose(gamma[1:4], [0.902613, 0.682898, 0.471354], atol=1e-6)
+    assert "stationary" in b.meta["snr_definition"]
+
+
+def test_cell_convention_matches_truth():
+    """The target cell contains the true position: centre within half a cell."""
+    b = make(6.0, n=1)
+    g = b.meta["grid"]
+    rc = b.meta["target_cells"][0]
+    centre_x = g["x_min_m"] + (rc[:, 1] + 0.5) * g["cell_m"]
+    centre_y = g["y_min_m"] + (rc[:, 0] + 0.5) * g["cell_m"]
+    assert np.all(np.abs(centre_x - b.truth[0, :, 0]) <= 0.5 * g["cell_m"])
+    assert np.all(np.abs(centre_y - b.truth[0, :, 1]) <= 0.5 * g["cell_m"])
+
+
+def test_paper_scale_geometry():
+    truth, grid, cells = scene_geometry(DEFAULT)
+    assert (grid["x_min_m"], grid["y_min_m"], grid["rows"]) == (150e3, 120e3, 500)
+    np.testing.assert_allclose(truth[0], [180e3, 160e3, 100.0, 100.0])
+    np.testing.assert_array_equal(cells[0], [400, 300])             # row <-> y, col <-> x
+    np.testing.assert_array_equal(cells[:10] - cells[0], np.arange(10)[:, None] * [1, 1])
+
+
+@pytest.mark.parametrize("side", [24, 32, 40, 64, 200, 500])
+def test_true_track_stays_inside_every_grid(side):
+    p = build_params(TbdGrid.Params, {"cells": side})
+    cells = scene_geometry(p)[2]
+    assert cells.min() >= EDGE_MARGIN_CELLS and cells.max() <= side - 1 - EDGE_MARGIN_CELLS
+    # the same cell path, relative to its start, at every grid size
+    np.testing.assert_array_equal(cells - cells[0], scene_geometry(DEFAULT)[2] - scene_geometry(DEFAULT)[2][0])
+
+
+def test_too_small_grid_is_rejected_naming_cells():
+    with pytest.raises(ConfigError) as err:
+        build_params(TbdGrid.Params, {"cells": 16})
+    assert err.value.field == "cells" and "needs cells >= 24" in str(err.value)
+
+
+def test_turn_is_clockwise_at_the_given_rate():
+    truth = true_track(20, 1.0, 0.35)
+    heading = np.unwrap(np.arctan2(truth[:, 3], truth[:, 2]))
+    dh = np.diff(heading)                                  # change on the transition into frame k
+    np.testing.assert_allclose(dh[9:14], -0.35, atol=1e-12)     # frames 11..15 (1-based): clockwise
+    np.testing.assert_allclose(np.delete(dh, np.s_[9:14]), 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.hypot(truth[:, 2], truth[:, 3]), 100 * np.sqrt(2), rtol=1e-12)
+    # positions follow the velocities of the exact constant-turn motion
+    assert np.all(np.diff(truth[:, 0]) > 0)
+
+
+def test_default_ar_is_stable_and_paper_printed_set_is_explosive():
+    assert np.max(np.abs(ar_roots((-2.0, 1.7, -0.64)))) == pytest.approx(0.9018821, abs=1e-6)
+    assert np.max(np.abs(ar_roots((-2.0, 1.7, 0.64)))) > 1.5
+    assert np.max(np.abs(ar_roots((2.0, -1.7, -0.64)))) > 2.5          # the other sign convention
+    with pytest.raises(ConfigError) as err:
+        build_params(TbdGrid.Params, {"ar_coefficients": [-2.0, 1.7, 0.64]})
+    assert err.value.field == "ar_coefficients"
+    assert "explosive" in str(err.value) and "flips the sign of a3" in str(err.value)
+
+
+def test_autocovariance_solves_yule_walker():
+    a = (-2.0, 1.7, -0.64)
+    g = ar_autocovariance(a, 10)
+    assert g[0] == pytest.approx(1.0)
+    for h in range(1, 11):      # gamma(h) + a1 gamma(h-1) + a2 gamma(h-2) + a3 gamma(h-3) = 0, h >= 1
+        assert g[h] + sum(ai * g[abs(h - i)] for i, ai in enumerate(a, 1)) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_snr_definition_and_target_amplitude():
+    """z(snr) - z(null) is exactly s in the target cells (same noise: common
+    random numbers) and 0 elsewhere; s = sigma 10^(snr/20) with sigma = 1."""
+    null, sig = make(None, n=2), make(9.0, n=2)
+    diff = sig.z.astype(np.float64) - null.z
+    s = 10 ** (9.0 / 20)
+    cells = sig.meta["target_cells"]
+    n_idx, k_idx = np.meshgrid(range(2), range(DEFAULT.frames), indexing="ij")
+    np.testing.assert_allclose(diff[n_idx, k_idx, cells[..., 0], cells[..., 1]], s, rtol=1e-6)
+    diff[n_idx, k_idx, cells[..., 0], cells[..., 1]] = 0.0
+    assert np.all(np.abs(diff) < 1e-5)
+    np.testing.assert_allclose(sig.meta["amplitude"], s)
+
+
+def test_null_has_no_target():
+    b = make(None, n=2)
+    assert b.meta["target_cells"] is None and b.meta["target_present"] is False
+    assert np.all(np.isnan(b.meta["realised_snr_db"]))
+    assert np.all(b.meta["amplitude"] == 0)
+    np.testing.assert_array_equal(b.truth, make(3.0, n=2).truth)      # truth kept for reference
+
+
+def test_swerling1_amplitude():
+    """A_k = s sqrt(E_k), E_k ~ Exp(1) per frame: the realised SNR is that of
+    the trial's mean power; over many frames E[A^2] = s^2 (the mean of N
+    Exp(1) draws has standard error 1 / sqrt(N); 5 standard errors)."""
+    b = make(3.0, n=40, amplitude="swerling1", cells=24)
+    s2 = 10 ** 0.3
+    amp = b.meta["amplitude"]
+    assert amp.shape == (40, 20) and np.all(amp > 0) and np.std(amp) > 0
+    np.testing.assert_allclose(b.meta["realised_snr_db"], 10 * np.log10(np.mean(amp ** 2, axis=1)))
+    assert abs(np.mean(amp ** 2) / s2 - 1.0) < 5 / np.sqrt(amp.size)
+    # the same noise as with a constant amplitude: only the target cells differ
+    const = make(3.0, n=40, cells=24)
+    assert np.count_nonzero(b.z != const.z) <= 40 * 20
+    off_target = np.ones(b.z.shape, bool)
+    cells = b.meta["target_cells"]
+    n_idx, k_idx = np.meshgrid(range(40), range(20), indexing="ij")
+    off_target[n_idx, k_idx, cells[..., 0], cells[..., 1]] = False
+    np.testing.assert_array_equal(b.z[off_target], const.z[off_target])
+
+
+def test_trial_is_identical_whatever_its_batch():
+    whole = make(4.0, n=4)
+    alone = make(4.0, trials=[2])
+    part = make(4.0, trials=[1, 3])
+    np.testing.assert_array_equal(whole.z[2], alone.z[0])
+    np.testing.assert_array_equal(whole.z[[1, 3]], part.z)
+    np.testing.assert_array_equal(whole.meta["realised_snr_db"][[1, 3]], part.meta["realised_snr_db"])
+
+
+def test_white_noise_option():
+    b = make(None, n=4, noise="white")
+    assert b.meta["ar_coefficients"] is None
+    np.testing.assert_array_equal(b.meta["noise_autocovariance"], np.r_[1.0, np.zeros(19)])
+    v = b.z.astype(np.float64)
+    lag1 = np.mean(v[:, 1:] * v[:, :-1])
+    assert abs(lag1) < 5 / np.sqrt(v[:, 1:].size)            # white: uncorrelated over frames
+    assert abs(np.mean(v ** 2) - 1.0) < 5 * np.sqrt(2 / v.size)
+
+
+def test_paper_scale_generation_is_float32_and_stationary():
+    b = TbdGrid().generate(DEFAULT, None, 1, TrialRNG(5, 0, 0, [0]))
+    assert b.z.shape == (1, 20, 500, 500) and b.z.dtype == np.float32
+    v = b.z[0].reshape(20, -1).astype(np.float64)
+    # per-frame variance, 250 000 cells each: standard error sqrt(2 / N)
+    assert np.all(np.abs(v.var(axis=1) - 1.0) < 5 * np.sqrt(2 / v.shape[1]))
