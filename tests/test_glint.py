@@ -1,0 +1,201 @@
+"""Scenario glint: discretisation, geometry, draws (chunking, common random numbers), meta."""
+
+import math
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from bench.errors import ConfigError
+from bench.params import build_params
+from bench.registry import get_scenario
+from bench.rng import TrialRNG
+from scenarios.glint import (
+    MEASURED,
+    POSITION_INDEX,
+    STATE_LABELS,
+    Glint,
+    discretisation,
+    los_basis,
+    measure,
+    measurement_jacobian,
+    measurement_residual,
+    spherical,
+    transition_matrices,
+    wrap_angle,
+)
+
+
+def make(snr_db=0.0, n=6, seed=1, trials=None, **values):
+    params = build_params(Glint.Params, values)
+    trials = range(n) if trials is None else trials
+    return Glint().generate(params, snr_db, len(trials), TrialRNG(seed, 0, 0, trials))
+
+
+def noise(batch):
+    """z - h(truth), bearing wrapped: the realised measurement noise (n, K, m)."""
+    return measurement_residual(batch.z, measure(batch.truth[..., :3], batch.meta["model"]["sensor"]))
+
+
+def test_registered_and_summary():
+    assert get_scenario("glint") is Glint
+    assert Glint.tasks == ("tracking",)
+    assert Glint.summary().startswith("Damped target with known control")
+
+
+@pytest.mark.parametrize("sensor, m", [("passive", 2), ("active", 3)])
+def test_shapes_and_meta(sensor, m):
+    b = make(n=5, sensor=sensor, steps=40)
+    assert b.t.shape == (40,) and b.truth.shape == (5, 40, 6) and b.z.shape == (5, 40, m)
+    np.testing.assert_allclose(b.t, 0.1 * np.arange(40))
+    meta = b.meta
+    assert meta["position_index"] == POSITION_INDEX == (0, 1, 2)
+    assert meta["state_labels"] == STATE_LABELS
+    assert len(meta["measurement_labels"]) == m and meta["measurement_labels"][-2:] == ("bearing", "elevation")
+    assert meta["z_xy"].shape == (5, 40, 2)
+    assert meta["glint_outlier"].shape == (5, 40, m) and meta["glint_outlier"].dtype == bool
+    assert meta["realised_snr_db"].shape == (5,)
+    assert meta["onset_step"] is None and meta["null_onset_step"] is None
+    assert meta["divergence_bound_m"] == 500.0
+    assert isinstance(meta["snr_definition"], str) and "10^(-snr_db/20)" in meta["snr_definition"]
+    model = meta["model"]
+    for key in ("F", "G", "u", "Bu", "Q", "sensor", "sigma", "eta", "epsilon", "glint_model", "x0", "P0",
+                "noise_variance", "los_rotation", "dt_s", "process_noise_m_s2"):
+        assert key in model, key
+    assert model["sigma"].shape == model["eta"].shape == (m,)
+    np.testing.assert_allclose(model["Bu"], model["G"] @ model["u"])
+    np.testing.assert_allclose(model["Q"], model["process_noise_m_s2"] ** 2 * model["G"] @ model["G"].T)
+    np.testing.assert_array_equal(b.trials, np.arange(5))
+    assert np.all(np.isfinite(b.z)) and np.all(np.isfinite(b.truth))
+
+
+def test_discretisation_matches_matrix_exponential():
+    """Zero-order hold of d/dt [p, v] = [[0, 1], [0, -mu]] [p, v] + [0, 1] (u + w):
+    expm([[A, B], [0, 0]] T) = [[F, G], [0, I]]; per axis F = [[1, P1], [0, a]], G = [P2, P1]."""
+    for mu, T in ((0.4, 0.1), (2.0, 0.5), (1e-9, 0.1), (0.0, 0.3)):
+        M = np.zeros((3, 3))
+        M[0, 1], M[1, 1], M[1, 2] = 1.0, -mu, 1.0
+        E = scipy.linalg.expm(M * T)
+        a, P1, P2 = discretisation(mu, T)
+        np.testing.assert_allclose([[1.0, P1], [0.0, a]], E[:2, :2], rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose([P2, P1], E[:2, 2], rtol=1e-7, atol=1e-15)
+        F, G = transition_matrices(mu, T)
+        np.testing.assert_allclose(F, np.kron(E[:2, :2], np.eye(3)), rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose(G, np.kron(E[:2, 2:], np.eye(3)), rtol=1e-7, atol=1e-15)
+    a, P1, P2 = discretisation(0.4, 0.1)
+    assert P1 == pytest.approx((1 - math.exp(-0.04)) / 0.4) and P2 == pytest.approx((0.04 - 1 + math.exp(-0.04)) / 0.16)
+
+
+def test_truth_follows_the_dynamics():
+    """x_{k+1} - F x_k - G u = G sigma_w w_k: its position part is P2/P1 times its velocity part."""
+    b = make(n=3, steps=50, process_noise_m_s2=2.0)
+    m = b.meta["model"]
+    resid = b.truth[:, 1:] - b.truth[:, :-1] @ m["F"].T - m["Bu"]
+    _, P1, P2 = discretisation(0.4, 0.1)
+    np.testing.assert_allclose(resid[..., :3], P2 / P1 * resid[..., 3:], atol=1e-9)
+    # velocity increments sigma_w P1 w_k: the sample std of N = 441 of them is within 4 standard
+    # errors (1/sqrt(2N) relative) of 2 P1
+    ratio = np.std(resid[..., 3:]) / (2.0 * P1)
+    assert abs(ratio - 1.0) < 4.0 / np.sqrt(2 * resid[..., 3:].size)
+    quiet = make(n=3, steps=50, process_noise_m_s2=0.0)
+    m = quiet.meta["model"]
+    np.testing.assert_allclose(quiet.truth[:, 1:], quiet.truth[:, :-1] @ m["F"].T + m["Bu"], atol=1e-9)
+
+
+def test_control_mapping_and_prior():
+    p = build_params(Glint.Params, {"initial_bearing_deg": 30.0, "initial_elevation_deg": 10.0})
+    m = Glint.model(p)
+    R = m["los_rotation"]
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(R @ m["u"], p.control_m_s2, atol=1e-12)
+    r, b, e = spherical(m["x0"][:3])
+    assert r == pytest.approx(5000.0) and b == pytest.approx(math.radians(30)) and e == pytest.approx(math.radians(10))
+    np.testing.assert_allclose(R[0], m["x0"][:3] / 5000.0, atol=1e-12)
+    P_los = R @ m["P0"][:3, :3] @ R.T
+    np.testing.assert_allclose(np.diag(P_los), [100.0 ** 2, 20.0 ** 2, 20.0 ** 2], rtol=1e-9)
+    # bearing increases clockwise from north: the bearing direction at bearing 0 is east (+x)
+    np.testing.assert_allclose(los_basis(0.0, 0.0), [[0, 1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-15)
+
+
+def test_spherical_jacobian_matches_finite_differences():
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(20, 3)) * 3000.0
+    for sensor in ("passive", "active"):
+        H = measurement_jacobian(p, sensor)
+        h = 1e-4
+        num = np.stack([(measure(p + h * np.eye(3)[i], sensor) - measure(p - h * np.eye(3)[i], sensor)) / (2 * h)
+                        for i in range(3)], axis=-1)
+        np.testing.assert_allclose(H, num, rtol=1e-6, atol=1e-12)
+
+
+def test_wrap_angle():
+    a = np.array([-3 * np.pi, -np.pi, 0.0, np.pi, 2 * np.pi + 0.1, -np.pi - 0.1])
+    np.testing.assert_allclose(wrap_angle(a), [np.pi, np.pi, 0.0, np.pi, 0.1, np.pi - 0.1], atol=1e-12)
+
+
+def test_trial_streams_do_not_depend_on_chunking():
+    whole = make(n=6, steps=30, sensor="active")
+    part = make(trials=range(3, 6), steps=30, sensor="active")
+    np.testing.assert_array_equal(whole.z[3:], part.z)
+    np.testing.assert_array_equal(whole.truth[3:], part.truth)
+    np.testing.assert_array_equal(whole.meta["glint_outlier"][3:], part.meta["glint_outlier"])
+
+
+def test_common_random_numbers_across_snr_epsilon_and_sensor():
+    """Same trial: same truth, same outliers at every SNR; the noise scales by
+    10^(-snr/20); raising eps only adds outliers; passive = active's angles."""
+    a = make(0.0, steps=80, sensor="active", epsilon=0.2)
+    b = make(20.0, steps=80, sensor="active", epsilon=0.2)
+    np.testing.assert_array_equal(a.truth, b.truth)
+    np.testing.assert_array_equal(a.meta["glint_outlier"], b.meta["glint_outlier"])
+    np.testing.assert_allclose(noise(b), 0.1 * noise(a), rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(b.meta["model"]["sigma"], 0.1 * a.meta["model"]["sigma"])
+    np.testing.assert_array_equal(b.meta["realised_snr_db"], np.full(6, 20.0))
+    low = make(0.0, steps=80, sensor="active", epsilon=0.05)
+    assert np.all(a.meta["glint_outlier"] >= low.meta["glint_outlier"])
+    assert a.meta["glint_outlier"].sum() > low.meta["glint_outlier"].sum()
+    passive = make(0.0, steps=80, sensor="passive", epsilon=0.2)
+    np.testing.assert_array_equal(passive.z, a.z[..., 1:])
+    none = make(None, steps=80, sensor="active", epsilon=0.2)
+    np.testing.assert_array_equal(none.z, a.z)
+
+
+def test_epsilon_zero_is_gaussian_and_outliers_use_the_glint_part():
+    g = make(steps=200, sensor="active", epsilon=0.0)
+    assert not g.meta["glint_outlier"].any()
+    one = make(steps=200, sensor="active", epsilon=1.0)
+    assert one.meta["glint_outlier"].all()
+    # with eps = 0 the additive model (core + spikes) is the same Gaussian noise, same draws
+    add = make(steps=200, sensor="active", epsilon=0.0, glint_model="additive")
+    np.testing.assert_allclose(noise(add), noise(g), atol=1e-9)
+
+
+def test_z_xy_is_the_horizontal_projection():
+    b = make(steps=20, sensor="active")
+    r, br, el = b.z[..., 0], b.z[..., 1], b.z[..., 2]
+    np.testing.assert_allclose(b.meta["z_xy"], np.stack([r * np.cos(el) * np.sin(br), r * np.cos(el) * np.cos(br)], -1))
+    p = make(steps=20, sensor="passive")
+    rng_true = np.linalg.norm(p.truth[..., :3], axis=-1)
+    np.testing.assert_allclose(np.hypot(*np.moveaxis(p.meta["z_xy"], -1, 0)), rng_true * np.cos(p.z[..., 1]))
+
+
+def test_bearing_wraps_near_south():
+    b = make(steps=60, initial_bearing_deg=180.0, initial_cross_range_std_m=50.0, sensor="active")
+    bearing = b.z[..., 1]
+    assert np.all((bearing > -np.pi) & (bearing <= np.pi))
+    assert (bearing > 3.0).any() and (bearing < -3.0).any()          # both sides of the cut
+    assert np.abs(noise(b)[..., 1]).max() < 0.5                      # residuals wrapped
+
+
+@pytest.mark.parametrize("values, field", [
+    ({"sensor": "radar"}, "sensor"), ({"epsilon": 1.5}, "epsilon"), ({"sigma_bearing_rad": 0.0}, "sigma_bearing_rad"),
+    ({"initial_range_std_m": 2000.0}, "initial_range_std_m"), ({"control_m_s2": [1.0, 2.0]}, "control_m_s2"),
+    ({"glint_model": "sum"}, "glint_model")])
+def test_bad_params_name_the_field(values, field):
+    with pytest.raises(ConfigError) as err:
+        build_params(Glint.Params, values)
+    assert err.value.field == field
+
+
+def test_measured_components():
+    assert MEASURED == {"passive": (1, 2), "active": (0, 1, 2)}
