@@ -6,7 +6,7 @@ import tomllib
 import pandas as pd
 import pytest
 
-from bench import tomlw
+from bench import registry, tomlw
 from bench.config import parse_sweep
 
 PRESETS = sorted(p.name[:-5] for p in (importlib.resources.files("bench") / "presets").iterdir()
@@ -29,7 +29,7 @@ def test_quick_preset_runs_as_the_readme_says(bench_cli, tmp_path):
     for name in ("plan.toml", "results.sqlite", "trials.csv", "summary.csv", "report.md", "recording.rrd",
                  "figures/pd_vs_snr.png"):
         assert (out / name).exists(), name
-    assert set(pd.read_csv(out / "summary.csv").method) == {"innovation", "cumulant", "wavelet"}
+    assert set(pd.read_csv(out / "summary.csv").method) == set(registry.methods())   # every method shows
 
 
 def test_maneuver_detection_preset_smoke(bench_cli, tmp_path):
@@ -44,3 +44,46 @@ def test_maneuver_detection_preset_smoke(bench_cli, tmp_path):
     assert summary.config.nunique() == len(parse_sweep(sweep).methods)
     report = (tmp_path / "out" / "report.md").read_text()
     assert "## ROC" in report and "## Ranking of methods" in report
+
+
+def test_tbd_small_preset_runs_through_the_cli(bench_cli, tmp_path):
+    bench_cli("run", "--preset", "tbd-small", "--quiet", "--out", tmp_path / "tbd", cwd=tmp_path, check=True)
+    out = tmp_path / "tbd"
+    summary = pd.read_csv(out / "summary.csv")
+    assert set(summary.method) == {"dp-tbd", "dp-tbd-mf"}
+    assert summary.groupby("config").pd.max().min() == 1.0          # both reach Pd = 1 in the swept range
+    assert (summary.pfa <= 0.05).all()                              # scene Pfa of the Gumbel threshold
+    report = (out / "report.md").read_text()
+    assert "## Track-before-detect: null scenes and the scene threshold" in report
+    for name in ("figures/tbd_pd_vs_snr.png", "figures/tbd_null_scores.png", "steps.csv", "recording.rrd"):
+        assert (out / name).exists(), name
+
+
+def test_tbd_preset_smoke(bench_cli, tmp_path):
+    """The paper preset's methods and calibration on a small grid, few trials and levels."""
+    sweep = _preset("tbd")
+    sweep.update(trials=6, chunk=6, snr_db=[-4, 14], scenario_params={"cells": 40})
+    sweep["calibration"]["h0_trials"] = 40
+    path = tmp_path / "smoke.toml"
+    path.write_text(tomlw.dumps(sweep))
+    bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 1, check=True)
+    assert set(pd.read_csv(tmp_path / "out" / "summary.csv").method) == {"dp-tbd", "dp-tbd-mf"}
+
+
+def test_glint_tracking_preset_at_reduced_size(bench_cli, tmp_path):
+    """The glint preset through the CLI at reduced trials and duration (issue 5's end-to-end test)."""
+    sweep = _preset("glint-tracking")
+    sweep.update(trials=4, chunk=4)
+    for entry in sweep["scenarios"]:
+        entry["params"]["steps"] = 40
+    path = tmp_path / "glint.toml"
+    path.write_text(tomlw.dumps(sweep))
+    bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 2, check=True)
+    out = tmp_path / "out"
+    summary = pd.read_csv(out / "summary.csv")
+    assert summary.config.nunique() == 4 and summary.scenario.nunique() == 6
+    assert summary.rmse_mean.notna().all() and (summary.rmse_low <= summary.rmse_high).all()
+    steps = pd.read_csv(out / "steps.csv")
+    assert {"rmse_position", "mean_est_x", "mean_true_x"} <= set(steps.columns)
+    report = (out / "report.md").read_text()
+    assert "## Tracking: position RMSE" in report and "## Calibration" not in report
