@@ -46,6 +46,11 @@ def _write_csv(df: pd.DataFrame, path: Path) -> None:
     _write_text(path, df.to_csv(index=False, float_format=None, lineterminator="\n"))
 
 
+def _scenario_order(record: dict) -> dict[str, int]:
+    """Scenario config label -> its position in the sweep (tables follow the sweep's order)."""
+    return {sc["label"]: i for i, sc in enumerate(record["scenarios"])}
+
+
 def trials_frame(store: Store, record: dict) -> tuple[pd.DataFrame, dict]:
     """One row per (scenario config, method config, SNR, trial), in a fixed
     order, and the series: ``{(scenario, config, snr_db): {name: (n, K)}}``
@@ -72,8 +77,9 @@ def trials_frame(store: Store, record: dict) -> tuple[pd.DataFrame, dict]:
         return pd.DataFrame(columns=TRIAL_KEYS), series
     df = pd.concat(frames, ignore_index=True)
     order = {m["label"]: i for i, m in enumerate(record["methods"])}
-    df = df.assign(_o=df.config.map(order)).sort_values(["scenario", "_o", "snr_db", "trial"])
-    rest = [c for c in df.columns if c not in TRIAL_KEYS and c != "_o"]
+    df = df.assign(_s=df.scenario.map(_scenario_order(record)), _o=df.config.map(order))
+    df = df.sort_values(["_s", "_o", "snr_db", "trial"])
+    rest = [c for c in df.columns if c not in TRIAL_KEYS and c not in ("_o", "_s")]
     return df[TRIAL_KEYS + rest].reset_index(drop=True), series
 
 
@@ -97,7 +103,8 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
     summary = summary.drop(columns="seconds_per_trial").merge(speed, on=["scenario", "config", "snr_db"],
                                                               how="left")
     order = {m["label"]: i for i, m in enumerate(record["methods"])}
-    summary = summary.assign(_o=summary.config.map(order)).sort_values(["scenario", "_o", "snr_db"])
+    summary = summary.assign(_s=summary.scenario.map(_scenario_order(record)), _o=summary.config.map(order))
+    summary = summary.sort_values(["_s", "_o", "snr_db"])
     return summary[SUMMARY_COLUMNS].reset_index(drop=True)
 
 
@@ -128,8 +135,8 @@ def steps_frame(trials: pd.DataFrame, series: dict, record: dict, t_of: dict) ->
         return pd.DataFrame()
     order = {m["label"]: i for i, m in enumerate(record["methods"])}
     out = pd.concat(rows, ignore_index=True)
-    out = out.assign(_o=out.config.map(order)).sort_values(["scenario", "_o", "snr_db", "step"])
-    return out.drop(columns="_o").reset_index(drop=True)
+    out = out.assign(_s=out.scenario.map(_scenario_order(record)), _o=out.config.map(order))
+    return out.sort_values(["_s", "_o", "snr_db", "step"]).drop(columns=["_s", "_o"]).reset_index(drop=True)
 
 
 # ------------------------------------------------------------------ report sections
