@@ -86,11 +86,7 @@ def ar_autocovariance(a: tuple[float, ...], lags: int, variance: float = 1.0) ->
     """
     P = len(a)
     phi = np.r_[1.0, np.asarray(a, float)]
-    M = np.zeros((P + 1, P + 1))
-    for h in range(P + 1):
-        for i in range(P + 1):
-            M[h, abs(h - i)] += phi[i]
-    g = np.linalg.solve(M, np.eye(P + 1)[0])         # sigma_w^2 = 1
+    g = _yule_walker_unit(a)
     out = np.empty(max(lags, P) + 1)
     out[:P + 1] = g
     for h in range(P + 1, len(out)):
@@ -103,14 +99,18 @@ def ar_autocovariance(a: tuple[float, ...], lags: int, variance: float = 1.0) ->
 def ar_innovation_std(a: tuple[float, ...], variance: float = 1.0) -> float:
     """sigma_w giving a stationary variance ``variance``: gamma scales with
     sigma_w^2, and gamma(0) = g0 for sigma_w = 1."""
+    return float(np.sqrt(variance / _yule_walker_unit(a)[0]))
+
+
+def _yule_walker_unit(a: tuple[float, ...]) -> np.ndarray:
+    """gamma(0..P) of the AR(P) model with sigma_w = 1 (the Yule-Walker system)."""
     P = len(a)
     phi = np.r_[1.0, np.asarray(a, float)]
     M = np.zeros((P + 1, P + 1))
     for h in range(P + 1):
         for i in range(P + 1):
             M[h, abs(h - i)] += phi[i]
-    g0 = np.linalg.solve(M, np.eye(P + 1)[0])[0]
-    return float(np.sqrt(variance / g0))
+    return np.linalg.solve(M, np.eye(P + 1)[0])
 
 
 def stationary_predictors(a: tuple[float, ...], sigma: float = NOISE_STD) -> list[tuple[np.ndarray, float]]:
