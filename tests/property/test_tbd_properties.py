@@ -239,3 +239,29 @@ def test_numba_dp_tbd_equals_scipy_reference(n, K, H, W, q, ties, seed):
     score, track = reference_dp_tbd(z, q)
     np.testing.assert_array_equal(out.score, score)
     np.testing.assert_array_equal(out.track, track)
+
+
+@settings(derandomize=True, deadline=None, max_examples=4)
+@given(pfa=st.sampled_from([0.1, 0.2]), seed=st.integers(0, 2**32 - 1),
+       method=st.sampled_from([DpTbd, DpTbdMf]))
+def test_empirical_scene_threshold_holds_its_pfa_on_fresh_null_scenes(pfa, seed, method):
+    """Scene Pfa at a threshold calibrated on N0 null scenes, measured on N1
+    fresh ones: null scenes are independent, so the error of the measured Pfa
+    has variance about pfa (1 - pfa) (1/N0 + 1/N1) (the fitted quantile's own
+    error plus the measurement's). 4.5 standard errors (a two-sided 7e-6 level
+    per example), and the test can see a threshold whose Pfa is off by half."""
+    from bench.calibration import calibrate
+    from bench.rng import CALIBRATION, EVALUATION
+
+    params = build_params(TbdGrid.Params, {"cells": 16, "frames": 6})
+    n0 = n1 = 1500
+
+    def scores(domain):
+        batch = TbdGrid().generate(params, None, n0, TrialRNG(seed, domain, 3, range(n0)))
+        return method().run(batch, method.Params()).score
+
+    threshold = calibrate("s", "m", scores(CALIBRATION), np.nan, pfa, "empirical").used
+    measured = np.mean(scores(EVALUATION) >= threshold)
+    sigma = math.sqrt(pfa * (1 - pfa) * (1 / n0 + 1 / n1))
+    assert abs(measured - pfa) < 4.5 * sigma, (measured, pfa, sigma)
+    assert 4.5 * sigma < 0.5 * pfa
