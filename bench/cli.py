@@ -53,7 +53,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", help="run folder (default: reports/<name>/)")
     run.add_argument("--workers", type=_positive_int, default=default_workers(),
                      help="worker processes (default: CPU count)")
-    run.add_argument("--executor", default="local", choices=["local"], help="where units run")
+    run.add_argument("--executor", default="local", choices=["local", "dask"],
+                     help="where units run: local processes, or a dask cluster (needs the [dask] extra)")
+    run.add_argument("--scheduler", metavar="ADDRESS",
+                     help="with --executor dask: an existing cluster's scheduler, tcp://HOST:8786 "
+                          "(default: a local cluster of --workers processes)")
+    run.add_argument("--retry-failed", action="store_true",
+                     help="also re-run the (unit, method config) pairs whose run failed")
     run.add_argument("--fresh", action="store_true", help="discard stored results and start over")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--no-record", action="store_true", help="do not write recording.rrd")
@@ -120,9 +126,41 @@ def _command_line(args) -> str:
     return shlex.join(words)
 
 
+def _check_executor(args) -> None:
+    """Executor options, checked before anything is written."""
+    if args.scheduler is not None and args.executor != "dask":
+        raise ConfigError("--scheduler", "only with --executor dask")
+    if args.executor == "dask":
+        from bench.executors import require_dask
+        require_dask()
+
+
+def _stored_units(plan, out_dir: Path) -> tuple[int, int]:
+    """(units stored in ``out_dir``, units of the plan)."""
+    from bench.runner import plan_units
+    from bench.store import Store
+    total = sum(map(len, plan_units(plan)))
+    if not (out_dir / "results.sqlite").exists():
+        return 0, total
+    store = Store(out_dir / "results.sqlite")
+    try:
+        return len(store.done_units()), total
+    finally:
+        store.close()
+
+
+def _interrupted(out_dir: Path, command: str, stored: int, total: int) -> int:
+    """Ctrl-C: what is kept and how to go on, in one line (the last one on stderr)."""
+    report = "; the report is not written" if stored >= total else ""
+    print(f"interrupted: {stored} of {total} units stored in {out_dir}{report}; "
+          f"run the same command again to resume (`{command}`)", file=sys.stderr)
+    return EXIT_INTERRUPTED
+
+
 def cmd_run(args) -> int:
     from bench.report import build_outputs
     from bench.runner import Interrupted, plan_record, run_sweep, write_plan_toml
+    _check_executor(args)
     plan = _load_plan(args)
     out_dir = Path(args.out) if args.out else Path("reports") / plan.name
     if out_dir.exists() and not out_dir.is_dir():
@@ -143,17 +181,21 @@ def cmd_run(args) -> int:
             viewer.log_records([TrialRecord.from_bytes(b) for _, b in result.records])
     try:
         store = run_sweep(plan, out_dir, plan_record=plan_record(plan, command), workers=args.workers,
-                          executor=args.executor, fresh=args.fresh, quiet=args.quiet, on_result=on_result)
+                          executor=args.executor, fresh=args.fresh, quiet=args.quiet, on_result=on_result,
+                          scheduler=args.scheduler, retry_failed=args.retry_failed)
     except Interrupted as exc:
-        print(f"interrupted: {exc.stored} of {exc.total} units are stored in {out_dir}; "
-              f"run `{command}` again to resume", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return _interrupted(out_dir, command, exc.stored, exc.total)
+    except KeyboardInterrupt:              # outside the units (opening the store, closing the executor)
+        return _interrupted(out_dir, command, *_stored_units(plan, out_dir))
     finally:
         if viewer is not None:
             viewer.close()
-    write_plan_toml(out_dir / "plan.toml", plan, command)
-    store.close()
-    report = build_outputs(out_dir, recording=not args.no_record)
+    try:
+        write_plan_toml(out_dir / "plan.toml", plan, command)
+        store.close()
+        report = build_outputs(out_dir, recording=not args.no_record)
+    except KeyboardInterrupt:
+        return _interrupted(out_dir, command, *_stored_units(plan, out_dir))
     print(f"wrote {report}")
     return 0
 
@@ -186,6 +228,13 @@ def cmd_perf(args) -> int:
     return 0
 
 
+def one_line(text: str, limit: int = 400) -> str:
+    """``text`` safe to print as one line: control characters (newlines, terminal escapes)
+    escaped, at most ``limit`` characters (hostile input can make messages huge)."""
+    safe = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text[:4 * limit])
+    return safe if len(safe) <= limit else safe[:limit - 3] + "..."
+
+
 COMMANDS = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "view": cmd_view, "perf": cmd_perf}
 
 
@@ -194,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         return COMMANDS[args.command](args)
     except ConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
+        print(f"error: {one_line(str(err))}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

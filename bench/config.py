@@ -45,10 +45,14 @@ TOP_KEYS = {"name", "description", "scenario", "scenarios", "trials", "seed", "s
 SCENARIO_KEYS = {"name", "params", "label", "snr_db", "trials"}
 METHOD_KEYS = {"name", "params", "label"}
 CALIBRATION_MODES = ("nominal", "empirical", "gumbel")
-NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
-#: scenario config labels: readable like "glint[epsilon=0.05]", never path-like
-LABEL_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.,=+\-\[\]() ]{0,199}$")
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}\Z")     # \Z: "$" would let a final newline in
+#: config labels: readable like "cumulant-as-printed" or "glint[epsilon=0.05]", never path-like
+LABEL_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.,=+\-\[\]() ]{0,199}\Z")
 MAX_SNR_LEVELS = 1000
+#: |SNR| bound (dB): beyond it powers overflow and nothing physical is left to measure
+MAX_ABS_SNR_DB = 200.0
+#: a sweep file is read only up to this size: a bigger one is refused before it is parsed
+MAX_SWEEP_BYTES = 1_000_000
 MAX_CONFIGS = 1000
 #: trial-runs (trials x SNR levels x configs) above which a sweep needs --yes
 LARGE_SWEEP_TRIAL_RUNS = 50_000_000
@@ -186,6 +190,12 @@ def _reject_unknown(table: Mapping, allowed: set, field: str) -> None:
             raise ConfigError(where, f"unknown key (allowed: {', '.join(sorted(allowed))})")
 
 
+def _check_snr_bound(value: float, field: str) -> float:
+    if abs(value) > MAX_ABS_SNR_DB:
+        raise ConfigError(field, f"expected an SNR in [-{MAX_ABS_SNR_DB:g}, {MAX_ABS_SNR_DB:g}] dB, got {value:g}")
+    return value
+
+
 def _parse_snr(value: Any, field: str = "snr_db") -> tuple[float, ...]:
     if isinstance(value, dict):
         _reject_unknown(value, {"start", "stop", "step"}, field)
@@ -197,18 +207,22 @@ def _parse_snr(value: Any, field: str = "snr_db") -> tuple[float, ...]:
             raise ConfigError(f"{field}.step", f"expected a number > 0, got {step!r}")
         if stop < start:
             raise ConfigError(f"{field}.stop", f"expected >= start ({start:g}), got {stop:g}")
-        count = math.floor((stop - start) / step + 1e-9) + 1
+        _check_snr_bound(start, f"{field}.start")
+        _check_snr_bound(stop, f"{field}.stop")
+        levels = (stop - start) / step       # counted, never built, before it is known to be small
+        count = math.floor(levels + 1e-9) + 1 if levels < MAX_SNR_LEVELS else math.inf
         if count > MAX_SNR_LEVELS:
-            raise ConfigError(field, f"{count} levels; at most {MAX_SNR_LEVELS}")
+            raise ConfigError(field, f"{levels + 1:.3g} levels; at most {MAX_SNR_LEVELS}")
         values = [round(start + i * step, 9) for i in range(count)]
     elif isinstance(value, list):
         if not value:
             raise ConfigError(field, "empty list: give at least one SNR value")
         if len(value) > MAX_SNR_LEVELS:
             raise ConfigError(field, f"{len(value)} levels; at most {MAX_SNR_LEVELS}")
-        values = [round(_expect_number(v, f"{field}[{i}]"), 9) for i, v in enumerate(value)]
+        values = [round(_check_snr_bound(_expect_number(v, f"{field}[{i}]"), f"{field}[{i}]"), 9)
+                  for i, v in enumerate(value)]
     else:
-        values = [round(_expect_number(value, field), 9)]
+        values = [round(_check_snr_bound(_expect_number(value, field), field), 9)]
     if len(set(values)) != len(values):
         raise ConfigError(field, "repeated SNR values")
     return tuple(sorted(values))
@@ -284,8 +298,9 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]) -> tuple[C
         expanded = _expand(cls.name, cls.Params, params, f"{field}.params")
         if "label" in entry:
             label = entry["label"]
-            if not isinstance(label, str) or not label.strip() or len(label) > 200:
-                raise ConfigError(f"{field}.label", f"expected a non-empty string, got {label!r}"[:200])
+            if not isinstance(label, str) or not LABEL_PATTERN.match(label):
+                raise ConfigError(f"{field}.label", "expected letters, digits, spaces or '_.,=+-[]()' "
+                                                    f"(at most 200, no path separators), got {label!r}"[:200])
             if len(expanded) != 1:
                 raise ConfigError(f"{field}.label", "a label names one config; remove the grid (list) values")
             c = expanded[0]
@@ -410,22 +425,38 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     if plan.trial_runs > LARGE_SWEEP_TRIAL_RUNS and not allow_large:
         raise ConfigError("trials", f"the sweep asks for {plan.trial_runs:,} trial-runs "
                                     f"(trials x SNR levels x configs); pass --yes to run it anyway")
+    calibration_runs = _calibration_trial_runs(plan)
+    if plan.trial_runs + calibration_runs > LARGE_SWEEP_TRIAL_RUNS and not allow_large:
+        raise ConfigError("calibration.h0_trials", f"the sweep asks for {calibration_runs:,} null-hypothesis "
+                                                   f"trial-runs (h0_trials x calibrated configs) besides "
+                                                   f"{plan.trial_runs:,} others; pass --yes to run it anyway")
     return plan
+
+
+def _calibration_trial_runs(plan: Plan) -> int:
+    """h0_trials x (scenario config, method config) pairs whose threshold is calibrated."""
+    pairs = sum(1 for s in plan.scenarios for m, task in zip(plan.methods, plan.method_tasks)
+                if task in s.tasks and handler(task).calibrated)
+    return plan.calibration.h0_trials * pairs
 
 
 def load_sweep(path: str | Path, *, allow_large: bool = False) -> Plan:
     """Read and validate a sweep file. Raises ConfigError (field '' for file-level problems)."""
     path = Path(path)
     try:
-        raw = path.read_bytes()
+        with path.open("rb") as f:
+            raw = f.read(MAX_SWEEP_BYTES + 1)      # bounded: never a huge file (or a pipe) in memory
     except OSError as exc:
         raise ConfigError("", f"cannot read the file ({exc.strerror or exc})") from None
     return parse_sweep_text(raw, str(path), allow_large=allow_large)
 
 
 def parse_sweep_text(raw: bytes, source: str, *, allow_large: bool = False) -> Plan:
+    if len(raw) > MAX_SWEEP_BYTES:
+        raise ConfigError("", f"more than {MAX_SWEEP_BYTES:,} bytes; a sweep file is at most that "
+                              "(a grid axis that long would not run anyway)")
     try:
-        text = raw.decode("utf-8")
+        text = raw.decode("utf-8-sig")        # a leading byte-order mark (Windows editors) is fine
     except UnicodeDecodeError as exc:
         raise ConfigError("", f"not UTF-8 text (byte {exc.start})") from None
     try:

@@ -100,8 +100,9 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
     ev = runs[(runs.phase == "evaluation") & runs.error.isna()]
     speed = ev.groupby(["scenario", "method", "snr_db"]).agg(s=("seconds", "sum"), n=("n", "sum"))
     speed = (speed.s / speed.n).rename("seconds_per_trial").reset_index().rename(columns={"method": "config"})
-    summary = summary.drop(columns="seconds_per_trial").merge(speed, on=["scenario", "config", "snr_db"],
-                                                              how="left")
+    summary = summary.drop(columns="seconds_per_trial").astype({"scenario": str, "config": str, "snr_db": float})
+    summary = summary.merge(speed.astype({"scenario": str, "config": str, "snr_db": float}),
+                            on=["scenario", "config", "snr_db"], how="left")
     order = {m["label"]: i for i, m in enumerate(record["methods"])}
     summary = summary.assign(_s=summary.scenario.map(_scenario_order(record)), _o=summary.config.map(order))
     summary = summary.sort_values(["_s", "_o", "snr_db"])

@@ -65,6 +65,7 @@ class UnitTask:
     plan: Plan
     unit: Unit
     thresholds: dict[str, float | None] = field(default_factory=dict)   # evaluation only
+    methods: tuple[str, ...] | None = None     # only these method configs (--retry-failed); None: all
 
 
 class Interrupted(Exception):
@@ -141,6 +142,8 @@ def execute_unit(task: UnitTask) -> UnitResult:
     traces: dict[int, dict] = {i: {} for i in recorded}
     methods = _calibrated(plan, sc) if unit.phase == "calibration" else plan.pairs(sc)
     for mc in methods:
+        if task.methods is not None and mc.label not in task.methods:
+            continue
         method_cls = registry.get_method(mc.name)
         run = MethodRun(mc.label, 0.0)
         t1 = time.perf_counter()
@@ -192,6 +195,17 @@ def calibrations(store: Store, scenarios: list[str], methods: list[str], pfa: fl
     return out
 
 
+def retry_tasks(plan: Plan, units: list[Unit], failed: dict[str, set[str]],
+                thresholds: dict[str, dict[str, float | None]] | None = None) -> list[UnitTask]:
+    """``--retry-failed``: for each stored unit on which method configs failed, a task that
+    runs only those configs again (:meth:`Store.save_unit` then replaces their failed runs
+    and leaves the other configs' results untouched)."""
+    labels = [m.label for m in plan.methods]
+    return [UnitTask(plan, u, thresholds[u.scenario_label] if thresholds else {},
+                     tuple(label for label in labels if label in failed[u.key]))
+            for u in units if u.key in failed]
+
+
 def _run_phase(executor, tasks, store: Store, progress: Progress, on_result=None) -> None:
     for result in executor.imap_unordered(execute_unit, tasks):
         store.save_unit(result)
@@ -211,8 +225,11 @@ def clear_run_folder(out_dir: Path) -> None:
 
 def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
               executor: str = "local", fresh: bool = False, quiet: bool = False,
-              on_result=None) -> Store:
-    """Run (or resume) a sweep into ``out_dir``; returns the open store."""
+              on_result=None, scheduler: str | None = None, retry_failed: bool = False) -> Store:
+    """Run (or resume) a sweep into ``out_dir``; returns the open store.
+
+    ``retry_failed``: also re-run the (unit, method config) pairs whose run failed,
+    the calibration ones before the thresholds are computed."""
     out_dir = Path(out_dir)
     if fresh and out_dir.exists():
         clear_run_folder(out_dir)
@@ -222,18 +239,21 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
     cal_units, eval_units = plan_units(plan)
     done = store.done_units()
     total = len(cal_units) + len(eval_units)
-    progress = Progress(total, sum(u.key in done for u in cal_units + eval_units), quiet=quiet)
+    failed = store.failed_runs() if retry_failed else {}
+    progress = Progress(total + len(failed), sum(u.key in done for u in cal_units + eval_units), quiet=quiet)
     ex = None
     started = time.monotonic()
     try:
-        ex = make_executor(executor, workers)
-        _run_phase(ex, [UnitTask(plan, u) for u in cal_units if u.key not in done], store, progress)
+        ex = make_executor(executor, workers, scheduler)
+        _run_phase(ex, [UnitTask(plan, u) for u in cal_units if u.key not in done]
+                   + retry_tasks(plan, cal_units, failed), store, progress)
         thresholds: dict[str, dict[str, float | None]] = {sc.label: {m.label: None for m in plan.methods}
                                                           for sc in plan.scenarios}
         for c in calibrations(store, [s.label for s in plan.scenarios], [m.label for m in plan.methods],
                               plan.calibration.pfa, plan.calibration.mode):
             thresholds[c.scenario][c.method] = c.used if np.isfinite(c.used) else None
-        tasks = [UnitTask(plan, u, thresholds[u.scenario_label]) for u in eval_units if u.key not in done]
+        tasks = [UnitTask(plan, u, thresholds[u.scenario_label]) for u in eval_units if u.key not in done] \
+            + retry_tasks(plan, eval_units, failed, thresholds)
         _run_phase(ex, tasks, store, progress, on_result)
     except KeyboardInterrupt:
         progress.close()

@@ -103,6 +103,18 @@ def bytes_to_columns(b: bytes) -> dict[str, np.ndarray]:
         return {k: z[k] for k in z.files}
 
 
+def _merge_record(old: bytes, new: bytes, labels: set[str], order: list[str]) -> bytes:
+    """A stored trial record with the traces of method configs ``labels`` taken from ``new``
+    (kept in plan order, as an uninterrupted run writes them)."""
+    from bench.recording import TrialRecord
+
+    rec, fresh = TrialRecord.from_bytes(old), TrialRecord.from_bytes(new)
+    traces = {**rec.methods, **{k: v for k, v in fresh.methods.items() if k in labels}}
+    rank = {label: i for i, label in enumerate(order)}
+    rec.methods = dict(sorted(traces.items(), key=lambda kv: rank.get(kv[0], len(rank))))
+    return rec.to_bytes()
+
+
 class Store:
     def __init__(self, path: str | Path):
         self.path = Path(path)
@@ -144,25 +156,64 @@ class Store:
     def done_units(self) -> set[str]:
         return {r[0] for r in self.db.execute("SELECT key FROM units")}
 
-    def save_unit(self, r: UnitResult) -> None:
-        """Store one finished unit in a single transaction."""
+    def save_unit(self, r: UnitResult) -> bool:
+        """Store one finished unit in a single transaction; returns whether anything was written.
+
+        A unit is stored once: a second result for a stored unit (a unit dask ran
+        again after losing a worker, or a re-run with ``--retry-failed``) only
+        replaces the runs of method configs that *failed* in the stored result;
+        everything else of it is ignored, so nothing is counted twice.
+        """
         with self.db:
+            if self.db.execute("SELECT 1 FROM units WHERE key=?", (r.key,)).fetchone() is not None:
+                return self._replace_failed_runs(r)
             self.db.execute("INSERT INTO units VALUES (?,?,?,?,?,?,?,?)",
                             (r.key, r.phase, r.scenario, r.snr_db, r.trial_start, r.n,
                              r.generate_seconds, time.time()))
-            for run in r.runs:
-                self.db.execute("INSERT INTO runs VALUES (?,?,?,?)", (r.key, run.label, run.seconds, run.error))
-                if run.metrics is not None:
-                    cols = {**r.common, **run.metrics}
-                    self.db.execute("INSERT INTO metrics VALUES (?,?,?)",
-                                    (r.key, run.label, columns_to_bytes(cols)))
-                if run.null_values is not None:
-                    peaks = None if run.null_peaks is None else array_to_bytes(run.null_peaks)
-                    self.db.execute("INSERT INTO null_stats VALUES (?,?,?,?,?,?)",
-                                    (r.key, r.scenario, run.label, run.nominal_threshold,
-                                     array_to_bytes(run.null_values), peaks))
+            self._insert_runs(r, r.runs)
             for trial, blob in r.records:
                 self.db.execute("INSERT INTO records VALUES (?,?,?)", (r.key, trial, blob))
+        return True
+
+    def failed_runs(self) -> dict[str, set[str]]:
+        """unit key -> method config labels whose run on that unit failed."""
+        out: dict[str, set[str]] = {}
+        for unit, method in self.db.execute("SELECT unit, method FROM runs WHERE error IS NOT NULL"):
+            out.setdefault(unit, set()).add(method)
+        return out
+
+    def _replace_failed_runs(self, r: UnitResult) -> bool:
+        """Within the caller's transaction: swap the stored failed runs of unit ``r.key``
+        for the runs of ``r`` (the other method configs' results stay untouched)."""
+        failed = {m for (m,) in self.db.execute("SELECT method FROM runs WHERE unit=? AND error IS NOT NULL",
+                                                (r.key,))}
+        runs = [run for run in r.runs if run.label in failed]
+        if not runs:
+            return False
+        for run in runs:
+            for table in ("runs", "metrics", "null_stats"):
+                self.db.execute(f"DELETE FROM {table} WHERE unit=? AND method=?", (r.key, run.label))
+        self._insert_runs(r, runs)
+        labels = {run.label for run in runs}
+        order = [m["label"] for m in self.plan().get("methods", [])] if self.meta("plan") else []
+        for trial, blob in r.records:
+            row = self.db.execute("SELECT data FROM records WHERE unit=? AND trial=?", (r.key, trial)).fetchone()
+            merged = blob if row is None else _merge_record(row[0], blob, labels, order)
+            self.db.execute("INSERT OR REPLACE INTO records VALUES (?,?,?)", (r.key, trial, merged))
+        return True
+
+    def _insert_runs(self, r: UnitResult, runs: list[MethodRun]) -> None:
+        for run in runs:
+            self.db.execute("INSERT INTO runs VALUES (?,?,?,?)", (r.key, run.label, run.seconds, run.error))
+            if run.metrics is not None:
+                cols = {**r.common, **run.metrics}
+                self.db.execute("INSERT INTO metrics VALUES (?,?,?)",
+                                (r.key, run.label, columns_to_bytes(cols)))
+            if run.null_values is not None:
+                peaks = None if run.null_peaks is None else array_to_bytes(run.null_peaks)
+                self.db.execute("INSERT INTO null_stats VALUES (?,?,?,?,?,?)",
+                                (r.key, r.scenario, run.label, run.nominal_threshold,
+                                 array_to_bytes(run.null_values), peaks))
 
     # ---------------------------------------------------------------- reads
     def units(self) -> pd.DataFrame:

@@ -379,13 +379,13 @@ class Viterbi(Method):
     @dataclass(frozen=True)
     class Params:
         Lb: int = param(4, "block length Lb (steps): the best path is backtracked and the trellis "
-                        "re-seeded every Lb steps (the paper: 4)", ge=1)
+                        "re-seeded every Lb steps (the paper: 4)", ge=1, le=1000)
         survivors: int = param(256, "best end nodes of a block that seed the next block (the paper's "
-                               "n; 1 = Demirbas's original)", ge=1)
+                               "n; 1 = Demirbas's original)", ge=1, le=100_000)
         position_levels: int = param(41, "quantisation levels of an axis's position within its gate "
-                                     "(odd)", ge=3)
+                                     "(odd)", ge=3, le=1001)
         velocity_levels: int = param(61, "quantisation levels of an axis's velocity within its gate "
-                                     "(odd)", ge=1)
+                                     "(odd)", ge=1, le=1001)
         gate_sigmas: float = param(4.0, "gate half-width, in standard deviations of a linear filter's "
                                    "predicted position and velocity for the axis", gt=0.0)
         gate_noise: str = param("glint", "measurement variance the gate is sized with: 'glint' = "

@@ -151,7 +151,7 @@ class CvTurnCv(Scenario):
 
     @dataclass(frozen=True)
     class Params:
-        steps: int = param(160, "number of measurement steps K", ge=2)
+        steps: int = param(160, "number of measurement steps K", ge=2, le=1_000_000)
         dt_s: float = param(1.0, "sampling interval T (s)", gt=0.0)
         onset_step: int = param(80, "first step moved by the turn (step index)", ge=1)
         turn_steps: int = param(40, "duration of the turn (steps)", ge=1)

@@ -211,7 +211,7 @@ class Glint(Scenario):
 
     @dataclass(frozen=True)
     class Params:
-        steps: int = param(300, "number of measurement steps K (duration K T)", ge=2)
+        steps: int = param(300, "number of measurement steps K (duration K T)", ge=2, le=1_000_000)
         dt_s: float = param(0.1, "sampling interval T (s)", gt=0.0)
         damping_per_s: float = param(0.4, "velocity damping mu (1/s) of dv/dt = -mu v + u + w", ge=0.0)
         control_m_s2: tuple[float, ...] = param(

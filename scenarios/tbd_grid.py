@@ -357,8 +357,8 @@ class TbdGrid(Scenario):
     class Params:
         cells: int = param(500, "grid side H = W (cells); the paper's scene is 500 (50 km at 100 m); "
                                 "smaller grids keep the cell size and trajectory and move the scene "
-                                "window so the whole track stays inside", ge=8)
-        frames: int = param(20, "number of frames K", ge=2)
+                                "window so the whole track stays inside", ge=8, le=5000)
+        frames: int = param(20, "number of frames K", ge=2, le=1000)
         noise: str = param("ar", "per-cell noise over frames: 'ar' (AR(P), ar_coefficients) or "
                                  "'white'", choices=("ar", "white"))
         ar_coefficients: tuple[float, ...] = param(

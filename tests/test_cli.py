@@ -14,7 +14,6 @@ from bench.report import SUMMARY_COLUMNS
 
 TRIAL_COLUMNS = ["scenario", "method", "params", "snr_db", "trial", "seed", "detected", "delay",
                  "false_alarms", "null_steps"]
-KEY = ["scenario", "config", "snr_db", "trial"]
 
 
 def test_list_shows_methods_and_scenarios(bench_cli):
@@ -85,16 +84,7 @@ def test_plan_toml_reruns_to_the_same_results(bench_cli, write_sweep, tmp_path):
     assert (a / "trials.csv").read_text() == (b / "trials.csv").read_text()
 
 
-def test_same_results_whatever_the_workers_and_chunks(bench_cli, write_sweep, tmp_path):
-    runs = [("w1", 1, 5), ("w2", 2, 5), ("w2c3", 2, 3), ("w1c12", 1, 12)]
-    frames = []
-    for name, workers, chunk in runs:
-        sweep = write_sweep(f"{name}.toml", chunk=chunk)
-        bench_cli("run", sweep, "--out", tmp_path / name, "--workers", workers, "--quiet", "--no-record",
-                  check=True)
-        frames.append(pd.read_csv(tmp_path / name / "trials.csv").sort_values(KEY).reset_index(drop=True))
-    for other in frames[1:]:
-        pd.testing.assert_frame_equal(frames[0], other)
+# Same results whatever the executor, workers and chunks: tests/test_executors.py
 
 
 @pytest.mark.parametrize("text, field", [
@@ -172,6 +162,71 @@ def test_interrupted_run_resumes_to_the_uninterrupted_results(bench_cli, uninter
     # every column but the timing is a result and must be identical
     results = lambda d: pd.read_csv(d / "summary.csv").drop(columns="seconds_per_trial")  # noqa: E731
     pd.testing.assert_frame_equal(results(part), results(whole))
+
+
+UNITS = 100          # of the `uninterrupted` sweep: 50 calibration + 50 evaluation units
+CALIBRATION_UNITS = 50
+
+
+def _start(sweep, out, workers):
+    # a session of its own, so the signal goes to the whole group as a terminal's Ctrl-C does
+    return subprocess.Popen([sys.executable, "-m", "bench", "run", str(sweep), "--out", str(out), "--workers",
+                             str(workers), "--quiet", "--no-record"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+
+
+def written_since(path, t: float) -> bool:
+    return path.exists() and path.stat().st_mtime >= t
+
+
+def test_a_run_killed_at_several_points_resumes_to_the_uninterrupted_results(bench_cli, uninterrupted, tmp_path):
+    """One run stopped again and again — after its first unit, during calibration, during
+    evaluation, with every unit stored but the report not yet written — alternating Ctrl-C
+    and kill -9 and the number of workers: nothing stored is ever lost, Ctrl-C says how to
+    resume, and the last re-run ends with the uninterrupted results."""
+    sweep, whole = uninterrupted
+    part = tmp_path / "part"
+    stops = [
+        (signal.SIGKILL, 2, "after the first unit", lambda n: n >= 1),
+        (signal.SIGINT, 2, "during calibration", lambda n: n >= CALIBRATION_UNITS // 2),
+        (signal.SIGKILL, 1, "early in evaluation", lambda n: n >= CALIBRATION_UNITS + 5),
+        (signal.SIGINT, 2, "late in evaluation", lambda n: n >= UNITS - 10),
+        # reached after this run stored the last units: all stored, the report being made
+        (signal.SIGINT, 1, "all units stored, report not written",
+         lambda n: n == UNITS and not (part / "report.md").exists()),
+        # this run has nothing left to compute: it is killed while it writes the report's files
+        (signal.SIGKILL, 2, "while the report is written",
+         lambda n: written_since(part / "trials.csv", started) and not (part / "report.md").exists()),
+    ]
+    stored = 0
+    for sig, workers, when, ready in stops:
+        started = time.time() - 1
+        proc = _start(sweep, part, workers)
+        deadline = time.monotonic() + 180
+        while not ready(_stored_units(part / "results.sqlite")) and time.monotonic() < deadline \
+                and proc.poll() is None:
+            time.sleep(0.005)
+        assert proc.poll() is None, f"{when}: the run ended before it could be stopped"
+        at_signal = _stored_units(part / "results.sqlite")
+        os.killpg(proc.pid, sig)
+        err = proc.communicate(timeout=120)[1]
+        after = _stored_units(part / "results.sqlite")
+        assert stored <= at_signal <= after, (when, stored, at_signal, after)   # nothing stored is lost
+        if at_signal < UNITS:
+            assert not (part / "summary.csv").exists(), when
+        if sig == signal.SIGINT:
+            assert proc.returncode == 130 and "Traceback" not in err, (when, err)
+            last = err.strip().splitlines()[-1]
+            assert last.startswith("interrupted: ") and "run the same command again to resume" in last, last
+            if at_signal < UNITS:
+                assert f"{after} of {UNITS} units stored" in last, last
+        stored = after
+    bench_cli("run", sweep, "--out", part, "--workers", 2, "--quiet", "--no-record", check=True)
+    assert (part / "trials.csv").read_text() == (whole / "trials.csv").read_text()
+    for d in (part, whole):
+        assert (d / "summary.csv").exists()
+    pd.testing.assert_frame_equal(pd.read_csv(part / "summary.csv").drop(columns="seconds_per_trial"),
+                                  pd.read_csv(whole / "summary.csv").drop(columns="seconds_per_trial"))
 
 
 def test_a_run_folder_refuses_a_different_sweep(bench_cli, write_sweep, tmp_path):

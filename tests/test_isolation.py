@@ -1,5 +1,6 @@
 """One method's failure never stops the others; a broken plugin never breaks the registry."""
 
+import os
 import sys
 from dataclasses import dataclass
 
@@ -7,11 +8,14 @@ import pandas as pd
 import pytest
 
 from bench import registry
+from bench.cli import main
 from bench.config import parse_sweep
 from bench.core import MANEUVER_DETECTION, Method
 from bench.params import param
+from bench.recording import TrialRecord
 from bench.report import build_outputs
 from bench.runner import plan_record, run_sweep
+from bench.store import Store
 from methods.innovation import Innovation
 
 
@@ -70,3 +74,110 @@ def test_a_broken_plugin_module_is_listed_as_unavailable(tmp_path, monkeypatch):
     registry._import_package_modules("someplugins")
     assert registry._UNAVAILABLE == [registry.Unavailable("someplugins.broken", "ImportError: needs libfoo 2.0")]
     assert "someplugins.fine" in sys.modules
+
+
+class Flaky(Method):
+    """Innovation detector with a transient fault: while FLAKY_FAIL is set it raises on the
+    null unit holding trial 0 (``fail_in = "calibration"``) or on the units above 5 dB
+    (``fail_in = "evaluation"``); once the fault is gone it gives the innovation results."""
+
+    name = "flaky"
+    task = MANEUVER_DETECTION
+
+    @dataclass(frozen=True)
+    class Params:
+        fail_in: str = param("evaluation", "phase whose units fail while FLAKY_FAIL is set",
+                             choices=("calibration", "evaluation"))
+
+    def run(self, batch, params):
+        if os.environ.get("FLAKY_FAIL"):
+            null = batch.meta.get("onset_step") is None
+            if params.fail_in == "calibration" and null and 0 in batch.trials:
+                raise ConnectionError("transient fault (calibration)")
+            if params.fail_in == "evaluation" and not null and batch.meta["realised_snr_db"].mean() > 5:
+                raise ConnectionError("transient fault (evaluation)")
+        return Innovation().run(batch, Innovation.Params(window=1))
+
+    def nominal_threshold(self, params, pfa, batch):
+        return Innovation().nominal_threshold(Innovation.Params(window=1), pfa, batch)
+
+
+FLAKY_SWEEP = """
+name = "flaky"
+scenario = "cv-turn-cv"
+trials = 6
+chunk = 3
+seed = 11
+snr_db = [0, 10]
+
+[[methods]]
+name = "flaky"
+params = { fail_in = ["calibration", "evaluation"] }
+
+[[methods]]
+name = "innovation"
+
+[calibration]
+h0_trials = 30
+
+[record]
+trials = 1
+"""
+
+
+@pytest.fixture
+def flaky():
+    registry.register_method(Flaky)
+    yield
+    registry._METHODS.pop("flaky", None)
+
+
+def _bench_run(sweep, out, *options) -> int:
+    return main(["run", str(sweep), "--out", str(out), "--workers", "1", "--quiet", "--no-record", *options])
+
+
+def _stored(out):
+    store = Store(out / "results.sqlite")
+    try:
+        runs = store.runs()
+        records = [TrialRecord.from_bytes(b) for b in store.records()]
+    finally:
+        store.close()
+    return runs, records
+
+
+def test_retry_failed_reruns_only_the_failed_pairs(flaky, tmp_path, monkeypatch):
+    sweep = tmp_path / "flaky.toml"
+    sweep.write_text(FLAKY_SWEEP)
+    assert _bench_run(sweep, tmp_path / "clean") == 0                         # no fault: the reference
+
+    monkeypatch.setenv("FLAKY_FAIL", "1")
+    run = tmp_path / "run"
+    assert _bench_run(sweep, run) == 0                                        # failures never stop a run
+    runs, _ = _stored(run)
+    failed = runs[runs.error.notna()]
+    cal = failed[failed.phase == "calibration"]
+    assert set(cal.method) == {"flaky[fail_in=calibration]"} and len(cal) == 1
+    ev = failed[failed.phase == "evaluation"]
+    assert (ev[ev.method == "flaky[fail_in=calibration]"].error.str.contains("no threshold")).all()
+    assert len(ev[ev.method == "flaky[fail_in=calibration]"]) == 4            # its every evaluation unit
+    assert set(ev[ev.method == "flaky[fail_in=evaluation]"].snr_db) == {10.0}
+    assert "transient fault" in (run / "report.md").read_text().split("## Failures")[1]
+
+    monkeypatch.delenv("FLAKY_FAIL")
+    assert _bench_run(sweep, run) == 0                                        # a plain re-run retries nothing
+    assert _stored(run)[0].error.notna().sum() == len(failed)
+
+    assert _bench_run(sweep, run, "--retry-failed") == 0
+    after, records = _stored(run)
+    assert after.error.isna().all() and len(after) == len(runs)               # replaced, not added
+    innovation = ["unit", "seconds"]
+    pd.testing.assert_frame_equal(after[after.method == "innovation"][innovation].reset_index(drop=True),
+                                  runs[runs.method == "innovation"][innovation].reset_index(drop=True))  # not re-run
+    ok = runs[runs.error.isna()].set_index(["unit", "method"]).seconds
+    assert (after.set_index(["unit", "method"]).seconds.loc[ok.index] == ok).all()
+    assert (run / "trials.csv").read_text() == (tmp_path / "clean" / "trials.csv").read_text()
+    assert "transient fault" not in (run / "report.md").read_text()
+    # the recorded trials gained the retried configs' traces, in plan order
+    labels = ["flaky[fail_in=calibration]", "flaky[fail_in=evaluation]", "innovation"]
+    assert records and all(list(r.methods) == labels for r in records)

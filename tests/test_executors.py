@@ -1,0 +1,135 @@
+"""Executors only map units: results never depend on them (DESIGN.md section 5, issue 6 items 1-2)."""
+
+import os
+import sys
+
+import pytest
+
+from bench.cli import main
+from bench.store import MethodRun, Store, UnitResult
+
+# (run name, bench run options, chunk): every one must give the trials.csv of the first
+RUNS = [
+    ("local-x1-chunk5", ["--workers", "1"], 5),
+    ("local-x2-chunk5", ["--workers", "2"], 5),
+    ("local-x2-chunk3", ["--workers", "2"], 3),
+    ("local-x1-chunk12", ["--workers", "1"], 12),
+    ("dask-x2-chunk5", ["--executor", "dask", "--workers", "2"], 5),   # a LocalCluster: started once
+]
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The small sweep run with the first configuration of RUNS."""
+    from conftest import SMALL_SWEEP, run_bench
+    root = tmp_path_factory.mktemp("executors")
+    name, options, chunk = RUNS[0]
+    sweep = root / f"{name}.toml"
+    sweep.write_text(SMALL_SWEEP.format(trials=12, snr="[0, 8]", chunk=chunk, h0=60))
+    run_bench("run", sweep, "--out", root / name, *options, "--quiet", "--no-record", check=True)
+    return root / name / "trials.csv"
+
+
+@pytest.mark.parametrize("name, options, chunk", RUNS[1:], ids=[r[0] for r in RUNS[1:]])
+def test_identical_trials_whatever_the_executor_workers_and_chunks(reference, bench_cli, write_sweep, tmp_path,
+                                                                   name, options, chunk):
+    if "dask" in options:
+        pytest.importorskip("distributed")
+    out = tmp_path / name
+    bench_cli("run", write_sweep(f"{name}.toml", chunk=chunk), "--out", out, *options, "--quiet", "--no-record",
+              check=True)
+    assert (out / "trials.csv").read_text() == reference.read_text()
+
+
+def test_a_lost_worker_s_unit_is_run_again_and_yielded_once(tmp_path):
+    """A worker dies while it holds a unit: dask runs the unit on another worker (the
+    nanny restarts the dead one); every unit comes back exactly once."""
+    pytest.importorskip("distributed")
+    from bench.executors import DaskExecutor
+    marker = str(tmp_path / "died")
+
+    def unit(i):                      # a closure: dask ships it by value to the workers
+        import os as _os
+        import time as _time
+        if i == 3 and not _os.path.exists(marker):
+            open(marker, "w").close()
+            _os._exit(1)              # the worker process dies with the unit in hand
+        _time.sleep(0.05)
+        return i, _os.getpid()
+
+    ex = DaskExecutor(2)
+    try:
+        results = list(ex.imap_unordered(unit, range(12)))
+    finally:
+        ex.shutdown()
+    assert os.path.exists(marker)
+    assert sorted(i for i, _ in results) == list(range(12))
+
+
+def test_workers_that_differ_from_the_driver_are_refused(monkeypatch):
+    """Workers must run the driver's harness and plugins, or results would silently differ."""
+    pytest.importorskip("distributed")
+    import bench
+    from bench.errors import ConfigError
+    from bench.executors import DaskExecutor
+    monkeypatch.setattr(bench, "__version__", "0.0.0-driver")          # the workers keep the real one
+    with pytest.raises(ConfigError, match="differs from this machine: bench '.*' \\(here '0.0.0-driver'\\)"):
+        DaskExecutor(1)
+
+
+def _result(key="evaluation/s/+0/000000000+2", error=None, value=1.0):
+    import numpy as np
+    run = MethodRun("m", 0.1, error=error, metrics=None if error else {"detected": np.array([value, value])})
+    return UnitResult(key, "evaluation", "s", 0.0, 0, 2, 0.01, runs=[run],
+                      common={"trial": np.array([0, 1])})
+
+
+def test_the_store_ignores_a_second_result_of_a_stored_unit(tmp_path):
+    store = Store(tmp_path / "results.sqlite")
+    assert store.save_unit(_result(value=1.0))
+    assert not store.save_unit(_result(value=2.0))                 # e.g. a unit dask ran twice
+    assert len(store.units()) == 1 and len(store.runs()) == 1
+    [(_, _, _, _, cols)] = list(store.iter_metrics())
+    assert cols["detected"].tolist() == [1.0, 1.0]                   # the first result stays
+    store.close()
+
+
+def test_a_failed_run_is_replaced_by_a_later_good_one(tmp_path):
+    store = Store(tmp_path / "results.sqlite")
+    store.save_unit(_result(error="ValueError: boom"))
+    assert store.failed_runs() == {"evaluation/s/+0/000000000+2": {"m"}}
+    assert store.save_unit(_result(value=3.0))
+    assert store.failed_runs() == {} and len(store.runs()) == 1
+    [(_, _, _, _, cols)] = list(store.iter_metrics())
+    assert cols["detected"].tolist() == [3.0, 3.0]
+    store.close()
+
+
+def _run_main(argv, capsys):
+    code = main(argv)
+    return code, capsys.readouterr().err
+
+
+def test_dask_missing_is_one_line_saying_how_to_install_it(write_sweep, tmp_path, monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "distributed", None)          # import distributed -> ImportError
+    code, err = _run_main(["run", str(write_sweep()), "--out", str(tmp_path / "out"), "--executor", "dask",
+                           "--quiet"], capsys)
+    assert code == 2 and err.count("\n") == 1, err
+    assert 'pip install "radar-maneuver-bench[dask]"' in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_scheduler_needs_the_dask_executor(write_sweep, tmp_path, capsys):
+    code, err = _run_main(["run", str(write_sweep()), "--out", str(tmp_path / "out"), "--scheduler",
+                           "tcp://127.0.0.1:8786", "--quiet"], capsys)
+    assert code == 2 and err.startswith("error: --scheduler: only with --executor dask"), err
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_unreachable_scheduler_is_one_line(write_sweep, tmp_path, monkeypatch, capsys):
+    pytest.importorskip("distributed")
+    from bench import executors
+    monkeypatch.setattr(executors.DaskExecutor, "connect_timeout", "1s")
+    code, err = _run_main(["run", str(write_sweep()), "--out", str(tmp_path / "out"), "--executor", "dask",
+                           "--scheduler", "tcp://127.0.0.1:9", "--quiet", "--no-record"], capsys)
+    assert code == 2 and err.count("\n") == 1 and "--scheduler: cannot connect to tcp://127.0.0.1:9" in err, err
