@@ -130,8 +130,6 @@ class EKF(Method):
 
     name = "ekf"
     task = TRACKING
-    #: ``bench perf``: issue 6's target for Kalman-based methods
-    perf_targets = {"*": {"speedup": 50.0}}
     reference_name = "per-trial filterpy ExtendedKalmanFilter loop"
     reference_trials = 10
 
