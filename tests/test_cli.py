@@ -116,6 +116,13 @@ def test_bad_command_line_is_one_line_too(bench_cli, tmp_path):
         assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr, proc.stderr
 
 
+def _as_from_a_terminal() -> None:
+    """In the child: Ctrl-C handled as in a terminal. A test run started in the
+    background by a non-interactive shell inherits SIGINT ignored (POSIX), and an
+    ignored disposition survives exec, so the run would never see the signal."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _stored_units(db) -> int:
     try:
         with sqlite3.connect(db, timeout=5) as con:
@@ -143,7 +150,7 @@ def test_interrupted_run_resumes_to_the_uninterrupted_results(bench_cli, uninter
     # a session of its own, so the signal goes to the whole group as a terminal's Ctrl-C does
     proc = subprocess.Popen([sys.executable, "-m", "bench", "run", str(sweep), "--out", str(part), "--workers",
                              str(workers), "--quiet", "--no-record"], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=_as_from_a_terminal)
     deadline = time.monotonic() + 120
     while _stored_units(part / "results.sqlite") < 60 and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.02)
@@ -172,7 +179,7 @@ def _start(sweep, out, workers):
     # a session of its own, so the signal goes to the whole group as a terminal's Ctrl-C does
     return subprocess.Popen([sys.executable, "-m", "bench", "run", str(sweep), "--out", str(out), "--workers",
                              str(workers), "--quiet", "--no-record"], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=_as_from_a_terminal)
 
 
 def written_since(path, t: float) -> bool:
