@@ -48,12 +48,6 @@ def gumbel_fit(null_values: np.ndarray) -> tuple[float, float]:
     return float(loc), float(scale)
 
 
-def gumbel_threshold(null_values: np.ndarray, pfa: float) -> float:
-    """The (1 − pfa) quantile of the fitted Gumbel law: t = μ − β·ln(−ln(1 − pfa))."""
-    loc, scale = gumbel_fit(null_values)
-    return float(stats.gumbel_r.isf(pfa, loc, scale))
-
-
 @dataclass(frozen=True)
 class CalibrationResult:
     """The calibration of one method config on one scenario config."""

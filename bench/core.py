@@ -49,6 +49,12 @@ class Batch:
         ``snr_definition`` (one sentence), ``realised_snr_db`` ((n,) array),
         ``position_index`` (indices of the position components of the state).
         A scenario may add a ``filter`` model for methods that run a filter.
+        Used by the harness for the other tasks: ``grid`` and ``target_cells``
+        ((n, K, 2) true cells, ``None`` under the null) and
+        ``hit_tolerance_cells`` (TBD metrics and recordings); ``state_labels``,
+        ``divergence_bound_m`` and ``glint_outlier`` ((n, K, m) flags, drawn
+        in recordings) for tracking; ``z_xy`` (measurements in the plane,
+        for recordings).
     trials : (n,) int
         Global index of each trial within its SNR level (for seeds and CSV).
     """

@@ -62,6 +62,15 @@ def binomial_interval(successes: int, trials: int, level: float = CONFIDENCE) ->
     return float(ci.low), float(ci.high)
 
 
+def _bootstrap_interval(n: int, estimate, level: float, resamples: int) -> tuple[float, float]:
+    """Percentile bootstrap interval: ``estimate(idx)`` maps a (resamples, n)
+    array of resampled indices to one statistic per resample; fixed seed."""
+    idx = np.random.default_rng(BOOTSTRAP_SEED).integers(0, n, size=(resamples, n))
+    values = estimate(idx)
+    alpha = (1 - level) / 2
+    return float(np.quantile(values, alpha)), float(np.quantile(values, 1 - alpha))
+
+
 def bootstrap_mean_interval(values: np.ndarray, level: float = CONFIDENCE,
                             resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float]:
     """Percentile bootstrap interval of the mean, with a fixed seed (reproducible)."""
@@ -71,11 +80,19 @@ def bootstrap_mean_interval(values: np.ndarray, level: float = CONFIDENCE,
         return (np.nan, np.nan)
     if values.size == 1 or np.all(values == values[0]):
         return (float(values[0]), float(values[0]))
-    rng = np.random.default_rng(BOOTSTRAP_SEED)
-    idx = rng.integers(0, values.size, size=(resamples, values.size))
-    means = values[idx].mean(axis=1)
-    alpha = (1 - level) / 2
-    return float(np.quantile(means, alpha)), float(np.quantile(means, 1 - alpha))
+    return _bootstrap_interval(values.size, lambda idx: values[idx].mean(axis=1), level, resamples)
+
+
+def bootstrap_statistic_interval(samples: np.ndarray, statistic, level: float = CONFIDENCE,
+                                 resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float]:
+    """Percentile bootstrap interval of ``statistic(samples[idx])``, resampling
+    trials (the first axis), with a fixed seed."""
+    samples = np.asarray(samples, float)
+    if len(samples) < 2:
+        value = statistic(samples) if len(samples) else np.nan
+        return (float(value), float(value))
+    return _bootstrap_interval(len(samples), lambda idx: np.array([statistic(samples[i]) for i in idx]),
+                               level, resamples)
 
 
 def summarise_detection(trials: pd.DataFrame) -> pd.DataFrame:
@@ -140,21 +157,6 @@ def tbd_trial_metrics(score: np.ndarray, track: np.ndarray, threshold: float, *,
 def per_step_rmse(sq_err: np.ndarray) -> np.ndarray:
     """RMSE per step across trials, from squared errors (n, K)."""
     return np.sqrt(np.mean(sq_err, axis=0)) if len(sq_err) else np.full(sq_err.shape[1:], np.nan)
-
-
-def bootstrap_statistic_interval(samples: np.ndarray, statistic, level: float = CONFIDENCE,
-                                 resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float]:
-    """Percentile bootstrap interval of ``statistic(samples[idx])`` over trials
-    (the first axis), with a fixed seed."""
-    samples = np.asarray(samples, float)
-    if len(samples) < 2:
-        value = statistic(samples) if len(samples) else np.nan
-        return (float(value), float(value))
-    rng = np.random.default_rng(BOOTSTRAP_SEED)
-    idx = rng.integers(0, len(samples), size=(resamples, len(samples)))
-    values = np.array([statistic(samples[i]) for i in idx])
-    alpha = (1 - level) / 2
-    return float(np.quantile(values, alpha)), float(np.quantile(values, 1 - alpha))
 
 
 def time_averaged_rmse(sq_err: np.ndarray) -> float:
