@@ -62,6 +62,48 @@ def binomial_interval(successes: int, trials: int, level: float = CONFIDENCE) ->
     return float(ci.low), float(ci.high)
 
 
+def clustered_rate_interval(events: np.ndarray, opportunities: np.ndarray,
+                            level: float = CONFIDENCE) -> tuple[float, float]:
+    """Interval of a rate counted over steps (or cells) that are correlated
+    within a trial, e.g. the per-step false-alarm rate of a window statistic.
+
+    ``events[i]`` and ``opportunities[i]`` are trial *i*'s count of alarms and
+    of steps. The rate R = sum(events) / sum(opportunities) is a ratio
+    estimator over independent trials; its linearised variance
+    ``n/(n-1) * sum((e_i - R o_i)^2) / (sum o_i)^2`` (Cochran, *Sampling
+    Techniques*, eq. 6.13) counts the clustering of alarms. The interval is
+    Wilson's on the *effective* number of steps ``sum(o) / deff``, where the
+    design effect ``deff`` is that variance over the binomial one (at least 1,
+    so it is never narrower than the independent-steps interval, and it stays
+    defined when no alarm occurred).
+    """
+    e = np.asarray(events, float)
+    o = np.asarray(opportunities, float)
+    total_o = float(o.sum())
+    if total_o <= 0:
+        return (np.nan, np.nan)
+    rate = float(e.sum()) / total_o
+    n = e.size
+    var_binomial = rate * (1 - rate) / total_o
+    deff = 1.0
+    if n > 1 and var_binomial > 0:
+        var_ratio = n / (n - 1) * float(((e - rate * o) ** 2).sum()) / total_o ** 2
+        deff = max(1.0, var_ratio / var_binomial)
+    return wilson_interval(rate, total_o / deff, level)
+
+
+def wilson_interval(proportion: float, n: float, level: float = CONFIDENCE) -> tuple[float, float]:
+    """Wilson score interval for a proportion observed on ``n`` (possibly
+    effective, non-integer) independent Bernoulli trials."""
+    if n <= 0:
+        return (np.nan, np.nan)
+    z = float(stats.norm.isf((1 - level) / 2))
+    denom = 1 + z * z / n
+    centre = (proportion + z * z / (2 * n)) / denom
+    half = z * np.sqrt(proportion * (1 - proportion) / n + z * z / (4 * n * n)) / denom
+    return float(max(0.0, centre - half)), float(min(1.0, centre + half))
+
+
 def _bootstrap_interval(n: int, estimate, level: float, resamples: int) -> tuple[float, float]:
     """Percentile bootstrap interval: ``estimate(idx)`` maps a (resamples, n)
     array of resampled indices to one statistic per resample; fixed seed."""

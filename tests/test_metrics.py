@@ -53,3 +53,20 @@ def test_crossing_interpolates_and_reports_missing():
     assert crossing([0, 1], [0.6, 0.9]) == -np.inf
     mid, low, high = snr_at_pd([0, 1, 2], [0.0, 0.4, 0.8], [0.0, 0.2, 0.6], [0.1, 0.6, 0.9])
     assert low < mid < high
+
+
+def test_wilson_interval_matches_scipy_on_integer_counts():
+    from bench.metrics import binomial_interval, wilson_interval
+    for k, n in [(0, 50), (3, 50), (10, 1000), (999, 1000)]:
+        np.testing.assert_allclose(wilson_interval(k / n, n), binomial_interval(k, n), rtol=1e-12, atol=1e-15)
+
+
+def test_clustered_rate_interval_widens_for_clustered_alarms():
+    from bench.metrics import binomial_interval, clustered_rate_interval
+    steps = np.full(200, 50)
+    spread = np.r_[np.ones(100), np.zeros(100)]          # 100 alarms, one per trial
+    clustered = np.r_[np.full(10, 10.0), np.zeros(190)]  # 100 alarms in 10 trials
+    independent = binomial_interval(100, steps.sum())
+    np.testing.assert_allclose(clustered_rate_interval(spread, steps), independent, rtol=0.02)
+    lo, hi = clustered_rate_interval(clustered, steps)
+    assert hi - lo > 2 * (independent[1] - independent[0])
