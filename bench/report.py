@@ -401,11 +401,11 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
     parts = [f"# {title}", sweep.get("description") or "",
              f"Reproduce with `{record.get('command', '')}`." +
              ("" if done >= total else f" **Incomplete run: {done} of {total} units stored.**"),
+             preset_notes(record.get("source", "")),   # the paper-vs-ours table leads a preset's report
              _section_plan(record, store), _section_calibration(cals, summary, tasks)]
     parts += _detection_parts(store, trials, of_task[MANEUVER_DETECTION], cals, fig_dir, title, pfa)
     parts += report_tbd.sections(of_task[TBD], steps, store, cals, fig_dir, title, pfa)
     parts += report_tracking.sections(of_task[TRACKING], steps, fig_dir, title)
-    parts.append(preset_notes(record.get("source", "")))
     parts += _timeline_parts(records, fig_dir, title)
     parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
     if recording and records:
