@@ -15,11 +15,10 @@ Track-before-detect and tracking metrics follow (``tbd_trial_metrics``,
 stored with the trial but kept out of trials.csv, they feed per-step RMSE.
 
 Per cell (scenario config, method config, SNR): Pd with a 95% Wilson interval
-(``scipy.stats.binomtest``), per-step Pfa = false alarms / null steps with its
-Wilson interval, mean delay with a percentile-bootstrap interval, median
-delay. Alarms of window statistics are correlated over steps, so the Pfa
-interval, which treats steps as independent, is too narrow for them; the
-report says so.
+(``scipy.stats.binomtest``), per-step Pfa = false alarms / null steps with an
+interval over trials (``clustered_rate_interval``: alarms of window
+statistics come in clusters, so steps are not independent), mean delay with
+a percentile-bootstrap interval, median delay.
 """
 
 from __future__ import annotations
@@ -74,30 +73,49 @@ def clustered_rate_interval(events: np.ndarray, opportunities: np.ndarray,
     Techniques*, eq. 6.13) counts the clustering of alarms. The interval is
     Wilson's on the *effective* number of steps ``sum(o) / deff``, where the
     design effect ``deff`` is that variance over the binomial one (at least 1,
-    so it is never narrower than the independent-steps interval, and it stays
-    defined when no alarm occurred).
+    so never narrower than the independent-steps interval), with Student's
+    quantile in place of the normal one (Korn & Graubard, "Confidence
+    intervals for proportions with small expected number of positive counts
+    estimated from survey data", Survey Methodology 24, 1998). Its degrees of
+    freedom are the trials that alarmed (at most n - 1): with rare clustered
+    alarms the variance rests on those trials alone; in simulation (window
+    sums of 16-32 chi-square values) this keeps coverage at or above 95 %
+    where the normal quantile falls to 0.88 with few alarming trials.
+
+    Chosen over a cluster bootstrap, whose percentile interval collapses to
+    [0, 0] without alarms and under-covers with few alarming trials. Limits:
+    every trial one step (independent Bernoulli trials): Wilson's interval;
+    at most one trial alarmed, or one trial in all (no between-trial
+    variance): the assumption-free bracket [q_low / max(o), q_high] from
+    Wilson's interval of q, the fraction of trials with an alarm, because a
+    stationary per-step rate p satisfies q / o <= p <= q.
     """
     e = np.asarray(events, float)
     o = np.asarray(opportunities, float)
     total_o = float(o.sum())
     if total_o <= 0:
         return (np.nan, np.nan)
+    if np.all(o == 1):
+        return binomial_interval(int(e.sum()), e.size, level)
     rate = float(e.sum()) / total_o
-    n = e.size
+    n, alarmed = e.size, int(np.count_nonzero(e > 0))
+    if n < 2 or alarmed < 2:
+        q_low, q_high = binomial_interval(alarmed, n, level)
+        return q_low / float(o.max()), q_high
     var_binomial = rate * (1 - rate) / total_o
-    deff = 1.0
-    if n > 1 and var_binomial > 0:
-        var_ratio = n / (n - 1) * float(((e - rate * o) ** 2).sum()) / total_o ** 2
-        deff = max(1.0, var_ratio / var_binomial)
-    return wilson_interval(rate, total_o / deff, level)
+    var_ratio = n / (n - 1) * float(((e - rate * o) ** 2).sum()) / total_o ** 2
+    deff = max(1.0, var_ratio / var_binomial) if var_binomial > 0 else 1.0
+    return wilson_interval(rate, total_o / deff, level, df=min(n - 1, alarmed))
 
 
-def wilson_interval(proportion: float, n: float, level: float = CONFIDENCE) -> tuple[float, float]:
+def wilson_interval(proportion: float, n: float, level: float = CONFIDENCE,
+                    df: float = np.inf) -> tuple[float, float]:
     """Wilson score interval for a proportion observed on ``n`` (possibly
-    effective, non-integer) independent Bernoulli trials."""
+    effective, non-integer) independent Bernoulli trials; with finite ``df``
+    Student's quantile replaces the normal one."""
     if n <= 0:
         return (np.nan, np.nan)
-    z = float(stats.norm.isf((1 - level) / 2))
+    z = float(stats.norm.isf((1 - level) / 2) if np.isinf(df) else stats.t.isf((1 - level) / 2, df))
     denom = 1 + z * z / n
     centre = (proportion + z * z / (2 * n)) / denom
     half = z * np.sqrt(proportion * (1 - proportion) / n + z * z / (4 * n * n)) / denom
@@ -147,7 +165,7 @@ def summarise_detection(trials: pd.DataFrame) -> pd.DataFrame:
         fa, steps = int(g["false_alarms"].sum()), int(g["null_steps"].sum())
         delays = g.loc[g["detected"].astype(bool), "delay"].to_numpy(float)
         pd_low, pd_high = binomial_interval(hits, n)
-        pfa_low, pfa_high = binomial_interval(fa, steps)
+        pfa_low, pfa_high = clustered_rate_interval(g["false_alarms"], g["null_steps"])
         d_low, d_high = bootstrap_mean_interval(delays)
         rows.append({
             **dict(zip(keys, key)),
