@@ -8,17 +8,25 @@ Per trial (maneuver detection), with alarm = statistic >= threshold:
 * ``false_alarms``: alarms in the null region, the steps
   ``[max(warmup, valid_from), onset)``; ``null_steps`` is its length;
 * ``peak_statistic``: the largest statistic in the detection window, so that a
-  ROC curve (Pd at any threshold) can be computed later without re-running.
+  ROC curve (Pd at any threshold) can be computed later without re-running;
+* ``window_alarm_fraction``: the fraction of the detection window's steps that
+  alarm (the per-step detection probability of the trial).
+
+The onset may differ per trial (a scenario's onset jitter); every window and
+null region above is then the trial's own.
 
 Track-before-detect and tracking metrics follow (``tbd_trial_metrics``,
 ``tracking_trial_metrics``); per-trial arrays of shape (n, K) are *series*:
 stored with the trial but kept out of trials.csv, they feed per-step RMSE.
 
 Per cell (scenario config, method config, SNR): Pd with a 95% Wilson interval
-(``scipy.stats.binomtest``), per-step Pfa = false alarms / null steps with an
-interval over trials (``clustered_rate_interval``: alarms of window
-statistics come in clusters, so steps are not independent), mean delay with
-a percentile-bootstrap interval, median delay.
+(``scipy.stats.binomtest``); two further Pd definitions that favour no
+detector (:func:`summarise_detection`): the per-step average Pd over the
+detection window, and Pd at a threshold calibrated to the same chance Pd on
+null trials (:func:`equal_chance_pd`); per-step Pfa = false alarms / null
+steps with an interval over trials (``clustered_rate_interval``: alarms of
+window statistics come in clusters, so steps are not independent), mean delay
+with a percentile-bootstrap interval, median delay.
 """
 
 from __future__ import annotations
@@ -32,24 +40,35 @@ BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 20040101
 
 
-def detection_trial_metrics(statistic: np.ndarray, threshold: float, *, onset: int,
+def detection_trial_metrics(statistic: np.ndarray, threshold: float, *, onset,
                             detect_window: int, null_start: int) -> dict[str, np.ndarray]:
-    """Per-trial detection metrics for ``statistic`` (n, K) at ``threshold``."""
+    """Per-trial detection metrics for ``statistic`` (n, K) at ``threshold``.
+
+    ``onset``: the onset step, one for all trials or one per trial (n,).
+    """
     n, K = statistic.shape
     alarms = statistic >= threshold
-    null_start = min(null_start, onset)
-    window = alarms[:, onset:min(onset + detect_window, K)]
+    onset = np.broadcast_to(np.asarray(onset, dtype=np.int64), (n,))
+    null_start = np.minimum(null_start, onset)
+    steps = np.arange(K)[None, :]
+    window_steps = onset[:, None] + np.arange(detect_window)[None, :]      # (n, W)
+    inside = window_steps < K
+    idx = np.minimum(window_steps, K - 1)
+    window = np.take_along_axis(alarms, idx, axis=1) & inside
     detected = window.any(axis=1)
     first = np.argmax(window, axis=1)
     delay = np.where(detected, first, np.nan).astype(float)
-    in_window = statistic[:, onset:min(onset + detect_window, K)]
-    peak = in_window.max(axis=1) if in_window.shape[1] else np.full(n, -np.inf)
+    in_window = np.where(inside, np.take_along_axis(statistic, idx, axis=1), -np.inf)
+    peak = in_window.max(axis=1) if detect_window else np.full(n, -np.inf)
+    null_region = (steps >= null_start[:, None]) & (steps < onset[:, None])
     return {
         "detected": detected,
         "delay": delay,
-        "false_alarms": alarms[:, null_start:onset].sum(axis=1).astype(np.int64),
-        "null_steps": np.full(n, onset - null_start, dtype=np.int64),
+        "false_alarms": (alarms & null_region).sum(axis=1).astype(np.int64),
+        "null_steps": (onset - null_start).astype(np.int64),
         "peak_statistic": peak.astype(float),
+        # the paper's per-step ("average") detection probability of one trial
+        "window_alarm_fraction": (window.sum(axis=1) / np.maximum(inside.sum(axis=1), 1)).astype(float),
     }
 
 
@@ -178,8 +197,32 @@ def summarise_detection(trials: pd.DataFrame) -> pd.DataFrame:
             "rmse_mean": np.nan,
             "threshold": float(g["threshold"].iloc[0]),
             "realised_snr_db": float(np.nanmean(g["realised_snr_db"])) if g["realised_snr_db"].notna().any() else np.nan,
+            **step_average_pd(g),
         })
     return pd.DataFrame(rows)
+
+
+def step_average_pd(g: pd.DataFrame) -> dict[str, float]:
+    """Pd averaged over the steps of the detection window and over trials:
+    mean of the alarm indicator, i.e. the mean over trials of each trial's
+    ``window_alarm_fraction``. Its interval is a bootstrap over trials (the
+    independent units; a trial's steps are correlated)."""
+    if "window_alarm_fraction" not in g:
+        return {"pd_step": np.nan, "pd_step_low": np.nan, "pd_step_high": np.nan}
+    f = g["window_alarm_fraction"].to_numpy(float)
+    low, high = bootstrap_mean_interval(f)
+    return {"pd_step": float(f.mean()) if f.size else np.nan, "pd_step_low": low, "pd_step_high": high}
+
+
+def equal_chance_pd(peaks: np.ndarray, threshold: float) -> dict[str, float]:
+    """Pd at a window threshold: the fraction of trials whose peak statistic in
+    the detection window reaches it, with its Wilson interval."""
+    peaks = np.asarray(peaks, float)
+    if not np.isfinite(threshold) or peaks.size == 0:
+        return {"pd_equal_chance": np.nan, "pd_equal_chance_low": np.nan, "pd_equal_chance_high": np.nan}
+    hits = int(np.count_nonzero(peaks >= threshold))
+    low, high = binomial_interval(hits, peaks.size)
+    return {"pd_equal_chance": hits / peaks.size, "pd_equal_chance_low": low, "pd_equal_chance_high": high}
 
 
 # ------------------------------------------------------------------ track-before-detect

@@ -87,11 +87,12 @@ class DetectionTask:
         onset = batch.meta.get("null_onset_step")
         if onset is None:
             return None
-        window = out.statistic[:, onset:onset + int(batch.meta["detect_window_steps"])]
-        return window.max(axis=1)
+        steps = np.asarray(onset)[..., None] + np.arange(int(batch.meta["detect_window_steps"]))
+        steps = np.broadcast_to(steps, (batch.n, steps.shape[-1]))   # per-trial onsets (jitter)
+        return np.take_along_axis(out.statistic, np.minimum(steps, batch.steps - 1), axis=1).max(axis=1)
 
     def trial_metrics(self, batch: Batch, out: DetectionOutput, threshold: float) -> dict[str, np.ndarray]:
-        return detection_trial_metrics(out.statistic, threshold, onset=int(batch.meta["onset_step"]),
+        return detection_trial_metrics(out.statistic, threshold, onset=np.asarray(batch.meta["onset_step"]),
                                        detect_window=int(batch.meta["detect_window_steps"]),
                                        null_start=self.null_start(batch, out))
 

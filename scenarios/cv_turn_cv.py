@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 
@@ -169,20 +170,28 @@ class CvTurnCv(Scenario):
             40, "a detection counts if the first alarm at or after onset comes "
             "within this many steps", ge=1)
         warmup_steps: int = param(10, "steps ignored before false alarms are counted", ge=0)
+        onset_jitter_steps: int = param(
+            0, "each trial's onset is drawn uniformly from onset_step .. onset_step + this "
+            "(steps), from the trial's own stream; 0: every trial starts the turn at onset_step",
+            ge=0)
+
+        @property
+        def last_onset(self) -> int:
+            return self.onset_step + self.onset_jitter_steps
 
         def validate(self) -> None:
             if self.turn_rate_deg_s == 0.0:
                 raise ConfigError("turn_rate_deg_s", "must be non-zero (a zero rate is no maneuver)")
-            if self.onset_step + self.turn_steps > self.steps:
-                raise ConfigError("turn_steps", f"onset_step + turn_steps = "
-                                  f"{self.onset_step + self.turn_steps} exceeds steps = {self.steps}")
+            if self.last_onset + self.turn_steps > self.steps:
+                raise ConfigError("turn_steps", f"onset_step + onset_jitter_steps + turn_steps = "
+                                  f"{self.last_onset + self.turn_steps} exceeds steps = {self.steps}")
             if self.warmup_steps >= self.onset_step:
                 raise ConfigError("warmup_steps", f"must be < onset_step = {self.onset_step} "
                                   f"(no null region left), got {self.warmup_steps}")
-            if self.onset_step + self.detect_window_steps > self.steps:
-                raise ConfigError("detect_window_steps", f"onset_step + detect_window_steps = "
-                                  f"{self.onset_step + self.detect_window_steps} exceeds "
-                                  f"steps = {self.steps}")
+            if self.last_onset + self.detect_window_steps > self.steps:
+                raise ConfigError("detect_window_steps", f"onset_step + onset_jitter_steps + "
+                                  f"detect_window_steps = {self.last_onset + self.detect_window_steps} "
+                                  f"exceeds steps = {self.steps}")
 
     def generate(self, params, snr_db: float | None, n: int, rng) -> Batch:
         p = params
@@ -191,25 +200,26 @@ class CvTurnCv(Scenario):
         e = rng.standard_normal(4)
         w = rng.standard_normal((K, 2))
         v = rng.standard_normal((K, 2))
+        onset = self._onsets(p, rng)           # int, or (n,) with jitter (drawn last)
 
         null = snr_db is None
         sigma_w = noise_std_for_snr(p, 0.0 if null else snr_db)
         model = cv_model(T, sigma_w, p.tracking_index)
         P0 = steady_state(model)[0]
 
-        track = deterministic_track(p, turn=not null)
-        truth = track[None] + self._process_noise(p, sigma_w, w)
+        track = self._tracks(p, onset, turn=not null)
+        truth = track + self._process_noise(p, sigma_w, w)
         z = truth[..., POSITION_INDEX] + sigma_w * v
         x0 = truth[:, 0] + e @ np.linalg.cholesky(P0).T
 
         meta = {
-            "onset_step": None if null else p.onset_step,
-            "null_onset_step": p.onset_step,
-            "offset_step": None if null else p.onset_step + p.turn_steps,
+            "onset_step": None if null else onset,
+            "null_onset_step": onset,
+            "offset_step": None if null else onset + p.turn_steps,
             "detect_window_steps": p.detect_window_steps,
             "warmup_steps": p.warmup_steps,
             "snr_definition": SNR_DEFINITION,
-            "realised_snr_db": self._realised_snr_db(p, model, z, x0, P0, track, null),
+            "realised_snr_db": self._realised_snr_db(p, model, z, x0, P0, onset, null),
             "position_index": POSITION_INDEX,
             "filter": model,
             "x0": x0,
@@ -220,6 +230,27 @@ class CvTurnCv(Scenario):
         }
         return Batch(t=T * np.arange(K), truth=truth, z=z, meta=meta,
                      trials=np.asarray(rng.trials))
+
+    @staticmethod
+    def _onsets(p, rng):
+        """``onset_step``, or with jitter one onset per trial, uniform on
+        onset_step .. onset_step + onset_jitter_steps, drawn after the noise
+        from each trial's own stream (so the noise, and every SNR level and
+        hypothesis, keep the same draws: common random numbers hold)."""
+        if p.onset_jitter_steps == 0:
+            return p.onset_step
+        u = rng.random(1)[:, 0]
+        return p.onset_step + np.minimum((u * (p.onset_jitter_steps + 1)).astype(np.int64),
+                                         p.onset_jitter_steps)
+
+    @staticmethod
+    def _tracks(p, onset, turn: bool) -> np.ndarray:
+        """The deterministic track, (1, K, 4) for one onset or (n, K, 4) per trial."""
+        if np.ndim(onset) == 0:
+            return deterministic_track(p, turn=turn)[None]
+        by_onset = {int(o): deterministic_track(dataclasses.replace(p, onset_step=int(o)), turn=turn)
+                    for o in np.unique(onset)}
+        return np.stack([by_onset[int(o)] for o in onset])
 
     @staticmethod
     def _process_noise(p, sigma_w: float, w: np.ndarray) -> np.ndarray:
@@ -235,15 +266,24 @@ class CvTurnCv(Scenario):
         return noise
 
     @staticmethod
-    def _realised_snr_db(p, model, z, x0, P0, track, null: bool) -> np.ndarray:
+    def _realised_snr_db(p, model, z, x0, P0, onset, null: bool) -> np.ndarray:
         """Per trial: 10 log10(P_m / mean over the turn of ||nu - nu_m||^2 / m).
 
         By linearity nu - nu_m is exactly the noise part of the innovation.
+        Trials are grouped by onset (one group without jitter); P_m does not
+        depend on the onset (the filter is time-invariant and the track before
+        the turn is predicted exactly, so nu_m only shifts).
         """
         if null:
             return np.full(z.shape[0], np.nan)
         nu = kalman_filter(model, z, x0, P0).nu
-        nu_m = maneuver_innovation(p)
-        turn = slice(p.onset_step, p.onset_step + p.turn_steps)
-        noise_power = np.mean(np.sum((nu - nu_m)[:, turn] ** 2, axis=-1), axis=-1) / 2.0
-        return 10.0 * np.log10(maneuver_power(p) / noise_power)
+        onsets = np.broadcast_to(onset, (z.shape[0],))
+        out = np.empty(z.shape[0])
+        for o in np.unique(onsets):
+            q = dataclasses.replace(p, onset_step=int(o))
+            rows = onsets == o
+            turn = slice(q.onset_step, q.onset_step + q.turn_steps)
+            noise_power = np.mean(np.sum((nu[rows] - maneuver_innovation(q))[:, turn] ** 2, axis=-1),
+                                  axis=-1) / 2.0
+            out[rows] = 10.0 * np.log10(maneuver_power(q) / noise_power)
+        return out
