@@ -185,3 +185,111 @@ def test_conditional_llr_of_the_default_noise():
     assert llr.beta_first == pytest.approx(gamma[1])
     with pytest.raises(ValueError, match="singular"):
         ConditionalLLR.from_autocovariance((1.0, 1.0, 1.0), 1.0)
+
+
+# ------------------------------------------------- ablation options (pre-whitening, priors, along-track)
+
+def lag1_correlation(x):
+    """Pooled lag-1 correlation over frames of (n, K, H, W) series."""
+    x = np.asarray(x, float)
+    return float((x[:, 1:] * x[:, :-1]).mean() / x.var())
+
+
+def test_prewhiten_makes_the_ar_cells_white_with_unit_variance():
+    from methods.dp_tbd import prewhiten
+    batch = scene(None, n=4, seed=11, frames=20)          # 4 x 20 x 32 x 32 null frames
+    z = batch.z
+    N = z[:, 1:].size                                      # 77 824 lag-1 pairs
+    assert lag1_correlation(z) > 0.85                      # the raw AR(3) series is far from white
+    eps = prewhiten(z, batch)
+    # Under H0 the innovations are iid N(0, 1): the pooled lag-1 correlation has
+    # standard error 1 / sqrt(N) and the sample variance sqrt(2 / N_all).
+    assert abs(lag1_correlation(eps)) < 4.0 / math.sqrt(N)
+    assert abs(eps.var() - 1.0) < 4.0 * math.sqrt(2.0 / eps.size)
+    for k in range(4):                                     # the conditionally whitened first frames too
+        assert abs(eps[:, k].var() - 1.0) < 4.0 * math.sqrt(2.0 / eps[:, k].size)
+
+
+def test_prewhiten_of_white_noise_divides_by_sigma_and_default_is_unchanged():
+    from methods.dp_tbd import prewhiten
+    batch = scene(6.0, n=2, seed=5, noise="white", frames=8)
+    np.testing.assert_allclose(prewhiten(batch.z, batch), batch.z, rtol=1e-6)
+    raw = DpTbd().run(batch, build_params(DpTbd.Params, {}))
+    same = DpTbd().run(batch, build_params(DpTbd.Params, {"prewhiten": True}))
+    np.testing.assert_allclose(raw.score, same.score, rtol=1e-5)
+
+
+def test_concentration_zero_is_a_uniform_turn_prior():
+    for prior in ("von-mises", "laplace"):
+        lp = transition_log_weights(2, prior, 0.0)
+        assert np.all(lp == LOG_UNIFORM_ANGLE)
+
+
+@pytest.mark.parametrize("gamma", [(1.0, 0.903, 0.683), (2.0, -0.5, 0.3), (1.0, 0.0, 0.0)])
+def test_along_track_term_is_the_3d_minus_2d_gaussian_log_ratio(gamma):
+    from scipy.stats import multivariate_normal as mvn
+
+    from methods.dp_tbd import along_track_llr
+    g = np.asarray(gamma)
+    G3 = g[np.abs(np.subtract.outer(np.arange(3), np.arange(3)))]
+    s = 1.7
+    for v in ([0.3, -1.2, 2.0], [4.0, 4.0, 4.0], [-2.5, 0.1, 0.0], [1.0, 3.0, -3.0]):
+        v = np.asarray(v)
+        ratio = lambda mean: (mvn(mean * np.ones(3), G3).logpdf(v)               # noqa: E731
+                              - mvn(mean * np.ones(2), G3[1:, 1:]).logpdf(v[1:]))
+        assert along_track_llr(v, s, gamma) == pytest.approx(ratio(s) - ratio(0.0), rel=1e-9, abs=1e-9)
+        two = lambda mean: (mvn(mean * np.ones(2), G3[:2, :2]).logpdf(v[:2])       # noqa: E731
+                            - mvn(mean, g[0]).logpdf(v[1]))
+        assert along_track_llr(v[:2], s, gamma) == pytest.approx(two(s) - two(0.0), rel=1e-9, abs=1e-9)
+        one = mvn(s, g[0]).logpdf(v[0]) - mvn(0.0, g[0]).logpdf(v[0])
+        assert along_track_llr(v[:1], s, gamma) == pytest.approx(one, rel=1e-9, abs=1e-9)
+
+
+def brute_force_along_track(z, gamma, s, lp, q):
+    """(best score, best track) by enumerating every path on a tiny scene."""
+    from methods.dp_tbd import along_track_llr
+    K, H, W = z.shape
+    disp = displacements(q)
+    D = len(disp)
+    best, best_track = -np.inf, None
+    for x0 in np.ndindex(H, W):
+        for ds in np.ndindex(*([D] * (K - 1))):
+            cells = [np.array(x0)]
+            for j in ds:
+                cells.append(cells[-1] + disp[j])
+            cells = np.array(cells)
+            if cells.min() < 0 or (cells[:, 0] >= H).any() or (cells[:, 1] >= W).any():
+                continue
+            vals = z[np.arange(K), cells[:, 0], cells[:, 1]].astype(float)
+            total = along_track_llr(vals[:1], s, gamma) + along_track_llr(vals[1::-1], s, gamma) + LOG_UNIFORM_ANGLE
+            for k in range(2, K):
+                total += along_track_llr(vals[k:k - 3 if k > 2 else None:-1], s, gamma) + lp[ds[k - 2], ds[k - 1]]
+            if total > best:
+                best, best_track = total, cells
+    return best, best_track
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_along_track_kernel_equals_brute_force_on_tiny_scenes(seed):
+    rng = np.random.default_rng(seed)
+    gamma = (1.0, 0.903, 0.683)
+    K, H = 4, 4
+    z = rng.normal(size=(1, K, H, H)).astype(np.float32)
+    z[0, np.arange(K), [0, 1, 2, 3], [0, 1, 1, 2]] += 2.0            # a target, so the best path is not noise
+    batch = frames_batch(z, gamma)
+    params = build_params(DpTbdMf.Params, {"max_speed_m_s": 100.0, "likelihood": "along-track"})
+    out = DpTbdMf().run(batch, params)
+    s = 10.0 ** (params.design_snr_db / 20.0)
+    lp = transition_log_weights(1, params.turn_prior, params.turn_concentration).astype(np.float32)
+    best, track = brute_force_along_track(z[0], gamma, s, lp.astype(float), 1)
+    assert out.score[0] == pytest.approx(best, rel=1e-5, abs=1e-4)
+    np.testing.assert_array_equal(out.track[0], track)
+
+
+def test_along_track_differs_from_per_cell_and_default_is_per_cell():
+    batch = scene(0.0, n=1, seed=4, cells=24, frames=8)
+    per_cell = DpTbdMf().run(batch, build_params(DpTbdMf.Params, {}))
+    explicit = DpTbdMf().run(batch, build_params(DpTbdMf.Params, {"likelihood": "per-cell"}))
+    along = DpTbdMf().run(batch, build_params(DpTbdMf.Params, {"likelihood": "along-track"}))
+    np.testing.assert_array_equal(per_cell.score, explicit.score)
+    assert not np.allclose(per_cell.score, along.score)
