@@ -8,8 +8,8 @@ Zeh, "Robust preprocessing for Kalman filtering of glint noise", IEEE TAES
 both, with the Laplace law parametrised by its *scale* ``eta`` (density
 exp(-|x|/eta) / (2 eta), variance 2 eta^2):
 
-``"mixture"`` (default of the ``glint`` scenario, the form written in the
-    issue): with probability 1 - eps the noise is N(0, sigma^2), with
+``"mixture"`` (default of the ``glint`` scenario, Song & Sun's eq. (5),
+    f = (1 - eps) f_g + eps f_l): with probability 1 - eps the noise is N(0, sigma^2), with
     probability eps it is Laplace(0, eta)::
 
         p(x) = (1 - eps) N(x; 0, sigma^2) + eps Laplace(x; 0, eta)

@@ -271,6 +271,8 @@ class _Axis:
     x0: np.ndarray           # (2,) prior mean (p, v)
     P0: np.ndarray           # (2, 2) prior covariance
     step: np.ndarray         # (K, 2) quantisation step (dp, dv) at each step
+    w: np.ndarray            # (J,) disturbance levels of the axis (m/s^2)
+    logpi: np.ndarray        # (J,) their log probabilities
 
 
 @dataclass(frozen=True)
@@ -279,8 +281,6 @@ class _Context:
     R: np.ndarray
     F2: np.ndarray
     g2: np.ndarray
-    w: np.ndarray
-    logpi: np.ndarray
     sensor: str
     density: dict
     Lp: int
@@ -409,6 +409,12 @@ class Viterbi(Method):
         return TrackingOutput(estimate=viterbi_track(batch.z, batch.meta["model"], params))
 
 
+def process_noise_los(model: dict) -> np.ndarray:
+    """(3,) disturbance std (m/s^2) along the radial, bearing and elevation
+    directions of the prior mean (isotropic: sigma_w three times)."""
+    return np.asarray(model.get("process_noise_los", np.full(3, float(model["process_noise_m_s2"]))), float)
+
+
 def axis_model(model: dict) -> tuple[np.ndarray, np.ndarray]:
     """(F2, g2): the per-axis 2-state transition and input gain of the model."""
     F, G = model["F"], model["G"]
@@ -420,7 +426,7 @@ def _axes(model: dict, K: int, params) -> tuple[list[_Axis], list[int]]:
     observed axes (a passive sensor does not observe the radial axis)."""
     R = model["los_rotation"]
     F2, g2 = axis_model(model)
-    Q2 = float(model["process_noise_m_s2"]) ** 2 * np.outer(g2, g2)
+    sigma_w = process_noise_los(model)
     x0, P0 = np.asarray(model["x0"], float), np.asarray(model["P0"], float)
     T = np.zeros((6, 6))
     T[:3, :3] = T[3:, 3:] = R
@@ -438,13 +444,15 @@ def _axes(model: dict, K: int, params) -> tuple[list[_Axis], list[int]]:
         P0j = P0los[np.ix_([j, j + 3], [j, j + 3])]
         if in_metres[j] is not None:
             observed.append(j)
+            Q2 = float(sigma_w[j]) ** 2 * np.outer(g2, g2)
             lin = LinearGaussianModel(F=F2, H=np.array([[1.0, 0.0]]), Q=Q2, R=np.array([[in_metres[j]]]))
             P_prior = covariance_sequence(lin, P0j, K)[0]
         else:
             P_prior = np.broadcast_to(P0j, (K, 2, 2))
         std = np.sqrt(np.stack([P_prior[:, 0, 0], P_prior[:, 1, 1]], axis=-1))
+        w, logpi = disturbance_levels(params.disturbance_levels, float(sigma_w[j]), params.disturbance_span)
         axes.append(_Axis(j=j, u=float(R[j] @ model["u"]), x0=x0los[[j, j + 3]], P0=P0j,
-                          step=params.gate_sigmas * std / half))
+                          step=params.gate_sigmas * std / half, w=w, logpi=logpi))
     return axes, observed
 
 
@@ -454,12 +462,10 @@ def viterbi_track(z: np.ndarray, model: dict, params) -> np.ndarray:
     n, K, _ = z.shape
     R = model["los_rotation"]
     F2, g2 = axis_model(model)
-    w, logpi = disturbance_levels(params.disturbance_levels, float(model["process_noise_m_s2"]),
-                                  params.disturbance_span)
     axes, observed = _axes(model, K, params)
     density = {"sigma": np.asarray(model["sigma"], float), "eta": np.asarray(model["eta"], float),
                "epsilon": float(model["epsilon"]), "model": model["glint_model"]}
-    ctx = _Context(z=z, R=R, F2=F2, g2=g2, w=w, logpi=logpi, sensor=model["sensor"], density=density,
+    ctx = _Context(z=z, R=R, F2=F2, g2=g2, sensor=model["sensor"], density=density,
                    Lp=params.position_levels, Lv=params.velocity_levels, snap=params.node_value == "centre")
 
     est = np.empty((n, K, 3, 2))                       # line-of-sight (p, v) per axis
@@ -544,7 +550,7 @@ def _axis_block(axis: _Axis, b0: int, b1: int, seeds, cur: np.ndarray, ctx: _Con
     block's best path (n, L, 2) and the seeds of the next block."""
     n = cur.shape[0]
     rows = np.arange(n)
-    Lp, Lv, J = ctx.Lp, ctx.Lv, len(ctx.w)
+    Lp, Lv, J = ctx.Lp, ctx.Lv, len(axis.w)
     others = cur[..., 0]                                          # (n, L, 3) positions
     states, backs = [], []
     if b0 == 0:
@@ -559,8 +565,8 @@ def _axis_block(axis: _Axis, b0: int, b1: int, seeds, cur: np.ndarray, ctx: _Con
         step = axis.step[k]
         levels = centre[:, 0, None] + (np.arange(Lp) - (Lp - 1) // 2) * step[0]
         metric = _node_metric(ctx, k, axis.j, levels, others[:, k - b0])
-        score, back, state = trellis_step(parent_state, parent_score, ctx.F2, ctx.g2, axis.u, ctx.w,
-                                          ctx.logpi, centre, step, Lp, Lv, metric, ctx.snap)
+        score, back, state = trellis_step(parent_state, parent_score, ctx.F2, ctx.g2, axis.u, axis.w,
+                                          axis.logpi, centre, step, Lp, Lv, metric, ctx.snap)
         states.append(state)
         backs.append(back)
         parent_state, parent_score = state, score

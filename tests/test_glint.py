@@ -199,3 +199,59 @@ def test_bad_params_name_the_field(values, field):
 
 def test_measured_components():
     assert MEASURED == {"passive": (1, 2), "active": (0, 1, 2)}
+
+
+def test_paper_parameters_as_printed():
+    """The preset's paper config carries Song & Sun's printed section-3 values."""
+    import importlib.resources
+    import math
+    import tomllib
+
+    from bench.params import build_params
+
+    sweep = tomllib.loads((importlib.resources.files("bench") / "presets" / "glint-tracking.toml").read_text())
+    entry = next(s for s in sweep["scenarios"] if s.get("label") == "paper-passive")
+    p = build_params(Glint.Params, entry["params"])
+    m = Glint.model(p, 0.0)
+    np.testing.assert_allclose(m["sigma"] ** 2, [4e-4, 4e-4])
+    np.testing.assert_allclose(m["eta"], [0.03, 0.03])
+    assert m["epsilon"] == 0.05 and m["sensor"] == "passive"
+    np.testing.assert_allclose(m["process_noise_los"] ** 2, [7.0, 0.07, 0.07])
+    np.testing.assert_allclose(m["control_los"], [1.5, 0.07, 0.06])
+    assert p.dt_s == 0.1 and p.damping_per_s == 0.4
+    # the prior mean is at 0.76 rad bearing and elevation, moving at 0.05 / 0.04 rad/s
+    x0 = m["x0"]
+    r, b, e = (float(v) for v in spherical(x0[:3]))
+    assert math.isclose(b, 0.76, abs_tol=1e-12) and math.isclose(e, 0.76, abs_tol=1e-12)
+    dt = 1e-6
+    r2, b2, e2 = (float(v) for v in spherical(x0[:3] + dt * x0[3:]))
+    np.testing.assert_allclose([(b2 - b) / dt, (e2 - e) / dt], [0.05, 0.04], rtol=1e-4)
+    # the angular prior std is 0.1 rad (variance 0.01): cross-range std r0 cos(e0) 0.1 and r0 0.1
+    Rl = m["los_rotation"]
+    P_los = Rl @ m["P0"][:3, :3] @ Rl.T
+    np.testing.assert_allclose(np.sqrt(np.diag(P_los))[1:], [r * math.cos(e) * 0.1, r * 0.1], rtol=1e-9)
+    # the disturbance is diagonal in the line-of-sight frame: Q = G Sw G'
+    Sw = Rl.T @ np.diag([7.0, 0.07, 0.07]) @ Rl
+    np.testing.assert_allclose(m["Q"], m["G"] @ Sw @ m["G"].T, rtol=1e-12, atol=1e-15)
+
+
+def test_line_of_sight_process_noise_drives_the_truth():
+    """The truth's disturbance has the configured stds along the line-of-sight directions."""
+    params = {"steps": 400, "process_noise_los_m_s2": [3.0, 0.5, 0.0], "initial_bearing_deg": 30.0,
+              "initial_elevation_deg": 20.0, "damping_per_s": 0.0}
+    b = make(n=20, **params)
+    m = b.meta["model"]
+    drive = (b.truth[:, 1:, 3:] - b.truth[:, :-1, 3:] @ m["F"][3:, 3:].T) / m["G"][3, 0] - m["u"]
+    los = drive @ m["los_rotation"].T
+    std = los.reshape(-1, 3).std(axis=0)
+    # 7980 draws per direction: the std's relative sampling error is ~1/sqrt(2 N) = 0.8%
+    np.testing.assert_allclose(std[:2], [3.0, 0.5], rtol=0.04)
+    assert std[2] < 1e-9
+
+
+def test_invalid_line_of_sight_noise_names_the_field():
+    from bench.errors import ConfigError
+    from bench.params import build_params
+
+    with pytest.raises(ConfigError, match="process_noise_los_m_s2"):
+        build_params(Glint.Params, {"process_noise_los_m_s2": [1.0, 2.0]})
