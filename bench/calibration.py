@@ -14,6 +14,13 @@
 Whatever the mode, the nominal threshold's *measured* Pfa on the same null
 values is reported with its binomial interval: a miscalibrated nominal
 threshold is a finding to show.
+
+Detectors are also given a *window* threshold: the empirical
+(1 − ``EQUAL_CHANCE_PD``) quantile of the null trials' peak statistic within
+the detection window. At it every detector has the same chance Pd (a per-trial
+false-alarm probability), which is the fair basis for comparing a single-step
+test with window statistics whose alarms cluster (``pd_equal_chance`` in
+summary.csv).
 """
 
 from __future__ import annotations
@@ -24,6 +31,10 @@ import numpy as np
 from scipy import stats
 
 from bench.metrics import binomial_interval
+
+#: the chance Pd (fraction of null trials with an alarm in the detection
+#: window) that every detector is calibrated to for ``pd_equal_chance``
+EQUAL_CHANCE_PD = 0.05
 
 
 def empirical_threshold(null_values: np.ndarray, pfa: float) -> float:
@@ -72,6 +83,7 @@ class CalibrationResult:
     used_pfa_high: float = float("nan")
     gumbel_loc: float = float("nan")   # the fit, in gumbel mode
     gumbel_scale: float = float("nan")
+    equal_chance_threshold: float = float("nan")   # window threshold for chance Pd = EQUAL_CHANCE_PD
 
     def as_row(self) -> dict:
         return asdict(self)
@@ -95,11 +107,12 @@ def calibrate(scenario: str, method: str, null_values: np.ndarray, nominal: floa
         measured = (exceed / values.size, *binomial_interval(exceed, values.size))
     else:   # the method has no analytic threshold
         exceed, measured = 0, (np.nan, np.nan, np.nan)
-    chance = (np.nan, np.nan, np.nan)
+    chance, window_threshold = (np.nan, np.nan, np.nan), np.nan
     if null_peaks is not None and len(null_peaks):
         hits = int(np.count_nonzero(np.asarray(null_peaks) >= used))
         chance = (hits / len(null_peaks), *binomial_interval(hits, len(null_peaks)))
+        window_threshold = empirical_threshold(null_peaks, EQUAL_CHANCE_PD)
     used_exceed = int(np.count_nonzero(values >= used))
     return CalibrationResult(scenario, method, mode, pfa, float(nominal), used, int(values.size),
                              exceed, *measured, *chance, used_exceed, used_exceed / values.size,
-                             *binomial_interval(used_exceed, values.size), *fit)
+                             *binomial_interval(used_exceed, values.size), *fit, window_threshold)

@@ -39,14 +39,15 @@ def table(header: list[str], rows: list[list]) -> str:
     return "\n".join(lines)
 
 
-def snr50(summary: pd.DataFrame) -> pd.DataFrame:
-    """Per config: the SNR at Pd = 0.5 (``mid``) and its interval (``low``, ``high``),
-    see :func:`bench.metrics.snr_at_pd`; ``order`` sorts them, a crossing above
-    the swept range (NaN) last."""
+def snr50(summary: pd.DataFrame, pd_column: str = "pd") -> pd.DataFrame:
+    """Per config: the SNR at which ``pd_column`` (default ``pd``; also
+    ``pd_step``, ``pd_equal_chance``) reaches 0.5 (``mid``) and its interval
+    (``low``, ``high``), see :func:`bench.metrics.snr_at_pd`; ``order`` sorts
+    them, a crossing above the swept range (NaN) last."""
     rows = []
     for (scenario, method, config), g in summary.groupby(["scenario", "method", "config"], sort=False):
         g = g.sort_values("snr_db")
-        mid, low, high = snr_at_pd(g.snr_db, g.pd, g.pd_low, g.pd_high)
+        mid, low, high = snr_at_pd(g.snr_db, g[pd_column], g[f"{pd_column}_low"], g[f"{pd_column}_high"])
         rows.append({"scenario": scenario, "method": method, "config": config, "mid": mid, "low": low,
                      "high": high, "order": np.inf if np.isnan(mid) else mid})
     return pd.DataFrame(rows)

@@ -21,7 +21,7 @@ from bench.markdown import fmt as _fmt
 from bench.markdown import fmt_crossing as _fmt_crossing
 from bench.markdown import snr50 as _snr50
 from bench.markdown import table as _table
-from bench.metrics import per_step_rmse, roc_curve, tracking_steps
+from bench.metrics import equal_chance_pd, per_step_rmse, roc_curve, tracking_steps
 from bench.provenance import provenance
 from bench.recording import TrialRecord, write_recording
 from bench.runner import calibrations
@@ -33,7 +33,9 @@ TRIAL_KEYS = ["scenario", "method", "config", "params", "snr_db", "trial", "seed
 SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials", "pd", "pd_low", "pd_high",
                    "pfa", "pfa_low", "pfa_high", "delay_mean", "delay_low", "delay_high", "delay_median",
                    "rmse_mean", "rmse_low", "rmse_high", "seconds_per_trial", "threshold", "realised_snr_db",
-                   "divergence_rate", "divergence_low", "divergence_high", "nees_mean"]
+                   "divergence_rate", "divergence_low", "divergence_high", "nees_mean",
+                   "pd_step", "pd_step_low", "pd_step_high",
+                   "pd_equal_chance", "pd_equal_chance_low", "pd_equal_chance_high"]
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -83,6 +85,15 @@ def trials_frame(store: Store, record: dict) -> tuple[pd.DataFrame, dict]:
     return df[TRIAL_KEYS + rest].reset_index(drop=True), series
 
 
+def _add_equal_chance_pd(summary: pd.DataFrame, trials: pd.DataFrame, cal) -> None:
+    """Pd of each SNR level at the calibration's window threshold (same chance Pd for every detector)."""
+    mine = trials[(trials.scenario == cal.scenario) & (trials.config == cal.method)]
+    for snr, g in mine.groupby("snr_db"):
+        rows = (summary.scenario == cal.scenario) & (summary.config == cal.method) & (summary.snr_db == snr)
+        for col, value in equal_chance_pd(g["peak_statistic"], cal.equal_chance_threshold).items():
+            summary.loc[rows, col] = value
+
+
 def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record: dict,
                   cals=()) -> pd.DataFrame:
     """One row per (scenario config, method config, SNR). For TBD configs the
@@ -97,6 +108,8 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
         rows = (summary.scenario == c.scenario) & (summary.config == c.method)
         if tasks.get(c.method) == TBD and rows.any():
             summary.loc[rows, ["pfa", "pfa_low", "pfa_high"]] = [c.used_pfa, c.used_pfa_low, c.used_pfa_high]
+        if tasks.get(c.method) == MANEUVER_DETECTION and rows.any():
+            _add_equal_chance_pd(summary, trials, c)
     ev = runs[(runs.phase == "evaluation") & runs.error.isna()]
     speed = ev.groupby(["scenario", "method", "snr_db"]).agg(s=("seconds", "sum"), n=("n", "sum"))
     speed = (speed.s / speed.n).rename("seconds_per_trial").reset_index().rename(columns={"method": "config"})
@@ -257,6 +270,39 @@ def _section_ranking(summary: pd.DataFrame) -> str:
     ])
 
 
+PD_DEFINITIONS = (("pd", "any alarm in the window"), ("pd_step", "per-step average"),
+                  ("pd_equal_chance", "equal chance Pd"))
+
+
+def _section_pd_definitions(summary: pd.DataFrame) -> str:
+    """SNR at Pd = 0.5 and the rank of every config under each Pd definition."""
+    if summary.empty or summary.pd_step.isna().all():
+        return ""
+    cells, ranks = {}, {}
+    for column, _ in PD_DEFINITIONS:
+        s = _snr50(summary, column)
+        ranks[column] = dict(zip(s.config, s.order.rank(method="min")))
+        cells[column] = {b.config: _fmt_crossing(b.mid, summary.snr_db) for b in s.itertuples()}
+    configs = list(dict.fromkeys(summary.config))
+    rows = [[f"`{c}`"] + [f"{cells[col][c]} (#{int(ranks[col][c])})" for col, _ in PD_DEFINITIONS]
+            for c in configs]
+    from bench.calibration import EQUAL_CHANCE_PD
+    return "\n\n".join([
+        "## Pd under three definitions",
+        "SNR at Pd = 0.5 (dB) and rank, per config. *Any alarm in the window*: a trial is detected if "
+        "any step of the detection window after the onset alarms at the per-step threshold (the columns "
+        "`pd*` of summary.csv). *Per-step average*: the fraction of the window's steps that alarm, "
+        "averaged over trials (`pd_step*`; the cumulant paper's 平均检测概率, \"average detection "
+        "probability\", Fig. 3, reads most naturally this way). *Equal chance Pd*: every detector's "
+        f"threshold is set on the null trials' window peaks so that it alarms in {EQUAL_CHANCE_PD:g} of "
+        "null trials' windows (a per-trial false-alarm rate), then a trial is detected if its window peak "
+        "reaches it (`pd_equal_chance*`). The first definition favours statistics that are white from step "
+        "to step (a single-step test gets about one chance per step, see the chance Pd above); the other two "
+        "do not.",
+        _table(["config"] + [name for _, name in PD_DEFINITIONS], rows),
+    ])
+
+
 def _section_roc(store: Store, trials: pd.DataFrame, summary: pd.DataFrame, fig_dir: Path, title: str,
                  pfa: float) -> str:
     """ROC at the SNR level where the configs' mean Pd is closest to 0.5."""
@@ -359,7 +405,7 @@ def _detection_parts(store, trials, summary, cals, fig_dir, title, pfa) -> list[
     if summary.empty:
         return []
     return [_section_detection(summary, fig_dir, title, pfa, {c.method: c.chance_pd for c in cals}),
-            _section_ranking(summary), _section_roc(store, trials, summary, fig_dir, title, pfa)]
+            _section_ranking(summary), _section_pd_definitions(summary), _section_roc(store, trials, summary, fig_dir, title, pfa)]
 
 
 def _timeline_parts(records, fig_dir: Path, title: str) -> list[str]:
