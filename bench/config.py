@@ -106,6 +106,7 @@ class Plan:
     record_trials: int
     source: str
     method_tasks: tuple[str, ...] = ()   # task of each method config, in order
+    timeline_snr_db: float | None = None  # report: the recorded trial shown over time (None: highest SNR)
 
     def pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
         """The method configs that run on ``scenario`` (those whose task it serves)."""
@@ -132,7 +133,8 @@ class Plan:
                         for m in self.methods],
             "calibration": {"pfa": self.calibration.pfa, "mode": self.calibration.mode,
                             "h0_trials": self.calibration.h0_trials},
-            "record": {"trials": self.record_trials},
+            "record": {"trials": self.record_trials}
+                      | ({} if self.timeline_snr_db is None else {"timeline_snr_db": self.timeline_snr_db}),
         }
 
     def fingerprint(self) -> str:
@@ -415,10 +417,12 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
             raise ConfigError("calibration.mode", f"{calibration.mode!r} does not apply to {m.label!r} ({task}); "
                                                   f"use one of {', '.join(map(repr, handler(task).calibration_modes))}")
     record = _expect_table(data.get("record", {}), "record")
-    _reject_unknown(record, {"trials"}, "record")
+    _reject_unknown(record, {"trials", "timeline_snr_db"}, "record")
     record_trials = _expect_int(record.get("trials", 1), "record.trials", 0, 1000)
+    timeline_snr_db = None if "timeline_snr_db" not in record else \
+        _check_snr_bound(_expect_number(record["timeline_snr_db"], "record.timeline_snr_db"), "record.timeline_snr_db")
     plan = Plan(name, description, scenario, scenarios, trials, seed, snr_db, chunk,
-                methods, calibration, record_trials, source, method_tasks)
+                methods, calibration, record_trials, source, method_tasks, timeline_snr_db)
     idle = [s.label for s in scenarios if not plan.pairs(s)]
     if idle:
         raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0]!r}")

@@ -408,12 +408,16 @@ def _detection_parts(store, trials, summary, cals, fig_dir, title, pfa) -> list[
             _section_ranking(summary), _section_pd_definitions(summary), _section_roc(store, trials, summary, fig_dir, title, pfa)]
 
 
-def _timeline_parts(records, fig_dir: Path, title: str) -> list[str]:
-    """The statistic of each detector on one recorded trial (the highest SNR)."""
+def _timeline_parts(records, fig_dir: Path, title: str, snr_db: float | None = None) -> list[str]:
+    """The statistic of each detector on one recorded trial: at the recorded SNR level
+    nearest ``snr_db`` (the sweep's ``[record] timeline_snr_db``), else the highest."""
     records = [r for r in records if r.methods and all(m.statistic is not None for m in r.methods.values())]
     if not records:
         return []
-    top = max(records, key=lambda r: (r.snr_db if r.snr_db is not None else -np.inf, -r.trial))
+    if snr_db is None:
+        top = max(records, key=lambda r: (r.snr_db if r.snr_db is not None else -np.inf, -r.trial))
+    else:
+        top = min(records, key=lambda r: (abs(r.snr_db - snr_db) if r.snr_db is not None else np.inf, r.trial))
     figures.trial_timeline(top, fig_dir / "trial_timeline.png",
                            f"{title}: trial {top.trial} at {_fmt(top.snr_db)} dB")
     return ["## One trial over time",
@@ -452,7 +456,7 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
     parts += _detection_parts(store, trials, of_task[MANEUVER_DETECTION], cals, fig_dir, title, pfa)
     parts += report_tbd.sections(of_task[TBD], steps, store, cals, fig_dir, title, pfa)
     parts += report_tracking.sections(of_task[TRACKING], steps, fig_dir, title)
-    parts += _timeline_parts(records, fig_dir, title)
+    parts += _timeline_parts(records, fig_dir, title, sweep["record"].get("timeline_snr_db"))
     parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
     if recording and records:
         write_recording(out_dir / "recording.rrd", records, summary.assign(method=summary.config),

@@ -117,3 +117,28 @@ def test_bad_params_name_the_field(values, field):
     with pytest.raises(ConfigError) as err:
         build_params(CvTurnCv.Params, values)
     assert err.value.field == field
+
+
+def test_onset_jitter_draws_one_onset_per_trial_shared_by_every_snr_and_the_null():
+    """Each trial's onset is uniform on onset_step .. onset_step + jitter, from the
+    trial's own stream: the same at every SNR level and under the null (common
+    random numbers), and spread over the whole range."""
+    jitter, n = 15, 400
+    onsets = [np.asarray(make(snr, n=n, onset_jitter_steps=jitter).meta["null_onset_step"]) for snr in (-5.0, 10.0, None)]
+    np.testing.assert_array_equal(onsets[0], onsets[1])
+    np.testing.assert_array_equal(onsets[0], onsets[2])
+    o = onsets[0]
+    assert o.shape == (n,) and o.min() >= DEFAULT.onset_step and o.max() <= DEFAULT.onset_step + jitter
+    # uniform on 16 values: each value's count is Binomial(400, 1/16) (mean 25, sd 4.8)
+    counts = np.bincount(o - DEFAULT.onset_step, minlength=jitter + 1)
+    assert counts.min() > 5 and counts.max() < 45
+    # the truth turns at each trial's own onset
+    b = make(10.0, n=6, onset_jitter_steps=jitter)
+    turn = np.abs(np.diff(np.arctan2(b.truth[..., 3], b.truth[..., 1]), axis=1))   # heading change per step
+    rate = np.deg2rad(DEFAULT.turn_rate_deg_s) * DEFAULT.dt_s
+    for i, onset in enumerate(np.asarray(b.meta["onset_step"])):
+        assert turn[i, onset - 1:onset + 7].mean() > 0.7 * rate > turn[i, onset - 9:onset - 1].mean()
+
+
+def test_zero_jitter_keeps_the_single_onset():
+    assert make(10.0, n=3, onset_jitter_steps=0).meta["onset_step"] == DEFAULT.onset_step

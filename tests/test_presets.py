@@ -44,6 +44,11 @@ def test_maneuver_detection_preset_smoke(bench_cli, tmp_path):
     assert summary.config.nunique() == len(parse_sweep(sweep).methods)
     report = (tmp_path / "out" / "report.md").read_text()
     assert "## ROC" in report and "## Ranking of methods" in report
+    # every detector ranked under the three Pd definitions; the extra Pd columns are filled
+    section = report.split("## Pd under three definitions", 1)[1].split("\n## ", 1)[0]
+    assert all(f"`{c}`" in section for c in summary.config.unique())
+    assert summary.pd_step.notna().all() and summary.pd_equal_chance.notna().all()
+    assert "at 5 dB" in report.split("## One trial over time", 1)[1]      # the paper's Fig. 2 level
 
 
 def test_tbd_small_preset_runs_through_the_cli(bench_cli, tmp_path):
