@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 
-from bench.metrics import binomial_interval
+from bench.metrics import binomial_interval, clustered_rate_interval
 
 #: the chance Pd (fraction of null trials with an alarm in the detection
 #: window) that every detector is calibrated to for ``pd_equal_chance``
@@ -89,10 +89,25 @@ class CalibrationResult:
         return asdict(self)
 
 
+def exceedance_interval(values: np.ndarray, threshold: float,
+                        trial_lengths: np.ndarray | None = None) -> tuple[float, float]:
+    """Interval of the fraction of null values at or above ``threshold``,
+    counted over trials (``trial_lengths``: values per null trial, in order),
+    since a window statistic's exceedances cluster within a trial; one value per
+    trial (or no lengths given) is Wilson's interval."""
+    hits = values >= threshold
+    if trial_lengths is None or len(trial_lengths) == 0 or int(np.sum(trial_lengths)) != values.size:
+        return binomial_interval(int(np.count_nonzero(hits)), values.size)
+    starts = np.concatenate([[0], np.cumsum(trial_lengths)[:-1]])
+    return clustered_rate_interval(np.add.reduceat(hits.astype(np.int64), starts), trial_lengths)
+
+
 def calibrate(scenario: str, method: str, null_values: np.ndarray, nominal: float,
-              pfa: float, mode: str, null_peaks: np.ndarray | None = None) -> CalibrationResult:
+              pfa: float, mode: str, null_peaks: np.ndarray | None = None,
+              trial_lengths: np.ndarray | None = None) -> CalibrationResult:
     """Choose the threshold; measure the nominal one's Pfa and, given the null
-    trials' window peaks, the chance detection rate at the threshold used."""
+    trials' window peaks, the chance detection rate at the threshold used.
+    Measured Pfa intervals are counted over trials (:func:`exceedance_interval`)."""
     values = np.asarray(null_values, dtype=float)
     fit = (np.nan, np.nan)
     if mode == "empirical":
@@ -104,7 +119,7 @@ def calibrate(scenario: str, method: str, null_values: np.ndarray, nominal: floa
         used = float(nominal)
     if np.isfinite(nominal):
         exceed = int(np.count_nonzero(values >= nominal))
-        measured = (exceed / values.size, *binomial_interval(exceed, values.size))
+        measured = (exceed / values.size, *exceedance_interval(values, nominal, trial_lengths))
     else:   # the method has no analytic threshold
         exceed, measured = 0, (np.nan, np.nan, np.nan)
     chance, window_threshold = (np.nan, np.nan, np.nan), np.nan
@@ -115,4 +130,4 @@ def calibrate(scenario: str, method: str, null_values: np.ndarray, nominal: floa
     used_exceed = int(np.count_nonzero(values >= used))
     return CalibrationResult(scenario, method, mode, pfa, float(nominal), used, int(values.size),
                              exceed, *measured, *chance, used_exceed, used_exceed / values.size,
-                             *binomial_interval(used_exceed, values.size), *fit, window_threshold)
+                             *exceedance_interval(values, used, trial_lengths), *fit, window_threshold)

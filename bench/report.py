@@ -211,7 +211,7 @@ def _section_calibration(cals, summary: pd.DataFrame, tasks: dict[str, str]) -> 
         "rate: per step for detectors, per scene for track-before-detect. *Measured Pfa of nominal* is "
         "the fraction of null-hypothesis values (separate calibration trials; detectors: all steps after "
         "warm-up; TBD: one scene score per null scene) at or above the method's own analytic threshold "
-        "(– where the method has none), with its 95% Wilson interval; *empirical* thresholds are the "
+        "(– where the method has none), with its 95% interval; *empirical* thresholds are the "
         "(1 − Pfa) quantile of the same values, *gumbel* ones the quantile of a Gumbel law fitted to them. "
         "*Measured Pfa of the threshold used* is on the same null values (by construction at most the "
         "requested Pfa for *empirical*; an honest check of the tail fit for *gumbel*). *Pfa in "
@@ -220,8 +220,10 @@ def _section_calibration(cals, summary: pd.DataFrame, tasks: dict[str, str]) -> 
         "on null trials (no maneuver) within the detection window: the floor Pd falls to as SNR goes "
         "down, drawn as a dotted line in the Pd figure.",
         _table([header[j] for j in keep], [[r[j] for j in keep] for r in rows]),
-        "Window statistics are correlated from step to step, so the per-step intervals, which treat "
-        "steps as independent, are narrower than the truth for them." if detectors else "",
+        "Per-step Pfa intervals (here and in summary.csv) are counted over trials, the independent "
+        "units: a window statistic's alarms cluster within a trial, so its interval is wider than one "
+        "that treats steps as independent (ratio-estimator variance over trials, Student's quantile on "
+        "the trials that alarmed). Scene Pfa (TBD) has one value per scene: Wilson's interval." if detectors else "",
     ])
 
 

@@ -191,7 +191,8 @@ def calibrations(store: Store, scenarios: list[str], methods: list[str], pfa: fl
             values, peaks, nominal = store.null_values(sc, m)
             if (sc, m) in failed_pairs or values.size == 0:
                 continue
-            out.append(calibrate(sc, m, values, np.nan if nominal is None else nominal, pfa, mode, peaks))
+            out.append(calibrate(sc, m, values, np.nan if nominal is None else nominal, pfa, mode, peaks,
+                                 store.null_trial_lengths(sc, m)))
     return out
 
 

@@ -245,6 +245,16 @@ class Store:
         peaks = None if any(r[1] is None for r in rows) else np.concatenate([bytes_to_array(r[1]) for r in rows])
         return values, peaks, rows[0][2]
 
+    def null_trial_lengths(self, scenario: str, method: str) -> np.ndarray:
+        """How many of :meth:`null_values` each null trial contributed, in the same
+        order (a unit's trials contribute equally), so rates over those values can
+        be counted per trial."""
+        rows = self.db.execute("SELECT null_stats.data, units.n FROM null_stats JOIN units ON "
+                               "null_stats.unit = units.key WHERE null_stats.scenario=? AND "
+                               "null_stats.method=? ORDER BY null_stats.unit", (scenario, method)).fetchall()
+        return np.concatenate([np.full(n, bytes_to_array(data).size // n, dtype=np.int64)
+                               for data, n in rows]) if rows else np.empty(0, np.int64)
+
     def records(self) -> list[bytes]:
         q = ("SELECT records.data FROM records JOIN units ON records.unit = units.key "
              "ORDER BY units.scenario, units.snr_db, records.trial")

@@ -70,3 +70,23 @@ def test_clustered_rate_interval_widens_for_clustered_alarms():
     np.testing.assert_allclose(clustered_rate_interval(spread, steps), independent, rtol=0.02)
     lo, hi = clustered_rate_interval(clustered, steps)
     assert hi - lo > 2 * (independent[1] - independent[0])
+
+
+def test_calibration_pfa_intervals_are_counted_over_trials():
+    """A window statistic's exceedances cluster within a trial: the calibration table's
+    interval over trials is wider than Wilson's on pooled steps; with one value per
+    trial (TBD scene scores) it is Wilson's exactly."""
+    from bench.calibration import exceedance_interval
+    from bench.metrics import binomial_interval
+    rng = np.random.default_rng(3)
+    n, K, M = 300, 100, 16
+    x = rng.chisquare(1, (n, K + M))
+    windowed = np.lib.stride_tricks.sliding_window_view(x, M, axis=1).sum(axis=-1)[:, :K]
+    values = windowed.ravel()
+    threshold = np.quantile(values, 0.99)
+    low, high = exceedance_interval(values, threshold, np.full(n, K))
+    w_low, w_high = binomial_interval(int((values >= threshold).sum()), values.size)
+    assert high - low > 2 * (w_high - w_low)
+    scenes = rng.gumbel(size=1000)
+    assert exceedance_interval(scenes, 2.0, np.ones(1000, int)) == \
+        binomial_interval(int((scenes >= 2.0).sum()), 1000)
