@@ -29,7 +29,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from methods._tbd_kernels import NEG_INF, _check_finite, _first_argmax_2d
+from methods._tbd_kernels import NEG_INF, _check_finite, _first_argmax_2d, _mf_score_and_backtrack
 
 
 @numba.njit(cache=True)
@@ -132,34 +132,4 @@ def dp_tbd_mf_along_track(z, q, lp, lp_first, rho1, beta1, beta2, a0, b0, a1, b1
                                             + m[d, rp, cp])
                             bp[k, d, r, c] = arg[d, rp, cp]
             prev, cur = cur, prev
-        vt = value[t]
-        vt[:, :] = prev[0]
-        for d in range(1, D):
-            for r in range(H):
-                for c in range(W):
-                    if prev[d, r, c] > vt[r, c]:
-                        vt[r, c] = prev[d, r, c]
-        sb = _first_argmax_2d(vt)[0]
-        score[t] = sb
-        d, r, c = 0, 0, 0
-        found = False
-        for d2 in range(D):
-            for r2 in range(H):
-                for c2 in range(W):
-                    if prev[d2, r2, c2] == sb:
-                        d, r, c = d2, r2, c2
-                        found = True
-                        break
-                if found:
-                    break
-            if found:
-                break
-        track[t, K - 1, 0] = r
-        track[t, K - 1, 1] = c
-        for k in range(K - 1, 0, -1):
-            dn = bp[k, d, r, c] if k >= 2 else 0
-            r -= d // w - q
-            c -= d % w - q
-            track[t, k - 1, 0] = r
-            track[t, k - 1, 1] = c
-            d = dn
+        score[t] = _mf_score_and_backtrack(prev, bp, value[t], track[t], q)

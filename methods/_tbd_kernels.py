@@ -415,35 +415,44 @@ def dp_tbd_mf(z, q, lp, lp_first, beta_2, beta_3, coef0, const0, coef1, const1, 
             _llr_planes(zt[k], zt[k - 1], zt[k - 2], beta_3[0], beta_3[1], coef2, const2, lam)
             _mf_frame(prev, cur, bp[k], lp, q, lam[0], lam[1], lam[2], lam[3], best, besti)
             prev, cur = cur, prev
-        # last frame: value = max over displacements (contiguous passes), the
-        # score its maximum, the start of backtracking the first (d, r, c)
-        # state that attains it
-        vt = value[t]
-        vt[:, :] = prev[0]
-        for d in range(1, D):
-            for r in range(H):
-                _max_into(prev[d, r], vt[r], W)
-        sb = _first_argmax_2d(vt)[0]
-        score[t] = sb
-        d, r, c = 0, 0, 0
-        found = False
-        for d2 in range(D):
-            for r2 in range(H):
-                for c2 in range(W):
-                    if prev[d2, r2, c2] == sb:
-                        d, r, c = d2, r2, c2
-                        found = True
-                        break
-                if found:
+        score[t] = _mf_score_and_backtrack(prev, bp, value[t], track[t], q)
+
+
+@numba.njit(cache=True)
+def _mf_score_and_backtrack(prev, bp, vt, track_t, q):  # pragma: no cover - compiled
+    """Last frame of a second-order DP-TBD: value map = max over displacements
+    (contiguous passes), the score its maximum, backtracking from the first
+    (d, r, c) state that attains it through the displacement backpointers
+    ``bp[k]`` (k >= 2; frame 1's predecessor is the single-cell state).
+    Returns the score; writes ``vt`` (H, W) and ``track_t`` (K, 2)."""
+    D, H, W = prev.shape
+    K = track_t.shape[0]
+    w = 2 * q + 1
+    vt[:, :] = prev[0]
+    for d in range(1, D):
+        for r in range(H):
+            _max_into(prev[d, r], vt[r], W)
+    sb = _first_argmax_2d(vt)[0]
+    d, r, c = 0, 0, 0
+    found = False
+    for d2 in range(D):
+        for r2 in range(H):
+            for c2 in range(W):
+                if prev[d2, r2, c2] == sb:
+                    d, r, c = d2, r2, c2
+                    found = True
                     break
             if found:
                 break
-        track[t, K - 1, 0] = r
-        track[t, K - 1, 1] = c
-        for k in range(K - 1, 0, -1):
-            dn = bp[k, d, r, c] if k >= 2 else 0
-            r -= d // w - q
-            c -= d % w - q
-            track[t, k - 1, 0] = r
-            track[t, k - 1, 1] = c
-            d = dn
+        if found:
+            break
+    track_t[K - 1, 0] = r
+    track_t[K - 1, 1] = c
+    for k in range(K - 1, 0, -1):
+        dn = bp[k, d, r, c] if k >= 2 else 0
+        r -= d // w - q
+        c -= d % w - q
+        track_t[k - 1, 0] = r
+        track_t[k - 1, 1] = c
+        d = dn
+    return sb
