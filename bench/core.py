@@ -52,8 +52,10 @@ class Batch:
         Used by the harness for the other tasks: ``grid`` and ``target_cells``
         ((n, K, 2) true cells, ``None`` under the null) and
         ``hit_tolerance_cells`` (TBD metrics and recordings); ``state_labels``,
-        ``divergence_bound_m`` and ``glint_outlier`` ((n, K, m) flags, drawn
-        in recordings) for tracking; ``z_xy`` (measurements in the plane,
+        ``divergence_bound_m``, ``glint_outlier`` ((n, K, m) flags, drawn
+        in recordings) and ``derived_components`` (a picklable function of
+        states (..., d) returning named (...) arrays, e.g. range, bearing and
+        elevation, scored per step like the state components) for tracking; ``z_xy`` (measurements in the plane,
         for recordings).
     trials : (n,) int
         Global index of each trial within its SNR level (for seeds and CSV).

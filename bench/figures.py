@@ -168,16 +168,27 @@ def grouped_bars(values: pd.DataFrame, low: pd.DataFrame, high: pd.DataFrame, pa
     return _save(fig, path)
 
 
-def mean_estimate(t: np.ndarray, truth: np.ndarray, estimates: dict[str, np.ndarray], path: Path,
-                  title: str, ylabel: str) -> Path:
-    """Mean estimate across trials against the mean truth, per step (one state component)."""
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
-    ax.plot(t, truth, "-", color="k", lw=2.2, label="truth (mean)")
-    for i, (label, y) in enumerate(estimates.items()):
-        ax.plot(t, y, STYLES[i % len(STYLES)][1:] or "-", color=f"C{i % 10}", lw=1.4, label=label)
-    ax.set(xlabel="time (s)", ylabel=ylabel, title=title)
-    ax.grid(alpha=0.3)
-    _legend_outside(ax)
+def mean_estimates(t: np.ndarray, panels: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]], path: Path,
+                   title: str) -> Path:
+    """Mean estimate across trials against the mean truth, per step: one panel
+    per component (``panels[component] = (truth, {label: estimate})``)."""
+    cols = 3 if len(panels) > 4 else min(2, len(panels))
+    rows = -(-len(panels) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.6 * rows + 0.8), sharex=True, squeeze=False)
+    for ax, (comp, (truth, estimates)) in zip(axes.ravel(), panels.items()):
+        ax.plot(t, truth, "-", color="k", lw=2.2, label="truth (mean)")
+        for i, (label, y) in enumerate(estimates.items()):
+            ax.plot(t, y, STYLES[i % len(STYLES)][1:] or "-", color=f"C{i % 10}", lw=1.2, label=label)
+        ax.set_title(comp, fontsize=9)
+        ax.grid(alpha=0.3)
+    for ax in axes.ravel()[len(panels):]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(4, len(labels)), fontsize=8, frameon=False)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout(rect=(0, 0.07, 1, 0.96))
     return _save(fig, path)
 
 

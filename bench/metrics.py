@@ -288,7 +288,8 @@ def summarise_tbd(trials: pd.DataFrame, series: dict) -> pd.DataFrame:
 # ------------------------------------------------------------------ tracking
 
 def tracking_trial_metrics(estimate: np.ndarray, truth: np.ndarray, *, position_index, labels,
-                           covariance: np.ndarray | None, divergence_bound_m: float) -> dict[str, np.ndarray]:
+                           covariance: np.ndarray | None, divergence_bound_m: float,
+                           derived=None) -> dict[str, np.ndarray]:
     """Per-trial tracking metrics (DESIGN.md section 7).
 
     ``rmse``: the trial's position RMSE over time; ``final_error_m``;
@@ -296,7 +297,9 @@ def tracking_trial_metrics(estimate: np.ndarray, truth: np.ndarray, *, position_
     step; ``nees_mean``: the trial's mean normalised estimation error squared
     (NaN without a covariance). Series (n, K), kept for per-step statistics:
     ``sq_err_position``, ``sq_err_<component>``, ``est_<component>``,
-    ``true_<component>`` and ``nees``.
+    ``true_<component>`` and ``nees``; the same three per component of
+    ``derived(states)`` (named functions of the state, e.g. range, bearing,
+    elevation), when given.
     """
     err = np.asarray(estimate, float) - np.asarray(truth, float)
     pos_sq = (err[..., list(position_index)] ** 2).sum(axis=-1)
@@ -308,10 +311,15 @@ def tracking_trial_metrics(estimate: np.ndarray, truth: np.ndarray, *, position_
         out["nees_mean"], out["nees"] = nees.mean(axis=1), nees
     else:
         out["nees_mean"] = np.full(len(err), np.nan)
-    for j, label in enumerate(labels):
-        out[f"sq_err_{label}"] = err[..., j] ** 2
-        out[f"est_{label}"] = np.asarray(estimate, float)[..., j]
-        out[f"true_{label}"] = np.asarray(truth, float)[..., j]
+    components = {label: (np.asarray(estimate, float)[..., j], np.asarray(truth, float)[..., j])
+                  for j, label in enumerate(labels)}
+    if derived is not None:
+        est_d, true_d = derived(np.asarray(estimate, float)), derived(np.asarray(truth, float))
+        components |= {name: (est_d[name], true_d[name]) for name in est_d}
+    for label, (est, true) in components.items():
+        out[f"sq_err_{label}"] = (est - true) ** 2
+        out[f"est_{label}"] = est
+        out[f"true_{label}"] = true
     return out
 
 

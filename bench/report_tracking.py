@@ -83,14 +83,15 @@ def _per_step(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: 
     at = steps[(steps.scenario == first) & (steps.snr_db == snr)]
     components = [c[len("mean_est_"):] for c in at.columns if c.startswith("mean_est_") and at[c].notna().any()]
     if not at.empty and components:
-        comp = components[0]
         one = at[at.config == at.config.iloc[0]]
-        figures.mean_estimate(one.t.to_numpy(), one[f"mean_true_{comp}"].to_numpy(),
-                              {c: s[f"mean_est_{comp}"].to_numpy() for c, s in at.groupby("config", sort=False)},
-                              fig_dir / "tracking_mean_estimate.png",
-                              f"{title}: mean estimate of {comp} on {first} at {fmt(snr)} dB", comp)
-        parts.append(f"Mean estimate of `{comp}` across trials against the truth, per step:\n\n"
-                     "![mean estimate](figures/tracking_mean_estimate.png)")
+        panels = {comp: (one[f"mean_true_{comp}"].to_numpy(),
+                         {c: s[f"mean_est_{comp}"].to_numpy() for c, s in at.groupby("config", sort=False)})
+                  for comp in components}
+        figures.mean_estimates(one.t.to_numpy(), panels, fig_dir / "tracking_mean_estimate.png",
+                               f"{title}: mean estimates on {first} at {fmt(snr)} dB ({int(one.n_trials.iloc[0])} trials)")
+        parts.append(f"Mean estimate of every component across trials against the truth, per step, on `{first}` "
+                     "(state components, and the components the scenario derives from the state, e.g. range, "
+                     "bearing and elevation):\n\n![mean estimates](figures/tracking_mean_estimate.png)")
     if parts:
         parts.insert(0, "## Tracking: error over time\n\nPer-step position RMSE across trials at each "
                         "scenario config's reference SNR (closest to 0 dB); `steps.csv` has every level "

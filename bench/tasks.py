@@ -177,7 +177,8 @@ class TrackingTask:
         return tracking_trial_metrics(out.estimate, batch.truth,
                                       position_index=batch.meta.get("position_index", (0, 1)),
                                       labels=self.labels(batch), covariance=out.covariance,
-                                      divergence_bound_m=float(batch.meta.get("divergence_bound_m", np.inf))) \
+                                      divergence_bound_m=float(batch.meta.get("divergence_bound_m", np.inf)),
+                                      derived=batch.meta.get("derived_components")) \
             | _time_series(batch)
 
     def trace(self, batch: Batch, out: TrackingOutput, i: int, threshold: float) -> MethodTrace:

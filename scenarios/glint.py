@@ -85,6 +85,13 @@ def spherical(p) -> np.ndarray:
     return np.stack([np.sqrt(rho ** 2 + z ** 2), np.arctan2(x, y), np.arctan2(z, rho)], axis=-1)
 
 
+def spherical_components(states) -> dict[str, np.ndarray]:
+    """Range (m), bearing and elevation (rad) of states (..., 6) seen from the
+    sensor: the components the paper's Fig. 4 plots (``derived_components``)."""
+    s = spherical(np.asarray(states, float)[..., :3])
+    return {"range_m": s[..., 0], "bearing_rad": s[..., 1], "elevation_rad": s[..., 2]}
+
+
 def measure(p, sensor: str) -> np.ndarray:
     """Noise-free measurement h(p) (..., m) of positions (..., 3)."""
     return spherical(p)[..., list(MEASURED[sensor])]
@@ -346,6 +353,7 @@ class Glint(Scenario):
             "realised_snr_db": np.full(n, snr),
             "position_index": POSITION_INDEX,
             "state_labels": STATE_LABELS,
+            "derived_components": spherical_components,
             "measurement_labels": MEASUREMENT_LABELS[p.sensor],
             "z_xy": z_xy,
             "glint_outlier": outlier[..., idx],
