@@ -364,6 +364,20 @@ class Viterbi(Method):
     block boundary and the paths stop correcting their offsets (the default
     keeps about a tenth of the nodes).
 
+    **The paper's trellis** (``trellis = "paper-1d"``; the default
+    ``"pv-grid"`` is the trellis above, ours). Song & Sun (section 2) quantise
+    each spherical component s_i (range, bearing, elevation) on its own 1-D
+    trellis of values q delta_i (gates ``quantisation_steps``, printed:
+    0.005, 0.001, 0.001), with successors s_q(k+1) = Q(f_i(s_q(k), sdot(k),
+    ..., w)) (eq. 6), the derivative sdot from differences of the estimates,
+    transition probabilities from the discrete disturbance levels (three
+    values, section 3), branch metric eq. (8-2) log Pr(s_q(k) | s_q(k-1)) +
+    log p(z_i(k) | s_q(k)) with the true glint density, blocks of ``Lb`` and
+    ``start_nodes`` candidate start nodes per block (the paper's n, not
+    printed; 1 is Demirbas's single node). See :func:`paper_1d_component`
+    and :func:`paper_1d_track` for our readings (constant-rate prediction,
+    Gauss-Hermite levels, n_i0, passive range).
+
     **Cost** per trial and step: for each observed axis and sweep, up to
     ``survivors`` (at a block start) or ``position_levels`` x
     ``velocity_levels`` nodes times ``disturbance_levels`` successors, and

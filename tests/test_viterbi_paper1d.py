@@ -170,3 +170,12 @@ def test_paper_1d_params_validation():
     with pytest.raises(ConfigError) as err:
         build_params(Viterbi.Params, {"quantisation_steps": [0.005, 0.0, 0.001]})
     assert err.value.field.startswith("quantisation_steps")
+
+
+def test_active_sensor_runs_and_is_deterministic():
+    params = build_params(Glint.Params, {"sensor": "active", "steps": 30, "epsilon": 0.1})
+    b = Glint().generate(params, 0.0, 3, TrialRNG(4, 0, 5, range(3)))
+    vp = build_params(Viterbi.Params, {"trellis": "paper-1d", "start_nodes": 3, "Lb": 3})
+    first = Viterbi().run(b, vp).estimate
+    assert first.shape == b.truth.shape and np.isfinite(first).all()
+    np.testing.assert_array_equal(Viterbi().run(b, vp).estimate, first)
