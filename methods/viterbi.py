@@ -721,10 +721,20 @@ def _initial_window(c: Component, n: int):
     return np.full(n, q.min(), dtype=np.int64), np.broadcast_to(prior, (n, len(prior))).copy()
 
 
+def _add_metric(score, base, delta, metric, k):
+    """score + log p(z(k) | node) at the reachable nodes (finite scores) only:
+    the first block's window is mostly empty."""
+    trials, cols = np.nonzero(score > -np.inf)
+    out = np.full_like(score, -np.inf)
+    out[trials, cols] = score[trials, cols] + metric(k, (base[trials] + cols) * delta, trials)
+    return out
+
+
 def paper_1d_component(c: Component, metric, K: int, n: int, Lb: int, start_nodes: int) -> np.ndarray:
     """Block Viterbi estimates (n, K) of one spherical component (Song & Sun, section 2).
 
-    ``metric(k, values)`` -> log p(z(k) | s(k) = values) for values (n, W).
+    ``metric(k, values, trials)`` -> log p(z(k) | s(k) = values) of trials
+    ``trials`` (flat arrays of the same length; evaluated at reachable nodes only).
     Trellis, eq. (6) with a constant-rate prediction: a node s_q(k) has the
     successors Q(s_q(k) + T sdot(k) + P2 w_m) for the disturbance levels w_m
     (probabilities pi_m), i.e. the node shifted by round((T sdot(k) +
@@ -754,7 +764,7 @@ def paper_1d_component(c: Component, metric, K: int, n: int, Lb: int, start_node
         if seeds is None:                       # the block's trellis starts at step `origin`
             origin = 0
             base, score = _initial_window(c, n)
-            score = score + metric(0, (base[:, None] + np.arange(score.shape[1])) * c.delta)
+            score = _add_metric(score, base, c.delta, metric, 0)
             filtered[:, 0] = (base + np.argmax(score, axis=1)) * c.delta
         else:                                   # ... at the previous block's last step
             origin = b0 - 1
@@ -773,7 +783,7 @@ def paper_1d_component(c: Component, metric, K: int, n: int, Lb: int, start_node
             offsets = np.floor((c.T * rate[:, None] + c.P2 * c.w[None, :]) / c.delta + 0.5).astype(np.int64)
             new, back, lo = shift_step(score, offsets, merged_transitions(offsets, c.logpi))
             base = base + lo
-            score = new + metric(k, (base[:, None] + np.arange(new.shape[1])) * c.delta)
+            score = _add_metric(new, base, c.delta, metric, k)
             best = np.argmax(score, axis=1)
             if k == 1:
                 s01 = (bases[-1] + back[rows, best]) * c.delta
@@ -864,8 +874,8 @@ def paper_1d_track(z: np.ndarray, model: dict, params) -> np.ndarray:
                          initial_nodes=params.initial_nodes)
         sigma, eta = float(model["sigma"][col]), float(model["eta"][col])
 
-        def metric(k, values, col=col, sigma=sigma, eta=eta, wrap=label == "bearing"):
-            res = z[:, k, col, None] - values
+        def metric(k, values, trials, col=col, sigma=sigma, eta=eta, wrap=label == "bearing"):
+            res = z[trials, k, col] - values
             return glint_logpdf(wrap_angle(res) if wrap else res, sigma, eta, float(model["epsilon"]),
                                 model["glint_model"])
 
