@@ -36,7 +36,7 @@ SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials
                    "divergence_rate", "divergence_low", "divergence_high", "nees_mean",
                    "pd_step", "pd_step_low", "pd_step_high",
                    "pd_equal_chance", "pd_equal_chance_low", "pd_equal_chance_high",
-                   "rmse_all_mean", "rmse_all_low", "rmse_all_high"]
+                   "rmse_all_mean", "rmse_all_low", "rmse_all_high", "snr_offset_unit_innovation_db"]
 
 
 def _write_text(path: Path, text: str) -> None:
