@@ -144,14 +144,14 @@ def _section_rmse_all(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path,
             figures.rmse_per_step(curves, fig_dir / "tbd_rmse_all_per_frame.png",
                                   f"{title}: per-frame RMSE over all runs at {fmt(level)} dB")
             parts.append("![RMSE per frame, all runs](figures/tbd_rmse_all_per_frame.png)")
-    rows = []
-    for (sc, cfg), g in summary.groupby(["scenario", "config"], sort=False):
-        rows.append([f"`{cfg}`", f"`{sc}`"] + [fmt_interval(r.rmse_all_mean, r.rmse_all_low, r.rmse_all_high)
-                                               for r in g.itertuples()])
-    snrs = [fmt(s) for s in sorted(summary.snr_db.unique())]
-    if summary.groupby(["scenario", "config"]).size().nunique() == 1:
-        parts.append("Average RMSE (m) over all runs against SNR (dB) [95% CI]:\n\n" +
-                     table(["config", "scenario"] + snrs, rows))
+    for sc, scene in summary.groupby("scenario", sort=False):
+        wide = scene.assign(cell=[fmt_interval(r.rmse_all_mean, r.rmse_all_low, r.rmse_all_high)
+                                  for r in scene.itertuples()])
+        wide = wide.pivot_table(index="config", columns="snr_db", values="cell", aggfunc="first", sort=False)
+        wide = wide[sorted(wide.columns)]
+        parts.append(f"Average RMSE (m) over all runs against SNR (dB) [95% CI], `{sc}`:\n\n" +
+                     table(["config"] + [fmt(s) for s in wide.columns],
+                           [[f"`{c}`"] + list(r) for c, r in zip(wide.index, wide.to_numpy())]))
     reductions = _reductions(summary)
     if reductions:
         parts.append("Reduction of the all-runs average RMSE of each `dp-tbd-mf` config against `dp-tbd` "
@@ -164,10 +164,12 @@ def _section_snr_reference(summary: pd.DataFrame) -> str:
     """Our SNR axis against one whose noise scale is a unit-variance AR innovation."""
     if "snr_offset_unit_innovation_db" not in summary or summary.snr_offset_unit_innovation_db.isna().all():
         return ""
-    offsets = summary.groupby("scenario", sort=False).snr_offset_unit_innovation_db.first()
-    snrs = sorted(summary.snr_db.unique())
-    rows = [[f"`{sc}`", f"{10 ** (off / 10):.2f}", f"{off:+.2f}",
-             ", ".join(fmt(s + off) for s in snrs)] for sc, off in offsets.items()]
+    rows = []
+    for sc, g in summary.groupby("scenario", sort=False):
+        off = float(g.snr_offset_unit_innovation_db.iloc[0])
+        snrs = sorted(g.snr_db.unique())
+        rows.append([f"`{sc}`", f"{10 ** (off / 10):.2f}", f"{off:+.2f}", ", ".join(fmt(s) for s in snrs),
+                     ", ".join(fmt(s + off) for s in snrs)])
     return "\n\n".join([
         "## Track-before-detect: SNR reference",
         "Our SNR is s² over the *stationary* variance of the per-cell noise (scaled to 1). An AR model "
@@ -175,8 +177,8 @@ def _section_snr_reference(summary: pd.DataFrame) -> str:
         "its noise, has stationary variance γ(0)/σ_w² (first Yule-Walker equation σ_w² = γ(0) + Σ a_i γ(i)); "
         "if its SNR is s² over σ_w² = 1, it reads higher than ours by the offset below (0 dB for white "
         "noise). Our SNR levels on that axis:",
-        table(["scenario", "stationary variance at σ_w = 1", "offset (dB)",
-               "our levels " + ", ".join(fmt(s) for s in snrs) + " dB on the unit-innovation axis (dB)"], rows),
+        table(["scenario", "stationary variance at σ_w = 1", "offset (dB)", "our SNR levels (dB)",
+               "the same on the unit-innovation axis (dB)"], rows),
         "Per-cell Pfa is not reported: the calibration stores one score per null scene (its largest merit), "
         "not the null scenes' merit maps, so only the per-scene Pfa is measured.",
     ])
