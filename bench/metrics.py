@@ -257,6 +257,23 @@ def tbd_trial_metrics(score: np.ndarray, track: np.ndarray, threshold: float, *,
             "score": score, "rmse": np.sqrt(sq_err.mean(axis=1)), "sq_err_m2": sq_err}
 
 
+def unit_innovation_snr_offset_db(ar_coefficients, autocovariance) -> float:
+    """dB to add to our SNR (s² over the *stationary* noise variance) to get the
+    SNR against a unit-variance *innovation* w_k ~ N(0, 1), the scale of an AR
+    model v_k + a1 v_(k-1) + ... + aP v_(k-P) = w_k written with w ~ N(0, 1).
+
+    Multiplying the model by v_k and taking expectations gives the first
+    Yule-Walker equation σ_w² = γ(0) + Σ_i a_i γ(i), so at σ_w = 1 the
+    stationary variance is γ(0) / σ_w² and the offset is 10 log10 of it.
+    White noise (``ar_coefficients`` None): 0 dB."""
+    if ar_coefficients is None:
+        return 0.0
+    a = np.asarray(ar_coefficients, float)
+    gamma = np.asarray(autocovariance, float)
+    innovation_var = gamma[0] + float(np.dot(a, gamma[1:len(a) + 1]))
+    return float(10.0 * np.log10(gamma[0] / innovation_var))
+
+
 def per_step_rmse(sq_err: np.ndarray) -> np.ndarray:
     """RMSE per step across trials, from squared errors (n, K)."""
     return np.sqrt(np.mean(sq_err, axis=0)) if len(sq_err) else np.full(sq_err.shape[1:], np.nan)
@@ -268,17 +285,25 @@ def time_averaged_rmse(sq_err: np.ndarray) -> float:
 
 
 def summarise_tbd(trials: pd.DataFrame, series: dict) -> pd.DataFrame:
-    """One row per cell: Pd (Wilson), average per-frame RMSE over detected
-    trials (bootstrap interval over trials)."""
+    """One row per cell: Pd (Wilson) and the average per-frame RMSE (bootstrap
+    interval over trials) twice: ``rmse_*`` over detected trials only, and
+    ``rmse_all_*`` over every Monte Carlo run, detected or not, as Tonissen-type
+    DP-TBD papers compute it: RMSE(k) = sqrt((1/MC) Σ_i ‖l̂_i(k) − l(k)‖²),
+    averaged over k ("average RMSE")."""
     rows = []
     keys = ["scenario", "method", "config", "params", "snr_db"]
     for key, g in trials.groupby(keys, sort=False, dropna=False):
         n, hits = len(g), int(g["detected"].sum())
         lo, hi = binomial_interval(hits, n)
-        sq = series[(key[0], key[2], key[4])]["sq_err_m2"][g["detected"].to_numpy(bool)]
+        sq_all = series[(key[0], key[2], key[4])]["sq_err_m2"]
+        sq = sq_all[g["detected"].to_numpy(bool)]
         r_lo, r_hi = bootstrap_statistic_interval(sq, time_averaged_rmse, resamples=500)
+        a_lo, a_hi = bootstrap_statistic_interval(sq_all, time_averaged_rmse, resamples=500)
         rows.append({**dict(zip(keys, key)), "n_trials": n, "pd": hits / n, "pd_low": lo, "pd_high": hi,
                      "rmse_mean": time_averaged_rmse(sq), "rmse_low": r_lo, "rmse_high": r_hi,
+                     "rmse_all_mean": time_averaged_rmse(sq_all), "rmse_all_low": a_lo, "rmse_all_high": a_hi,
+                     "snr_offset_unit_innovation_db": float(g["snr_offset_unit_innovation_db"].iloc[0])
+                     if "snr_offset_unit_innovation_db" in g else np.nan,
                      "threshold": float(g["threshold"].iloc[0]),
                      "realised_snr_db": float(np.nanmean(g["realised_snr_db"]))
                      if g["realised_snr_db"].notna().any() else np.nan})

@@ -35,7 +35,8 @@ SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials
                    "rmse_mean", "rmse_low", "rmse_high", "seconds_per_trial", "threshold", "realised_snr_db",
                    "divergence_rate", "divergence_low", "divergence_high", "nees_mean",
                    "pd_step", "pd_step_low", "pd_step_high",
-                   "pd_equal_chance", "pd_equal_chance_low", "pd_equal_chance_high"]
+                   "pd_equal_chance", "pd_equal_chance_low", "pd_equal_chance_high",
+                   "rmse_all_mean", "rmse_all_low", "rmse_all_high", "snr_offset_unit_innovation_db"]
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -124,7 +125,8 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
 
 def steps_frame(trials: pd.DataFrame, series: dict, record: dict, t_of: dict) -> pd.DataFrame:
     """Per (scenario, config, SNR, step): position RMSE (TBD: over detected
-    trials) and, for trackers, RMSE and mean estimate vs truth per component."""
+    trials, and ``rmse_position_all`` over every trial) and, for trackers,
+    RMSE and mean estimate vs truth per component."""
     tasks = {m["label"]: m["task"] for m in record["methods"]}
     rows = []
     for (scenario, config, snr), cols in series.items():
@@ -132,7 +134,8 @@ def steps_frame(trials: pd.DataFrame, series: dict, record: dict, t_of: dict) ->
         if tasks.get(config) == TBD:
             detected = g["detected"].to_numpy(bool)
             df = pd.DataFrame({"rmse_position": per_step_rmse(cols["sq_err_m2"][detected]),
-                               "n_trials": int(detected.sum())})
+                               "n_trials": int(detected.sum()),
+                               "rmse_position_all": per_step_rmse(cols["sq_err_m2"])})
         elif tasks.get(config) == TRACKING:
             labels = [k[len("est_"):] for k in cols if k.startswith("est_")]
             df = tracking_steps(cols, labels).assign(n_trials=len(g))

@@ -33,6 +33,7 @@ from bench.metrics import (
     summarise_tracking,
     tbd_trial_metrics,
     tracking_trial_metrics,
+    unit_innovation_snr_offset_db,
 )
 from bench.recording import MethodTrace
 
@@ -138,9 +139,12 @@ class TBDTask:
         meta = batch.meta
         if meta.get("target_cells") is None:
             raise OutputError("an evaluation batch has no target (target_cells is None)")
-        return tbd_trial_metrics(out.score, out.track, threshold, target_cells=meta["target_cells"],
-                                 truth_xy_m=batch.truth[..., :2], grid=meta["grid"],
-                                 tolerance_cells=int(meta.get("hit_tolerance_cells", 1))) | _time_series(batch)
+        offset = (unit_innovation_snr_offset_db(meta["ar_coefficients"], meta["noise_autocovariance"])
+                  if "noise_autocovariance" in meta else np.nan)
+        return (tbd_trial_metrics(out.score, out.track, threshold, target_cells=meta["target_cells"],
+                                  truth_xy_m=batch.truth[..., :2], grid=meta["grid"],
+                                  tolerance_cells=int(meta.get("hit_tolerance_cells", 1)))
+                | {"snr_offset_unit_innovation_db": np.full(batch.n, offset)} | _time_series(batch))
 
     def trace(self, batch: Batch, out: TBDOutput, i: int, threshold: float) -> MethodTrace:
         return MethodTrace(statistic=None, threshold=float(threshold), alarms=None,

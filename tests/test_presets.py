@@ -75,6 +75,25 @@ def test_tbd_preset_smoke(bench_cli, tmp_path):
     assert set(pd.read_csv(tmp_path / "out" / "summary.csv").method) == {"dp-tbd", "dp-tbd-mf"}
 
 
+def test_tbd_ablations_preset_smoke(bench_cli, tmp_path):
+    """The ablation preset's scenarios, configs and calibration on a small grid, few trials and levels."""
+    sweep = _preset("tbd-ablations")
+    sweep.update(trials=4, chunk=4)
+    for sc in sweep["scenarios"]:
+        sc.update(snr_db=[sc["snr_db"][0], sc["snr_db"][-1]], params=sc["params"] | {"cells": 40})
+    sweep["calibration"]["h0_trials"] = 30
+    path = tmp_path / "smoke.toml"
+    path.write_text(tomlw.dumps(sweep))
+    bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 1, check=True)
+    summary = pd.read_csv(tmp_path / "out" / "summary.csv")
+    assert summary.groupby("scenario").config.nunique().to_dict() == {"ar": 5, "white": 5, "ar-swerling1": 5}
+    assert (summary[summary.scenario == "white"].snr_offset_unit_innovation_db == 0).all()
+    assert summary[summary.scenario == "ar"].snr_offset_unit_innovation_db.iloc[0] > 12
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "## Track-before-detect: SNR reference" in report
+    assert "Reduction of the all-runs average RMSE" in report
+
+
 def test_glint_tracking_preset_at_reduced_size(bench_cli, tmp_path):
     """The glint preset through the CLI at reduced trials and duration (issue 5's end-to-end test)."""
     sweep = _preset("glint-tracking")

@@ -6,8 +6,8 @@ import pytest
 
 from bench.config import parse_sweep
 from bench.errors import ConfigError
-from bench.metrics import (cell_centres_m, per_step_rmse, summarise_tracking, tbd_trial_metrics,
-                           time_averaged_rmse, tracking_trial_metrics)
+from bench.metrics import (cell_centres_m, per_step_rmse, summarise_tbd, summarise_tracking, tbd_trial_metrics,
+                           time_averaged_rmse, tracking_trial_metrics, unit_innovation_snr_offset_db)
 
 GRID = {"rows": 10, "cols": 10, "cell_m": 100.0, "x_min_m": 1000.0, "y_min_m": 2000.0}
 
@@ -37,6 +37,29 @@ def test_time_averaged_rmse_is_the_mean_of_per_step_rmse():
     sq = np.array([[1.0, 4.0], [9.0, 16.0]])
     assert np.allclose(per_step_rmse(sq), [np.sqrt(5), np.sqrt(10)])
     assert time_averaged_rmse(sq) == pytest.approx((np.sqrt(5) + np.sqrt(10)) / 2)
+
+
+def test_tbd_summary_has_the_rmse_over_detected_trials_and_over_all_runs():
+    sq = np.array([[1.0, 4.0], [9.0, 16.0], [100.0, 400.0]])
+    trials = pd.DataFrame({"scenario": "s", "method": "m", "config": "c", "params": "", "snr_db": 6.0,
+                           "detected": [True, True, False], "threshold": 1.0, "realised_snr_db": np.nan})
+    row = summarise_tbd(trials, {("s", "c", 6.0): {"sq_err_m2": sq}}).iloc[0]
+    assert row.rmse_mean == pytest.approx((np.sqrt(5) + np.sqrt(10)) / 2)
+    assert row.rmse_all_mean == pytest.approx((np.sqrt(110 / 3) + np.sqrt(420 / 3)) / 2)
+    assert row.rmse_all_low <= row.rmse_all_mean <= row.rmse_all_high
+
+
+def test_unit_innovation_snr_offset_matches_the_scenarios_innovation_scale():
+    from scenarios.tbd_grid import ar_autocovariance, ar_innovation_std
+    a = (-2.0, 1.7, -0.64)
+    gamma = ar_autocovariance(a, 7, 1.0)
+    offset = unit_innovation_snr_offset_db(a, gamma)
+    assert offset == pytest.approx(10 * np.log10(1 / ar_innovation_std(a) ** 2), abs=1e-9)
+    assert offset == pytest.approx(12.67, abs=0.01)         # stationary variance ≈ 18.5 at σ_w = 1
+    ar1 = (-0.5,)                                           # AR(1): γ(0) = σ_w² / (1 − 0.25)
+    assert unit_innovation_snr_offset_db(ar1, ar_autocovariance(ar1, 3, 1.0)) == pytest.approx(
+        10 * np.log10(1 / 0.75))
+    assert unit_innovation_snr_offset_db(None, [1.0, 0.0]) == 0.0
 
 
 def test_tracking_metrics_nees_and_divergence():
