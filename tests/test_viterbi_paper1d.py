@@ -13,11 +13,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import methods.viterbi as vit
+import methods._viterbi_paper1d as vit
 from bench.errors import ConfigError
 from bench.params import build_params
 from bench.rng import TrialRNG
-from methods.viterbi import Component, Viterbi, paper_1d_component
+from methods._viterbi_paper1d import Component, paper_1d_component
+from methods.viterbi import Viterbi
 from scenarios.glint import Glint, measurement_jacobian, spherical
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=12)
