@@ -16,11 +16,20 @@ values is reported with its binomial interval: a miscalibrated nominal
 threshold is a finding to show.
 
 Detectors are also given a *window* threshold: the empirical
-(1 − ``EQUAL_CHANCE_PD``) quantile of the null trials' peak statistic within
+(1 − ``chance_pd``) quantile of the null trials' peak statistic within
 the detection window. At it every detector has the same chance Pd (a per-trial
 false-alarm probability), which is the fair basis for comparing a single-step
 test with window statistics whose alarms cluster (``pd_equal_chance`` in
-summary.csv).
+summary.csv); ``chance_pd`` is the sweep's ``[calibration] chance_pd``
+(default ``EQUAL_CHANCE_PD``).
+
+Scene statistics (TBD) are thresholded per scene, but a threshold on a value
+map can also be read per cell (the DP-TBD literature's "candidate end cells"
+whose merit exceeds V_T). For those tasks each null scene keeps the order
+statistics of its value map at a fixed set of ranks
+(:func:`cell_order_statistics`), from which the per-cell Pfa of the threshold
+used, and the threshold whose per-cell Pfa is the requested one, are computed
+exactly or within a stated bracket (:func:`cell_exceedances`).
 """
 
 from __future__ import annotations
@@ -32,9 +41,13 @@ from scipy import stats
 
 from bench.metrics import binomial_interval, clustered_rate_interval
 
-#: the chance Pd (fraction of null trials with an alarm in the detection
+#: the default chance Pd (fraction of null trials with an alarm in the detection
 #: window) that every detector is calibrated to for ``pd_equal_chance``
 EQUAL_CHANCE_PD = 0.05
+#: ranks 1..EXACT_CELL_RANKS of a value map are kept exactly; beyond them ranks grow
+#: geometrically by CELL_RANK_RATIO up to the number of cells
+EXACT_CELL_RANKS = 64
+CELL_RANK_RATIO = 1.25
 
 
 def empirical_threshold(null_values: np.ndarray, pfa: float) -> float:
@@ -83,7 +96,12 @@ class CalibrationResult:
     used_pfa_high: float = float("nan")
     gumbel_loc: float = float("nan")   # the fit, in gumbel mode
     gumbel_scale: float = float("nan")
-    equal_chance_threshold: float = float("nan")   # window threshold for chance Pd = EQUAL_CHANCE_PD
+    equal_chance_threshold: float = float("nan")   # window threshold for the sweep's chance Pd
+    cell_pfa: float = float("nan")          # per-cell Pfa of the threshold used (value maps)
+    cell_pfa_low: float = float("nan")
+    cell_pfa_high: float = float("nan")
+    cell_threshold: float = float("nan")    # threshold whose per-cell Pfa is the requested pfa
+    cell_threshold_scene_pfa: float = float("nan")   # fraction of null scenes whose score reaches it
 
     def as_row(self) -> dict:
         return asdict(self)
@@ -102,11 +120,80 @@ def exceedance_interval(values: np.ndarray, threshold: float,
     return clustered_rate_interval(np.add.reduceat(hits.astype(np.int64), starts), trial_lengths)
 
 
+def cell_ranks(cells: int) -> np.ndarray:
+    """1-based ranks kept of a value map of ``cells`` cells: 1..EXACT_CELL_RANKS,
+    then geometric steps of CELL_RANK_RATIO, always ending at ``cells``."""
+    ranks = list(range(1, min(EXACT_CELL_RANKS, cells) + 1))
+    r = float(ranks[-1])
+    while r < cells:
+        r = max(r * CELL_RANK_RATIO, r + 1)
+        ranks.append(min(int(r), cells))
+    return np.unique(np.asarray(ranks, np.int64))
+
+
+def cell_order_statistics(values: np.ndarray) -> np.ndarray:
+    """(n, 2, R) float64: per trial, the ranks of :func:`cell_ranks` (row 0) and
+    the value map's values at those ranks in decreasing order (row 1), from
+    ``values`` (n, ...) (each trial's cells flattened)."""
+    v = np.asarray(values, float).reshape(len(values), -1)
+    ranks = cell_ranks(v.shape[1])
+    top = -np.partition(-v, ranks - 1, axis=1)[:, ranks - 1]
+    return np.stack([np.broadcast_to(ranks.astype(float), top.shape), top], axis=1)
+
+
+def cell_exceedances(order_stats: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per trial, bounds (low, high) on the number of cells at or above
+    ``threshold``: with v_j the value at rank r_j, the count is r_j for the
+    last j with v_j >= threshold, up to r_(j+1) - 1 (exact where the kept
+    ranks are consecutive, i.e. up to EXACT_CELL_RANKS cells)."""
+    ranks, vals = order_stats[:, 0], order_stats[:, 1]
+    above = vals >= threshold
+    j = above.sum(axis=1)                       # values are decreasing: the first j are above
+    idx = np.maximum(j - 1, 0)
+    low = np.where(j > 0, np.take_along_axis(ranks, idx[:, None], axis=1)[:, 0], 0.0)
+    nxt = np.minimum(j, ranks.shape[1] - 1)
+    high = np.where(j >= ranks.shape[1], ranks[:, -1],
+                    np.take_along_axis(ranks, nxt[:, None], axis=1)[:, 0] - 1.0)
+    return low, np.maximum(high, low)
+
+
+def cell_calibration(order_stats: np.ndarray, scores: np.ndarray, used: float,
+                     pfa: float) -> tuple[float, float, float, float, float]:
+    """Per-cell Pfa of the threshold ``used`` (point, low, high) and the
+    threshold whose pooled per-cell Pfa is ``pfa`` with the fraction of null
+    scene ``scores`` reaching it.
+
+    The point estimate takes the middle of each trial's count bracket
+    (:func:`cell_exceedances`); the interval is the trial-clustered interval of
+    the lower counts' rate at its low end and of the upper counts' at its high
+    end. The per-cell threshold solves mean(count(t)) / cells = pfa by
+    bisection on the bracket midpoints."""
+    cells = order_stats[:, 0, -1]
+    low, high = cell_exceedances(order_stats, used)
+    point = float(((low + high) / 2).sum() / cells.sum())
+    lo_int = clustered_rate_interval(low, cells)[0]
+    hi_int = clustered_rate_interval(high, cells)[1]
+
+    def rate(t: float) -> float:
+        lo, hi = cell_exceedances(order_stats, t)
+        return float(((lo + hi) / 2).sum() / cells.sum())
+
+    a, b = float(order_stats[:, 1].min()), float(order_stats[:, 1].max()) + 1.0
+    for _ in range(80):
+        mid = (a + b) / 2
+        a, b = (mid, b) if rate(mid) > pfa else (a, mid)
+    scene = float(np.mean(np.asarray(scores, float) >= b))
+    return point, float(lo_int), float(hi_int), b, scene
+
+
 def calibrate(scenario: str, method: str, null_values: np.ndarray, nominal: float,
               pfa: float, mode: str, null_peaks: np.ndarray | None = None,
-              trial_lengths: np.ndarray | None = None) -> CalibrationResult:
+              trial_lengths: np.ndarray | None = None, chance_pd: float = EQUAL_CHANCE_PD,
+              null_cells: np.ndarray | None = None) -> CalibrationResult:
     """Choose the threshold; measure the nominal one's Pfa and, given the null
-    trials' window peaks, the chance detection rate at the threshold used.
+    trials' window peaks, the chance detection rate at the threshold used (and the
+    window threshold whose chance Pd is ``chance_pd``); given the null trials'
+    cell order statistics, the per-cell Pfa (:func:`cell_calibration`).
     Measured Pfa intervals are counted over trials (:func:`exceedance_interval`)."""
     values = np.asarray(null_values, dtype=float)
     fit = (np.nan, np.nan)
@@ -126,8 +213,11 @@ def calibrate(scenario: str, method: str, null_values: np.ndarray, nominal: floa
     if null_peaks is not None and len(null_peaks):
         hits = int(np.count_nonzero(np.asarray(null_peaks) >= used))
         chance = (hits / len(null_peaks), *binomial_interval(hits, len(null_peaks)))
-        window_threshold = empirical_threshold(null_peaks, EQUAL_CHANCE_PD)
+        window_threshold = empirical_threshold(null_peaks, chance_pd)
     used_exceed = int(np.count_nonzero(values >= used))
+    per_cell = (cell_calibration(null_cells, values, used, pfa) if null_cells is not None and len(null_cells)
+                and np.isfinite(used) else (np.nan,) * 5)
     return CalibrationResult(scenario, method, mode, pfa, float(nominal), used, int(values.size),
                              exceed, *measured, *chance, used_exceed, used_exceed / values.size,
-                             *exceedance_interval(values, used, trial_lengths), *fit, window_threshold)
+                             *exceedance_interval(values, used, trial_lengths), *fit, window_threshold,
+                             *per_cell)

@@ -87,6 +87,9 @@ class CalibrationConfig:
     pfa: float = 0.01
     mode: str = "empirical"
     h0_trials: int = 2000
+    #: the chance Pd (fraction of null trials whose detection window alarms)
+    #: every detector is calibrated to for the equal-chance Pd definition
+    chance_pd: float = 0.05
 
 
 @dataclass(frozen=True)
@@ -132,7 +135,10 @@ class Plan:
             "methods": [{"name": m.name, "label": m.label, "params": params_as_dict(m.params)}
                         for m in self.methods],
             "calibration": {"pfa": self.calibration.pfa, "mode": self.calibration.mode,
-                            "h0_trials": self.calibration.h0_trials},
+                            "h0_trials": self.calibration.h0_trials}
+                           # written only when set, so plans without it keep their fingerprints
+                           | ({} if self.calibration.chance_pd == CalibrationConfig.chance_pd
+                              else {"chance_pd": self.calibration.chance_pd}),
             "record": {"trials": self.record_trials}
                       | ({} if self.timeline_snr_db is None else {"timeline_snr_db": self.timeline_snr_db}),
         }
@@ -379,7 +385,7 @@ def _parse_scenarios(data: Mapping[str, Any], trials: int) -> tuple[str, tuple[S
 
 def _parse_calibration(value: Any) -> CalibrationConfig:
     table = _expect_table(value, "calibration")
-    _reject_unknown(table, {"pfa", "mode", "h0_trials"}, "calibration")
+    _reject_unknown(table, {"pfa", "mode", "h0_trials", "chance_pd"}, "calibration")
     default = CalibrationConfig()
     pfa = _expect_number(table.get("pfa", default.pfa), "calibration.pfa")
     if not 0 < pfa < 0.5:
@@ -388,7 +394,10 @@ def _parse_calibration(value: Any) -> CalibrationConfig:
     if mode not in CALIBRATION_MODES:
         raise ConfigError("calibration.mode", f"expected one of {', '.join(map(repr, CALIBRATION_MODES))}, got {mode!r}"[:200])
     h0 = _expect_int(table.get("h0_trials", default.h0_trials), "calibration.h0_trials", 10, 10_000_000)
-    return CalibrationConfig(pfa, mode, h0)
+    chance_pd = _expect_number(table.get("chance_pd", default.chance_pd), "calibration.chance_pd")
+    if not 0 < chance_pd <= 0.5:
+        raise ConfigError("calibration.chance_pd", f"expected a number in (0, 0.5], got {chance_pd!r}")
+    return CalibrationConfig(pfa, mode, h0, float(chance_pd))
 
 
 def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large: bool = False) -> Plan:

@@ -17,6 +17,7 @@ import pandas as pd
 from bench import figures, report_tbd, report_tracking
 from bench.core import MANEUVER_DETECTION, TBD, TRACKING
 from bench.errors import ConfigError
+from bench.calibration import EQUAL_CHANCE_PD
 from bench.markdown import fmt as _fmt
 from bench.markdown import fmt_crossing as _fmt_crossing
 from bench.markdown import snr50 as _snr50
@@ -279,7 +280,7 @@ PD_DEFINITIONS = (("pd", "any alarm in the window"), ("pd_step", "per-step avera
                   ("pd_equal_chance", "equal chance Pd"))
 
 
-def _section_pd_definitions(summary: pd.DataFrame) -> str:
+def _section_pd_definitions(summary: pd.DataFrame, chance_pd: float) -> str:
     """SNR at Pd = 0.5 and the rank of every config under each Pd definition."""
     if summary.empty or summary.pd_step.isna().all():
         return ""
@@ -291,7 +292,6 @@ def _section_pd_definitions(summary: pd.DataFrame) -> str:
     configs = list(dict.fromkeys(summary.config))
     rows = [[f"`{c}`"] + [f"{cells[col][c]} (#{int(ranks[col][c])})" for col, _ in PD_DEFINITIONS]
             for c in configs]
-    from bench.calibration import EQUAL_CHANCE_PD
     return "\n\n".join([
         "## Pd under three definitions",
         "SNR at Pd = 0.5 (dB) and rank, per config. *Any alarm in the window*: a trial is detected if "
@@ -299,7 +299,7 @@ def _section_pd_definitions(summary: pd.DataFrame) -> str:
         "`pd*` of summary.csv). *Per-step average*: the fraction of the window's steps that alarm, "
         "averaged over trials (`pd_step*`; the cumulant paper's 平均检测概率, \"average detection "
         "probability\", Fig. 3, reads most naturally this way). *Equal chance Pd*: every detector's "
-        f"threshold is set on the null trials' window peaks so that it alarms in {EQUAL_CHANCE_PD:g} of "
+        f"threshold is set on the null trials' window peaks so that it alarms in {chance_pd:g} of "
         "null trials' windows (a per-trial false-alarm rate), then a trial is detected if its window peak "
         "reaches it (`pd_equal_chance*`). The first definition favours statistics that are white from step "
         "to step (a single-step test gets about one chance per step, see the chance Pd above); the other two "
@@ -406,11 +406,11 @@ def build_outputs(out_dir: Path, *, recording: bool = True) -> Path:
         store.close()
 
 
-def _detection_parts(store, trials, summary, cals, fig_dir, title, pfa) -> list[str]:
+def _detection_parts(store, trials, summary, cals, fig_dir, title, pfa, chance_pd) -> list[str]:
     if summary.empty:
         return []
     return [_section_detection(summary, fig_dir, title, pfa, {c.method: c.chance_pd for c in cals}),
-            _section_ranking(summary), _section_pd_definitions(summary), _section_roc(store, trials, summary, fig_dir, title, pfa)]
+            _section_ranking(summary), _section_pd_definitions(summary, chance_pd), _section_roc(store, trials, summary, fig_dir, title, pfa)]
 
 
 def _timeline_parts(records, fig_dir: Path, title: str, snr_db: float | None = None) -> list[str]:
@@ -437,7 +437,8 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
     runs, units = store.runs(), store.units()
     trials, series = trials_frame(store, record)
     cals = calibrations(store, [s["label"] for s in record["scenarios"]], [m["label"] for m in record["methods"]],
-                        sweep["calibration"]["pfa"], sweep["calibration"]["mode"])
+                        sweep["calibration"]["pfa"], sweep["calibration"]["mode"],
+                        sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD))
     summary = summary_frame(trials, series, runs, record, cals)
     t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}
     steps = steps_frame(trials, series, record, t_of)
@@ -458,7 +459,8 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
              ("" if done >= total else f" **Incomplete run: {done} of {total} units stored.**"),
              preset_notes(record.get("source", "")),   # the paper-vs-ours table leads a preset's report
              _section_plan(record, store), _section_calibration(cals, summary, tasks)]
-    parts += _detection_parts(store, trials, of_task[MANEUVER_DETECTION], cals, fig_dir, title, pfa)
+    parts += _detection_parts(store, trials, of_task[MANEUVER_DETECTION], cals, fig_dir, title, pfa,
+                              sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD))
     parts += report_tbd.sections(of_task[TBD], steps, store, cals, fig_dir, title, pfa)
     parts += report_tracking.sections(of_task[TRACKING], steps, fig_dir, title)
     parts += _timeline_parts(records, fig_dir, title, sweep["record"].get("timeline_snr_db"))

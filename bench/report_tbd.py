@@ -77,7 +77,9 @@ def _section_null(cals, store, fig_dir: Path, title: str, pfa: float, configs: s
         loc, scale = (c.gumbel_loc, c.gumbel_scale) if np.isfinite(c.gumbel_loc) else gumbel_fit(values)
         fits[f"{c.method} ({c.scenario})" if several else c.method] = (values, loc, scale, c.used)
         rows.append([f"`{c.method}`", f"`{c.scenario}`", c.mode, f"{c.null_values:,}", fmt(loc, 4), fmt(scale, 4), fmt(c.used, 4),
-                     fmt_interval(c.used_pfa, c.used_pfa_low, c.used_pfa_high)])
+                     fmt_interval(c.used_pfa, c.used_pfa_low, c.used_pfa_high),
+                     fmt_interval(c.cell_pfa, c.cell_pfa_low, c.cell_pfa_high), fmt(c.cell_threshold, 4),
+                     fmt(c.cell_threshold_scene_pfa)])
     if not fits:
         return ""
     figures.gumbel_fits(fits, fig_dir / "tbd_null_scores.png", pfa, f"{title}: null scene scores")
@@ -88,9 +90,17 @@ def _section_null(cals, store, fig_dir: Path, title: str, pfa: float, configs: s
         "and the threshold used (dotted); the requested Pfa is the horizontal line. *Scene Pfa* is the "
         "fraction of null scenes at or above the threshold used, with its 95% Wilson interval: with N "
         "null scenes it cannot resolve Pfa much below 3/N.",
+        "*Per-cell Pfa* reads the same threshold per cell, as a DP-TBD detector that declares every cell "
+        "whose final merit reaches V_T a candidate track end: the fraction of all null cells at or above "
+        "it, with a 95% interval counted over scenes (each null scene keeps its value map's 64 largest "
+        "values exactly and coarser order statistics below them; a count that falls between two kept "
+        "ranks is taken at the middle of its bracket). The last two columns give the other reading: the "
+        f"threshold whose per-cell Pfa is {fmt(pfa)}, and the fraction of null scenes that reach it (their "
+        "scene Pfa).",
         "![null scene scores](figures/tbd_null_scores.png)",
         table(["config", "scenario", "mode", "null scenes", "Gumbel location", "Gumbel scale", "threshold used",
-               "scene Pfa [95% CI]"], rows),
+               "scene Pfa [95% CI]", "per-cell Pfa [95% CI]", f"threshold at per-cell Pfa {fmt(pfa)}",
+               "its scene Pfa"], rows),
     ])
 
 

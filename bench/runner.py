@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from bench import registry, tomlw
-from bench.calibration import CalibrationResult, calibrate
+from bench.calibration import EQUAL_CHANCE_PD, CalibrationResult, calibrate
 from bench.config import Plan
 from bench.executors import make_executor
 from bench.progress import Progress
@@ -156,6 +156,7 @@ def execute_unit(task: UnitTask) -> UnitResult:
             if unit.phase == "calibration":
                 run.null_values = task_handler.null_values(batch, out)
                 run.null_peaks = task_handler.null_peaks(batch, out)
+                run.null_cells = task_handler.null_cells(batch, out)
                 run.nominal_threshold = float(method.nominal_threshold(mc.params, plan.calibration.pfa, batch))
             else:
                 threshold = task.thresholds.get(mc.label)
@@ -177,7 +178,7 @@ def execute_unit(task: UnitTask) -> UnitResult:
 # ------------------------------------------------------------------ driver side
 
 def calibrations(store: Store, scenarios: list[str], methods: list[str], pfa: float,
-                 mode: str) -> list[CalibrationResult]:
+                 mode: str, chance_pd: float = EQUAL_CHANCE_PD) -> list[CalibrationResult]:
     """Calibrate every (scenario config, method config) from the stored null values.
 
     A method config whose calibration failed on any unit gets no threshold.
@@ -192,7 +193,7 @@ def calibrations(store: Store, scenarios: list[str], methods: list[str], pfa: fl
             if (sc, m) in failed_pairs or values.size == 0:
                 continue
             out.append(calibrate(sc, m, values, np.nan if nominal is None else nominal, pfa, mode, peaks,
-                                 store.null_trial_lengths(sc, m)))
+                                 store.null_trial_lengths(sc, m), chance_pd, store.null_cells(sc, m)))
     return out
 
 
@@ -251,7 +252,7 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
         thresholds: dict[str, dict[str, float | None]] = {sc.label: {m.label: None for m in plan.methods}
                                                           for sc in plan.scenarios}
         for c in calibrations(store, [s.label for s in plan.scenarios], [m.label for m in plan.methods],
-                              plan.calibration.pfa, plan.calibration.mode):
+                              plan.calibration.pfa, plan.calibration.mode, plan.calibration.chance_pd):
             thresholds[c.scenario][c.method] = c.used if np.isfinite(c.used) else None
         tasks = [UnitTask(plan, u, thresholds[u.scenario_label]) for u in eval_units if u.key not in done] \
             + retry_tasks(plan, eval_units, failed, thresholds)

@@ -46,7 +46,7 @@ CREATE TABLE IF NOT EXISTS metrics (
     unit TEXT NOT NULL, method TEXT NOT NULL, data BLOB NOT NULL, PRIMARY KEY (unit, method));
 CREATE TABLE IF NOT EXISTS null_stats (
     unit TEXT NOT NULL, scenario TEXT NOT NULL, method TEXT NOT NULL, nominal REAL,
-    data BLOB NOT NULL, peaks BLOB, PRIMARY KEY (unit, method));
+    data BLOB NOT NULL, peaks BLOB, cells BLOB, PRIMARY KEY (unit, method));
 CREATE TABLE IF NOT EXISTS records (
     unit TEXT NOT NULL, trial INTEGER NOT NULL, data BLOB NOT NULL, PRIMARY KEY (unit, trial));
 """
@@ -62,6 +62,7 @@ class MethodRun:
     metrics: dict[str, np.ndarray] | None = None   # evaluation units: per-trial columns
     null_values: np.ndarray | None = None          # calibration units: null statistic values
     null_peaks: np.ndarray | None = None           # calibration units: per-trial window peaks
+    null_cells: np.ndarray | None = None           # calibration units: per-trial cell order statistics
     nominal_threshold: float | None = None         # calibration units
 
 
@@ -122,6 +123,9 @@ class Store:
         self.db.execute("PRAGMA journal_mode=WAL")
         self.db.execute("PRAGMA synchronous=NORMAL")
         self.db.executescript(SCHEMA)
+        columns = {row[1] for row in self.db.execute("PRAGMA table_info(null_stats)")}
+        if "cells" not in columns:      # a store written before per-cell statistics existed
+            self.db.execute("ALTER TABLE null_stats ADD COLUMN cells BLOB")
 
     def close(self) -> None:
         self.db.close()
@@ -211,9 +215,10 @@ class Store:
                                 (r.key, run.label, columns_to_bytes(cols)))
             if run.null_values is not None:
                 peaks = None if run.null_peaks is None else array_to_bytes(run.null_peaks)
-                self.db.execute("INSERT INTO null_stats VALUES (?,?,?,?,?,?)",
-                                (r.key, r.scenario, run.label, run.nominal_threshold,
-                                 array_to_bytes(run.null_values), peaks))
+                cells = None if run.null_cells is None else array_to_bytes(run.null_cells)
+                self.db.execute("INSERT INTO null_stats (unit, scenario, method, nominal, data, peaks, cells) "
+                                "VALUES (?,?,?,?,?,?,?)", (r.key, r.scenario, run.label, run.nominal_threshold,
+                                                           array_to_bytes(run.null_values), peaks, cells))
 
     # ---------------------------------------------------------------- reads
     def units(self) -> pd.DataFrame:
@@ -244,6 +249,16 @@ class Store:
         values = np.concatenate([bytes_to_array(r[0]) for r in rows])
         peaks = None if any(r[1] is None for r in rows) else np.concatenate([bytes_to_array(r[1]) for r in rows])
         return values, peaks, rows[0][2]
+
+    def null_cells(self, scenario: str, method: str) -> np.ndarray | None:
+        """Per null trial, the order statistics of its cell values (see
+        :func:`bench.calibration.cell_order_statistics`), stacked (trials, 2, R);
+        None if the task keeps none or a unit lacks them."""
+        rows = self.db.execute("SELECT cells FROM null_stats WHERE scenario=? AND method=? ORDER BY unit",
+                               (scenario, method)).fetchall()
+        if not rows or any(r[0] is None for r in rows):
+            return None
+        return np.concatenate([bytes_to_array(r[0]) for r in rows])
 
     def null_trial_lengths(self, scenario: str, method: str) -> np.ndarray:
         """How many of :meth:`null_values` each null trial contributed, in the same

@@ -26,6 +26,7 @@ from bench.core import (
     TBDOutput,
     TrackingOutput,
 )
+from bench.calibration import cell_order_statistics
 from bench.metrics import (
     detection_trial_metrics,
     summarise_detection,
@@ -92,6 +93,9 @@ class DetectionTask:
         steps = np.broadcast_to(steps, (batch.n, steps.shape[-1]))   # per-trial onsets (jitter)
         return np.take_along_axis(out.statistic, np.minimum(steps, batch.steps - 1), axis=1).max(axis=1)
 
+    def null_cells(self, batch: Batch, out: DetectionOutput) -> None:
+        return None
+
     def trial_metrics(self, batch: Batch, out: DetectionOutput, threshold: float) -> dict[str, np.ndarray]:
         return detection_trial_metrics(out.statistic, threshold, onset=np.asarray(batch.meta["onset_step"]),
                                        detect_window=int(batch.meta["detect_window_steps"]),
@@ -134,6 +138,11 @@ class TBDTask:
 
     def null_peaks(self, batch: Batch, out: TBDOutput) -> None:
         return None
+
+    def null_cells(self, batch: Batch, out: TBDOutput) -> np.ndarray | None:
+        """Order statistics of each null scene's value map (the final merit per
+        cell), for the per-cell Pfa (:func:`bench.calibration.cell_calibration`)."""
+        return None if out.value is None else cell_order_statistics(out.value)
 
     def trial_metrics(self, batch: Batch, out: TBDOutput, threshold: float) -> dict[str, np.ndarray]:
         meta = batch.meta

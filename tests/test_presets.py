@@ -86,12 +86,15 @@ def test_tbd_ablations_preset_smoke(bench_cli, tmp_path):
     path.write_text(tomlw.dumps(sweep))
     bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 1, check=True)
     summary = pd.read_csv(tmp_path / "out" / "summary.csv")
-    assert summary.groupby("scenario").config.nunique().to_dict() == {"ar": 5, "white": 5, "ar-swerling1": 5}
+    assert summary.groupby("scenario").config.nunique().to_dict() == {"ar": 7, "white": 7, "ar-swerling1": 7}
     assert (summary[summary.scenario == "white"].snr_offset_unit_innovation_db == 0).all()
     assert summary[summary.scenario == "ar"].snr_offset_unit_innovation_db.iloc[0] > 12
     report = (tmp_path / "out" / "report.md").read_text()
     assert "## Track-before-detect: SNR reference" in report
     assert "Reduction of the all-runs average RMSE" in report
+    cal = pd.read_csv(tmp_path / "out" / "calibration.csv")
+    assert (cal.cell_pfa_low <= cal.cell_pfa).all() and (cal.cell_pfa <= cal.cell_pfa_high).all()
+    assert "per-cell Pfa" in report
 
 
 def test_glint_tracking_preset_at_reduced_size(bench_cli, tmp_path):
