@@ -1,4 +1,4 @@
-"""Threshold calibration (DESIGN.md section 6). One routine, used everywhere.
+"""Threshold calibration. One routine, used everywhere.
 
 * ``nominal``: the method's own analytic threshold (e.g. a chi-square
   quantile), taken as is.

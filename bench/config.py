@@ -1,8 +1,9 @@
 """Sweep files: parsing, validation, grid expansion, the resolved plan.
 
-A sweep file (TOML, DESIGN.md section 4) is validated completely before any
-work is done. Every problem raises :class:`~bench.errors.ConfigError` naming
-the field, e.g. ``methods[1].params.window: expected int >= 3, got -2``.
+A sweep file (TOML; its fields are described in docs/architecture.md,
+'Sweep files and presets') is validated completely before any work is done.
+Every problem raises :class:`~bench.errors.ConfigError` naming the field,
+e.g. ``methods[1].params.window: expected int >= 3, got -2``.
 
 Grids: in ``params`` (and ``scenario_params``) a list value is a grid axis and
 the Cartesian product of the axes is expanded, one config per combination. For
@@ -15,13 +16,13 @@ A config's identity is a readable label in the style of benchopt:
 ``plan.toml`` keeps each method's label, so re-running it gives the same
 identities and the same results.
 
-Scenarios: either one ``scenario`` name with ``[scenario_params]`` (DESIGN.md
-section 4), or several ``[[scenarios]]`` tables, each with ``name``,
-``params`` (grid axes allowed) and optionally its own ``snr_db``, ``trials``
-and ``label``; the top-level ``snr_db`` and ``trials`` are their defaults.
-Each method config runs on every scenario config that serves its task
-(``Scenario.tasks``), so one sweep (the ``quick`` preset) can cover
-detection, tracking and track-before-detect.
+Scenarios: either one ``scenario`` name with ``[scenario_params]``, or
+several ``[[scenarios]]`` tables, each with ``name``, ``params`` (grid axes
+allowed) and optionally its own ``snr_db``, ``trials`` and ``label``; the
+top-level ``snr_db`` and ``trials`` are their defaults. Each method config
+runs on every scenario config that serves its task (``Scenario.tasks``), so
+one sweep (the ``quick`` preset) can cover detection, tracking and
+track-before-detect.
 """
 
 from __future__ import annotations

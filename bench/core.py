@@ -1,4 +1,4 @@
-"""The interfaces every scenario and method implements (DESIGN.md section 3).
+"""The interfaces every scenario and method implements (the plugin protocol).
 
 Everything is batched over Monte Carlo trials: arrays carry a leading trial
 axis ``n``.
@@ -149,14 +149,19 @@ class Component:
 
 
 class Scenario(Component):
-    """Supplies batches of trials. Subclasses implement :meth:`generate`."""
+    """Supplies batches of trials. Subclasses implement :meth:`generate`.
+
+    Besides ``name`` and ``Params`` a scenario may override the class
+    attributes below; the harness and the tests read them directly, so every
+    one has a working default.
+    """
 
     #: tasks whose methods can run on this scenario
     tasks: ClassVar[tuple[str, ...]] = ()
-    #: parameters of a small instance (tests, quick looks); the defaults if empty
-    small_params: ClassVar[dict] = {}
-    #: ``bench perf`` sizes: name -> (scenario params, trials)
-    perf_sizes: ClassVar[dict] = {"default": ({}, 100)}
+    #: parameters of a small instance (conformance tests, quick looks); empty: the defaults
+    small_params: ClassVar[dict[str, Any]] = {}
+    #: ``bench perf`` sizes: size name -> (scenario params, trials)
+    perf_sizes: ClassVar[dict[str, tuple[dict[str, Any], int]]] = {"default": ({}, 100)}
     #: SNR (dB) at which ``bench perf`` generates its batches
     perf_snr_db: ClassVar[float] = 10.0
 
@@ -170,15 +175,46 @@ class Scenario(Component):
 
 
 class Method(Component):
-    """A detector, tracker or TBD algorithm. Subclasses implement :meth:`run`."""
+    """A detector, tracker or TBD algorithm. Subclasses implement :meth:`run`.
 
+    The other members are optional; their defaults mean "not provided" and
+    ``bench perf`` checks for exactly those values:
+
+    * a *reference implementation* (:meth:`reference_run`, declared by setting
+      :attr:`reference_name`): the straightforward code the method is timed
+      against;
+    * :meth:`transitions`: the work of a DP method, for transitions per second;
+    * :attr:`perf_targets`: goals the performance report checks.
+    """
+
+    #: the task this method performs (one of :data:`TASKS`)
     task: ClassVar[str] = ""
+    #: ``bench perf``: what :meth:`reference_run` is (one phrase); None: no reference implementation
+    reference_name: ClassVar[str | None] = None
+    #: ``bench perf``: trials the (slow) reference runs on, at most the method's; None: as many
+    reference_trials: ClassVar[int | None] = None
+    #: ``bench perf``: size name (or ``"*"`` for every size) -> {measure: goal}, measures
+    #: ``speedup`` (at least), ``transitions_per_second`` (at least), ``seconds_per_trial`` (at most)
+    perf_targets: ClassVar[dict[str, dict[str, float]]] = {}
 
     def run(self, batch: Batch, params) -> Any:
+        """The task's output (:class:`DetectionOutput`, :class:`TrackingOutput`
+        or :class:`TBDOutput`) for every trial of ``batch``."""
         raise NotImplementedError
 
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
         """The method's own analytic threshold for per-step false-alarm rate
         ``pfa`` (detectors) or per-scene rate (TBD)."""
         raise NotImplementedError
+
+    def reference_run(self, batch: Batch, params) -> Any:
+        """The same output as :meth:`run` by the straightforward implementation
+        (``bench perf`` times it; the tests may use it as an oracle). Called only
+        when :attr:`reference_name` is set."""
+        raise NotImplementedError
+
+    def transitions(self, batch: Batch, params) -> int | None:
+        """State transitions a DP method evaluates per trial of ``batch``;
+        None (the default): not a DP method, nothing to count."""
+        return None
 

@@ -4,24 +4,23 @@ For each method and each named size of its scenario (``Scenario.perf_sizes``:
 ``name -> (scenario params, trials)``), one batch is generated and the method
 runs on it after a warm-up on one trial (so JIT compilation is not timed); the
 best of a few repetitions is kept. In the same run, the method's *reference
-implementation* runs on the same kind of batch:
-
-* a method may define ``reference_run(batch, params)`` (and
-  ``reference_name``), e.g. the straightforward SciPy DP-TBD;
-* otherwise, for a method that reads the scenario's linear filter
-  (``batch.meta["filter"]``), the reference is the same method with its
-  innovations computed by a per-trial ``filterpy`` ``KalmanFilter`` loop
-  (:func:`bench.kalman.innovations` honours ``meta["kalman_backend"]``).
+implementation* (``Method.reference_run``, when ``Method.reference_name`` is
+set; e.g. the straightforward SciPy DP-TBD, or a Kalman-innovation detector
+on innovations from a per-trial ``filterpy`` loop) runs on the same kind of
+batch, on at most ``Method.reference_trials`` trials.
 
 Each measurement runs in a fresh process, so ``peak_rss_mb`` (the process's
 maximum resident set size, including the interpreter, the libraries and the
-batch) is the method's alone. DP methods may define ``transitions(batch,
+batch) is the method's alone. DP methods report ``Method.transitions(batch,
 params)`` (state transitions evaluated per trial) and methods may declare
-``perf_targets`` (``speedup``, ``transitions_per_second``,
-``seconds_per_trial``), which the report shows against the measurements.
-Nothing here is asserted by tests: speed is measured, never a pass/fail gate.
+``Method.perf_targets`` (``speedup``, ``transitions_per_second``,
+``seconds_per_trial``), which the report shows against the measurements. The
+plugin protocol (:mod:`bench.core`) gives every one of these a default, read
+here as "not provided". Nothing here is asserted by tests: speed is measured,
+never a pass/fail gate.
 
-Optionally (``--executors``) a compute-bound sweep is run with one local
+Optionally (``--executors``) a compute-bound sweep, the packaged preset
+``perf-scaling`` (``bench/presets/perf-scaling.toml``), is run with one local
 worker, N local workers and N Dask workers, to measure the executors' scaling.
 """
 
@@ -68,19 +67,15 @@ def _batch(job: Job, n: int):
     cls = registry.get_scenario(job.scenario)
     params = build_params(cls.Params, job.scenario_params)
     rng = TrialRNG(SEED, EVALUATION, stable_key([job.scenario, job.scenario_params]), range(n))
-    return cls().generate(params, float(getattr(cls, "perf_snr_db", 10.0)), n, rng)
+    return cls().generate(params, float(cls.perf_snr_db), n, rng)
 
 
-def reference_of(method, batch):
-    """``(name, callable(batch, params))`` of the method's reference, or None."""
-    if hasattr(method, "reference_run"):
-        return getattr(method, "reference_name", "reference implementation"), method.reference_run
-    if "filter" in batch.meta:
-        def run(b, params):
-            b.meta = {**b.meta, "kalman_backend": "filterpy"}
-            return method.run(b, params)
-        return "same detector, per-trial filterpy KalmanFilter loop", run
-    return None
+def reference_of(method):
+    """``(name, callable(batch, params))`` of the method's reference, or None
+    when it declares none (:attr:`bench.core.Method.reference_name`)."""
+    if method.reference_name is None:
+        return None
+    return method.reference_name, method.reference_run
 
 
 def _timed(fn, repeats: int) -> float:
@@ -101,7 +96,7 @@ def measure(job: Job) -> dict:
     batch = _batch(job, job.trials)
     out = {"name": None, "transitions": None}
     if job.reference:
-        ref = reference_of(method, warm)
+        ref = reference_of(method)
         if ref is None:
             return {**out, "seconds_per_trial": np.nan, "peak_rss_mb": np.nan}
         out["name"], fn = ref
@@ -110,8 +105,9 @@ def measure(job: Job) -> dict:
     else:
         method.run(warm, params)
         seconds = _timed(lambda: method.run(batch, params), REPEATS)
-        if hasattr(method, "transitions"):
-            out["transitions"] = float(method.transitions(batch, params))
+        transitions = method.transitions(batch, params)
+        if transitions is not None:
+            out["transitions"] = float(transitions)
     return {**out, "seconds_per_trial": seconds / job.trials, "peak_rss_mb": _peak_rss_mb()}
 
 
@@ -131,10 +127,10 @@ def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> li
         scenario = next((s for s in registry.scenarios().values() if cls.task in s.tasks), None)
         if scenario is None:
             continue
-        for size, (params, trials) in getattr(scenario, "perf_sizes", {"default": ({}, 100)}).items():
+        for size, (params, trials) in scenario.perf_sizes.items():
             if sizes and size not in sizes:
                 continue
-            ref_trials = max(1, min(trials, int(getattr(cls, "reference_trials", trials))))
+            ref_trials = trials if cls.reference_trials is None else max(1, min(trials, cls.reference_trials))
             out.append((Job(name, scenario.name, size, dict(params), int(trials), False), ref_trials))
     return out
 
@@ -154,40 +150,37 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
         tps = m["transitions"] / m["seconds_per_trial"] if m["transitions"] else np.nan
         extra.append({"scenario": job.scenario, "params": job.scenario_params, "reference_trials": ref_trials,
                       "transitions_per_second": tps,
-                      "targets": getattr(registry.get_method(job.method), "perf_targets", {})})
-    scaling = executor_scaling(workers, progress) if executors else None
-    return write_report(Path(out_dir), pd.DataFrame(rows, columns=PERF_COLUMNS), extra, scaling)
+                      "targets": registry.get_method(job.method).perf_targets})
+    scaling, sweep = None, ""
+    if executors:
+        plan = scaling_plan()
+        scaling, sweep = executor_scaling(workers, progress, plan), f"Preset `{plan.name}`: {plan.description}"
+    return write_report(Path(out_dir), pd.DataFrame(rows, columns=PERF_COLUMNS), extra, scaling, sweep)
 
 
 # ------------------------------------------------------------------ executors
 
-SCALING_SWEEP = """
-name = "perf-scaling"
-scenario = "tbd-grid"
-trials = {trials}
-seed = 7
-snr_db = [-6.0, 0.0, 6.0]
-chunk = 10
-[scenario_params]
-cells = 100
-[[methods]]
-name = "dp-tbd-mf"
-[[methods]]
-name = "dp-tbd"
-[calibration]
-h0_trials = {h0}
-[record]
-trials = 0
-"""
+#: the packaged preset (``bench/presets/``) that ``--executors`` times
+SCALING_PRESET = "perf-scaling"
 
 
-def executor_scaling(workers: int, progress=print, trials: int = 300) -> pd.DataFrame:
-    """Wall time of one compute-bound sweep per executor (units only, no report)."""
-    import tempfile
+def scaling_plan():
+    """The executor-scaling sweep, packaged as preset :data:`SCALING_PRESET`
+    (the harness names no plugin itself)."""
+    import importlib.resources
 
     from bench.config import parse_sweep_text
+    path = importlib.resources.files("bench") / "presets" / f"{SCALING_PRESET}.toml"
+    return parse_sweep_text(path.read_bytes(), f"preset {SCALING_PRESET}")
+
+
+def executor_scaling(workers: int, progress=print, plan=None) -> pd.DataFrame:
+    """Wall time of one compute-bound sweep (``plan``, default
+    :func:`scaling_plan`) per executor (units only, no report)."""
+    import tempfile
+
     from bench.runner import plan_record, run_sweep
-    plan = parse_sweep_text(SCALING_SWEEP.format(trials=trials, h0=trials).encode(), "perf scaling sweep")
+    plan = scaling_plan() if plan is None else plan
     rows = []
     for executor, n in (("local", 1), ("local", workers), ("dask", workers)):
         progress(f"perf: scaling sweep with {executor} x {n}")
@@ -224,7 +217,9 @@ def _target_text(targets: dict, row: dict, tps: float) -> str:
     return "; ".join(checks) or "–"
 
 
-def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: pd.DataFrame | None) -> Path:
+def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: pd.DataFrame | None,
+                 scaling_sweep: str = "") -> Path:
+    """``perf.csv`` and ``report.md``; ``scaling_sweep`` describes the sweep ``scaling`` timed."""
     from bench.provenance import provenance
     out_dir.mkdir(parents=True, exist_ok=True)
     tmp = out_dir / "perf.csv.tmp"
@@ -251,10 +246,9 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
     if scaling is not None:
         srows = [[r.executor, r.workers, fmt(r.seconds), fmt(r.speedup), fmt(r.efficiency), r.error or ""]
                  for r in scaling.itertuples()]
-        parts += ["## Executor scaling", "One compute-bound sweep (`tbd-grid` at 100 × 100 × 20, `dp-tbd-mf` and "
-                  "`dp-tbd`, 3 SNR levels of 300 trials plus 300 null scenes, 10 trials per unit), wall time of "
-                  "the units including the executor's start-up (a Dask `LocalCluster` takes a few seconds); "
-                  "speed-up against one local worker. Target for Dask: ≥ 0.8·N on N local workers.",
+        parts += ["## Executor scaling", f"{scaling_sweep} Wall time of the units including the executor's "
+                  "start-up (a Dask `LocalCluster` takes a few seconds); speed-up against one local worker. "
+                  "Target for Dask: ≥ 0.8·N on N local workers.",
                   table(["executor", "workers", "seconds", "speed-up", "speed-up / workers", "error"], srows)]
     prov = provenance()
     parts.append("## Machine\n\n" + table(["", ""], [["CPU count", os.cpu_count()], ["platform", platform.platform()],

@@ -39,7 +39,7 @@ class TrialRNG:
     Each call draws ``shape`` numbers from every trial's own stream and returns
     an array of shape ``(n, *shape)``. This loop over trials is the one place
     the harness pays per trial in Python, and it is what buys results that do
-    not depend on chunk size (DESIGN.md section 5).
+    not depend on chunk size.
     """
 
     def __init__(self, seed: int, domain: int, scenario_key: int, trials: Sequence[int]):

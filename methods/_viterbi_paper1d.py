@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.glint_density import glint_logpdf
-from scenarios.glint import measurement_jacobian, spherical, wrap_angle
+from models.glint import glint_logpdf
+from models.spherical import measurement_jacobian, spherical, wrap_angle
 
 try:                                    # numba is optional: NumPy versions are the fallback
     import numba

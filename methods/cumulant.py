@@ -8,12 +8,13 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.stats
 
-from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Method
+from bench.core import Batch, DetectionOutput
 from bench.errors import ConfigError
-from bench.kalman import innovations
 from bench.params import param
 from bench.registry import register_method
 from bench.windows import sliding_sum
+from methods._innovation_base import InnovationDetector
+from models.kalman import innovations
 
 
 def window_lengths(steps: int, M: int) -> np.ndarray:
@@ -94,13 +95,13 @@ def third_moment_null_variance(L: np.ndarray, centred: bool) -> np.ndarray:
 
 
 @register_method
-class Cumulant(Method):
+class Cumulant(InnovationDetector):
     """Sliding-window third-order (zero-lag) cumulant of the whitened innovation, chi-square test.
 
     After Song, Ji & Gao (2004), "A new method of maneuver detection based on
     higher-order cumulants", Acta Electronica Sinica; the cumulant statistics
     after Giannakis & Tsatsanis, IEEE TASSP 38(7), 1990. Under the null the
-    whitened innovation x (:func:`bench.kalman.innovations`) is i.i.d.
+    whitened innovation x (:func:`models.kalman.innovations`) is i.i.d.
     N(0, 1) per component, so its third-order cumulant is zero; a maneuver
     biases the innovation and, while a window straddles the onset, skews it.
 
@@ -156,7 +157,7 @@ class Cumulant(Method):
     The paper works on the "观测数据" (observed data) x(k), a scalar sequence
     whose Gaussian part is the measurement noise; it does not say which
     sequence of a tracker that is. Every detector here works on the whitened
-    innovation of the reference CV filter (:func:`bench.kalman.innovations`),
+    innovation of the reference CV filter (:func:`models.kalman.innovations`),
     one sequence per measurement component, so the paper's scalar test runs
     per component and ``combine`` joins them.
 
@@ -170,10 +171,6 @@ class Cumulant(Method):
     """
 
     name = "cumulant"
-    task = MANEUVER_DETECTION
-    #: ``bench perf``: the reference is the per-trial filterpy loop (issue 6 target)
-    perf_targets = {"*": {"speedup": 50.0}}
-    reference_trials = 100
 
     @dataclass(frozen=True)
     class Params:

@@ -30,7 +30,7 @@ from bench.params import param
 from bench.registry import register_method
 from methods import _tbd_alongtrack, _tbd_kernels
 from methods._tbd_reference import reference_dp_tbd
-from scenarios.tbd_grid import ar_innovation_std, stationary_predictors
+from models.ar_noise import ar_innovation_std, stationary_predictors
 
 #: the largest window radius int8 backpointers can number: (2q + 1)^2 <= 127
 MAX_WINDOW_RADIUS = 5
@@ -112,7 +112,7 @@ class DpTbd(Method):
 
     name = "dp-tbd"
     task = TBD
-    #: ``bench perf``: issue 4's targets at paper scale
+    #: ``bench perf`` goals at the paper's scene size: 5x the SciPy reference, 1e9 transitions/s
     perf_targets = {"paper": {"speedup": 5.0, "transitions_per_second": 1e9}}
     reference_name = "SciPy shifted-stack max + argmax with int8 backpointers"
 
@@ -161,7 +161,7 @@ def prewhiten(z: np.ndarray, batch: Batch) -> np.ndarray:
     innovation std for stationary variance sigma^2). The first P frames are
     whitened conditionally on the frames before them under the stationary
     law: eps_k = (z_k - phi_k . (z_(k-1), ..., z_0)) / sqrt(nu_k)
-    (:func:`scenarios.tbd_grid.stationary_predictors`, the Cholesky factor
+    (:func:`models.ar_noise.stationary_predictors`, the Cholesky factor
     of the stationary covariance), so no frame is dropped and every eps_k is
     N(0, 1), independent of the others, under H0. White noise (no AR
     model): z / sigma.
@@ -446,7 +446,7 @@ class DpTbdMf(Method):
 
     name = "dp-tbd-mf"
     task = TBD
-    #: ``bench perf``: issue 4's target at paper scale
+    #: ``bench perf`` goal at the paper's scene size: one second per 500 x 500 x 20 scene
     perf_targets = {"paper": {"seconds_per_trial": 1.0}}
 
     @dataclass(frozen=True)

@@ -9,7 +9,7 @@ import numpy as np
 from bench.core import TRACKING, Batch, Method, TrackingOutput
 from bench.params import param
 from bench.registry import register_method
-from scenarios.glint import measure, measurement_jacobian, measurement_residual
+from models.spherical import measure, measurement_jacobian, measurement_residual
 
 
 @dataclass(frozen=True)
@@ -44,7 +44,7 @@ def ekf_filter(z: np.ndarray, model: dict, R: np.ndarray) -> EKFResult:
     The dynamics are linear (the ``glint`` model), only the measurement is
     linearised. ``model`` is ``batch.meta["model"]`` (F, Bu = G u, Q, x0, P0,
     sensor); ``x0``, ``P0`` are the prior of step 0 (step 0 updates with
-    ``z[:, 0]`` first, as in :func:`bench.kalman.kalman_filter`). Covariances
+    ``z[:, 0]`` first, as in :func:`models.kalman.kalman_filter`). Covariances
     depend on the data through the Jacobian, so they carry the trial axis;
     the loop runs over time only.
     """

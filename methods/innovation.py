@@ -8,12 +8,13 @@ import numpy as np
 import scipy.signal
 import scipy.stats
 
-from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Method
+from bench.core import Batch, DetectionOutput
 from bench.errors import ConfigError
-from bench.kalman import innovations
 from bench.params import param
 from bench.registry import register_method
 from bench.windows import sliding_sum
+from methods._innovation_base import InnovationDetector
+from models.kalman import innovations
 
 #: the fading-memory statistic counts as formed once the weight of the
 #: missing (pre-start) past is below this fraction of its steady total
@@ -36,11 +37,11 @@ def fading_valid_from(delta: float) -> int:
 
 
 @register_method
-class Innovation(Method):
+class Innovation(InnovationDetector):
     """Normalised innovation squared (NIS) chi-square test, sliding-window or fading-memory.
 
     Bar-Shalom, Li & Kirubarajan (2001), sec. 11.2.2. For the scenario's
-    reference filter (:func:`bench.kalman.innovations`),
+    reference filter (:func:`models.kalman.innovations`),
     eps_k = nu_k' S_k^-1 nu_k ~ chi2(n_z) under a matched model, and the
     innovations are white, so:
 
@@ -59,10 +60,6 @@ class Innovation(Method):
     """
 
     name = "innovation"
-    task = MANEUVER_DETECTION
-    #: ``bench perf``: the reference is the per-trial filterpy loop (issue 6 target)
-    perf_targets = {"*": {"speedup": 50.0}}
-    reference_trials = 100
 
     @dataclass(frozen=True)
     class Params:

@@ -9,12 +9,12 @@ import numpy as np
 
 from bench.core import TRACKING, Batch, Method, TrackingOutput
 from bench.errors import ConfigError
-from bench.glint_density import glint_logpdf
-from bench.kalman import LinearGaussianModel, covariance_sequence
 from bench.params import param
 from bench.registry import register_method
-from scenarios.glint import measure, measurement_residual
 from methods._viterbi_paper1d import paper_1d_track
+from models.glint import glint_logpdf
+from models.kalman import LinearGaussianModel, covariance_sequence
+from models.spherical import measure, measurement_residual
 
 try:                                    # numba is optional: NumPy versions are the fallback
     import numba
@@ -327,12 +327,12 @@ class Viterbi(Method):
     ``velocity_levels`` nodes centred on the prediction F2 s* + g u of the
     best node s* of the previous step, spanning +- ``gate_sigmas`` standard
     deviations of the predicted (p, v) of a linear filter for the axis (the
-    gate; :func:`bench.kalman.covariance_sequence` with the measurement
+    gate; :func:`models.kalman.covariance_sequence` with the measurement
     variance mapped to metres at the prior range); the quantisation step is
     the gate over the levels. Successors entering the same node merge (the
     Viterbi recursion keeps the best score), those outside the gate are
     dropped. The branch metric is log pi_m + log p(z_k | state), the second
-    the *true* glint log density (:func:`bench.glint_density.glint_logpdf`:
+    the *true* glint log density (:func:`models.glint.glint_logpdf`:
     the scenario's mixture or additive model with its sigma, eta and eps) of
     the measurement residuals, evaluated on the position levels and
     interpolated linearly at the successor's position.

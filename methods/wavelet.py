@@ -9,11 +9,12 @@ import numpy as np
 import pywt
 import scipy.stats
 
-from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Method
+from bench.core import Batch, DetectionOutput
 from bench.errors import ConfigError
-from bench.kalman import innovations
 from bench.params import param
 from bench.registry import register_method
+from methods._innovation_base import InnovationDetector
+from models.kalman import innovations
 
 MODES = ("decimated", "sliding")
 COEFFICIENTS = ("approximation", "detail", "both")
@@ -253,7 +254,7 @@ def null_threshold(pfa: float, df: int, n_levels: int) -> float:
 
 
 @register_method
-class Wavelet(Method):
+class Wavelet(InnovationDetector):
     """Multiresolution (wavelet) test of the whitened innovation at the coarse levels, after Hong.
 
     After L. Hong, "Multiresolutional filtering using wavelet transform", IEEE
@@ -268,7 +269,7 @@ class Wavelet(Method):
     transforms (:func:`causal_coefficients`).
 
     Input: the whitened innovation x_k = L_k^-1 nu_k of the scenario's
-    reference filter (:func:`bench.kalman.innovations`), i.i.d. N(0, I_m)
+    reference filter (:func:`models.kalman.innovations`), i.i.d. N(0, I_m)
     under the null. Each component is decomposed to level J = ``levels``
     with an orthonormal wavelet (``wavelet``; Haar by default). For Haar and
     a block of L = 2^j samples ending at step k (pyramid A_0 = x,
@@ -323,10 +324,6 @@ class Wavelet(Method):
     """
 
     name = "wavelet"
-    task = MANEUVER_DETECTION
-    #: ``bench perf``: the reference is the per-trial filterpy loop (issue 6 target)
-    perf_targets = {"*": {"speedup": 50.0}}
-    reference_trials = 100
 
     @dataclass(frozen=True)
     class Params:

@@ -1,2 +1,3 @@
 """Scenarios: one module per scenario family; each registers its scenarios
-with :func:`bench.registry.register_scenario`."""
+with :func:`bench.registry.register_scenario`. Scenarios import the harness's
+API (:mod:`bench`) and the shared maths (:mod:`models`), never a method."""

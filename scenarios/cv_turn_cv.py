@@ -10,9 +10,9 @@ import numpy as np
 
 from bench.core import MANEUVER_DETECTION, Batch, Scenario
 from bench.errors import ConfigError
-from bench.kalman import LinearGaussianModel, kalman_filter, steady_state
 from bench.params import param
 from bench.registry import register_scenario
+from models.kalman import LinearGaussianModel, kalman_filter, steady_state
 
 #: indices of x and y in the state [x, vx, y, vy]
 POSITION_INDEX = (0, 2)
@@ -136,7 +136,7 @@ class CvTurnCv(Scenario):
     chol(P0) e, so under the matched model its innovations are white and
     stationary from step 0.
 
-    SNR: see :data:`SNR_DEFINITION` (DESIGN.md sec. 10). Under the null
+    SNR: see :data:`SNR_DEFINITION`. Under the null
     (``snr_db=None``) the track is the same CV line without the turn and the
     noise level is that of 0 dB: every shipped detector normalises by S, so
     the scale of the null is immaterial to them. Random draws, in this order

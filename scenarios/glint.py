@@ -10,18 +10,15 @@ import numpy as np
 
 from bench.core import TRACKING, Batch, Scenario
 from bench.errors import ConfigError
-from bench.glint_density import GLINT_MODELS, glint_variance
 from bench.params import param
 from bench.registry import register_scenario
+from models.glint import GLINT_MODELS, glint_variance
+from models.spherical import MEASURED, MEASUREMENT_LABELS, los_basis, spherical, wrap_angle
 
 #: state components, in order (metres, m/s; x east, y north, z up)
 STATE_LABELS = ("x", "y", "z", "vx", "vy", "vz")
 #: indices of the position components in the state
 POSITION_INDEX = (0, 1, 2)
-#: measured components per sensor (range in m, angles in rad)
-MEASUREMENT_LABELS = {"passive": ("bearing", "elevation"), "active": ("range", "bearing", "elevation")}
-#: which of (range, bearing, elevation) each sensor measures
-MEASURED = {"passive": (1, 2), "active": (0, 1, 2)}
 
 SNR_DEFINITION = (
     "snr_db is a measurement-noise level relative to the scenario's reference noise: "
@@ -30,13 +27,6 @@ SNR_DEFINITION = (
     "reference and +6 dB halves all noise; the glint shape (epsilon, eta/sigma) does not "
     "change along the axis; snr_db=None is the 0 dB reference (tracking has no null)."
 )
-
-
-def wrap_angle(a):
-    """Angle(s) wrapped to (-pi, pi]."""
-    a = np.asarray(a, float)
-    w = np.mod(a + np.pi, 2.0 * np.pi) - np.pi          # [-pi, pi)
-    return np.where(w == -np.pi, np.pi, w)
 
 
 def discretisation(mu: float, dt: float) -> tuple[float, float, float]:
@@ -65,60 +55,11 @@ def transition_matrices(mu: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
     return F, G
 
 
-def los_basis(bearing: float, elevation: float) -> np.ndarray:
-    """(3, 3) rows: unit vectors of increasing range, bearing and elevation at
-    (bearing, elevation) (rad; bearing clockwise from north (+y), elevation
-    above the horizontal). Orthonormal; ``R @ p`` gives line-of-sight
-    coordinates, ``R.T @ q`` world coordinates."""
-    sb, cb, se, ce = math.sin(bearing), math.cos(bearing), math.sin(elevation), math.cos(elevation)
-    return np.array([[ce * sb, ce * cb, se],
-                     [cb, -sb, 0.0],
-                     [-se * sb, -se * cb, ce]])
-
-
-def spherical(p) -> np.ndarray:
-    """(..., 3) range (m), bearing (rad, clockwise from north = atan2(x, y)),
-    elevation (rad) of positions ``p`` (..., 3) seen from the origin."""
-    p = np.asarray(p, float)
-    x, y, z = p[..., 0], p[..., 1], p[..., 2]
-    rho = np.hypot(x, y)
-    return np.stack([np.sqrt(rho ** 2 + z ** 2), np.arctan2(x, y), np.arctan2(z, rho)], axis=-1)
-
-
 def spherical_components(states) -> dict[str, np.ndarray]:
     """Range (m), bearing and elevation (rad) of states (..., 6) seen from the
     sensor: the components the paper's Fig. 4 plots (``derived_components``)."""
     s = spherical(np.asarray(states, float)[..., :3])
     return {"range_m": s[..., 0], "bearing_rad": s[..., 1], "elevation_rad": s[..., 2]}
-
-
-def measure(p, sensor: str) -> np.ndarray:
-    """Noise-free measurement h(p) (..., m) of positions (..., 3)."""
-    return spherical(p)[..., list(MEASURED[sensor])]
-
-
-def measurement_jacobian(p, sensor: str) -> np.ndarray:
-    """dh/dp (..., m, 3) of :func:`measure` at positions ``p`` (..., 3)."""
-    p = np.asarray(p, float)
-    x, y, z = p[..., 0], p[..., 1], p[..., 2]
-    rho2 = x ** 2 + y ** 2
-    rho = np.sqrt(rho2)
-    r2 = rho2 + z ** 2
-    r = np.sqrt(r2)
-    zero = np.zeros_like(x)
-    d_range = np.stack([x / r, y / r, z / r], axis=-1)
-    d_bearing = np.stack([y / rho2, -x / rho2, zero], axis=-1)
-    d_elev = np.stack([-x * z / (r2 * rho), -y * z / (r2 * rho), rho / r2], axis=-1)
-    rows = (d_range, d_bearing, d_elev)
-    return np.stack([rows[i] for i in MEASURED[sensor]], axis=-2)
-
-
-def measurement_residual(z, zhat):
-    """z - zhat with the bearing difference wrapped to (-pi, pi]; works for
-    both sensors (bearing is the next-to-last component) and any leading axes."""
-    res = np.asarray(z, float) - np.asarray(zhat, float)
-    res[..., -2] = wrap_angle(res[..., -2])
-    return res
 
 
 @register_scenario
@@ -146,7 +87,7 @@ class Glint(Scenario):
     the radial, bearing and elevation directions: u_r = 1.5, u_b = 0.07,
     u_e = 0.06. With a Cartesian state we read them as accelerations in m/s^2
     along the unit vectors of increasing range, bearing and elevation at the
-    *prior mean* initial position (:func:`los_basis`), a constant Cartesian
+    *prior mean* initial position (:func:`models.spherical.los_basis`), a constant Cartesian
     vector ``u`` (so the model stays linear and the control is exactly
     known). Reading u_b, u_e as angular accelerations (rad/s^2) times range
     would mean 350 m/s^2 at 5 km, not a plausible target. ``los_rotation`` in
@@ -165,12 +106,13 @@ class Glint(Scenario):
     **Measurements** (``sensor``): ``"passive"`` (the paper's case) measures
     [bearing, elevation], ``"active"`` [range, bearing, elevation]; bearing
     = atan2(x, y) (clockwise from north) wrapped to (-pi, pi], elevation =
-    atan2(z, hypot(x, y)), range in m. Noise per component, independent:
+    atan2(z, hypot(x, y)), range in m (:mod:`models.spherical`). Noise per
+    component, independent:
     ``glint_model = "mixture"`` (Song & Sun, eq. 5): (1 - eps) N(0, sigma^2)
     + eps Laplace(0, eta), eta the Laplace *scale* (variance 2 eta^2);
     ``"additive"``: N(0, sigma^2) always plus, with probability eps, a
     Laplace(0, eta) spike (the outlier part is the Gaussian-Laplace
-    convolution). See :mod:`bench.glint_density`. eps = 0 is the Gaussian case.
+    convolution). See :mod:`models.glint`. eps = 0 is the Gaussian case.
 
     **Noise defaults** (ours, not the paper's): sigma = 1 mrad for the angles
     and 5 m for range (about 5 m cross-range at the default 5 km), glint

@@ -1,6 +1,7 @@
 """Scenario ``tbd-grid``: the DP track-before-detect surveillance scene.
 
-The scene of the multi-frame DP-TBD paper (DESIGN.md section 10): a
+The scene of the multi-frame DP-TBD paper (Zheng, Wang, Yang & Du, multi-frame
+data-association DP-TBD in AR-correlated noise, the seed of ``dp-tbd-mf``): a
 50 km x 50 km surveillance area (x 150-200 km, y 120-170 km) in 100 m cells
 (500 x 500), 20 frames at T = 1 s, one target with a non-fluctuating (or
 Swerling-1) amplitude, and noise that is correlated over frames within each
@@ -9,7 +10,6 @@ cell by an autoregressive model and independent across cells.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
@@ -20,6 +20,7 @@ from bench.core import TBD, Batch, Scenario
 from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_scenario
+from models.ar_noise import ar_autocovariance, ar_innovation_std, ar_stationarity_problem, stationary_predictors
 
 #: the paper's surveillance area (m): x and y ranges
 PAPER_X_RANGE_M = (150e3, 200e3)
@@ -47,89 +48,15 @@ SNR_DEFINITION = (
 
 # --------------------------------------------------------------------- noise
 
-def ar_roots(a) -> np.ndarray:
-    """Roots of z^P + a1 z^(P-1) + ... + aP, the characteristic polynomial of
-    v_k + a1 v_(k-1) + ... + aP v_(k-P) = w_k."""
-    return np.roots(np.r_[1.0, np.asarray(a, float)])
-
-
-def ar_stationarity_problem(a) -> str | None:
-    """None if the AR model is stationary (all roots strictly inside the unit
-    circle), else a one-line reason."""
-    a = tuple(float(x) for x in a)
-    radius = float(np.max(np.abs(ar_roots(a)))) if a else 0.0
-    if radius < 1.0 - 1e-9:
-        return None
-    poly = f"z^{len(a)}"
-    for i, c in enumerate(a, start=1):
-        power = len(a) - i
-        poly += f" {'-' if c < 0 else '+'} {abs(c):g}" + (f" z^{power}" if power > 1 else " z" if power else "")
-    why = (f"not stationary: {poly} (convention v_k + a1 v_(k-1) + ... + aP v_(k-P) = w_k) "
-           f"has a root of modulus {radius:.4g} >= 1, so the noise would grow without bound")
-    if len(a) == len(PAPER_PRINTED_AR) and np.allclose(a, PAPER_PRINTED_AR):
+def ar_coefficients_problem(a) -> str | None:
+    """None if the AR coefficients are usable (stationary), else a one-line
+    reason (:func:`models.ar_noise.ar_stationarity_problem`), which says so
+    when ``a`` is the paper's printed set."""
+    why = ar_stationarity_problem(a)
+    if why is not None and len(a) == len(PAPER_PRINTED_AR) and np.allclose(a, PAPER_PRINTED_AR):
         why += ("; these are the paper's printed coefficients, explosive in this convention and in "
                 "v_k = a1 v_(k-1) + ... too; the default (-2, 1.7, -0.64) flips the sign of a3")
     return why
-
-
-@functools.lru_cache(maxsize=64)
-def ar_autocovariance(a: tuple[float, ...], lags: int, variance: float = 1.0) -> np.ndarray:
-    """Stationary autocovariance gamma(0..lags) of the AR(P) model, scaled so
-    that gamma(0) = ``variance``.
-
-    Multiplying v_k + sum_i a_i v_(k-i) = w_k by v_(k-h) and taking
-    expectations gives, for h = 0..P, sum_(i=0..P) phi_i gamma(|h - i|) =
-    sigma_w^2 delta_h (phi_0 = 1, phi_i = a_i): P + 1 linear equations for
-    gamma(0..P) (Yule-Walker). Beyond P the same recursion without the
-    right-hand side extends it: gamma(h) = -sum_i a_i gamma(h - i).
-    Returned read-only, as a float64 array of length ``lags + 1``.
-    """
-    P = len(a)
-    phi = np.r_[1.0, np.asarray(a, float)]
-    g = _yule_walker_unit(a)
-    out = np.empty(max(lags, P) + 1)
-    out[:P + 1] = g
-    for h in range(P + 1, len(out)):
-        out[h] = -np.dot(phi[1:], out[h - 1::-1][:P])
-    out = out[:lags + 1] * (variance / g[0])
-    out.setflags(write=False)
-    return out
-
-
-def ar_innovation_std(a: tuple[float, ...], variance: float = 1.0) -> float:
-    """sigma_w giving a stationary variance ``variance``: gamma scales with
-    sigma_w^2, and gamma(0) = g0 for sigma_w = 1."""
-    return float(np.sqrt(variance / _yule_walker_unit(a)[0]))
-
-
-def _yule_walker_unit(a: tuple[float, ...]) -> np.ndarray:
-    """gamma(0..P) of the AR(P) model with sigma_w = 1 (the Yule-Walker system)."""
-    P = len(a)
-    phi = np.r_[1.0, np.asarray(a, float)]
-    M = np.zeros((P + 1, P + 1))
-    for h in range(P + 1):
-        for i in range(P + 1):
-            M[h, abs(h - i)] += phi[i]
-    return np.linalg.solve(M, np.eye(P + 1)[0])
-
-
-def stationary_predictors(a: tuple[float, ...], sigma: float = NOISE_STD) -> list[tuple[np.ndarray, float]]:
-    """Per frame k < P: (phi_k, nu_k) of the exact conditional law
-    v_k | v_(k-1), ..., v_0 ~ N(sum_j phi_k[j-1] v_(k-j), nu_k) of the
-    stationary process: phi_k solves Gamma_k phi_k = (gamma(1), ..., gamma(k))
-    (Gamma_k the k x k Toeplitz matrix of gamma(0..k-1)) and
-    nu_k = gamma(0) - phi_k . (gamma(1), ..., gamma(k)) (the prediction-error
-    decomposition of N(0, Gamma_P), i.e. its Cholesky factorisation). From
-    frame P on the conditional law is the AR recursion itself: phi = -a,
-    nu = sigma_w^2."""
-    P = len(a)
-    gamma = ar_autocovariance(tuple(a), P, sigma ** 2)
-    out = [(np.zeros(0), float(gamma[0]))]
-    for k in range(1, P):
-        G = gamma[np.abs(np.subtract.outer(np.arange(k), np.arange(k)))]
-        phi = np.linalg.solve(G, gamma[1:k + 1])
-        out.append((phi, float(gamma[0] - phi @ gamma[1:k + 1])))
-    return out
 
 
 def generate_noise(rng, shape_hw: tuple[int, int], frames: int, a: tuple[float, ...] | None,
@@ -376,7 +303,7 @@ class TbdGrid(Scenario):
                                              "11-15 (rad/s); 0: straight line", ge=0.0, le=3.0)
 
         def validate(self) -> None:
-            why = ar_stationarity_problem(self.ar_coefficients)
+            why = ar_coefficients_problem(self.ar_coefficients)
             if why is not None:
                 raise ConfigError("ar_coefficients", why)
             need = scene_geometry(self)[1]["cells_needed"]

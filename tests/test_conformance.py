@@ -23,7 +23,7 @@ def test_every_method_has_a_scenario_and_nothing_is_unavailable():
 
 def _params(cls):
     """A small instance of the scenario (``small_params``), so the test stays quick."""
-    return build_params(cls.Params, getattr(cls, "small_params", {}))
+    return build_params(cls.Params, cls.small_params)
 
 
 def _batch(scenario, snr_db, seed=3):

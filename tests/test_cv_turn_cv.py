@@ -5,10 +5,10 @@ import pytest
 import scipy.stats
 
 from bench.errors import ConfigError
-from bench.kalman import innovations, steady_state
 from bench.params import build_params
 from bench.registry import get_scenario
 from bench.rng import TrialRNG
+from models.kalman import innovations, steady_state
 from scenarios.cv_turn_cv import (CvTurnCv, cv_model, deterministic_track,
                                   filter_response, maneuver_power)
 

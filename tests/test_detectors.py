@@ -6,13 +6,13 @@ import scipy.stats
 
 from bench.core import DetectionOutput
 from bench.errors import ConfigError
-from bench.kalman import innovations
 from bench.params import build_params
 from bench.registry import get_method
 from bench.rng import TrialRNG
-from methods.cumulant import Cumulant, window_third_moment
 from bench.windows import sliding_sum
+from methods.cumulant import Cumulant, window_third_moment
 from methods.innovation import Innovation, fading_sum, fading_valid_from
+from models.kalman import innovations
 from scenarios.cv_turn_cv import CvTurnCv
 
 CONFIGS = [

@@ -1,4 +1,4 @@
-"""Scenario glint: discretisation, geometry, draws (chunking, common random numbers), meta."""
+"""Scenario glint: discretisation, control and prior, draws (chunking, common random numbers), meta."""
 
 import math
 
@@ -10,20 +10,8 @@ from bench.errors import ConfigError
 from bench.params import build_params
 from bench.registry import get_scenario
 from bench.rng import TrialRNG
-from scenarios.glint import (
-    MEASURED,
-    POSITION_INDEX,
-    STATE_LABELS,
-    Glint,
-    discretisation,
-    los_basis,
-    measure,
-    measurement_jacobian,
-    measurement_residual,
-    spherical,
-    transition_matrices,
-    wrap_angle,
-)
+from models.spherical import los_basis, measure, measurement_residual, spherical
+from scenarios.glint import POSITION_INDEX, STATE_LABELS, Glint, discretisation, transition_matrices
 
 
 def make(snr_db=0.0, n=6, seed=1, trials=None, **values):
@@ -117,22 +105,6 @@ def test_control_mapping_and_prior():
     np.testing.assert_allclose(los_basis(0.0, 0.0), [[0, 1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-15)
 
 
-def test_spherical_jacobian_matches_finite_differences():
-    rng = np.random.default_rng(3)
-    p = rng.normal(size=(20, 3)) * 3000.0
-    for sensor in ("passive", "active"):
-        H = measurement_jacobian(p, sensor)
-        h = 1e-4
-        num = np.stack([(measure(p + h * np.eye(3)[i], sensor) - measure(p - h * np.eye(3)[i], sensor)) / (2 * h)
-                        for i in range(3)], axis=-1)
-        np.testing.assert_allclose(H, num, rtol=1e-6, atol=1e-12)
-
-
-def test_wrap_angle():
-    a = np.array([-3 * np.pi, -np.pi, 0.0, np.pi, 2 * np.pi + 0.1, -np.pi - 0.1])
-    np.testing.assert_allclose(wrap_angle(a), [np.pi, np.pi, 0.0, np.pi, 0.1, np.pi - 0.1], atol=1e-12)
-
-
 def test_trial_streams_do_not_depend_on_chunking():
     whole = make(n=6, steps=30, sensor="active")
     part = make(trials=range(3, 6), steps=30, sensor="active")
@@ -195,10 +167,6 @@ def test_bad_params_name_the_field(values, field):
     with pytest.raises(ConfigError) as err:
         build_params(Glint.Params, values)
     assert err.value.field == field
-
-
-def test_measured_components():
-    assert MEASURED == {"passive": (1, 2), "active": (0, 1, 2)}
 
 
 def test_paper_parameters_as_printed():

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
-from bench.kalman import (LinearGaussianModel, covariance_sequence, innovations,
-                          kalman_filter, steady_state, whiten)
+from models.kalman import (LinearGaussianModel, covariance_sequence, innovations,
+                           kalman_filter, steady_state, whiten)
 
 
 def random_model(rng, d=4, m=2):

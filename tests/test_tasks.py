@@ -50,7 +50,7 @@ def test_tbd_summary_has_the_rmse_over_detected_trials_and_over_all_runs():
 
 
 def test_unit_innovation_snr_offset_matches_the_scenarios_innovation_scale():
-    from scenarios.tbd_grid import ar_autocovariance, ar_innovation_std
+    from models.ar_noise import ar_autocovariance, ar_innovation_std
     a = (-2.0, 1.7, -0.64)
     gamma = ar_autocovariance(a, 7, 1.0)
     offset = unit_innovation_snr_offset_db(a, gamma)

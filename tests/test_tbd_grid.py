@@ -8,14 +8,7 @@ from bench.errors import ConfigError
 from bench.params import build_params
 from bench.registry import get_scenario
 from bench.rng import TrialRNG
-from scenarios.tbd_grid import (
-    EDGE_MARGIN_CELLS,
-    TbdGrid,
-    ar_autocovariance,
-    ar_roots,
-    scene_geometry,
-    true_track,
-)
+from scenarios.tbd_grid import EDGE_MARGIN_CELLS, TbdGrid, scene_geometry, true_track
 
 DEFAULT = build_params(TbdGrid.Params, {})
 META_KEYS = {"grid", "target_cells", "target_present", "frame_period_s", "noise_std", "noise_autocovariance",
@@ -104,22 +97,11 @@ def test_turn_is_clockwise_at_the_given_rate():
     assert np.all(np.diff(truth[:, 0]) > 0)
 
 
-def test_default_ar_is_stable_and_paper_printed_set_is_explosive():
-    assert np.max(np.abs(ar_roots((-2.0, 1.7, -0.64)))) == pytest.approx(0.9018821, abs=1e-6)
-    assert np.max(np.abs(ar_roots((-2.0, 1.7, 0.64)))) > 1.5
-    assert np.max(np.abs(ar_roots((2.0, -1.7, -0.64)))) > 2.5          # the other sign convention
+def test_paper_printed_ar_set_is_rejected_with_the_reason():
     with pytest.raises(ConfigError) as err:
         build_params(TbdGrid.Params, {"ar_coefficients": [-2.0, 1.7, 0.64]})
     assert err.value.field == "ar_coefficients"
     assert "explosive" in str(err.value) and "flips the sign of a3" in str(err.value)
-
-
-def test_autocovariance_solves_yule_walker():
-    a = (-2.0, 1.7, -0.64)
-    g = ar_autocovariance(a, 10)
-    assert g[0] == pytest.approx(1.0)
-    for h in range(1, 11):      # gamma(h) + a1 gamma(h-1) + a2 gamma(h-2) + a3 gamma(h-3) = 0, h >= 1
-        assert g[h] + sum(ai * g[abs(h - i)] for i, ai in enumerate(a, 1)) == pytest.approx(0.0, abs=1e-12)
 
 
 def test_snr_definition_and_target_amplitude():

@@ -19,7 +19,8 @@ from bench.params import build_params
 from bench.rng import TrialRNG
 from methods._viterbi_paper1d import Component, paper_1d_component
 from methods.viterbi import Viterbi
-from scenarios.glint import Glint, measurement_jacobian, spherical
+from models.spherical import measurement_jacobian, spherical
+from scenarios.glint import Glint
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=12)
 

@@ -8,12 +8,12 @@ import scipy.stats
 from bench import registry
 from bench.core import DetectionOutput
 from bench.errors import ConfigError
-from bench.kalman import innovations
 from bench.params import build_params
 from bench.rng import TrialRNG
 from bench.windows import sliding_sum
 from methods.wavelet import (Wavelet, causal_coefficients, first_step, null_threshold, support,
                              valid_from, wavelet_statistic)
+from models.kalman import innovations
 
 CONFIGS = [
     {},

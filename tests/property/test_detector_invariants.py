@@ -14,11 +14,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bench.core import Batch
-from bench.kalman import LinearGaussianModel, innovations
 from bench.params import build_params
 from bench.rng import TrialRNG
 from methods.cumulant import Cumulant, third_moment_null_variance, window_third_moment
 from methods.innovation import Innovation
+from models.kalman import LinearGaussianModel, innovations
 from scenarios.cv_turn_cv import CvTurnCv
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=4)

@@ -15,18 +15,19 @@ import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.glint_density import (
+from bench.params import build_params
+from bench.rng import TrialRNG
+from methods.ekf import EKF
+from methods.viterbi import Viterbi, expand, trellis_step, viterbi_path
+from models.glint import (
     gauss_laplace_logpdf,
     gaussian_logpdf,
     glint_logpdf,
     glint_tail_probability,
     glint_variance,
 )
-from bench.params import build_params
-from bench.rng import TrialRNG
-from methods.ekf import EKF
-from methods.viterbi import Viterbi, expand, trellis_step, viterbi_path
-from scenarios.glint import Glint, measure, measurement_residual
+from models.spherical import measure, measurement_residual
+from scenarios.glint import Glint
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=5)
 

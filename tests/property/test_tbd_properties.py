@@ -23,7 +23,8 @@ from bench.params import build_params
 from bench.rng import TrialRNG
 from methods._tbd_reference import reference_dp_tbd
 from methods.dp_tbd import DpTbd, DpTbdMf, turn_log_density
-from scenarios.tbd_grid import TbdGrid, ar_autocovariance
+from models.ar_noise import ar_autocovariance
+from scenarios.tbd_grid import TbdGrid
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=8)
 LOG_UNIFORM = -math.log(2 * math.pi)

@@ -1,0 +1,17 @@
+"""Models: the radar and filtering maths shared by methods and scenarios.
+
+A scenario uses a model to generate data, a method the same model to process
+it; keeping the model here lets neither import the other, and keeps the
+harness (:mod:`bench`) free of domain maths. Modules:
+
+* :mod:`models.kalman` — the batched linear Kalman filter and its innovations
+  (with the per-trial filterpy loop as oracle);
+* :mod:`models.glint` — glint measurement-noise densities (Gaussian core plus
+  Laplace spikes);
+* :mod:`models.spherical` — range / bearing / elevation measurements of a
+  Cartesian position, Jacobian and angle-aware residual;
+* :mod:`models.ar_noise` — autoregressive noise: stationarity, autocovariance,
+  exact predictors.
+
+Models import neither :mod:`methods` nor :mod:`scenarios` (nor the harness).
+"""

@@ -1,0 +1,59 @@
+"""The optional members of the plugin protocol (``bench.core``) as plugins declare them."""
+
+import numpy as np
+import pytest
+
+from bench import registry
+from bench.core import Method, Scenario
+from bench.params import build_params
+from bench.perf import reference_of, scaling_plan
+from bench.rng import TrialRNG
+from methods._innovation_base import InnovationDetector
+
+METHODS = list(registry.methods().items())
+
+
+@pytest.mark.parametrize("name, cls", METHODS)
+def test_a_declared_reference_is_implemented_and_an_implemented_one_declared(name, cls):
+    overrides = cls.reference_run is not Method.reference_run
+    assert overrides == (cls.reference_name is not None), name
+    assert cls.reference_trials is None or cls.reference_trials >= 1
+    for size, targets in cls.perf_targets.items():
+        assert set(targets) <= {"speedup", "transitions_per_second", "seconds_per_trial"}, (name, size)
+
+
+@pytest.mark.parametrize("cls", list(registry.scenarios().values()))
+def test_scenario_perf_sizes_are_valid_params(cls):
+    assert isinstance(cls.perf_snr_db, float | int)
+    for params, trials in cls.perf_sizes.values():
+        build_params(cls.Params, params)
+        assert trials >= 1
+    build_params(cls.Params, cls.small_params)
+
+
+def test_defaults_mean_not_provided():
+    assert Method.reference_name is None and Method.reference_trials is None and Method.perf_targets == {}
+    assert Method().transitions(None, None) is None
+    assert reference_of(Method()) is None
+    assert Scenario.small_params == {} and Scenario.perf_sizes == {"default": ({}, 100)}
+
+
+def test_innovation_detectors_share_the_filterpy_reference():
+    detectors = [cls for cls in registry.methods().values() if issubclass(cls, InnovationDetector)]
+    assert {cls.name for cls in detectors} == {"innovation", "cumulant", "wavelet"}
+    scenario = registry.get_scenario("cv-turn-cv")
+    batch = scenario().generate(build_params(scenario.Params, scenario.small_params), 5.0, 3,
+                                TrialRNG(1, 0, 0, range(3)))
+    meta = dict(batch.meta)
+    for cls in detectors:
+        method = cls()
+        name, run = reference_of(method)
+        assert name == InnovationDetector.reference_name
+        ref, out = run(batch, cls.Params()), method.run(batch, cls.Params())
+        np.testing.assert_allclose(ref.statistic, out.statistic, rtol=1e-7, atol=1e-9, err_msg=cls.name)
+        assert batch.meta.keys() == meta.keys()                 # the batch is not switched to filterpy
+
+
+def test_the_scaling_sweep_is_a_packaged_preset():
+    plan = scaling_plan()
+    assert plan.name == "perf-scaling" and plan.record_trials == 0
