@@ -1,4 +1,4 @@
-"""Metrics: the definitions of DESIGN.md section 7, per trial and per cell.
+"""Metrics: their definitions, per trial and per cell.
 
 Per trial (maneuver detection), with alarm = statistic >= threshold:
 
@@ -238,7 +238,7 @@ def cell_centres_m(cells: np.ndarray, grid: dict) -> np.ndarray:
 def tbd_trial_metrics(score: np.ndarray, track: np.ndarray, threshold: float, *, target_cells: np.ndarray,
                       truth_xy_m: np.ndarray, grid: dict, tolerance_cells: int,
                       min_hits: int = 2) -> dict[str, np.ndarray]:
-    """Per-trial TBD metrics (DESIGN.md section 7).
+    """Per-trial TBD metrics.
 
     A frame is a *hit* when the backtracked cell is within ``tolerance_cells``
     of the true cell in both row and column (Chebyshev distance). The trial is
@@ -315,7 +315,7 @@ def summarise_tbd(trials: pd.DataFrame, series: dict) -> pd.DataFrame:
 def tracking_trial_metrics(estimate: np.ndarray, truth: np.ndarray, *, position_index, labels,
                            covariance: np.ndarray | None, divergence_bound_m: float,
                            derived=None) -> dict[str, np.ndarray]:
-    """Per-trial tracking metrics (DESIGN.md section 7).
+    """Per-trial tracking metrics.
 
     ``rmse``: the trial's position RMSE over time; ``final_error_m``;
     ``diverged``: the position error exceeded ``divergence_bound_m`` at some

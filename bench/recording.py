@@ -1,4 +1,4 @@
-"""Rerun recordings of selected trials (DESIGN.md section 9).
+"""Rerun recordings of selected trials.
 
 Workers build one :class:`TrialRecord` per selected trial (``[record] trials``
 per SNR); it travels to the driver as bytes (:meth:`TrialRecord.to_bytes`, also

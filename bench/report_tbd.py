@@ -1,4 +1,4 @@
-"""Report sections of the track-before-detect task (DESIGN.md sections 6–8).
+"""Report sections of the track-before-detect task.
 
 Pd against SNR at the calibrated scene Pfa, the SNR at Pd = 0.5 and each
 config's gain over the first one, the null scene scores against their Gumbel

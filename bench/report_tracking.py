@@ -1,4 +1,4 @@
-"""Report sections of the tracking task (DESIGN.md sections 7–8).
+"""Report sections of the tracking task.
 
 Time-averaged position RMSE with bootstrap intervals per scenario config and
 SNR, divergence rate and NEES, RMSE against SNR, per-step RMSE and the mean

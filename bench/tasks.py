@@ -1,6 +1,6 @@
 """What the harness does with each task's outputs.
 
-A task handler knows, for one task of DESIGN.md section 3, how to check a
+A task handler knows, for one task (:data:`bench.core.TASKS`), how to check a
 method's output, which statistic values under the null hypothesis feed the
 calibration, how to turn an output and a threshold into per-trial metrics,
 what to record of a trial, and how to summarise trials into cells. The runner
@@ -112,7 +112,7 @@ class DetectionTask:
 
 class TBDTask:
     """Track-before-detect: a scene score thresholded at a per-scene Pfa, and a
-    backtracked track scored against the true cells (DESIGN.md section 7)."""
+    backtracked track scored against the true cells (:func:`bench.metrics.tbd_trial_metrics`)."""
 
     task = TBD
     calibrated = True

@@ -1,4 +1,4 @@
-"""Executors only map units: results never depend on them (DESIGN.md section 5, issue 6 items 1-2)."""
+"""Executors only map units: results never depend on them."""
 
 import os
 import sys

@@ -1,4 +1,4 @@
-"""Metric definitions (DESIGN.md section 7) and calibration."""
+"""Metric definitions and calibration."""
 
 import numpy as np
 import pytest

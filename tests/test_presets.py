@@ -98,7 +98,7 @@ def test_tbd_ablations_preset_smoke(bench_cli, tmp_path):
 
 
 def test_glint_tracking_preset_at_reduced_size(bench_cli, tmp_path):
-    """The glint preset through the CLI at reduced trials and duration (issue 5's end-to-end test)."""
+    """The glint preset through the CLI at reduced trials and duration (the end-to-end test of the tracking suite)."""
     sweep = _preset("glint-tracking")
     sweep.update(trials=4, chunk=4)
     for entry in sweep["scenarios"]:

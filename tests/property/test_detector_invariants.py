@@ -1,4 +1,4 @@
-"""Statistical invariants of the maneuver detectors (DESIGN.md sec. 11).
+"""Statistical invariants of the maneuver detectors.
 
 Hypothesis draws the cases with ``derandomize=True`` and every random array
 comes from a fixed seed, so the tests are deterministic; tolerances are set

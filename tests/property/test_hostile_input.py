@@ -1,4 +1,4 @@
-"""Hostile and broken sweep files (issue 6, item 4).
+"""Hostile and broken sweep files.
 
 Hypothesis generates malformed or adversarial sweep files — wrong types, NaN
 and infinities, huge grids, negative counts, unknown keys, deep nesting,

@@ -1,4 +1,4 @@
-"""Invariants of the TBD suite (DESIGN.md sec. 11): DP = exhaustive search,
+"""Invariants of the TBD suite: DP = exhaustive search,
 the AR noise has the law it claims, unstable models are rejected, the score
 grows with the amplitude, the compiled DP equals the SciPy reference.
 

@@ -1,4 +1,4 @@
-"""Statistical invariants of the wavelet maneuver detector (DESIGN.md sec. 11).
+"""Statistical invariants of the wavelet maneuver detector.
 
 Hypothesis draws the cases with ``derandomize=True`` and every random array
 comes from a fixed seed, so the tests are deterministic; tolerances are set
