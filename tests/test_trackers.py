@@ -17,7 +17,6 @@ from bench.registry import get_method
 from bench.rng import TrialRNG
 from methods.ekf import EKF, ekf_filter, filterpy_ekf, noise_covariance
 from methods.viterbi import Viterbi, expand, max_plus_step, trellis_step
-from models.spherical import measure, measurement_jacobian, measurement_residual
 from scenarios.glint import Glint
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=4)
