@@ -70,7 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--no-record", action="store_true", help="do not rewrite recording.rrd")
     view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
     view.add_argument("dir")
-    perf = sub.add_parser("perf", help="measure every method's speed and memory against its reference")
+    perf = sub.add_parser("perf", help="measure every method's speed and memory against its reference, "
+                                       "and scene generation")
     perf.add_argument("--out", default="reports/perf", help="output folder (default: reports/perf)")
     perf.add_argument("--methods", nargs="+", help="only these methods")
     perf.add_argument("--sizes", nargs="+", help="only these named sizes (e.g. small paper)")

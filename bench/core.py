@@ -164,6 +164,8 @@ class Scenario(Component):
     perf_sizes: ClassVar[dict[str, tuple[dict[str, Any], int]]] = {"default": ({}, 100)}
     #: SNR (dB) at which ``bench perf`` generates its batches
     perf_snr_db: ClassVar[float] = 10.0
+    #: ``bench perf`` goals for :meth:`generate` alone: size -> {"seconds_per_trial": goal}
+    perf_targets: ClassVar[dict] = {}
 
     def generate(self, params, snr_db: float | None, n: int, rng) -> Batch:
         """``n`` trials at ``snr_db`` (``None``: the null hypothesis).

@@ -17,7 +17,13 @@ params)`` (state transitions evaluated per trial) and methods may declare
 ``seconds_per_trial``), which the report shows against the measurements. The
 plugin protocol (:mod:`bench.core`) gives every one of these a default, read
 here as "not provided". Nothing here is asserted by tests: speed is measured,
-never a pass/fail gate.
+
+Scene generation is measured too, in its own table: for every (scenario,
+size) of the measured methods, ``Scenario.generate`` of that many trials
+(after a one-trial warm-up, best of a few repetitions, fresh process), which
+is what every unit of a sweep pays before any method runs. A scenario may
+declare ``Scenario.perf_targets`` (``size -> {"seconds_per_trial": goal}``) for it.
+Nothing here is asserted by tests: speed is measured, never a pass/fail gate.
 
 Optionally (``--executors``) a compute-bound sweep, the packaged preset
 ``perf-scaling`` (``bench/presets/perf-scaling.toml``), is run with one local
@@ -45,6 +51,7 @@ from bench.rng import EVALUATION, TrialRNG, stable_key
 
 PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "reference", "reference_seconds_per_trial",
                 "speedup", "peak_rss_mb"]
+SCENE_COLUMNS = ["scenario", "size", "trials", "seconds_per_trial", "peak_rss_mb"]
 SEED = 20261121
 REPEATS = 3
 
@@ -59,15 +66,26 @@ class Job:
     reference: bool          # time the reference implementation instead of the method
 
 
+@dataclass(frozen=True)
+class SceneJob:
+    scenario: str
+    size: str
+    scenario_params: dict
+    trials: int
+
+
 def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # Linux: kB
 
 
-def _batch(job: Job, n: int):
+def _batch(job: Job | SceneJob, n: int):
     cls = registry.get_scenario(job.scenario)
     params = build_params(cls.Params, job.scenario_params)
-    rng = TrialRNG(SEED, EVALUATION, stable_key([job.scenario, job.scenario_params]), range(n))
-    return cls().generate(params, float(cls.perf_snr_db), n, rng)
+    return cls().generate(params, float(cls.perf_snr_db), n, _trial_rng(job, n))
+
+
+def _trial_rng(job: Job | SceneJob, n: int) -> TrialRNG:
+    return TrialRNG(SEED, EVALUATION, stable_key([job.scenario, job.scenario_params]), range(n))
 
 
 def reference_of(method):
@@ -111,10 +129,27 @@ def measure(job: Job) -> dict:
     return {**out, "seconds_per_trial": seconds / job.trials, "peak_rss_mb": _peak_rss_mb()}
 
 
-def _in_fresh_process(job: Job) -> dict:
+def measure_scene(job: SceneJob) -> dict:
+    """Run in a fresh process: seconds per trial of ``generate`` (best of
+    REPEATS; the per-trial streams are set up outside the timing), peak RSS."""
+    registry.discover()
+    _batch(job, 1)                                    # warm-up: JIT compilation
+    cls = registry.get_scenario(job.scenario)
+    params = build_params(cls.Params, job.scenario_params)
+    snr_db = float(cls.perf_snr_db)
+    best = np.inf
+    for _ in range(REPEATS):
+        rng = _trial_rng(job, job.trials)
+        t0 = time.perf_counter()
+        cls().generate(params, snr_db, job.trials, rng)
+        best = min(best, time.perf_counter() - t0)
+    return {"seconds_per_trial": best / job.trials, "peak_rss_mb": _peak_rss_mb()}
+
+
+def _in_fresh_process(job: Job | SceneJob) -> dict:
     ctx = multiprocessing.get_context("spawn")
     with cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
-        return pool.submit(measure, job).result()
+        return pool.submit(measure_scene if isinstance(job, SceneJob) else measure, job).result()
 
 
 def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> list[tuple[Job, int]]:
@@ -135,10 +170,28 @@ def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> li
     return out
 
 
+def scene_jobs(method_jobs: list[Job]) -> list[SceneJob]:
+    """One scene-generation job per (scenario, size) among ``method_jobs``, in order."""
+    out = {}
+    for j in method_jobs:
+        out.setdefault((j.scenario, j.size), SceneJob(j.scenario, j.size, j.scenario_params, j.trials))
+    return list(out.values())
+
+
+def measure_scenes(method_jobs: list[Job], progress=print) -> pd.DataFrame:
+    rows = []
+    for job in scene_jobs(method_jobs):
+        progress(f"perf: {job.scenario} scene generation at {job.size} ({job.trials} trials)")
+        m = _in_fresh_process(job)
+        rows.append({"scenario": job.scenario, "size": job.size, "trials": job.trials, **m})
+    return pd.DataFrame(rows, columns=SCENE_COLUMNS)
+
+
 def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False, workers: int = 2,
              progress=print) -> Path:
     rows, extra = [], []
-    for job, ref_trials in jobs(methods, sizes):
+    planned = jobs(methods, sizes)
+    for job, ref_trials in planned:
         progress(f"perf: {job.method} at {job.size} ({job.trials} trials)")
         m = _in_fresh_process(job)
         r = _in_fresh_process(Job(job.method, job.scenario, job.size, job.scenario_params, ref_trials, True))
@@ -151,11 +204,12 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
         extra.append({"scenario": job.scenario, "params": job.scenario_params, "reference_trials": ref_trials,
                       "transitions_per_second": tps,
                       "targets": registry.get_method(job.method).perf_targets})
+    scenes = measure_scenes([job for job, _ in planned], progress)
     scaling, sweep = None, ""
     if executors:
         plan = scaling_plan()
         scaling, sweep = executor_scaling(workers, progress, plan), f"Preset `{plan.name}`: {plan.description}"
-    return write_report(Path(out_dir), pd.DataFrame(rows, columns=PERF_COLUMNS), extra, scaling, sweep)
+    return write_report(Path(out_dir), pd.DataFrame(rows, columns=PERF_COLUMNS), extra, scaling, sweep, scenes)
 
 
 # ------------------------------------------------------------------ executors
@@ -217,14 +271,35 @@ def _target_text(targets: dict, row: dict, tps: float) -> str:
     return "; ".join(checks) or "–"
 
 
+def _write_csv(df: pd.DataFrame, path: Path) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    df.to_csv(tmp, index=False, lineterminator="\n")
+    tmp.replace(path)
+
+
+def _scene_section(scenes: pd.DataFrame) -> list[str]:
+    rows = []
+    for r in scenes.to_dict("records"):
+        cls = registry.scenarios().get(r["scenario"])
+        targets = cls.perf_targets if cls is not None else {}
+        goal = targets.get(r["size"], targets.get("*", {}))
+        rows.append([f"`{r['scenario']}`", r["size"], r["trials"], f"{r['seconds_per_trial'] * 1e3:.3g}",
+                     f"{r['peak_rss_mb']:.0f}", _target_text(goal, r, np.nan)])
+    return ["## Scene generation", "`Scenario.generate` alone (the scene every unit of a sweep draws before "
+            "its methods run), at each size of the table above: one core, fresh process, best of 3 runs after "
+            "a one-trial warm-up; `scene.csv` holds the same numbers.",
+            table(["scenario", "size", "trials", "ms per trial", "peak RSS (MB)", "targets"], rows)]
+
+
 def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: pd.DataFrame | None,
-                 scaling_sweep: str = "") -> Path:
-    """``perf.csv`` and ``report.md``; ``scaling_sweep`` describes the sweep ``scaling`` timed."""
+                 scaling_sweep: str = "", scenes: pd.DataFrame | None = None) -> Path:
+    """``perf.csv``, ``scene.csv`` and ``report.md``; ``scaling_sweep`` describes the sweep
+    ``scaling`` timed."""
     from bench.provenance import provenance
     out_dir.mkdir(parents=True, exist_ok=True)
-    tmp = out_dir / "perf.csv.tmp"
-    perf.to_csv(tmp, index=False, lineterminator="\n")
-    tmp.replace(out_dir / "perf.csv")
+    _write_csv(perf, out_dir / "perf.csv")
+    if scenes is not None:
+        _write_csv(scenes, out_dir / "scene.csv")
     rows = []
     for row, info in zip(perf.to_dict("records"), extra):
         tps = info["transitions_per_second"]
@@ -243,6 +318,8 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
                     "reference ms per trial", "speed-up", "peak RSS (MB)", "targets"], rows),
              "Sizes: " + "; ".join(sorted({f"`{i['scenario']}` {r['size']} = {i['params'] or 'defaults'}"
                                           for r, i in zip(perf.to_dict("records"), extra)}))]
+    if scenes is not None and len(scenes):
+        parts += _scene_section(scenes)
     if scaling is not None:
         srows = [[r.executor, r.workers, fmt(r.seconds), fmt(r.speedup), fmt(r.efficiency), r.error or ""]
                  for r in scaling.itertuples()]

@@ -51,6 +51,13 @@ class TrialRNG:
     def n(self) -> int:
         return len(self._gens)
 
+    @property
+    def generators(self) -> list[np.random.Generator]:
+        """Each trial's own Generator, in trial order, for code that draws a
+        trial's numbers itself (e.g. compiled code: numba accepts a numpy
+        Generator and runs numpy's algorithms on its bits)."""
+        return self._gens
+
     def seed_values(self) -> np.ndarray:
         """One 32-bit integer per trial identifying its stream (for the CSV)."""
         return np.array([s.generate_state(1)[0] for s in self.seeds], dtype=np.int64)

@@ -8,7 +8,8 @@ from bench.errors import ConfigError
 from bench.params import build_params
 from bench.registry import get_scenario
 from bench.rng import TrialRNG
-from scenarios.tbd_grid import EDGE_MARGIN_CELLS, TbdGrid, scene_geometry, true_track
+from models.ar_noise import ar_autocovariance, ar_innovation_std, ar_roots, stationary_predictors
+from scenarios.tbd_grid import EDGE_MARGIN_CELLS, TbdGrid, generate_noise, scene_geometry, true_track
 
 DEFAULT = build_params(TbdGrid.Params, {})
 META_KEYS = {"grid", "target_cells", "target_present", "frame_period_s", "noise_std", "noise_autocovariance",
@@ -171,3 +172,66 @@ def test_paper_scale_generation_is_float32_and_stationary():
     v = b.z[0].reshape(20, -1).astype(np.float64)
     # per-frame variance, 250 000 cells each: standard error sqrt(2 / N)
     assert np.all(np.abs(v.var(axis=1) - 1.0) < 5 * np.sqrt(2 / v.shape[1]))
+
+
+def numpy_noise(gen, shape_hw, frames, a, sigma):
+    """The noise law of ``generate_noise`` written out in plain numpy: e =
+    gen.standard_normal((K, H, W)), then v_k = sqrt(nu_k) e_k + sum phi_k v_(k-j)
+    for k < P and v_k = sigma_w e_k - sum a_i v_(k-i) from k = P on, in float64,
+    each lag subtracted in turn (the compiled kernel's order of operations)."""
+    e = gen.standard_normal((frames, *shape_hw))
+    if not a:
+        return (sigma * e).astype(np.float32)
+    P = len(a)
+    steps = [(-phi, np.sqrt(nu)) for phi, nu in stationary_predictors(a, sigma)]
+    v = np.empty_like(e)
+    for k in range(frames):
+        coeffs, scale = steps[k] if k < P else (np.asarray(a), ar_innovation_std(a, sigma ** 2))
+        v[k] = scale * e[k]
+        for i, c in enumerate(coeffs, start=1):
+            v[k] -= c * v[k - i]
+    return v.astype(np.float32)
+
+
+@pytest.mark.parametrize("a", [None, (-2.0, 1.7, -0.64), (-0.5,), (-0.5, 0.1, 0.05, -0.02, 0.01)])
+def test_noise_is_the_trials_numpy_normals_through_the_recursion(a):
+    """The compiled path draws exactly each trial's numpy standard normals, in
+    (frame, row, column) order, and applies the documented recursion: equal,
+    bit for bit, to the numpy transcription above; each trial's Generator ends
+    in the same state (what it draws next, the Swerling powers, is unchanged)."""
+    trials = [0, 3, 11]
+    z = generate_noise(TrialRNG(4, 0, 2, trials), (9, 13), 7, a, 1.3)
+    ref_rng, rng = TrialRNG(4, 0, 2, trials), TrialRNG(4, 0, 2, trials)
+    generate_noise(rng, (9, 13), 7, a, 1.3)
+    for t, gen in enumerate(ref_rng.generators):
+        np.testing.assert_array_equal(z[t], numpy_noise(gen, (9, 13), 7, a, 1.3))
+        assert gen.bit_generator.state == rng.generators[t].bit_generator.state
+
+
+def _lag_product_variance(gamma, h, m):
+    """Var of (1/m) sum_(k<m) v_k v_(k+h) in one cell, v zero-mean Gaussian
+    stationary with autocovariance gamma (Isserlis: Cov(v_k v_(k+h), v_l v_(l+h))
+    = gamma(k-l)^2 + gamma(k-l+h) gamma(k-l-h))."""
+    d = np.abs(np.subtract.outer(np.arange(m), np.arange(m)))
+    g = np.r_[gamma, np.zeros(2 * len(gamma))]
+    return float(np.sum(g[d] ** 2 + g[np.abs(d + h)] * g[np.abs(d - h)])) / m ** 2
+
+
+def test_ar_noise_has_the_models_variance_and_autocorrelations():
+    """Fixed seed, 8 trials x 150 x 150 independent cells x 20 frames. (1) the
+    lag-h covariance pooled over frames (per cell, then averaged over cells)
+    equals gamma(h) of the AR model (gamma(0) = 1: variance 1, lags 1..3: the
+    autocorrelations) within 5 standard errors of its exact Gaussian sampling
+    law; (2) every frame pair (k, k + h), including the start-up frames,
+    matches gamma(h) within 5 standard errors, sqrt((gamma(0)^2 +
+    gamma(h)^2) / cells): stationary from frame 0."""
+    b = make(None, n=8, cells=150)
+    v = b.z.astype(np.float64).transpose(1, 0, 2, 3).reshape(DEFAULT.frames, -1)   # (K, cells)
+    K, cells = v.shape
+    gamma = ar_autocovariance(DEFAULT.ar_coefficients, K - 1)
+    for h in range(4):
+        per_pair = np.mean(v[:K - h] * v[h:], axis=1)                            # (K - h,)
+        se_pooled = np.sqrt(_lag_product_variance(gamma, h, K - h) / cells)
+        assert abs(per_pair.mean() - gamma[h]) < 5 * se_pooled, (h, per_pair.mean(), gamma[h])
+        se_pair = np.sqrt((gamma[0] ** 2 + gamma[h] ** 2) / cells)
+        assert np.all(np.abs(per_pair - gamma[h]) < 5 * se_pair), (h, per_pair - gamma[h])
