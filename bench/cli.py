@@ -45,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     from bench.executors import default_workers
     p = _Parser(prog="bench", description="Benchmark radar maneuver detectors, trackers and TBD methods.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    ls = sub.add_parser("list", help="methods and scenarios, with task and summary")
+    ls = sub.add_parser("list", help="tasks, methods and scenarios, with task and summary")
     ls.add_argument("-v", "--verbose", action="store_true", help="show every parameter with its default")
     run = sub.add_parser("run", help="run (or resume) a sweep")
     run.add_argument("sweep", nargs="?", help="sweep file (TOML)")
@@ -85,6 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def cmd_list(args) -> int:
     from bench.params import describe_params
+    print("tasks:")
+    for name, task in registry.tasks().items():
+        print(f"  {name:<20} {task.summary()}")
     for title, table in (("scenarios", registry.scenarios()), ("methods", registry.methods())):
         print(f"{title}:")
         for name, cls in table.items():
@@ -170,8 +173,10 @@ def cmd_run(args) -> int:
     viewer = None
     if args.viewer:
         from bench.recording import LiveViewer
+        tasks = {m.label: registry.get_task(task) for m, task in zip(plan.methods, plan.method_tasks)}
         try:
-            viewer = LiveViewer(application_id="radar-bench", recording_id=f"{plan.name}-{plan.fingerprint()}")
+            viewer = LiveViewer(tasks=tasks, application_id="radar-bench",
+                                recording_id=f"{plan.name}-{plan.fingerprint()}")
         except RuntimeError as exc:
             raise ConfigError("--viewer", str(exc)) from None
     on_result = None

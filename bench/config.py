@@ -39,7 +39,6 @@ from bench import registry
 from bench.errors import ConfigError
 from bench.params import build_params, is_tuple_field, params_as_dict
 from bench.rng import stable_key
-from bench.tasks import handler
 
 TOP_KEYS = {"name", "description", "scenario", "scenarios", "trials", "seed", "snr_db", "chunk",
             "scenario_params", "methods", "calibration", "record", "provenance"}
@@ -423,9 +422,10 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     method_tasks = tuple(registry.get_method(m.name).task for m in methods)
     calibration = _parse_calibration(data.get("calibration", {}))
     for i, (m, task) in enumerate(zip(methods, method_tasks)):
-        if calibration.mode not in handler(task).calibration_modes:
+        modes = registry.get_task(task).calibration_modes
+        if calibration.mode not in modes:
             raise ConfigError("calibration.mode", f"{calibration.mode!r} does not apply to {m.label!r} ({task}); "
-                                                  f"use one of {', '.join(map(repr, handler(task).calibration_modes))}")
+                                                  f"use one of {', '.join(map(repr, modes))}")
     record = _expect_table(data.get("record", {}), "record")
     _reject_unknown(record, {"trials", "timeline_snr_db"}, "record")
     record_trials = _expect_int(record.get("trials", 1), "record.trials", 0, 1000)
@@ -450,7 +450,7 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
 def _calibration_trial_runs(plan: Plan) -> int:
     """h0_trials x (scenario config, method config) pairs whose threshold is calibrated."""
     pairs = sum(1 for s in plan.scenarios for m, task in zip(plan.methods, plan.method_tasks)
-                if task in s.tasks and handler(task).calibrated)
+                if task in s.tasks and registry.get_task(task).calibrated)
     return plan.calibration.h0_trials * pairs
 
 

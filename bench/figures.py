@@ -98,18 +98,19 @@ def runtime(per_method: pd.DataFrame, path: Path) -> Path:
     return _save(fig, path)
 
 
-def trial_timeline(record, path: Path, title: str) -> Path:
-    """One trial's statistic and threshold per method over time (the paper's single-run figure)."""
-    methods = list(record.methods.items())
-    fig, axes = plt.subplots(len(methods), 1, figsize=(7.5, 1.9 * len(methods) + 0.6), sharex=True,
+def trial_timeline(t: np.ndarray, series: dict[str, tuple[np.ndarray, float, np.ndarray]], path: Path,
+                   title: str) -> Path:
+    """One trial's statistic and threshold per method over time (the paper's single-run figure);
+    ``series``: label -> (statistic (K,), threshold, alarms (K,) bool)."""
+    fig, axes = plt.subplots(len(series), 1, figsize=(7.5, 1.9 * len(series) + 0.6), sharex=True,
                              squeeze=False)
-    for ax, (i, (label, tr)) in zip(axes[:, 0], enumerate(methods)):
+    for ax, (i, (label, (statistic, threshold, alarms))) in zip(axes[:, 0], enumerate(series.items())):
         color = f"C{i % 10}"
-        ax.plot(record.t, tr.statistic, color=color, lw=1.2, label=label)
-        ax.axhline(tr.threshold, color="k", lw=0.9, ls="--", label="threshold")
-        hit = np.asarray(tr.alarms, bool)
-        ax.plot(record.t[hit], tr.statistic[hit], "v", color="crimson", ms=4, label="alarm")
-        ax.set_yscale("symlog", linthresh=max(tr.threshold, 1e-6))
+        ax.plot(t, statistic, color=color, lw=1.2, label=label)
+        ax.axhline(threshold, color="k", lw=0.9, ls="--", label="threshold")
+        hit = np.asarray(alarms, bool)
+        ax.plot(t[hit], statistic[hit], "v", color="crimson", ms=4, label="alarm")
+        ax.set_yscale("symlog", linthresh=max(threshold, 1e-6))
         ax.legend(fontsize=7, loc="upper left")
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("time (s)")

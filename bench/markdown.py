@@ -39,6 +39,22 @@ def table(header: list[str], rows: list[list]) -> str:
     return "\n".join(lines)
 
 
+def cell(value) -> str:
+    """Any value as a table cell: numbers by :func:`fmt`, text with its pipes escaped."""
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value))
+    if isinstance(value, (float, np.floating)):
+        return fmt(float(value))
+    if isinstance(value, (int, np.integer)):
+        return fmt(int(value))
+    return "–" if value is None else str(value).replace("|", "\\|")
+
+
+def frame_table(df: pd.DataFrame) -> str:
+    """A whole DataFrame as a Markdown table (column names as the header)."""
+    return table([cell(c) for c in df.columns], [[cell(v) for v in row] for row in df.itertuples(index=False)])
+
+
 def snr50(summary: pd.DataFrame, pd_column: str = "pd") -> pd.DataFrame:
     """Per config: the SNR at which ``pd_column`` (default ``pd``; also
     ``pd_step``, ``pd_equal_chance``) reaches 0.5 (``mid``) and its interval

@@ -1,43 +1,38 @@
 """Outputs of a run, all rebuilt from ``results.sqlite`` (``bench report DIR``).
 
 Writes ``trials.csv``, ``summary.csv``, ``calibration.csv``, ``steps.csv``
-(per-step RMSE of trackers and TBD methods), ``report.md``, ``figures/*.png``
-and ``recording.rrd``. The sections of each task live with it: detection
-here, :mod:`bench.report_tbd`, :mod:`bench.report_tracking`. Every file is written to a temporary
-name and renamed, so no reader ever sees a half-written output.
+(per-step tables of the tasks that have them), ``report.md``,
+``figures/*.png`` and ``recording.rrd`` (docs/architecture.md, 'Outputs of a
+run'). The report is the sweep's plan and calibration, then each task's own
+sections (:meth:`bench.tasks.base.Task.report_sections`: the calibrated
+tasks first, next to their calibration), then runtime, failures, the
+recording and provenance. Every file is written to a temporary name and
+renamed, so no reader ever sees a half-written output.
 """
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from bench import figures, report_tbd, report_tracking
-from bench.core import MANEUVER_DETECTION, TBD, TRACKING
-from bench.errors import ConfigError
+from bench import figures, registry
 from bench.calibration import EQUAL_CHANCE_PD
+from bench.errors import ConfigError
 from bench.markdown import fmt as _fmt
-from bench.markdown import fmt_crossing as _fmt_crossing
-from bench.markdown import snr50 as _snr50
 from bench.markdown import table as _table
-from bench.metrics import equal_chance_pd, per_step_rmse, roc_curve, tracking_steps
 from bench.provenance import provenance
 from bench.recording import TrialRecord, write_recording
 from bench.runner import calibrations
 from bench.store import Store
-from bench.tasks import handler
+from bench.tasks import ReportContext, summary_columns
 
 TRIAL_KEYS = ["scenario", "method", "config", "params", "snr_db", "trial", "seed", "realised_snr_db",
               "threshold"]
-SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials", "pd", "pd_low", "pd_high",
-                   "pfa", "pfa_low", "pfa_high", "delay_mean", "delay_low", "delay_high", "delay_median",
-                   "rmse_mean", "rmse_low", "rmse_high", "seconds_per_trial", "threshold", "realised_snr_db",
-                   "divergence_rate", "divergence_low", "divergence_high", "nees_mean",
-                   "pd_step", "pd_step_low", "pd_step_high",
-                   "pd_equal_chance", "pd_equal_chance_low", "pd_equal_chance_high",
-                   "rmse_all_mean", "rmse_all_low", "rmse_all_high", "snr_offset_unit_innovation_db"]
+#: Summary columns the recording's table always shows, besides the tasks' headline columns.
+RECORDING_KEYS = ("scenario", "method", "snr_db", "n_trials")
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -87,31 +82,26 @@ def trials_frame(store: Store, record: dict) -> tuple[pd.DataFrame, dict]:
     return df[TRIAL_KEYS + rest].reset_index(drop=True), series
 
 
-def _add_equal_chance_pd(summary: pd.DataFrame, trials: pd.DataFrame, cal) -> None:
-    """Pd of each SNR level at the calibration's window threshold (same chance Pd for every detector)."""
-    mine = trials[(trials.scenario == cal.scenario) & (trials.config == cal.method)]
-    for snr, g in mine.groupby("snr_db"):
-        rows = (summary.scenario == cal.scenario) & (summary.config == cal.method) & (summary.snr_db == snr)
-        for col, value in equal_chance_pd(g["peak_statistic"], cal.equal_chance_threshold).items():
-            summary.loc[rows, col] = value
+def _task_of(record: dict) -> dict:
+    """Method config label -> its task (bench.tasks), from the stored plan."""
+    return {m["label"]: registry.get_task(m["task"]) for m in record["methods"]}
 
 
 def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record: dict,
                   cals=()) -> pd.DataFrame:
-    """One row per (scenario config, method config, SNR). For TBD configs the
-    Pfa columns are the scene Pfa of the threshold used, measured on the
-    calibration null scenes."""
+    """One row per (scenario config, method config, SNR): each task's summary
+    of its trials, completed by its calibrations (:meth:`Task.apply_calibration`)."""
     tasks = {m["label"]: m["task"] for m in record["methods"]}
-    parts = [handler(task).summarise(g, series) for task, g in trials.groupby(trials.config.map(tasks))] \
+    task_of = _task_of(record)
+    columns = summary_columns(registry.tasks().values())
+    parts = [registry.get_task(task).summarise(g, series) for task, g in trials.groupby(trials.config.map(tasks))] \
         if len(trials) else []
-    summary = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=SUMMARY_COLUMNS)
-    summary = summary.reindex(columns=list(dict.fromkeys([*SUMMARY_COLUMNS, *summary.columns])))
+    summary = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=columns)
+    summary = summary.reindex(columns=list(dict.fromkeys([*columns, *summary.columns])))
     for c in cals:
         rows = (summary.scenario == c.scenario) & (summary.config == c.method)
-        if tasks.get(c.method) == TBD and rows.any():
-            summary.loc[rows, ["pfa", "pfa_low", "pfa_high"]] = [c.used_pfa, c.used_pfa_low, c.used_pfa_high]
-        if tasks.get(c.method) == MANEUVER_DETECTION and rows.any():
-            _add_equal_chance_pd(summary, trials, c)
+        if rows.any():
+            task_of[c.method].apply_calibration(summary, trials, c)
     ev = runs[(runs.phase == "evaluation") & runs.error.isna()]
     speed = ev.groupby(["scenario", "method", "snr_db"]).agg(s=("seconds", "sum"), n=("n", "sum"))
     speed = (speed.s / speed.n).rename("seconds_per_trial").reset_index().rename(columns={"method": "config"})
@@ -121,26 +111,18 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
     order = {m["label"]: i for i, m in enumerate(record["methods"])}
     summary = summary.assign(_s=summary.scenario.map(_scenario_order(record)), _o=summary.config.map(order))
     summary = summary.sort_values(["_s", "_o", "snr_db"])
-    return summary[SUMMARY_COLUMNS].reset_index(drop=True)
+    return summary[columns].reset_index(drop=True)
 
 
 def steps_frame(trials: pd.DataFrame, series: dict, record: dict, t_of: dict) -> pd.DataFrame:
-    """Per (scenario, config, SNR, step): position RMSE (TBD: over detected
-    trials, and ``rmse_position_all`` over every trial) and, for trackers,
-    RMSE and mean estimate vs truth per component."""
-    tasks = {m["label"]: m["task"] for m in record["methods"]}
+    """Per (scenario, config, SNR, step): the task's per-step table
+    (:meth:`Task.steps`), with the step's time."""
+    task_of = _task_of(record)
     rows = []
     for (scenario, config, snr), cols in series.items():
         g = trials[(trials.scenario == scenario) & (trials.config == config) & (trials.snr_db == snr)]
-        if tasks.get(config) == TBD:
-            detected = g["detected"].to_numpy(bool)
-            df = pd.DataFrame({"rmse_position": per_step_rmse(cols["sq_err_m2"][detected]),
-                               "n_trials": int(detected.sum()),
-                               "rmse_position_all": per_step_rmse(cols["sq_err_m2"])})
-        elif tasks.get(config) == TRACKING:
-            labels = [k[len("est_"):] for k in cols if k.startswith("est_")]
-            df = tracking_steps(cols, labels).assign(n_trials=len(g))
-        else:
+        df = task_of[config].steps(g, cols) if config in task_of else None
+        if df is None:
             continue
         t = t_of.get(scenario)
         df.insert(0, "t", t[:len(df)] if t is not None and len(t) >= len(df) else np.nan)
@@ -165,12 +147,19 @@ def _snr_text(snr: list) -> str:
     return ", ".join(f"{_fmt(x)} dB" for x in snr)
 
 
-def _section_plan(record: dict, store: Store) -> str:
+def _tasks_present(task_of: dict) -> list:
+    """The tasks of the sweep's method configs, in registry order."""
+    present = set(task_of.values())
+    return [t for t in registry.tasks().values() if t in present]
+
+
+def _section_plan(record: dict, store: Store, tasks: list) -> str:
     sweep = record["sweep"]
     cal = sweep["calibration"]
+    units = ", ".join(f"{t.pfa_unit} for {t.short_noun}" for t in tasks if t.calibrated)
     rows = [["seed", sweep["seed"]], ["trials per unit (chunk)", sweep["chunk"]],
-            ["calibration", f"{cal['mode']}, requested Pfa {cal['pfa']:g} (per step for detectors, per scene "
-                            f"for TBD), {cal['h0_trials']} null trials per scenario config"]]
+            ["calibration", f"{cal['mode']}, requested Pfa {cal['pfa']:g}{f' ({units})' if units else ''}, "
+                            f"{cal['h0_trials']} null trials per scenario config"]]
     scenarios = [[f"`{sc['label']}`", sc["name"], ", ".join(sc.get("tasks", [])), sc["params"] or "defaults",
                   _snr_text(sc.get("snr_db", sweep.get("snr_db", []))), sc.get("trials", sweep.get("trials"))]
                  for sc in record["scenarios"]]
@@ -190,14 +179,30 @@ def _section_plan(record: dict, store: Store) -> str:
     ])
 
 
-def _section_calibration(cals, summary: pd.DataFrame, tasks: dict[str, str]) -> str:
+def _calibration_text(calibrated: list) -> str:
+    """What the calibration table shows, for the tasks calibrated in the sweep."""
+    units = ", ".join(f"{t.pfa_unit} for {t.noun}" for t in calibrated)
+    samples = "; ".join(f"{t.short_noun}: {t.null_sample}" for t in calibrated)
+    return " ".join([
+        f"Thresholds are applied by the harness, so every method is compared at the same false-alarm "
+        f"rate: {units}. *Measured Pfa of nominal* is the fraction of null-hypothesis values (separate "
+        f"calibration trials; {samples}) at or above the method's own analytic threshold "
+        "(– where the method has none), with its 95% interval; *empirical* thresholds are the "
+        "(1 − Pfa) quantile of the same values, *gumbel* ones the quantile of a Gumbel law fitted to them. "
+        "*Measured Pfa of the threshold used* is on the same null values (by construction at most the "
+        "requested Pfa for *empirical*; an honest check of the tail fit for *gumbel*).",
+        *(t.calibration_text for t in calibrated if t.calibration_text)])
+
+
+def _section_calibration(cals, summary: pd.DataFrame, task_of: dict) -> str:
     if not cals:
         return ""
     measured = summary.groupby("config").agg(fa_pfa=("pfa", "mean"))
     rows = []
     for c in cals:
-        in_eval = measured.fa_pfa.get(c.method, np.nan) if tasks.get(c.method) == MANEUVER_DETECTION else np.nan
-        rows.append([f"`{c.method}`", c.mode, f"{c.pfa:g} {handler(tasks[c.method]).pfa_unit}",
+        task = task_of[c.method]
+        in_eval = measured.fa_pfa.get(c.method, np.nan) if task.evaluation_pfa else np.nan
+        rows.append([f"`{c.method}`", c.mode, f"{c.pfa:g} {task.pfa_unit}",
                      _fmt(c.nominal, 4),
                      f"{_fmt(c.nominal_pfa)} [{_fmt(c.nominal_pfa_low)}, {_fmt(c.nominal_pfa_high)}]",
                      _fmt(c.used, 4), f"{_fmt(c.used_pfa)} [{_fmt(c.used_pfa_low)}, {_fmt(c.used_pfa_high)}]",
@@ -208,127 +213,12 @@ def _section_calibration(cals, summary: pd.DataFrame, tasks: dict[str, str]) -> 
               "chance Pd [95% CI]", "null values"]
     empty = {"–", "– [–, –]"}
     keep = [j for j in range(len(header)) if any(r[j] not in empty for r in rows)]
-    detectors = any(tasks.get(c.method) == MANEUVER_DETECTION for c in cals)
+    present = _tasks_present({c.method: task_of[c.method] for c in cals})
     return "\n\n".join([
         "## Calibration",
-        "Thresholds are applied by the harness, so every method is compared at the same false-alarm "
-        "rate: per step for detectors, per scene for track-before-detect. *Measured Pfa of nominal* is "
-        "the fraction of null-hypothesis values (separate calibration trials; detectors: all steps after "
-        "warm-up; TBD: one scene score per null scene) at or above the method's own analytic threshold "
-        "(– where the method has none), with its 95% interval; *empirical* thresholds are the "
-        "(1 − Pfa) quantile of the same values, *gumbel* ones the quantile of a Gumbel law fitted to them. "
-        "*Measured Pfa of the threshold used* is on the same null values (by construction at most the "
-        "requested Pfa for *empirical*; an honest check of the tail fit for *gumbel*). *Pfa in "
-        "evaluation* is the per-step false-alarm rate measured before the maneuver onset in the "
-        "evaluation trials, averaged over SNR levels. *Chance Pd* is how often the detection rule fires "
-        "on null trials (no maneuver) within the detection window: the floor Pd falls to as SNR goes "
-        "down, drawn as a dotted line in the Pd figure.",
+        _calibration_text(present),
         _table([header[j] for j in keep], [[r[j] for j in keep] for r in rows]),
-        "Per-step Pfa intervals (here and in summary.csv) are counted over trials, the independent "
-        "units: a window statistic's alarms cluster within a trial, so its interval is wider than one "
-        "that treats steps as independent (ratio-estimator variance over trials, Student's quantile on "
-        "the trials that alarmed). Scene Pfa (TBD) has one value per scene: Wilson's interval." if detectors else "",
-    ])
-
-
-def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: float,
-                       chance: dict[str, float]) -> str:
-    if summary.empty:
-        return "## Detection\n\nNo results."
-    figures.pd_vs_snr(summary, fig_dir / "pd_vs_snr.png", pfa, title, chance)
-    figures.delay_vs_snr(summary, fig_dir / "delay_vs_snr.png", title)
-    snr = summary.snr_db
-    rows = []
-    for c in _snr50(summary).itertuples():
-        last = summary[summary.config == c.config].sort_values("snr_db").iloc[-1]
-        rows.append([f"`{c.config}`", _fmt_crossing(c.mid, snr), f"[{_fmt_crossing(c.low, snr)}, "
-                     f"{_fmt_crossing(c.high, snr)}]", f"{_fmt(last.pd)} at {_fmt(last.snr_db)} dB",
-                     _fmt(last.delay_mean)])
-    detail = summary.pivot_table(index="snr_db", columns="config", values="pd", sort=False)
-    detail_rows = [[_fmt(s)] + [_fmt(v) for v in r] for s, r in zip(detail.index, detail.to_numpy())]
-    return "\n\n".join([
-        "## Detection probability",
-        "![Pd vs SNR](figures/pd_vs_snr.png)",
-        "SNR at which Pd = 0.5, interpolated linearly between levels; the interval is where the 95% "
-        "Pd band crosses 0.5. `< x` / `> x`: the crossing lies outside the swept range.",
-        _table(["config", "SNR at Pd = 0.5 (dB)", "interval (dB)", "Pd at the highest SNR",
-                "mean delay there (steps)"], rows),
-        "<details><summary>Pd per SNR level</summary>\n\n" +
-        _table(["SNR (dB)"] + [f"`{c}`" for c in detail.columns], detail_rows) + "\n\n</details>",
-        "## Detection delay",
-        "![delay vs SNR](figures/delay_vs_snr.png)",
-        "Delay = first alarm at or after the onset minus the onset, over detected trials only.",
-    ])
-
-
-def _section_ranking(summary: pd.DataFrame) -> str:
-    """Method families ordered by the lowest SNR at which any of their configs reaches Pd = 0.5."""
-    best = _snr50(summary).sort_values("order", kind="stable").drop_duplicates("method")
-    lead = best.order.iloc[0]
-    table = [[f"{rank}", f"`{b.method}`", f"`{b.config}`", _fmt_crossing(b.mid, summary.snr_db),
-              f"{b.order - lead:+.2g}" if np.isfinite(b.order) and np.isfinite(lead) else "–"]
-             for rank, b in enumerate(best.itertuples(), start=1)]
-    return "\n\n".join([
-        "## Ranking of methods",
-        "Each method at its best config in this sweep, by the SNR at which Pd reaches 0.5 "
-        "(all at the same calibrated per-step Pfa).",
-        _table(["rank", "method", "best config", "SNR at Pd = 0.5 (dB)", "dB behind the first"], table),
-    ])
-
-
-PD_DEFINITIONS = (("pd", "any alarm in the window"), ("pd_step", "per-step average"),
-                  ("pd_equal_chance", "equal chance Pd"))
-
-
-def _section_pd_definitions(summary: pd.DataFrame, chance_pd: float) -> str:
-    """SNR at Pd = 0.5 and the rank of every config under each Pd definition."""
-    if summary.empty or summary.pd_step.isna().all():
-        return ""
-    cells, ranks = {}, {}
-    for column, _ in PD_DEFINITIONS:
-        s = _snr50(summary, column)
-        ranks[column] = dict(zip(s.config, s.order.rank(method="min")))
-        cells[column] = {b.config: _fmt_crossing(b.mid, summary.snr_db) for b in s.itertuples()}
-    configs = list(dict.fromkeys(summary.config))
-    rows = [[f"`{c}`"] + [f"{cells[col][c]} (#{int(ranks[col][c])})" for col, _ in PD_DEFINITIONS]
-            for c in configs]
-    return "\n\n".join([
-        "## Pd under three definitions",
-        "SNR at Pd = 0.5 (dB) and rank, per config. *Any alarm in the window*: a trial is detected if "
-        "any step of the detection window after the onset alarms at the per-step threshold (the columns "
-        "`pd*` of summary.csv). *Per-step average*: the fraction of the window's steps that alarm, "
-        "averaged over trials (`pd_step*`; the cumulant paper's 平均检测概率, \"average detection "
-        "probability\", Fig. 3, reads most naturally this way). *Equal chance Pd*: every detector's "
-        f"threshold is set on the null trials' window peaks so that it alarms in {chance_pd:g} of "
-        "null trials' windows (a per-trial false-alarm rate), then a trial is detected if its window peak "
-        "reaches it (`pd_equal_chance*`). The first definition favours statistics that are white from step "
-        "to step (a single-step test gets about one chance per step, see the chance Pd above); the other two "
-        "do not.",
-        _table(["config"] + [name for _, name in PD_DEFINITIONS], rows),
-    ])
-
-
-def _section_roc(store: Store, trials: pd.DataFrame, summary: pd.DataFrame, fig_dir: Path, title: str,
-                 pfa: float) -> str:
-    """ROC at the SNR level where the configs' mean Pd is closest to 0.5."""
-    if summary.empty or "peak_statistic" not in trials:
-        return ""
-    mean_pd = summary.groupby("snr_db").pd.mean()
-    snr = float((mean_pd - 0.5).abs().idxmin())
-    curves = {}
-    for (scenario, label), g in trials[trials.snr_db == snr].groupby(["scenario", "config"], sort=False):
-        null, _peaks, _nominal = store.null_values(scenario, label)
-        if null.size:
-            curves[label] = roc_curve(null, g.peak_statistic.to_numpy())
-    if not curves:
-        return ""
-    figures.roc(curves, fig_dir / "roc.png", snr, pfa, title)
-    return "\n\n".join([
-        "## ROC",
-        f"Pd against per-step Pfa at {_fmt(snr)} dB, the level where the configs' mean Pd is closest to "
-        "0.5, computed from the stored statistics without re-running: Pfa from the calibration null "
-        "values, Pd from each trial's peak statistic in the detection window.",
-        "![ROC](figures/roc.png)",
+        "\n\n".join(t.calibration_note for t in present if t.calibration_note),
     ])
 
 
@@ -373,15 +263,16 @@ def _section_provenance(record: dict, store: Store, prov: dict) -> str:
     return "## Provenance\n\n" + _table(["", ""], rows)
 
 
-RECORDING_TEXT = """## Recording
-
-`recording.rrd` holds the first {n} trial(s) of every SNR level of each scenario config, on the
-timelines `step` and `time`: the true and measured positions (2D, y negated so north is up); per
-detector the statistic, the threshold in force and the alarms; per tracker the estimated trajectory
-and its error per state component, with glint-corrupted measurements marked; per TBD method the
-frames as heatmaps with the true and backtracked tracks, the last-frame value map and the scene
-score against its threshold. Pd and RMSE against SNR per config are under `/summary`. Open it with
-`bench view {out}` or `rerun {out}/recording.rrd`."""
+def _section_recording(n: int, out_dir: Path, tasks: list) -> str:
+    """What ``recording.rrd`` holds: the harness's part, then each task's
+    (``Task.recording_text``)."""
+    body = ("`recording.rrd` holds the first {n} trial(s) of every SNR level of each scenario config, on the "
+            "timelines `step` and `time`: the true and measured positions (2D, y negated so north is up); " +
+            "; ".join(t.recording_text for t in tasks if t.recording_text) +
+            ". Pd and RMSE against SNR per config are under `/summary`. Open it with `bench view {out}` or "
+            "`rerun {out}/recording.rrd`.")
+    text = textwrap.fill(body, width=100)
+    return "## Recording\n\n" + text.replace("{n}", str(n)).replace("{out}", str(out_dir))
 
 
 def preset_notes(source: str) -> str:
@@ -406,35 +297,50 @@ def build_outputs(out_dir: Path, *, recording: bool = True) -> Path:
         store.close()
 
 
-def _detection_parts(store, trials, summary, cals, fig_dir, title, pfa, chance_pd) -> list[str]:
-    if summary.empty:
-        return []
-    return [_section_detection(summary, fig_dir, title, pfa, {c.method: c.chance_pd for c in cals}),
-            _section_ranking(summary), _section_pd_definitions(summary, chance_pd), _section_roc(store, trials, summary, fig_dir, title, pfa)]
+def build_outputs(out_dir: Path, *, recording: bool = True) -> Path:
+    """(Re)build every output of a run folder from its store; returns report.md's path."""
+    out_dir = Path(out_dir)
+    db = out_dir / "results.sqlite"
+    if not db.exists():
+        raise ConfigError("", f"{out_dir} has no results.sqlite (not a bench run folder)")
+    store = Store(db)
+    try:
+        return _build(store, out_dir, recording)
+    finally:
+        store.close()
 
 
-def _timeline_parts(records, fig_dir: Path, title: str, snr_db: float | None = None) -> list[str]:
-    """The statistic of each detector on one recorded trial: at the recorded SNR level
-    nearest ``snr_db`` (the sweep's ``[record] timeline_snr_db``), else the highest."""
-    records = [r for r in records if r.methods and all(m.statistic is not None for m in r.methods.values())]
-    if not records:
-        return []
-    if snr_db is None:
-        top = max(records, key=lambda r: (r.snr_db if r.snr_db is not None else -np.inf, -r.trial))
-    else:
-        top = min(records, key=lambda r: (abs(r.snr_db - snr_db) if r.snr_db is not None else np.inf, r.trial))
-    figures.trial_timeline(top, fig_dir / "trial_timeline.png",
-                           f"{title}: trial {top.trial} at {_fmt(top.snr_db)} dB")
-    return ["## One trial over time",
-            f"Statistic, threshold in force and alarms of each method on trial {top.trial} at "
-            f"{_fmt(top.snr_db)} dB (symmetric-log scale).",
-            "![one trial](figures/trial_timeline.png)"]
+def _task_contexts(present: list, task_of: dict, summary, trials, steps, series, cals, records, store,
+                   out_dir: Path, sweep: dict) -> list:
+    """(task, its report context) per task present, calibrated tasks first
+    (their sections follow the calibration)."""
+    out = []
+    for task in sorted(present, key=lambda t: not t.calibrated):
+        configs = frozenset(label for label, t in task_of.items() if t is task)
+        out.append((task, ReportContext(
+            summary=summary[summary.config.isin(configs)], trials=trials[trials.config.isin(configs)],
+            steps=steps[steps.config.isin(configs)] if not steps.empty else steps,
+            series={k: v for k, v in series.items() if k[1] in configs},
+            calibrations=[c for c in cals if c.method in configs], records=records, store=store,
+            fig_dir=out_dir / "figures", title=sweep["name"], pfa=sweep["calibration"]["pfa"],
+            chance_pd=sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD),
+            timeline_snr_db=sweep["record"].get("timeline_snr_db"), configs=configs)))
+    return out
+
+
+def _recording_summary(summary: pd.DataFrame, tasks) -> pd.DataFrame:
+    """The summary as the recording shows it: configs as methods, the headline columns."""
+    wanted = set(RECORDING_KEYS).union(*(t.headline_columns for t in tasks))
+    summary = summary.assign(method=summary.config)
+    return summary[[c for c in summary.columns if c in wanted]]
 
 
 def _build(store: Store, out_dir: Path, recording: bool) -> Path:
     record = store.plan()
     sweep = record["sweep"]
     runs, units = store.runs(), store.units()
+    task_of = _task_of(record)
+    present = _tasks_present(task_of)
     trials, series = trials_frame(store, record)
     cals = calibrations(store, [s["label"] for s in record["scenarios"]], [m["label"] for m in record["methods"]],
                         sweep["calibration"]["pfa"], sweep["calibration"]["mode"],
@@ -449,26 +355,21 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
         _write_csv(steps, out_dir / "steps.csv")
     fig_dir = out_dir / "figures"
     title = sweep["name"]
-    pfa = sweep["calibration"]["pfa"]
-    tasks = {m["label"]: m["task"] for m in record["methods"]}
-    of_task = {task: summary[summary.config.map(tasks) == task] for task in (MANEUVER_DETECTION, TBD, TRACKING)}
     records = [TrialRecord.from_bytes(b) for b in store.records()]
+    contexts = _task_contexts(present, task_of, summary, trials, steps, series, cals, records, store, out_dir, sweep)
     done, total = len(units), int(store.meta("units_total") or len(units))
     parts = [f"# {title}", sweep.get("description") or "",
              f"Reproduce with `{record.get('command', '')}`." +
              ("" if done >= total else f" **Incomplete run: {done} of {total} units stored.**"),
              preset_notes(record.get("source", "")),   # the paper-vs-ours table leads a preset's report
-             _section_plan(record, store), _section_calibration(cals, summary, tasks)]
-    parts += _detection_parts(store, trials, of_task[MANEUVER_DETECTION], cals, fig_dir, title, pfa,
-                              sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD))
-    parts += report_tbd.sections(of_task[TBD], steps, store, cals, fig_dir, title, pfa)
-    parts += report_tracking.sections(of_task[TRACKING], steps, fig_dir, title)
-    parts += _timeline_parts(records, fig_dir, title, sweep["record"].get("timeline_snr_db"))
+             _section_plan(record, store, present), _section_calibration(cals, summary, task_of)]
+    parts += [s for task, ctx in contexts for s in task.report_sections(ctx)]
+    parts += [s for task, ctx in contexts for s in task.trial_sections(ctx)]
     parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
     if recording and records:
-        write_recording(out_dir / "recording.rrd", records, summary.assign(method=summary.config),
-                        recording_id=f"{title}-{store.meta('fingerprint')}")
-        parts.append(RECORDING_TEXT.format(n=sweep["record"]["trials"], out=out_dir))
+        write_recording(out_dir / "recording.rrd", records, _recording_summary(summary, present),
+                        tasks=task_of, recording_id=f"{title}-{store.meta('fingerprint')}")
+        parts.append(_section_recording(sweep["record"]["trials"], out_dir, present))
     parts.append(_section_provenance(record, store, provenance()))
     report = out_dir / "report.md"
     _write_text(report, "\n\n".join(p for p in parts if p) + "\n")

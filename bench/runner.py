@@ -34,10 +34,10 @@ from bench.config import Plan
 from bench.executors import make_executor
 from bench.progress import Progress
 from bench.provenance import provenance
-from bench.recording import TrialRecord
+from bench.recording.record import TrialRecord
 from bench.rng import CALIBRATION, EVALUATION, TrialRNG
 from bench.store import MethodRun, Store, UnitResult
-from bench.tasks import handler
+from bench.tasks.base import Scene
 
 RUN_FILES = ("results.sqlite", "results.sqlite-wal", "results.sqlite-shm", "plan.toml", "trials.csv",
              "summary.csv", "calibration.csv", "steps.csv", "report.md", "recording.rrd")
@@ -79,9 +79,14 @@ def _chunks(total: int, chunk: int):
         yield start, min(chunk, total - start)
 
 
+def _task_of(method_config):
+    """The task (bench.tasks) of a method config."""
+    return registry.get_task(registry.get_method(method_config.name).task)
+
+
 def _calibrated(plan: Plan, sc) -> list:
     """The method configs on scenario config ``sc`` whose task thresholds a statistic."""
-    return [m for m in plan.pairs(sc) if handler(registry.get_method(m.name).task).calibrated]
+    return [m for m in plan.pairs(sc) if _task_of(m).calibrated]
 
 
 def plan_units(plan: Plan) -> tuple[list[Unit], list[Unit]]:
@@ -106,27 +111,32 @@ def _error_text(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}{where}"
 
 
-def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict) -> bytes:
+def _measurements_xy(batch, i: int):
+    """Trial ``i``'s measurements in the plane: the scenario's ``z_xy``, else
+    the first two components of point measurements ``z`` (n, K, m >= 2); None
+    for other measurements (scalars, frames)."""
+    z_xy = batch.meta.get("z_xy")
+    if z_xy is not None:
+        return z_xy[i]
+    return batch.z[i][:, :2] if batch.z.ndim == 3 and batch.z.shape[-1] >= 2 else None
+
+
+def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict, tasks) -> bytes:
+    """Trial ``i`` as the record the driver draws: the harness's truth and
+    measurements, what each of ``tasks`` keeps of the scene, the methods' traces."""
     sc = plan.scenarios[unit.scenario_index]
     pos = list(batch.meta.get("position_index", (0, 1)))
-    z_xy = batch.meta.get("z_xy")
-    measured = z_xy[i] if z_xy is not None else (batch.z[i][:, :2] if batch.z.ndim == 3 else None)
-    extras = {}
-    if batch.z.ndim == 4:                       # TBD frames (n, K, H, W)
-        cells = batch.meta.get("target_cells")
-        extras = {"frames": batch.z[i], "grid": dict(batch.meta["grid"]),
-                  "truth_cells": None if cells is None else np.asarray(cells[i])}
-    elif batch.meta.get("glint_outlier") is not None:
-        extras = {"measurement_flags": np.asarray(batch.meta["glint_outlier"][i]).reshape(batch.steps, -1).any(axis=1)}
-    rec = TrialRecord(scenario=sc.label, snr_db=unit.snr_db, trial=int(batch.trials[i]), t=batch.t,
-                      truth_xy=batch.truth[i][:, pos[:2]], measurements_xy=measured, methods=traces, **extras)
+    scene = Scene.union(task.recorded_scene(batch, i) for task in tasks)
+    rec = TrialRecord(sc.label, unit.snr_db, int(batch.trials[i]), batch.t, truth_xy=batch.truth[i][:, pos[:2]],
+                      measurements_xy=_measurements_xy(batch, i), methods=traces, arrays=scene.arrays,
+                      images=scene.images, info=scene.info)
     return rec.to_bytes()
 
 
-def execute_unit(task: UnitTask) -> UnitResult:
+def execute_unit(work: UnitTask) -> UnitResult:
     """Generate one unit's batch, run every method config on it, evaluate."""
     registry.discover()
-    plan, unit = task.plan, task.unit
+    plan, unit = work.plan, work.unit
     sc = plan.scenarios[unit.scenario_index]
     domain = CALIBRATION if unit.phase == "calibration" else EVALUATION
     rng = TrialRNG(plan.seed, domain, sc.key, range(unit.trial_start, unit.trial_start + unit.n))
@@ -141,35 +151,35 @@ def execute_unit(task: UnitTask) -> UnitResult:
         if unit.phase == "evaluation" else []
     traces: dict[int, dict] = {i: {} for i in recorded}
     methods = _calibrated(plan, sc) if unit.phase == "calibration" else plan.pairs(sc)
+    methods = [mc for mc in methods if work.methods is None or mc.label in work.methods]
     for mc in methods:
-        if task.methods is not None and mc.label not in task.methods:
-            continue
         method_cls = registry.get_method(mc.name)
         run = MethodRun(mc.label, 0.0)
         t1 = time.perf_counter()
         try:
-            task_handler = handler(method_cls.task)
+            task = registry.get_task(method_cls.task)
             method = method_cls()
-            if unit.phase == "evaluation" and task_handler.calibrated and task.thresholds.get(mc.label) is None:
+            if unit.phase == "evaluation" and task.calibrated and work.thresholds.get(mc.label) is None:
                 raise RuntimeError("no threshold: the calibration of this method failed")
-            out = task_handler.check_output(method.run(batch, mc.params), batch)
+            out = task.check_output(method.run(batch, mc.params), batch)
             if unit.phase == "calibration":
-                run.null_values = task_handler.null_values(batch, out)
-                run.null_peaks = task_handler.null_peaks(batch, out)
-                run.null_cells = task_handler.null_cells(batch, out)
+                run.null_values = task.null_values(batch, out)
+                run.null_peaks = task.null_peaks(batch, out)
+                run.null_cells = task.null_cells(batch, out)
                 run.nominal_threshold = float(method.nominal_threshold(mc.params, plan.calibration.pfa, batch))
             else:
-                threshold = task.thresholds.get(mc.label)
+                threshold = work.thresholds.get(mc.label)
                 threshold = float("nan") if threshold is None else float(threshold)
-                run.metrics = task_handler.trial_metrics(batch, out, threshold)
+                run.metrics = task.trial_metrics(batch, out, threshold)
                 run.metrics["threshold"] = np.full(unit.n, threshold)
                 for i in recorded:
-                    traces[i][mc.label] = task_handler.trace(batch, out, i, threshold)
+                    traces[i][mc.label] = task.recorded_method(batch, out, i, threshold)
         except Exception as exc:  # noqa: BLE001 - one method's failure never stops the others
             run.error = _error_text(exc)
         run.seconds = time.perf_counter() - t1
         result.runs.append(run)
-    result.records = [(int(batch.trials[i]), _trial_record(plan, unit, batch, i, traces[i]))
+    tasks = list(dict.fromkeys(_task_of(mc) for mc in methods))
+    result.records = [(int(batch.trials[i]), _trial_record(plan, unit, batch, i, traces[i], tasks))
                       for i in recorded]
     result.snr_definition = str(batch.meta.get("snr_definition", ""))
     return result

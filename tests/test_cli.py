@@ -10,7 +10,17 @@ import time
 import pandas as pd
 import pytest
 
-from bench.report import SUMMARY_COLUMNS
+from bench import registry
+from bench.tasks import summary_columns
+
+#: summary.csv's columns with the built-in tasks, in the order readers have always found them.
+SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials", "pd", "pd_low", "pd_high",
+                   "pfa", "pfa_low", "pfa_high", "delay_mean", "delay_low", "delay_high", "delay_median",
+                   "rmse_mean", "rmse_low", "rmse_high", "seconds_per_trial", "threshold", "realised_snr_db",
+                   "divergence_rate", "divergence_low", "divergence_high", "nees_mean",
+                   "pd_step", "pd_step_low", "pd_step_high",
+                   "pd_equal_chance", "pd_equal_chance_low", "pd_equal_chance_high",
+                   "rmse_all_mean", "rmse_all_low", "rmse_all_high", "snr_offset_unit_innovation_db"]
 
 TRIAL_COLUMNS = ["scenario", "method", "params", "snr_db", "trial", "seed", "detected", "delay",
                  "false_alarms", "null_steps"]
@@ -18,8 +28,12 @@ TRIAL_COLUMNS = ["scenario", "method", "params", "snr_db", "trial", "seed", "det
 
 def test_list_shows_methods_and_scenarios(bench_cli):
     out = bench_cli("list", check=True).stdout
-    for name in ("cv-turn-cv", "innovation", "cumulant", "maneuver-detection"):
+    for name in ("cv-turn-cv", "innovation", "cumulant", "maneuver-detection", "tasks:", "tracking", "tbd"):
         assert name in out
+
+
+def test_summary_columns_keep_their_order():
+    assert summary_columns(registry.tasks().values()) == SUMMARY_COLUMNS
 
 
 def test_run_writes_every_output_and_report_rebuilds_them(bench_cli, write_sweep, tmp_path):

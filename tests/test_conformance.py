@@ -9,7 +9,7 @@ from bench import registry
 from bench.core import MANEUVER_DETECTION
 from bench.params import build_params
 from bench.rng import TrialRNG
-from bench.tasks import handler
+from bench.registry import get_task
 
 PAIRS = [(s, m) for s, scls in registry.scenarios().items() for m, mcls in registry.methods().items()
          if mcls.task in scls.tasks]
@@ -39,7 +39,7 @@ def _arrays(out) -> dict:
 @pytest.mark.parametrize("scenario, method", PAIRS)
 def test_method_conforms(scenario, method):
     cls = registry.get_method(method)
-    task = handler(cls.task)
+    task = get_task(cls.task)
     levels = (None, 0.0, 10.0) if task.calibrated else (0.0, 10.0)     # null trials only where calibrated
     for snr in levels:
         batch = _batch(scenario, snr)

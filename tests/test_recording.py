@@ -1,4 +1,4 @@
-"""Tests of bench.recording: byte round trip, entity paths, the .rrd file."""
+"""Tests of bench.recording and of the tasks' recording hooks: byte round trip, entity paths, the .rrd file."""
 
 from __future__ import annotations
 
@@ -14,7 +14,6 @@ import pytest
 
 from bench.recording import (
     LiveViewer,
-    MethodTrace,
     Quantised,
     TrialRecord,
     entity_name,
@@ -24,10 +23,23 @@ from bench.recording import (
     snr_part,
     write_recording,
 )
+from bench.tasks import Scene, detection, tbd, tracking
+from bench.tasks.detection import DetectionTask
+from bench.tasks.tbd import TBDTask
+from bench.tasks.tracking import TrackingTask
 
 K = 50
 CUM = "cumulant[window=32]"
 INNO = "innovation[window=5, variant=fading]"
+TRACKER = "ekf"
+DET, TRK, TBD = DetectionTask(), TrackingTask(), TBDTask()
+
+
+def _record_of(scenario, snr_db, trial, t, truth, z, methods, scene=None) -> TrialRecord:
+    """A record as the runner builds it: the harness's fields plus a task's scene."""
+    scene = scene or Scene()
+    return TrialRecord(scenario, snr_db, trial, t, truth, z, methods, arrays=scene.arrays, images=scene.images,
+                       info=scene.info)
 
 
 def _record(snr_db, trial, *, seed, nan_rows=(), alarm_from=None, estimate=False) -> TrialRecord:
@@ -43,10 +55,11 @@ def _record(snr_db, trial, *, seed, nan_rows=(), alarm_from=None, estimate=False
     alarms_c = stat_c >= 6.63
     stat_i = rng.chisquare(10, K) * 0.1  # far below its threshold: no alarms
     methods = {
-        CUM: MethodTrace(stat_c, 6.63, alarms_c, traces={"innovation": rng.normal(size=K)}),
-        INNO: MethodTrace(stat_i, 1e3, stat_i >= 1e3,
-                          estimate_xy=truth + 1.0 if estimate else None),
+        CUM: detection.method_trace(stat_c, 6.63, alarms_c, traces={"innovation": rng.normal(size=K)}),
+        INNO: detection.method_trace(stat_i, 1e3, stat_i >= 1e3),
     }
+    if estimate:   # a tracker on the same trial: two tasks in one record
+        methods[TRACKER] = tracking.method_trace(truth + 1.0)
     return TrialRecord("cv-turn-cv", snr_db, trial, t, truth, z, methods)
 
 
@@ -76,13 +89,11 @@ def _assert_records_equal(a: TrialRecord, b: TrialRecord) -> None:
     assert list(a.methods) == list(b.methods)
     for label in a.methods:
         ma, mb = a.methods[label], b.methods[label]
-        assert ma.threshold == mb.threshold
-        for key in ("statistic", "alarms", "estimate_xy"):
-            x, y = getattr(ma, key), getattr(mb, key)
-            assert (x is None) == (y is None)
-            if x is not None:
-                assert x.dtype == y.dtype
-                np.testing.assert_array_equal(x, y)
+        assert ma.threshold == mb.threshold and ma.info == mb.info
+        assert list(ma.arrays) == list(mb.arrays)
+        for key in ma.arrays:
+            assert ma.arrays[key].dtype == mb.arrays[key].dtype
+            np.testing.assert_array_equal(ma.arrays[key], mb.arrays[key])
         assert list(ma.traces) == list(mb.traces)
         for name in ma.traces:
             np.testing.assert_array_equal(ma.traces[name], mb.traces[name])
@@ -99,16 +110,22 @@ def test_bytes_round_trip(records):
 def test_bytes_round_trip_null_trial_and_tracker():
     t = np.linspace(0, 1, 4, dtype=np.float32)
     xy = np.zeros((4, 2), dtype=np.float32)
-    tracker = MethodTrace(None, None, None, estimate_xy=xy + 1)
-    rec = TrialRecord("glint", None, 7, t, xy, xy, {"ekf": tracker, "x[y=inf]": MethodTrace(
+    tracker = tracking.method_trace(xy + 1)
+    rec = TrialRecord("glint", None, 7, t, xy, xy, {"ekf": tracker, "x[y=inf]": detection.method_trace(
         np.ones(4), float("inf"), np.zeros(4, bool))})
     _assert_records_equal(rec, TrialRecord.from_bytes(rec.to_bytes()))
 
 
 def test_bad_shape_is_named():
-    with pytest.raises(ValueError, match=r"methods\['m'\]\.statistic: expected shape \(3,\)"):
+    with pytest.raises(ValueError, match=r"methods\['m'\]\.arrays\['statistic'\]: expected shape \(3,\)"):
         TrialRecord("s", 0, 0, np.zeros(3), np.zeros((3, 2)), np.zeros((3, 2)),
-                    {"m": MethodTrace(np.zeros(4), 1.0, np.zeros(4, bool))})
+                    {"m": detection.method_trace(np.zeros(4), 1.0, np.zeros(4, bool))})
+
+
+@pytest.mark.parametrize("name", ["t", "header", "truth_xy", "m0_x", "1x", "a-b"])
+def test_unusable_array_names_are_refused(name):
+    with pytest.raises(ValueError, match="not a usable array name"):
+        TrialRecord("s", 0, 0, np.zeros(3), arrays={name: np.zeros(3)})
 
 
 @pytest.mark.parametrize("snr, part", [
@@ -142,7 +159,7 @@ def test_entity_names_are_safe_and_distinct():
 @pytest.fixture(scope="module")
 def rrd(records, tmp_path_factory):
     out = tmp_path_factory.mktemp("rec") / "recording.rrd"
-    assert write_recording(out, records, _summary(), recording_id="test-rec") == out
+    assert write_recording(out, records, _summary(), tasks=TASKS, recording_id="test-rec") == out
     return out
 
 
@@ -174,7 +191,7 @@ def test_entity_paths(rrd, records):
     expected = [
         f"{root}/truth", f"{root}/measurements", f"{root}/measurements/all",
         f"{cum}/statistic", f"{cum}/threshold", f"{cum}/alarms", f"{cum}/innovation",
-        f"{inno}/statistic", f"{inno}/threshold", f"{inno}/estimate",
+        f"{inno}/statistic", f"{inno}/threshold", f"{root}/ekf/estimate",
         "/summary/table",
         "/summary/pd_vs_snr/cumulant_window-32",
         "/summary/pd_vs_snr/innovation_window-5_variant-fading",
@@ -199,15 +216,16 @@ def test_values_read_back(rrd, records):
     steps, values = _column(reader, f"{base}/statistic", "Scalars:scalars")
     np.testing.assert_array_equal(steps, np.arange(K))
     # Scalars are float64 in rerun: exact.
-    np.testing.assert_array_equal(np.concatenate(values), trace.statistic)
+    np.testing.assert_array_equal(np.concatenate(values), trace.arrays["statistic"])
 
     steps, values = _column(reader, f"{base}/threshold", "Scalars:scalars")
     np.testing.assert_array_equal(np.concatenate(values), np.full(K, 6.63))
 
     steps, values = _column(reader, f"{base}/alarms", "Scalars:scalars")
-    assert trace.alarms.sum() > 0
-    np.testing.assert_array_equal(steps, np.flatnonzero(trace.alarms))
-    np.testing.assert_array_equal(np.concatenate(values), trace.statistic[trace.alarms])
+    alarms = trace.arrays["alarms"]
+    assert alarms.sum() > 0
+    np.testing.assert_array_equal(steps, np.flatnonzero(alarms))
+    np.testing.assert_array_equal(np.concatenate(values), trace.arrays["statistic"][alarms])
 
 
 def test_points_skip_missing_and_point_north_up(rrd, records):
@@ -254,20 +272,20 @@ def test_rrd_verify(rrd):
 
 
 def test_failed_write_leaves_nothing(tmp_path, records, monkeypatch):
-    from bench import recording
+    from bench.recording import sinks
 
     def boom(*_a, **_k):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr(recording, "_log_summary", boom)
+    monkeypatch.setattr(sinks, "log_summary", boom)
     out = tmp_path / "recording.rrd"
     with pytest.raises(RuntimeError, match="boom"):
-        write_recording(out, records, _summary(), recording_id="x")
+        write_recording(out, records, _summary(), tasks=TASKS, recording_id="x")
     assert list(tmp_path.iterdir()) == []
 
 
 def test_empty_recording(tmp_path):
-    out = write_recording(tmp_path / "empty.rrd", [], None, recording_id="empty")
+    out = write_recording(tmp_path / "empty.rrd", [], None, tasks={}, recording_id="empty")
     assert out.exists()
 
 
@@ -275,11 +293,11 @@ def test_empty_recording(tmp_path):
 
 
 def test_live_viewer_without_display_raises_one_line(monkeypatch):
-    from bench import recording
+    from bench.recording import sinks
 
-    monkeypatch.setattr(recording, "_has_display", lambda: False)
+    monkeypatch.setattr(sinks, "_has_display", lambda: False)
     with pytest.raises(RuntimeError) as err:
-        LiveViewer(recording_id="live")
+        LiveViewer(tasks=TASKS, recording_id="live")
     assert "\n" not in str(err.value) and "viewer" in str(err.value)
 
 
@@ -290,7 +308,7 @@ def test_live_viewer_logs_like_the_file_writer(tmp_path, records, rrd):
     out = tmp_path / "live.rrd"
     stream = rr.RecordingStream("radar-bench", recording_id="live")
     stream.save(out)
-    viewer = LiveViewer.from_stream(stream)
+    viewer = LiveViewer.from_stream(stream, tasks=TASKS)
     viewer.log_records(records[:2])
     viewer.log_records(records[2:])
     viewer.log_summary(_summary())
@@ -311,6 +329,8 @@ DP = "dp-tbd[pfa=0.001]"
 HOUGH = "hough[bins=64]"
 EKF = "ekf"
 IMM = "imm[models=3]"
+#: The task of every method config label used here (the plan gives it in a run).
+TASKS = {CUM: DET, INNO: DET, TRACKER: TRK, DP: TBD, HOUGH: TBD, EKF: TRK, IMM: TRK}
 
 
 def _cell_xy(cells: np.ndarray) -> np.ndarray:
@@ -329,14 +349,11 @@ def _tbd_record(snr_db=9.0, trial=0, *, seed=5, null=False) -> TrialRecord:
     off = cells + [0, 1]
     off[2] = -1  # a cell outside the grid: not drawn
     methods = {
-        DP: MethodTrace(None, 20.0, None, track_cells=cells, score=35.5,
-                        value=rng.gamma(2.0, 3.0, (H, W)).astype(np.float32)),
-        HOUGH: MethodTrace(None, 50.0, None, track_cells=off, score=float("nan"),
-                           value=rng.normal(size=(H, W))),
+        DP: tbd.method_trace(20.0, cells, rng.gamma(2.0, 3.0, (H, W)).astype(np.float32), 35.5),
+        HOUGH: tbd.method_trace(50.0, off, rng.normal(size=(H, W)), float("nan")),
     }
-    return TrialRecord("tbd-line", None if null else snr_db, trial, t,
-                       None if null else _cell_xy(cells), None, methods,
-                       frames=frames, grid=GRID, truth_cells=None if null else cells)
+    return _record_of("tbd-line", None if null else snr_db, trial, t, None if null else _cell_xy(cells), None,
+                      methods, tbd.scene(frames, GRID, None if null else cells))
 
 
 GLINT_STEPS = [5, 17, 30]
@@ -357,9 +374,9 @@ def _tracking_record(snr_db=10.0, trial=2, *, seed=7) -> TrialRecord:
     for label, noise in ((EKF, 20.0), (IMM, 10.0)):
         est = truth + rng.normal(0, noise, (k, 2))
         err = est - truth
-        methods[label] = MethodTrace(None, None, None, estimate_xy=est, traces={
+        methods[label] = tracking.method_trace(est, traces={
             "error_x": err[:, 0], "error_y": err[:, 1], "error_pos": np.hypot(*err.T)})
-    return TrialRecord("glint-cv", snr_db, trial, t, truth, z, methods, measurement_flags=flags)
+    return _record_of("glint-cv", snr_db, trial, t, truth, z, methods, tracking.scene(flags))
 
 
 def _tracking_summary() -> pd.DataFrame:
@@ -373,25 +390,27 @@ def _tracking_summary() -> pd.DataFrame:
 def test_tbd_round_trip_quantises_frames_and_values():
     rec = _tbd_record()
     back = TrialRecord.from_bytes(rec.to_bytes())
-    assert back.grid == GRID and back.snr_db == 9.0 and back.truth_xy.shape == (KT, 2)
-    assert back.measurements_xy is None and back.measurement_flags is None
-    assert back.truth_cells.dtype == np.int32
-    np.testing.assert_array_equal(back.truth_cells, rec.truth_cells)
-    q = Quantised.of(rec.frames)
-    assert back.frames.dtype == np.float32 and back.frames.shape == (KT, H, W)
+    assert back.info["grid"] == GRID and back.snr_db == 9.0 and back.truth_xy.shape == (KT, 2)
+    assert back.measurements_xy is None and "measurement_flags" not in back.arrays
+    assert back.arrays["truth_cells"].dtype == np.int32
+    np.testing.assert_array_equal(back.arrays["truth_cells"], rec.arrays["truth_cells"])
+    frames, back_frames = rec.image("frames"), back.image("frames")
+    q = Quantised.of(frames)
+    assert back_frames.dtype == np.float32 and back_frames.shape == (KT, H, W)
     # Exact inside [lo, hi] up to half a code; clipped outside.
-    clipped = np.clip(rec.frames, q.lo, q.hi)
-    assert np.abs(back.frames - clipped).max() <= (q.hi - q.lo) / 508 * 1.001
-    mean, std = rec.frames.mean(), rec.frames.std()
-    assert q.lo == pytest.approx(max(rec.frames.min(), mean - 3 * std), rel=1e-5)
-    assert q.hi == pytest.approx(min(rec.frames.max(), mean + 6 * std), rel=1e-5)
+    clipped = np.clip(frames, q.lo, q.hi)
+    assert np.abs(back_frames - clipped).max() <= (q.hi - q.lo) / 508 * 1.001
+    mean, std = frames.mean(), frames.std()
+    assert q.lo == pytest.approx(max(frames.min(), mean - 3 * std), rel=1e-5)
+    assert q.hi == pytest.approx(min(frames.max(), mean + 6 * std), rel=1e-5)
     for label in (DP, HOUGH):
         a, b = rec.methods[label], back.methods[label]
-        np.testing.assert_array_equal(a.track_cells, b.track_cells)
-        assert b.value.shape == (H, W) and b.value.dtype == np.float32
-        qv = Quantised.of(a.value)
-        assert np.abs(b.value - np.clip(a.value, qv.lo, qv.hi)).max() <= (qv.hi - qv.lo) / 508 * 1.001
-    assert back.methods[DP].score == 35.5 and math.isnan(back.methods[HOUGH].score)
+        np.testing.assert_array_equal(a.arrays["track_cells"], b.arrays["track_cells"])
+        value, back_value = a.image("value"), b.image("value")
+        assert back_value.shape == (H, W) and back_value.dtype == np.float32
+        qv = Quantised.of(value)
+        assert np.abs(back_value - np.clip(value, qv.lo, qv.hi)).max() <= (qv.hi - qv.lo) / 508 * 1.001
+    assert back.methods[DP].info["score"] == 35.5 and math.isnan(back.methods[HOUGH].info["score"])
     assert back.methods[DP].threshold == 20.0
     # The codes travel unchanged: a second round trip gives the same bytes.
     assert back.to_bytes() == TrialRecord.from_bytes(back.to_bytes()).to_bytes()
@@ -401,11 +420,12 @@ def test_tracking_round_trip():
     rec = _tracking_record()
     back = TrialRecord.from_bytes(rec.to_bytes())
     _assert_records_equal(rec, back)
-    assert back.measurement_flags.dtype == bool
-    np.testing.assert_array_equal(np.flatnonzero(back.measurement_flags), GLINT_STEPS)
-    assert back.frames is None and back.grid is None and back.truth_cells is None
+    flags = back.arrays["measurement_flags"]
+    assert flags.dtype == bool
+    np.testing.assert_array_equal(np.flatnonzero(flags), GLINT_STEPS)
+    assert not back.images and not back.info and list(back.arrays) == ["measurement_flags"]
     null = TrialRecord.from_bytes(_tbd_record(null=True).to_bytes())
-    assert null.snr_db is None and null.truth_xy is None and null.truth_cells is None
+    assert null.snr_db is None and null.truth_xy is None and "truth_cells" not in null.arrays
 
 
 def test_version_1_bytes_still_load():
@@ -423,7 +443,33 @@ def test_version_1_bytes_still_load():
     rec = TrialRecord.from_bytes(buf.getvalue())
     np.testing.assert_array_equal(rec.measurements_xy, xy * 2)
     np.testing.assert_array_equal(rec.methods[CUM].traces["innovation"], -t)
-    assert rec.frames is None and rec.methods[CUM].value is None and rec.methods[CUM].score is None
+    assert not rec.images and not rec.methods[CUM].images and not rec.methods[CUM].info
+
+
+def test_version_2_bytes_still_load():
+    """Bytes of format version 2, which named every task's field: they map onto the containers."""
+    import io
+    import json
+
+    t, cells = np.arange(3.0), np.array([[1, 2], [2, 3], [3, 4]], np.int32)
+    header = {"version": 2, "scenario": "tbd", "snr_db": 6.0, "trial": 0,
+              "has": ["truth_xy", "truth_cells"], "grid": GRID, "frames_range": [-1.0, 2.0],
+              "methods": [{"label": DP, "threshold": 20.0, "score": 35.5, "has": ["track_cells"], "traces": [],
+                           "value_range": [0.0, 4.0]},
+                          {"label": CUM, "threshold": 6.63, "score": None, "has": ["statistic", "alarms"],
+                           "traces": []}]}
+    buf = io.BytesIO()
+    np.savez_compressed(buf, t=t, truth_xy=np.ones((3, 2)), truth_cells=cells,
+                        frames=np.full((3, H, W), 128, np.uint8), m0_track_cells=cells,
+                        m0_value=np.full((H, W), 255, np.uint8), m1_statistic=t, m1_alarms=t > 1,
+                        header=np.frombuffer(json.dumps(header).encode(), np.uint8))
+    rec = TrialRecord.from_bytes(buf.getvalue())
+    assert rec.info == {"grid": GRID} and list(rec.arrays) == ["truth_cells"]
+    assert rec.quantised("frames").lo == -1.0 and rec.image("frames").shape == (3, H, W)
+    dp, cum = rec.methods[DP], rec.methods[CUM]
+    assert dp.info == {"score": 35.5} and dp.image("value").max() == pytest.approx(4.0)
+    np.testing.assert_array_equal(dp.arrays["track_cells"], cells)
+    assert not cum.info and not cum.images and list(cum.arrays) == ["statistic", "alarms"]
 
 
 def test_quantised_edge_cases():
@@ -435,22 +481,21 @@ def test_quantised_edge_cases():
     assert Quantised.of(np.full(3, np.nan)).codes.tolist() == [0, 0, 0]
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"frames": np.zeros((KT, 4, 4))}, r"grid: rows x cols = 32 x 32 does not match frames 4 x 4"),
-    ({"truth_cells": np.zeros((KT, 2))}, r"truth_cells: expected an integer array"),
-    ({"measurement_flags": np.zeros(KT + 1)}, r"measurement_flags: expected shape \(K,\)|expected shape \(6,\)"),
-    ({"grid": {"rows": 32}}, r"grid: missing key\(s\) cols, cell_m"),
+@pytest.mark.parametrize("build, message", [
+    (lambda: tbd.scene(np.zeros((KT, 4, 4)), GRID), r"grid: rows x cols = 32 x 32 does not match frames 4 x 4"),
+    (lambda: tbd.scene(truth_cells=np.zeros((KT, 2))), r"truth_cells: expected an integer array"),
+    (lambda: tbd.scene(grid={"rows": 32}), r"grid: missing key\(s\) cols, cell_m"),
+    (lambda: _record_of("s", 0, 0, np.zeros(KT), None, None, {}, tracking.scene(np.zeros(KT + 1))),
+     r"arrays\['measurement_flags'\]: expected shape \(6,\)"),
 ])
-def test_bad_task_fields_are_named(kwargs, message):
-    fields = {"frames": np.zeros((KT, H, W)), "grid": GRID, **kwargs}
+def test_bad_task_fields_are_named(build, message):
     with pytest.raises(ValueError, match=message):
-        TrialRecord("s", 0, 0, np.zeros(KT), None, None, **fields)
+        build()
 
 
 def test_bad_value_map_is_named():
-    with pytest.raises(ValueError, match=r"methods\['m'\]\.value: expected shape \(32, 32\)"):
-        TrialRecord("s", 0, 0, np.zeros(KT), frames=np.zeros((KT, H, W)), grid=GRID,
-                    methods={"m": MethodTrace(None, None, None, value=np.zeros((4, 4)))})
+    with pytest.raises(ValueError, match=r"value: expected shape \(32, 32\)"):
+        tbd.method_trace(None, value=np.zeros((4, 4)), image_shape=(H, W))
 
 
 def test_large_tbd_record_is_compact():
@@ -461,10 +506,9 @@ def test_large_tbd_record_is_compact():
     cells = np.column_stack([100 + np.arange(k), 50 + 3 * np.arange(k)])
     frames[np.arange(k), cells[:, 0], cells[:, 1]] += 6.0
     grid = {"rows": n, "cols": n, "cell_m": 10.0, "x_min_m": 0.0, "y_min_m": 0.0}
-    dp = MethodTrace(None, 30.0, None, track_cells=cells, score=44.0,
-                     value=rng.gamma(4.0, 5.0, (n, n)).astype(np.float32))
-    rec = TrialRecord("tbd-big", 6.0, 0, np.arange(k) * 1.0, np.zeros((k, 2)), None, {DP: dp},
-                      frames=frames, grid=grid, truth_cells=cells)
+    dp = tbd.method_trace(30.0, cells, rng.gamma(4.0, 5.0, (n, n)).astype(np.float32), 44.0)
+    rec = _record_of("tbd-big", 6.0, 0, np.arange(k) * 1.0, np.zeros((k, 2)), None, {DP: dp},
+                     tbd.scene(frames, grid, cells))
     data = rec.to_bytes()
     assert len(data) <= 6_000_000, len(data) / 1e6
 
@@ -479,7 +523,7 @@ def task_rrd(task_records, tmp_path_factory):
     out = tmp_path_factory.mktemp("tasks") / "recording.rrd"
     # Through the bytes, as in the driver: frames and value maps arrive quantised.
     records = [TrialRecord.from_bytes(r.to_bytes()) for r in task_records]
-    return write_recording(out, records, _tracking_summary(), recording_id="test-tasks")
+    return write_recording(out, records, _tracking_summary(), tasks=TASKS, recording_id="test-tasks")
 
 
 def _static(reader, path: str, component: str) -> list:
@@ -526,13 +570,14 @@ def test_frames_read_back_north_up(task_rrd, task_records):
     steps, buffers = _column(reader, path, "DepthImage:buffer")
     np.testing.assert_array_equal(steps, np.arange(KT))
     codes = np.array([np.asarray(b[0], np.uint8).reshape(H, W) for b in buffers])
-    np.testing.assert_array_equal(codes, Quantised.of(rec.frames).codes[:, ::-1, :])
+    np.testing.assert_array_equal(codes, Quantised.of(rec.image("frames")).codes[:, ::-1, :])
     fmt = _static(reader, path, "DepthImage:format")[0][0]
     assert (fmt["width"], fmt["height"]) == (W, H)
     # The true cells, as pixel centres of the north-up image.
     steps, pts = _column(reader, path + "/truth_track", "Points2D:positions")
     xy = np.array([p[0] for p in pts])
-    np.testing.assert_allclose(xy, np.column_stack([rec.truth_cells[:, 1] + 0.5, H - rec.truth_cells[:, 0] - 0.5]))
+    cells = rec.arrays["truth_cells"]
+    np.testing.assert_allclose(xy, np.column_stack([cells[:, 1] + 0.5, H - cells[:, 0] - 0.5]))
     # The strip overlays the image: the pixel under each point is the target's (+5: bright).
     under = codes[steps, np.floor(xy[:, 1]).astype(int), np.floor(xy[:, 0]).astype(int)]
     assert (under >= 150).all(), under  # the noise median is near code 90
@@ -554,7 +599,7 @@ def test_score_and_value_read_back(task_rrd, task_records):
     _, values = _column(reader, f"{base}/score", "Scalars:scalars")
     np.testing.assert_array_equal(np.concatenate(values), np.full(KT, 35.5))
     buf = _static(reader, f"{base}/value", "DepthImage:buffer")[0][0]
-    q = Quantised.of(task_records[0].methods[DP].value)
+    q = Quantised.of(task_records[0].methods[DP].image("value"))
     np.testing.assert_array_equal(np.asarray(buf, np.uint8).reshape(H, W), q.codes[::-1])
     assert _static(reader, f"{base}/value", "code_lo")[0][0] == pytest.approx(q.lo)
 
@@ -592,11 +637,11 @@ def test_summary_without_pd_column(tmp_path, task_records):
     from rerun.chunk import RrdReader
 
     summary = _tracking_summary().drop(columns=["pd"])
-    out = write_recording(tmp_path / "r.rrd", task_records[2:], summary, recording_id="no-pd")
+    out = write_recording(tmp_path / "r.rrd", task_records[2:], summary, tasks=TASKS, recording_id="no-pd")
     paths = set(RrdReader(out).store().schema().entity_paths())
     assert "/summary/rmse_vs_snr/ekf" in paths and "/summary/table" in paths
     with pytest.raises(ValueError, match="missing column"):
-        write_recording(tmp_path / "bad.rrd", [], summary.drop(columns=["snr_db"]), recording_id="x")
+        write_recording(tmp_path / "bad.rrd", [], summary.drop(columns=["snr_db"]), tasks=TASKS, recording_id="x")
 
 
 def test_live_viewer_logs_tasks_like_the_file_writer(tmp_path, task_records, task_rrd):
@@ -606,7 +651,7 @@ def test_live_viewer_logs_tasks_like_the_file_writer(tmp_path, task_records, tas
     out = tmp_path / "live.rrd"
     stream = rr.RecordingStream("radar-bench", recording_id="live-tasks")
     stream.save(out)
-    with LiveViewer.from_stream(stream) as viewer:
+    with LiveViewer.from_stream(stream, tasks=TASKS) as viewer:
         viewer.log_records(TrialRecord.from_bytes(r.to_bytes()) for r in task_records)
         viewer.log_summary(_tracking_summary())
 
@@ -614,3 +659,17 @@ def test_live_viewer_logs_tasks_like_the_file_writer(tmp_path, task_records, tas
         return {x for x in RrdReader(p).store().schema().entity_paths() if not x.startswith("/__")}
 
     assert data_paths(out) == data_paths(task_rrd)
+
+
+def test_workers_import_neither_rerun_nor_matplotlib():
+    """What a worker imports (the runner, every task, the record) stays light."""
+    code = ("import sys, bench.runner, bench.tasks, bench.recording; from bench import registry; "
+            "registry.discover(); print(sorted(m for m in ('rerun', 'matplotlib') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def test_a_method_without_a_task_is_refused_before_any_io(tmp_path, records):
+    with pytest.raises(ValueError, match="no task given for method config"):
+        write_recording(tmp_path / "r.rrd", records, None, tasks={CUM: DET}, recording_id="x")
+    assert list(tmp_path.iterdir()) == []

@@ -1,4 +1,4 @@
-"""Task handlers and metrics of the tracking and TBD tasks, and multi-scenario sweeps."""
+"""Tasks: metrics of the tracking and TBD tasks, the task registry, multi-scenario sweeps."""
 
 import numpy as np
 import pandas as pd
@@ -6,8 +6,9 @@ import pytest
 
 from bench.config import parse_sweep
 from bench.errors import ConfigError
-from bench.metrics import (cell_centres_m, per_step_rmse, summarise_tbd, summarise_tracking, tbd_trial_metrics,
-                           time_averaged_rmse, tracking_trial_metrics, unit_innovation_snr_offset_db)
+from bench.metrics import per_step_rmse, time_averaged_rmse
+from bench.tasks.tbd_metrics import cell_centres_m, summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
+from bench.tasks.tracking_metrics import summarise_tracking, tracking_trial_metrics
 
 GRID = {"rows": 10, "cols": 10, "cell_m": 100.0, "x_min_m": 1000.0, "y_min_m": 2000.0}
 
@@ -113,3 +114,53 @@ def test_bad_scenarios_tables_name_the_field(over, field):
     with pytest.raises(ConfigError) as exc:
         parse_sweep(_multi(**over))
     assert str(exc.value).startswith(f"{field}:"), str(exc.value)
+
+
+# ------------------------------------------------------------------ the task registry
+
+def test_builtin_tasks_are_registered_in_order():
+    from bench import registry
+    assert list(registry.tasks())[:3] == ["maneuver-detection", "tracking", "tbd"]
+    assert all(registry.get_task(name).name == name for name in registry.tasks())
+
+
+def test_an_unknown_task_is_a_config_error_and_no_method_can_claim_it():
+    from bench import registry
+    from bench.core import Method
+    with pytest.raises(ConfigError) as exc:
+        registry.get_task("cfar", field="methods[0].task")
+    assert str(exc.value).startswith("methods[0].task: unknown task 'cfar'")
+
+    class Orphan(Method):
+        name, task = "orphan", "cfar"
+
+    with pytest.raises(TypeError, match="task 'cfar' is not one of"):
+        registry.register_method(Orphan)
+
+
+def _code_names_and_strings(path) -> set[str]:
+    """Identifiers and string constants of a module's code, docstrings left out."""
+    import ast
+    tree = ast.parse(path.read_text())
+    docs = {id(node.body[0].value) for node in ast.walk(tree)
+            if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef)) and node.body
+            and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name):
+            out.add(node.id)
+        elif isinstance(node, ast.alias):
+            out.add(node.asname or node.name)
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docs:
+            out.add(node.value)
+    return out
+
+
+def test_the_harness_never_names_a_task():
+    """The report, the runner, the recording and the metrics loop over the tasks present."""
+    import pathlib
+    root = pathlib.Path(__file__).resolve().parents[1] / "bench"
+    files = [root / "report.py", root / "runner.py", root / "metrics.py", *sorted((root / "recording").glob("*.py"))]
+    forbidden = {"MANEUVER_DETECTION", "TRACKING", "TBD", "maneuver-detection", "tracking", "tbd"}
+    named = {f.name: sorted(_code_names_and_strings(f) & forbidden) for f in files}
+    assert not any(named.values()), named

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from bench import registry
 from bench.calibration import calibrate
 from bench.rng import CALIBRATION, EVALUATION, TrialRNG
-from bench.tasks import handler
+from bench.registry import get_task
 
 
 def _null_values(seed: int, domain: int, n: int) -> np.ndarray:
@@ -26,7 +26,7 @@ def _null_values(seed: int, domain: int, n: int) -> np.ndarray:
     batch = scenario().generate(scenario.Params(), None, n, TrialRNG(seed, domain, 5, range(n)))
     params = method.Params(window=1)
     out = method().run(batch, params)
-    return handler(method.task).null_values(batch, out)
+    return get_task(method.task).null_values(batch, out)
 
 
 @settings(derandomize=True, deadline=None, max_examples=6)

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from bench import registry
 from bench.calibration import empirical_threshold
 from bench.rng import CALIBRATION, EVALUATION, TrialRNG
-from bench.tasks import handler
+from bench.registry import get_task
 
 DETECTORS = [
     ("innovation", {"window": 5}),
@@ -35,7 +35,7 @@ def _null_statistics(name, params, seed, domain):
     method = registry.get_method(name)
     batch = scenario().generate(scenario.Params(), None, TRIALS, TrialRNG(seed, domain, 3, range(TRIALS)))
     out = method().run(batch, method.Params(**params))
-    start = handler(method.task).null_start(batch, out)
+    start = get_task(method.task).null_start(batch, out)
     return out.statistic[:, start:]
 
 

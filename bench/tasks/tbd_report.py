@@ -1,10 +1,12 @@
-"""Report sections of the track-before-detect task.
+"""Report sections of the track-before-detect task (docs/architecture.md, 'Outputs of a run').
 
 Pd against SNR at the calibrated scene Pfa, the SNR at Pd = 0.5 and each
 config's gain over the first one, the null scene scores against their Gumbel
 fit, the per-frame position RMSE over detected trials and its average, and
 the papers' RMSE over all Monte Carlo runs with the percentage reduction of
-each config against the first config of its scenario config.
+each config against the first config of its scenario config (the multi-frame
+DP-TBD paper's figure of merit). Imported only when a report is written
+(matplotlib).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import pandas as pd
 from bench import figures
 from bench.calibration import gumbel_fit
 from bench.markdown import fmt, fmt_crossing, fmt_interval, snr50, table
+from bench.tasks.base import ReportContext
 
 
 def _rmse_level(summary: pd.DataFrame) -> float | None:
@@ -201,14 +204,12 @@ def _section_snr_reference(summary: pd.DataFrame) -> str:
     ])
 
 
-def sections(summary: pd.DataFrame, steps: pd.DataFrame, store, cals, fig_dir: Path, title: str,
-             pfa: float) -> list[str]:
+def sections(ctx: ReportContext) -> list[str]:
+    summary, steps, fig_dir, title, pfa = ctx.summary, ctx.steps, ctx.fig_dir, ctx.title, ctx.pfa
     if summary.empty:
         return []
-    configs = set(summary.config)
-    tbd_steps = steps[steps.config.isin(configs)] if not steps.empty else steps
     return [_section_snr_reference(summary),
             _section_detection(summary, fig_dir, title, pfa),
-            _section_null(cals, store, fig_dir, title, pfa, configs),
-            _section_rmse(summary, tbd_steps, fig_dir, title),
-            _section_rmse_all(summary, tbd_steps, fig_dir, title)]
+            _section_null(ctx.calibrations, ctx.store, fig_dir, title, pfa, set(summary.config)),
+            _section_rmse(summary, steps, fig_dir, title),
+            _section_rmse_all(summary, steps, fig_dir, title)]

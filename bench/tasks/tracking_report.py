@@ -1,8 +1,10 @@
-"""Report sections of the tracking task.
+"""Report sections of the tracking task (docs/architecture.md, 'Outputs of a run').
 
 Time-averaged position RMSE with bootstrap intervals per scenario config and
 SNR, divergence rate and NEES, RMSE against SNR, per-step RMSE and the mean
-estimate against the truth per step (the usual figure of tracking papers).
+estimate against the truth per step (the usual figure of tracking papers, e.g.
+the glint paper's Viterbi vs EKF comparison). Imported only when a report is
+written (matplotlib).
 """
 
 from __future__ import annotations
@@ -14,7 +16,8 @@ import pandas as pd
 
 from bench import figures
 from bench.markdown import fmt, fmt_interval, table
-from bench.recording import entity_name as slug
+from bench.recording.paths import entity_name as slug
+from bench.tasks.base import ReportContext
 
 
 def _reference_snr(g: pd.DataFrame) -> float:
@@ -99,9 +102,9 @@ def _per_step(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: 
     return parts
 
 
-def sections(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
+def sections(ctx: ReportContext) -> list[str]:
+    summary = ctx.summary
     if summary.empty:
         return []
-    tr_steps = steps[steps.config.isin(set(summary.config))] if not steps.empty else steps
-    return _overview(summary, fig_dir, title) + _versus_snr(summary, fig_dir, title) + \
-        _per_step(summary, tr_steps, fig_dir, title)
+    return _overview(summary, ctx.fig_dir, ctx.title) + _versus_snr(summary, ctx.fig_dir, ctx.title) + \
+        _per_step(summary, ctx.steps, ctx.fig_dir, ctx.title)

@@ -1,0 +1,88 @@
+"""Where one recorded trial goes: its entity paths, colours and tab title.
+
+A :class:`TrialLayout` is computed once per record and is the one source of
+paths for the logging code and for the blueprint, so the two cannot disagree
+(docs/architecture.md, 'Recordings'). It knows only what the harness logs
+(truth, measurements, each method's traces); the paths a task logs under the
+trial root or a method entity are named by that task, which reserves them here
+(``Task.scene_entities``, ``Task.method_entities``) so that no method or trace
+name can shadow them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from bench.recording.paths import entity_root, method_entity_names
+from bench.recording.record import TrialRecord
+
+__all__ = ["MEASUREMENT_COLOR", "PALETTE", "TRUTH_COLOR", "MethodLayout", "TrialLayout", "trial_layout"]
+
+# tab10: distinct on the viewer's dark background.
+PALETTE = [
+    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
+    (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
+]
+TRUTH_COLOR = (230, 230, 230)
+MEASUREMENT_COLOR = (255, 200, 60)
+#: Children of a trial root the harness logs itself.
+ROOT_CHILDREN = ("truth", "measurements")
+
+
+@dataclass(frozen=True)
+class MethodLayout:
+    """One method config under one trial: its entity, colour, task and traces."""
+
+    label: str
+    task: Any                        # the method's Task (bench.tasks.base.Task)
+    color: tuple[int, int, int]
+    base: str
+    traces: dict[str, str]           # trace key -> entity path
+
+    def path(self, child: str) -> str:
+        return f"{self.base}/{child}"
+
+
+@dataclass(frozen=True)
+class TrialLayout:
+    """Entity paths and a tab title for one record."""
+
+    root: str
+    scenario: str
+    title: str                       # without the scenario, which is the same in most recordings
+    sort_key: tuple
+    methods: tuple[MethodLayout, ...]
+    tasks: tuple[Any, ...]           # the tasks of the methods, each once, in the order given
+    has_xy: bool                     # truth or measurements in metres
+
+    def path(self, child: str) -> str:
+        return f"{self.root}/{child}"
+
+    def methods_of(self, task) -> list[MethodLayout]:
+        return [m for m in self.methods if m.task is task]
+
+
+def trial_layout(rec: TrialRecord, tasks: Mapping[str, Any]) -> TrialLayout:
+    """The layout of ``rec``; ``tasks`` maps each method config label to its task."""
+    missing = [label for label in rec.methods if label not in tasks]
+    if missing:
+        raise ValueError(f"no task given for method config(s) {', '.join(map(repr, missing))}")
+    present = tuple(dict.fromkeys(tasks[label] for label in tasks if label in rec.methods))
+    root = entity_root(rec.scenario, rec.snr_db, rec.trial)
+    reserved = set(ROOT_CHILDREN).union(*(t.scene_entities for t in present))
+    names = method_entity_names(rec.methods, reserved=reserved)
+    methods = []
+    # Colours follow the sorted labels, so the same configs get the same
+    # colour in every trial of a sweep.
+    for i, label in enumerate(sorted(rec.methods)):
+        task, base = tasks[label], f"{root}/{names[label]}"
+        trace_names = method_entity_names(rec.methods[label].traces, reserved=task.method_entities)
+        traces = {key: f"{base}/{trace_names[key]}" for key in rec.methods[label].traces}
+        methods.append(MethodLayout(label, task, PALETTE[i % len(PALETTE)], base, traces))
+    snr = "null" if rec.snr_db is None else f"{rec.snr_db:+g} dB"
+    return TrialLayout(root=root, scenario=rec.scenario, title=f"{snr} · trial {rec.trial}",
+                       sort_key=(rec.scenario, rec.snr_db is None, rec.snr_db or 0.0, rec.trial),
+                       methods=tuple(methods), tasks=present,
+                       has_xy=rec.truth_xy is not None or rec.measurements_xy is not None)

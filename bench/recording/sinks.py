@@ -1,0 +1,184 @@
+"""Where a recording goes: an ``.rrd`` file, or a spawned Rerun viewer.
+
+Both sinks log through the same code (:mod:`bench.recording.draw`,
+:mod:`bench.recording.summary`) and send the same default blueprint
+(:mod:`bench.recording.blueprint`), so a live run looks like its file
+(docs/architecture.md, 'Recordings'). Both need the task of every method
+config (``tasks``: label -> :class:`bench.tasks.base.Task`): the record does
+not carry it, the plan does.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import sys
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Self
+
+from bench.recording import blueprint as bp
+from bench.recording.draw import log_records
+from bench.recording.layout import trial_layout
+from bench.recording.record import TrialRecord
+from bench.recording.summary import log_summary, summary_charts
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    import pandas as pd
+
+__all__ = ["LiveViewer", "write_recording"]
+
+
+def write_recording(
+    path: str | os.PathLike,
+    records: list[TrialRecord],
+    summary: pd.DataFrame | None = None,
+    *,
+    tasks: Mapping[str, Any],
+    recording_id: str,
+    application_id: str = "radar-bench",
+) -> Path:
+    """Write ``records`` (and the ``summary`` curves) to an ``.rrd`` file.
+
+    Atomic: the file is written to ``path.with_suffix(".rrd.tmp")`` and renamed
+    only once complete (footer written), so a crash never leaves a truncated
+    ``recording.rrd``. ``summary`` needs columns ``method`` and ``snr_db``;
+    ``pd`` and ``rmse_mean`` (either, both or none; NaN rows skipped) become
+    bar charts, every row and column goes into the table. Returns ``path``.
+    """
+    import rerun as rr
+
+    path = Path(path)
+    tmp = path.with_suffix(".rrd.tmp")
+    tmp.parent.mkdir(parents=True, exist_ok=True)
+    records = list(records)  # iterated twice: blueprint, then logging
+    layouts = [trial_layout(r, tasks) for r in records]  # fails on bad names before any I/O
+    tabs = [bp.trial_tab(lay, rec) for lay, rec in zip(layouts, records)]
+    charts = summary_charts(summary)
+    stream = rr.RecordingStream(application_id, recording_id=recording_id)
+    try:
+        # The sink (and its blueprint) must be attached before logging.
+        stream.save(tmp, default_blueprint=bp.blueprint(tabs, charts))
+        try:
+            log_records(records, stream, layouts)
+            log_summary(stream, summary)
+            stream.flush()
+        finally:
+            stream.disconnect()  # writes the footer
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _has_display() -> bool:
+    """False on Linux/BSD without X11 or Wayland: the viewer cannot open."""
+    if sys.platform.startswith(("win", "darwin")):
+        return True
+    return any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"))
+
+
+def _viewer_executable() -> str | None:
+    """The ``rerun`` binary: on PATH, or next to this interpreter (venv not activated)."""
+    found = shutil.which("rerun")
+    if found:
+        return found
+    local = Path(sys.executable).with_name("rerun.exe" if os.name == "nt" else "rerun")
+    return str(local) if local.exists() else None
+
+
+def _port_open(port: int) -> bool:
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=1.0):
+            return True
+    except OSError:
+        return False
+
+
+class LiveViewer:
+    """Stream records to a spawned Rerun viewer (``bench run --viewer``).
+
+    Uses the same logging code as :func:`write_recording`. The default
+    blueprint is re-sent while the set of trial tabs grows (up to MAX_TABS),
+    which resets a layout the user changed in the meantime.
+
+    Raises RuntimeError (one line) when no viewer can be started: no display,
+    no ``rerun`` executable, or a viewer that never listens on ``port``.
+    Spawning reuses a viewer already listening on ``port``.
+    """
+
+    def __init__(self, *, tasks: Mapping[str, Any], recording_id: str, application_id: str = "radar-bench",
+                 port: int = 9876):
+        import rerun as rr
+
+        if not _has_display():
+            raise RuntimeError("cannot open the Rerun viewer: no display (DISPLAY/WAYLAND_DISPLAY unset)")
+        exe = _viewer_executable()
+        if exe is None:
+            raise RuntimeError("cannot open the Rerun viewer: `rerun` executable not found")
+        stream = rr.RecordingStream(application_id, recording_id=recording_id)
+        try:
+            rr.spawn(port=port, connect=True, recording=stream, executable_path=exe,
+                     hide_welcome_screen=True)
+        except Exception as exc:  # the bindings raise various types
+            stream.disconnect()
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else repr(exc)
+            raise RuntimeError(f"cannot open the Rerun viewer: {first}") from exc
+        # rr.spawn only warns when the viewer dies at start-up: check for real.
+        if not _port_open(port):
+            stream.disconnect()
+            raise RuntimeError(f"cannot open the Rerun viewer: nothing listens on port {port}")
+        self._attach(stream, tasks)
+
+    @classmethod
+    def from_stream(cls, stream, *, tasks: Mapping[str, Any]) -> LiveViewer:
+        """Wrap a stream whose sink is already set (an existing viewer via
+        ``connect_grpc``, a file in tests) instead of spawning a viewer."""
+        self = cls.__new__(cls)
+        self._attach(stream, tasks)
+        return self
+
+    def _attach(self, stream, tasks: Mapping[str, Any]) -> None:
+        self._stream = stream
+        self._tasks = dict(tasks)
+        self._tabs: list[bp.TrialTab] = []
+        self._summary: tuple | None = None  # charts of the logged summary
+        self._shown: tuple | None = None
+
+    def log_records(self, records: Iterable[TrialRecord]) -> None:
+        """Log records now (the viewer shows them as they arrive)."""
+        records = list(records)
+        layouts = [trial_layout(r, self._tasks) for r in records]
+        log_records(records, self._stream, layouts)
+        self._tabs += [bp.trial_tab(lay, rec) for lay, rec in zip(layouts, records)]
+        self._send_blueprint()
+
+    def log_summary(self, summary: pd.DataFrame | None) -> None:
+        """Log the Pd / RMSE vs SNR bars and table, and add the summary tab."""
+        charts = log_summary(self._stream, summary)
+        if charts is not None:
+            self._summary = charts
+        self._send_blueprint()
+
+    def _send_blueprint(self) -> None:
+        # Only when the tabs change: each send replaces the viewer's layout.
+        chosen = tuple(tab.layout.root for tab in bp.chosen(self._tabs))
+        if (chosen, self._summary) != self._shown:
+            self._stream.send_blueprint(bp.blueprint(self._tabs, self._summary))
+            self._shown = (chosen, self._summary)
+
+    def close(self) -> None:
+        """Flush and disconnect; safe to call twice."""
+        if self._stream is not None:
+            # Bounded: a viewer the user already closed must not hang the run.
+            self._stream.flush(timeout_sec=30.0)
+            self._stream.disconnect()
+            self._stream = None
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

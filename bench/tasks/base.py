@@ -1,0 +1,200 @@
+"""What a *task* is to the harness: everything it owns, behind one signature.
+
+A task (maneuver detection, tracking, track-before-detect, ...) says what a
+method's output must look like, what the calibration samples on null
+trials, how an output becomes per-trial metrics and those become a summary
+and per-step tables, what a recorded trial keeps and how it is drawn in
+Rerun, and which report sections it writes (docs/architecture.md, 'Tasks').
+The runner, the report, the recording and the metrics module only loop over
+the tasks present; they never name one. Tasks are found by
+:func:`bench.registry.tasks`: the built-ins and the entry-point group
+``bench.tasks``.
+
+Worker side (must stay light: no rerun, no matplotlib at import):
+:meth:`check_output`, :meth:`null_values`, :meth:`null_peaks`,
+:meth:`null_cells`, :meth:`trial_metrics`, :meth:`recorded_scene`,
+:meth:`recorded_method`. Driver side: :meth:`summarise`,
+:meth:`apply_calibration`, :meth:`steps`, :meth:`log_trial`, :meth:`views`,
+:meth:`report_sections`, :meth:`trial_sections`.
+
+Per-trial metrics are 1-D columns (``trials.csv``) or 2-D *series* (n, K)
+(per-step values: kept in the store, summarised per step, never in
+``trials.csv``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+import pandas as pd
+
+from bench.core import Batch
+from bench.recording.blueprint import Views
+from bench.recording.layout import TrialLayout
+from bench.recording.record import MethodTrace, TrialRecord
+
+__all__ = ["OutputError", "ReportContext", "Scene", "Task", "Views", "check_finite", "time_series"]
+
+
+class OutputError(RuntimeError):
+    """A method returned something malformed; recorded as that method's failure."""
+
+
+@dataclass
+class Scene:
+    """What a task keeps of a recorded trial's scene, beyond the harness's
+    truth and measurements: the record's ``arrays`` (per step), ``images``
+    (quantised) and ``info`` (JSON)."""
+
+    arrays: dict[str, np.ndarray] = field(default_factory=dict)
+    images: dict[str, np.ndarray] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def union(cls, scenes) -> Scene:
+        """The scenes of several tasks in one; ValueError when two keep the same name."""
+        out = cls()
+        for scene in scenes:
+            for mine, theirs in ((out.arrays, scene.arrays), (out.images, scene.images), (out.info, scene.info)):
+                clash = set(mine) & set(theirs)
+                if clash:
+                    raise ValueError(f"two tasks keep {sorted(clash)} in the same recorded trial")
+                mine.update(theirs)
+        return out
+
+
+@dataclass(frozen=True)
+class ReportContext:
+    """What a task's report sections may use. ``summary``, ``trials``,
+    ``steps``, ``series`` and ``calibrations`` hold the task's configs only."""
+
+    summary: pd.DataFrame            # summary.csv rows
+    trials: pd.DataFrame             # trials.csv rows
+    steps: pd.DataFrame              # steps.csv rows (may be empty, without columns)
+    series: dict                     # (scenario, config, snr_db) -> {name: (n, K)}
+    calibrations: list               # bench.calibration.CalibrationResult
+    records: list[TrialRecord]       # every recorded trial of the run (pick the task's own)
+    store: Any                       # bench.store.Store (null values for ROC, Gumbel fits, ...)
+    fig_dir: Path
+    title: str                       # the sweep's name
+    pfa: float                       # requested Pfa
+    chance_pd: float                 # [calibration] chance_pd
+    timeline_snr_db: float | None    # [record] timeline_snr_db
+    configs: frozenset[str]          # the task's method config labels
+
+
+def check_finite(name: str, a: np.ndarray, shape: tuple) -> None:
+    """OutputError unless ``a`` has ``shape`` and only finite values."""
+    if a.shape != shape:
+        raise OutputError(f"{name} has shape {a.shape}, expected {shape}")
+    bad = int(np.count_nonzero(~np.isfinite(a)))
+    if bad:
+        raise OutputError(f"{name} has {bad} non-finite values")
+
+
+def time_series(batch: Batch) -> dict[str, np.ndarray]:
+    """The step times as a series, so per-step tables carry time in seconds."""
+    return {"t_s": np.broadcast_to(np.asarray(batch.t, float), (batch.n, batch.steps))}
+
+
+class Task:
+    """One task. Subclasses set ``name`` and override what applies to them."""
+
+    #: registry name, the value of ``Method.task`` and ``Scenario.tasks``
+    name: ClassVar[str] = ""
+    #: whether a threshold is calibrated on null trials for this task
+    calibrated: ClassVar[bool] = False
+    #: calibration modes that apply (any mode is accepted when none applies)
+    calibration_modes: ClassVar[tuple[str, ...]] = ("nominal", "empirical", "gumbel")
+    #: what the requested Pfa is counted over, e.g. "per step"
+    pfa_unit: ClassVar[str] = ""
+    #: whether summary.csv's ``pfa`` is measured on the evaluation trials (else: on the null ones)
+    evaluation_pfa: ClassVar[bool] = False
+    #: its methods, in the report's prose ("detectors") and in short ("TBD")
+    noun: ClassVar[str] = ""
+    short_noun: ClassVar[str] = ""
+    #: what one null trial contributes to the calibration, in a few words
+    null_sample: ClassVar[str] = ""
+    #: sentences added to the calibration section's explanation (the columns it fills)
+    calibration_text: ClassVar[str] = ""
+    #: paragraph after the calibration table when the task's configs were calibrated
+    calibration_note: ClassVar[str] = ""
+    #: what a recorded trial shows of its methods, for the report's recording paragraph
+    recording_text: ClassVar[str] = ""
+    #: summary.csv columns the task writes (shared ones included)
+    summary_columns: ClassVar[tuple[str, ...]] = ()
+    #: the few of them worth a glance (the recording's summary table)
+    headline_columns: ClassVar[tuple[str, ...]] = ()
+    #: children of a trial root / of a method entity the task logs (reserved names)
+    scene_entities: ClassVar[tuple[str, ...]] = ()
+    method_entities: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def summary(cls) -> str:
+        """One line, from the first line of the class docstring."""
+        doc = (cls.__doc__ or "").strip()
+        return doc.splitlines()[0] if doc else ""
+
+    # -------------------------------------------------------------- worker side
+
+    def check_output(self, out, batch: Batch):
+        """``out`` if it is a well-formed output for ``batch``, else OutputError."""
+        raise NotImplementedError
+
+    def null_values(self, batch: Batch, out) -> np.ndarray:
+        """The calibration sample of a null batch (calibrated tasks)."""
+        raise NotImplementedError
+
+    def null_peaks(self, batch: Batch, out) -> np.ndarray | None:
+        """Per null trial, the statistic the chance detection rate is read on; None: none."""
+        return None
+
+    def null_cells(self, batch: Batch, out) -> np.ndarray | None:
+        """Per null trial, order statistics of a value map for the per-cell Pfa; None: none."""
+        return None
+
+    def trial_metrics(self, batch: Batch, out, threshold: float) -> dict[str, np.ndarray]:
+        """Per-trial metrics at ``threshold`` (NaN for uncalibrated tasks): (n,) columns and (n, K) series."""
+        raise NotImplementedError
+
+    def recorded_scene(self, batch: Batch, i: int) -> Scene:
+        """What trial ``i``'s record keeps of the scene for this task."""
+        return Scene()
+
+    def recorded_method(self, batch: Batch, out, i: int, threshold: float) -> MethodTrace:
+        """What trial ``i``'s record keeps of one method config's output."""
+        return MethodTrace(threshold=threshold)
+
+    # -------------------------------------------------------------- driver side
+
+    def summarise(self, trials: pd.DataFrame, series: dict) -> pd.DataFrame:
+        """One summary row per (scenario config, method config, SNR) of the task's trials."""
+        raise NotImplementedError
+
+    def apply_calibration(self, summary: pd.DataFrame, trials: pd.DataFrame, cal) -> None:
+        """Fill the summary columns that come from ``cal`` (one config on one
+        scenario config; its rows exist), in place."""
+
+    def steps(self, trials: pd.DataFrame, series: dict[str, np.ndarray]) -> pd.DataFrame | None:
+        """Per-step table of one (scenario, config, SNR) cell from its trials and
+        series; None: the task has none."""
+        return None
+
+    def log_trial(self, stream, layout: TrialLayout, rec: TrialRecord) -> None:
+        """Draw the task's part of a recorded trial: its scene and its
+        methods (``layout.methods_of(self)``); traces are drawn by the harness."""
+
+    def views(self, layout: TrialLayout, rec: TrialRecord) -> Views:
+        """The task's views in the trial's tab of the default blueprint."""
+        return Views()
+
+    def report_sections(self, ctx: ReportContext) -> list[str]:
+        """Markdown sections of the task's results."""
+        return []
+
+    def trial_sections(self, ctx: ReportContext) -> list[str]:
+        """Markdown sections about single recorded trials, after every task's results."""
+        return []

@@ -1,0 +1,172 @@
+"""Maneuver detection: a statistic per step, thresholded at a per-step Pfa.
+
+A detector returns a :class:`~bench.core.DetectionOutput`; the harness
+calibrates its threshold on the null trials' statistic after warm-up, then
+scores detection, delay and false alarms around the maneuver onset
+(:mod:`bench.tasks.detection_metrics`; docs/architecture.md, 'Tasks' and
+'Metrics'). The chance detection rate and the equal-chance Pd follow Song,
+Ji & Gao 2004 (the cumulant detector's paper) in reading Pd per window.
+
+A recorded trial keeps, per detector, the statistic, the alarms and the
+threshold in force, drawn under ``.../{method}/statistic``, ``threshold``
+(Scalars at every step) and ``alarms`` (Scalars at alarm steps only, drawn
+as points), with a "statistics" view on top of the trial's tab.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput
+from bench.recording.blueprint import Views, relative
+from bench.recording.draw import log_series
+from bench.recording.layout import TrialLayout
+from bench.recording.paths import rerun_path
+from bench.recording.record import MethodTrace, TrialRecord, check_shape
+from bench.tasks.base import OutputError, ReportContext, Task
+from bench.tasks.detection_metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
+
+__all__ = ["DetectionTask", "method_trace"]
+
+
+def method_trace(statistic, threshold: float | None, alarms, traces: dict | None = None) -> MethodTrace:
+    """What a recorded trial keeps of a detector: statistic (K,), alarms (K,) bool, threshold."""
+    statistic, alarms = np.asarray(statistic), np.asarray(alarms, dtype=bool)
+    check_shape(statistic, (None,), "statistic")
+    check_shape(alarms, statistic.shape, "alarms")
+    return MethodTrace(threshold=threshold, traces=traces or {},
+                       arrays={"statistic": statistic, "alarms": alarms})
+
+
+def _drawn(tr: MethodTrace) -> dict[str, bool]:
+    """Which of a detector's entities are logged (and so shown in its view)."""
+    stat = "statistic" in tr.arrays
+    return {"statistic": stat,
+            "threshold": stat and tr.threshold is not None and math.isfinite(tr.threshold),
+            "alarms": stat and "alarms" in tr.arrays and bool(tr.arrays["alarms"].any())}
+
+
+class DetectionTask(Task):
+    """Maneuver detection: a per-step statistic, alarms at a calibrated per-step Pfa."""
+
+    name = MANEUVER_DETECTION
+    calibrated = True
+    calibration_modes = ("nominal", "empirical")
+    pfa_unit = "per step"
+    evaluation_pfa = True
+    noun = short_noun = "detectors"
+    null_sample = "all steps after warm-up"
+    calibration_text = (
+        "*Pfa in evaluation* is the per-step false-alarm rate measured before the maneuver onset in the "
+        "evaluation trials, averaged over SNR levels. *Chance Pd* is how often the detection rule fires "
+        "on null trials (no maneuver) within the detection window: the floor Pd falls to as SNR goes "
+        "down, drawn as a dotted line in the Pd figure.")
+    calibration_note = (
+        "Per-step Pfa intervals (here and in summary.csv) are counted over trials, the independent "
+        "units: a window statistic's alarms cluster within a trial, so its interval is wider than one "
+        "that treats steps as independent (ratio-estimator variance over trials, Student's quantile on "
+        "the trials that alarmed). Scene Pfa (TBD) has one value per scene: Wilson's interval.")
+    recording_text = "per detector the statistic, the threshold in force and the alarms"
+    summary_columns = ("n_trials", "pd", "pd_low", "pd_high", "pfa", "pfa_low", "pfa_high", "delay_mean",
+                       "delay_low", "delay_high", "delay_median", "rmse_mean", "threshold", "realised_snr_db",
+                       "pd_step", "pd_step_low", "pd_step_high",
+                       "pd_equal_chance", "pd_equal_chance_low", "pd_equal_chance_high")
+    headline_columns = ("pd", "pd_low", "pd_high", "pfa", "pfa_low", "pfa_high", "delay_mean")
+    method_entities = ("statistic", "threshold", "alarms")
+
+    # -------------------------------------------------------------- worker side
+
+    def check_output(self, out, batch: Batch) -> DetectionOutput:
+        if not isinstance(out, DetectionOutput):
+            raise OutputError(f"expected a DetectionOutput, got {type(out).__name__}")
+        shape = (batch.n, batch.steps)
+        if out.statistic.shape != shape:
+            raise OutputError(f"statistic has shape {out.statistic.shape}, expected {shape}")
+        bad = int(np.count_nonzero(~np.isfinite(out.statistic)))
+        if bad:
+            raise OutputError(f"statistic has {bad} non-finite values")
+        return out
+
+    def null_start(self, batch: Batch, out: DetectionOutput) -> int:
+        """First step of the null region: after warm-up and once the statistic is formed."""
+        return max(int(batch.meta.get("warmup_steps", 0)), int(out.valid_from))
+
+    def null_values(self, batch: Batch, out: DetectionOutput) -> np.ndarray:
+        """Per-step statistic values of a null batch, after warm-up: the calibration sample."""
+        return out.statistic[:, self.null_start(batch, out):].ravel()
+
+    def null_peaks(self, batch: Batch, out: DetectionOutput) -> np.ndarray | None:
+        """Per null trial, the largest statistic in the detection window placed
+        where the maneuver would start: ``mean(peaks >= threshold)`` is the
+        chance detection rate, the floor Pd falls to as SNR goes down."""
+        onset = batch.meta.get("null_onset_step")
+        if onset is None:
+            return None
+        steps = np.asarray(onset)[..., None] + np.arange(int(batch.meta["detect_window_steps"]))
+        steps = np.broadcast_to(steps, (batch.n, steps.shape[-1]))   # per-trial onsets (jitter)
+        return np.take_along_axis(out.statistic, np.minimum(steps, batch.steps - 1), axis=1).max(axis=1)
+
+    def trial_metrics(self, batch: Batch, out: DetectionOutput, threshold: float) -> dict[str, np.ndarray]:
+        return detection_trial_metrics(out.statistic, threshold, onset=np.asarray(batch.meta["onset_step"]),
+                                       detect_window=int(batch.meta["detect_window_steps"]),
+                                       null_start=self.null_start(batch, out))
+
+    def recorded_method(self, batch: Batch, out: DetectionOutput, i: int, threshold: float) -> MethodTrace:
+        stat = out.statistic[i]
+        return method_trace(stat, threshold, stat >= threshold, {k: v[i] for k, v in out.traces.items()})
+
+    # -------------------------------------------------------------- driver side
+
+    def summarise(self, trials: pd.DataFrame, series: dict) -> pd.DataFrame:
+        return summarise_detection(trials)
+
+    def apply_calibration(self, summary: pd.DataFrame, trials: pd.DataFrame, cal) -> None:
+        """Pd of each SNR level at the calibration's window threshold (the same
+        chance Pd for every detector)."""
+        mine = trials[(trials.scenario == cal.scenario) & (trials.config == cal.method)]
+        for snr, g in mine.groupby("snr_db"):
+            rows = (summary.scenario == cal.scenario) & (summary.config == cal.method) & (summary.snr_db == snr)
+            for col, value in equal_chance_pd(g["peak_statistic"], cal.equal_chance_threshold).items():
+                summary.loc[rows, col] = value
+
+    def log_trial(self, stream, layout: TrialLayout, rec: TrialRecord) -> None:
+        import rerun as rr
+
+        t = np.asarray(rec.t, dtype=np.float64)
+        every = np.arange(t.shape[0])
+        for m in layout.methods_of(self):
+            tr = rec.methods[m.label]
+            drawn = _drawn(tr)
+            stat = tr.arrays.get("statistic")
+            if drawn["statistic"]:
+                log_series(stream, m.path("statistic"), t, every, stat,
+                           rr.SeriesLines(names=m.label, colors=[m.color], widths=[1.5]))
+            if drawn["threshold"]:
+                # Lighter and thinner than the statistic: a reference line.
+                log_series(stream, m.path("threshold"), t, every, np.full(t.shape[0], tr.threshold),
+                           rr.SeriesLines(names=f"{m.label} threshold", colors=[(*m.color, 150)], widths=[1.0]))
+            if drawn["alarms"]:
+                hits = np.flatnonzero(tr.arrays["alarms"])
+                log_series(stream, m.path("alarms"), t, hits, stat[hits],
+                           rr.SeriesPoints(names=f"{m.label} alarms", colors=[m.color], markers=["cross"],
+                                           marker_sizes=[5.0]))
+
+    def views(self, layout: TrialLayout, rec: TrialRecord) -> Views:
+        import rerun.blueprint as rrb
+
+        contents = [relative(layout, m.path(child)) for m in layout.methods_of(self)
+                    for child, shown in _drawn(rec.methods[m.label]).items() if shown]
+        if not contents:
+            return Views()
+        return Views(top=[rrb.TimeSeriesView(origin=rerun_path(layout.root), name="statistics", contents=contents)])
+
+    def report_sections(self, ctx: ReportContext) -> list[str]:
+        from bench.tasks import detection_report
+        return detection_report.sections(ctx)
+
+    def trial_sections(self, ctx: ReportContext) -> list[str]:
+        from bench.tasks import detection_report
+        return detection_report.timeline(ctx)

@@ -1,0 +1,290 @@
+"""Track-before-detect: a scene score thresholded at a per-scene Pfa, and a
+backtracked track scored against the true cells.
+
+A TBD method returns a :class:`~bench.core.TBDOutput`; the harness calibrates
+the scene threshold on null scenes (empirical quantile or a Gumbel fit,
+Johnston & Krishnamurthy, IEEE TAES 38(1), 2002), reads the same threshold
+per cell on the null value maps, and scores detection and position error
+(:mod:`bench.tasks.tbd_metrics`; docs/architecture.md, 'Tasks'), as the
+multi-frame DP-TBD paper and Tonissen & Evans (IEEE TAES 32(4), 1996) do.
+
+A recorded trial keeps, of the scene, the frames (quantised), the grid and
+the true cells; per method, the backtracked cells, the last-frame value map
+(quantised) and the scene score. Entities::
+
+    .../frames                  DepthImage per step (uint8 codes, viridis), grid as static AnyValues
+    .../frames/truth_track      true cells: Points2D per step + static LineStrips2D, pixel coords
+    .../frames/{method}_track   backtracked cells of a method, same form
+    .../{method}/score          Scalars: the scene score, a flat line over the steps
+    .../{method}/threshold      Scalars: the scene threshold (when the score is drawn)
+    .../{method}/value          static DepthImage: merit map at the last frame (uint8 codes, inferno)
+
+Images are north up like positions: grid row ``r`` (``y = y_min + (r + 0.5)·cell_m``)
+is drawn at image row ``rows - 1 - r``, so a cell ``(row, col)`` is at pixel
+``(col + 0.5, rows - row - 0.5)``, where the track strips are logged. Cells
+outside the grid (e.g. -1) are left out of the strips; a score or threshold
+that is non-finite is not drawn.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from bench.calibration import cell_order_statistics
+from bench.core import TBD, Batch, TBDOutput
+from bench.metrics import per_step_rmse
+from bench.recording.blueprint import Views, relative
+from bench.recording.draw import log_image, log_image_series, log_series, log_track
+from bench.recording.layout import TRUTH_COLOR, MethodLayout, TrialLayout
+from bench.recording.paths import rerun_path
+from bench.recording.record import MethodTrace, TrialRecord, check_shape
+from bench.tasks.base import OutputError, ReportContext, Scene, Task, check_finite, time_series
+from bench.tasks.tbd_metrics import summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
+
+__all__ = ["GRID_KEYS", "TBDTask", "method_trace", "scene"]
+
+#: Keys of a grid: cell ``(row, col)`` has its centre at
+#: ``x = x_min_m + (col + 0.5)·cell_m``, ``y = y_min_m + (row + 0.5)·cell_m``.
+GRID_KEYS = ("rows", "cols", "cell_m", "x_min_m", "y_min_m")
+_FRAMES_COLORMAP = "viridis"
+_VALUE_COLORMAP = "inferno"
+
+
+# ------------------------------------------------------------------ what a recorded trial keeps
+
+def _grid(grid) -> dict:
+    """The grid dict with exactly GRID_KEYS, ints and floats; ValueError if not."""
+    missing = [k for k in GRID_KEYS if k not in grid]
+    if missing:
+        raise ValueError(f"TrialRecord.grid: missing key(s) {', '.join(missing)}")
+    out = {"rows": int(grid["rows"]), "cols": int(grid["cols"])}
+    out.update({k: float(grid[k]) for k in GRID_KEYS[2:]})
+    if out["rows"] <= 0 or out["cols"] <= 0 or not out["cell_m"] > 0:
+        raise ValueError(f"TrialRecord.grid: rows, cols and cell_m must be > 0, got {out}")
+    return out
+
+
+def _cells(cells, where: str) -> np.ndarray:
+    """Integer (K, 2) cells as int32."""
+    cells = np.asarray(cells)
+    check_shape(cells, (None, 2), where, kinds="iu")
+    return cells.astype(np.int32)
+
+
+def scene(frames=None, grid: dict | None = None, truth_cells=None) -> Scene:
+    """What a recorded trial keeps of a TBD scene: frames (K, H, W), the grid
+    (must match the frames) and the true cells (K, 2) (None under the null)."""
+    kept = Scene()
+    if grid is not None:
+        kept.info["grid"] = grid = _grid(grid)
+    if frames is not None:
+        frames = np.asarray(frames)
+        check_shape(frames, (None, None, None), "frames")
+        if grid is not None and frames.shape[1:] != (grid["rows"], grid["cols"]):
+            raise ValueError(f"TrialRecord.grid: rows x cols = {grid['rows']} x {grid['cols']} "
+                             f"does not match frames {frames.shape[1]} x {frames.shape[2]}")
+        kept.images["frames"] = frames
+    if truth_cells is not None:
+        kept.arrays["truth_cells"] = _cells(truth_cells, "truth_cells")
+    return kept
+
+
+def method_trace(threshold: float | None, track_cells=None, value=None, score: float | None = None,
+                 image_shape: tuple[int, int] | None = None) -> MethodTrace:
+    """What a recorded trial keeps of a TBD method: its backtracked cells (K, 2),
+    last-frame value map (H, W) (must be ``image_shape`` when given) and scene score."""
+    arrays, images = {}, {}
+    if track_cells is not None:
+        arrays["track_cells"] = _cells(track_cells, "track_cells")
+    if value is not None:
+        value = np.asarray(value)
+        check_shape(value, image_shape or (None, None), "value")
+        images["value"] = value
+    return MethodTrace(threshold=threshold, arrays=arrays, images=images,
+                       info={} if score is None else {"score": float(score)})
+
+
+# ------------------------------------------------------------------ what is drawn
+
+def _image_shape(rec: TrialRecord) -> tuple[int, int] | None:
+    """(H, W) of the images: from the frames, else the grid, else None."""
+    frames = rec.image_shape("frames")
+    if frames is not None and len(frames) == 3:
+        return frames[1], frames[2]
+    grid = rec.info.get("grid")
+    return None if grid is None else (int(grid["rows"]), int(grid["cols"]))
+
+
+def _finite(x) -> bool:
+    return x is not None and math.isfinite(x)
+
+
+def _drawn(tr: MethodTrace, image: tuple | None) -> dict[str, bool]:
+    """Which of a method's entities are logged, for the logging and the views alike."""
+    score = _finite(tr.info.get("score"))
+    return {"score": score, "threshold": score and _finite(tr.threshold),
+            "track": "track_cells" in tr.arrays and image is not None, "value": "value" in tr.images}
+
+
+def _track_path(layout: TrialLayout, m: MethodLayout) -> str:
+    return layout.path(f"frames/{m.base.rsplit('/', 1)[-1]}_track")
+
+
+def cell_pixels(cells: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Pixel centres ``(col + 0.5, rows - row - 0.5)`` of (row, col) cells in
+    the north-up image; NaN rows for cells outside the grid."""
+    rows, cols = shape
+    r, c = cells[:, 0].astype(np.float64), cells[:, 1].astype(np.float64)
+    out = np.column_stack([c + 0.5, rows - r - 0.5]).astype(np.float32)
+    out[~((r >= 0) & (r < rows) & (c >= 0) & (c < cols))] = np.nan
+    return out
+
+
+class TBDTask(Task):
+    """Track-before-detect: a scene score at a calibrated per-scene Pfa, and a backtracked track."""
+
+    name = TBD
+    calibrated = True
+    calibration_modes = ("nominal", "empirical", "gumbel")
+    pfa_unit = "per scene"
+    noun, short_noun = "track-before-detect", "TBD"
+    null_sample = "one scene score per null scene"
+    recording_text = ("per TBD method the frames as heatmaps with the true and backtracked tracks, the "
+                      "last-frame value map and the scene score against its threshold")
+    summary_columns = ("n_trials", "pd", "pd_low", "pd_high", "pfa", "pfa_low", "pfa_high", "rmse_mean",
+                       "rmse_low", "rmse_high", "threshold", "realised_snr_db", "rmse_all_mean", "rmse_all_low",
+                       "rmse_all_high", "snr_offset_unit_innovation_db")
+    headline_columns = ("pd", "pd_low", "pd_high", "pfa", "pfa_low", "pfa_high", "rmse_mean", "rmse_low",
+                        "rmse_high")
+    scene_entities = ("frames",)
+    method_entities = ("score", "threshold", "value")
+
+    # -------------------------------------------------------------- worker side
+
+    def check_output(self, out, batch: Batch) -> TBDOutput:
+        if not isinstance(out, TBDOutput):
+            raise OutputError(f"expected a TBDOutput, got {type(out).__name__}")
+        check_finite("score", np.asarray(out.score, float), (batch.n,))
+        track = np.asarray(out.track)
+        if track.shape != (batch.n, batch.steps, 2) or not np.issubdtype(track.dtype, np.integer):
+            raise OutputError(f"track has shape {track.shape} ({track.dtype}), expected integer cells "
+                              f"{(batch.n, batch.steps, 2)}")
+        grid = batch.meta["grid"]
+        if track.min() < 0 or (track[..., 0] >= grid["rows"]).any() or (track[..., 1] >= grid["cols"]).any():
+            raise OutputError("track leaves the grid")
+        return out
+
+    def null_values(self, batch: Batch, out: TBDOutput) -> np.ndarray:
+        """One scene score per null trial: the calibration sample."""
+        return np.asarray(out.score, float)
+
+    def null_cells(self, batch: Batch, out: TBDOutput) -> np.ndarray | None:
+        """Order statistics of each null scene's value map (the final merit per
+        cell), for the per-cell Pfa (:func:`bench.calibration.cell_calibration`)."""
+        return None if out.value is None else cell_order_statistics(out.value)
+
+    def trial_metrics(self, batch: Batch, out: TBDOutput, threshold: float) -> dict[str, np.ndarray]:
+        meta = batch.meta
+        if meta.get("target_cells") is None:
+            raise OutputError("an evaluation batch has no target (target_cells is None)")
+        offset = (unit_innovation_snr_offset_db(meta["ar_coefficients"], meta["noise_autocovariance"])
+                  if "noise_autocovariance" in meta else np.nan)
+        return (tbd_trial_metrics(out.score, out.track, threshold, target_cells=meta["target_cells"],
+                                  truth_xy_m=batch.truth[..., :2], grid=meta["grid"],
+                                  tolerance_cells=int(meta.get("hit_tolerance_cells", 1)))
+                | {"snr_offset_unit_innovation_db": np.full(batch.n, offset)} | time_series(batch))
+
+    def recorded_scene(self, batch: Batch, i: int) -> Scene:
+        cells = batch.meta.get("target_cells")
+        return scene(batch.z[i], dict(batch.meta["grid"]), None if cells is None else np.asarray(cells[i]))
+
+    def recorded_method(self, batch: Batch, out: TBDOutput, i: int, threshold: float) -> MethodTrace:
+        grid = batch.meta["grid"]
+        return method_trace(threshold, np.asarray(out.track[i]),
+                            None if out.value is None else np.asarray(out.value[i]), float(out.score[i]),
+                            image_shape=(int(grid["rows"]), int(grid["cols"])))
+
+    # -------------------------------------------------------------- driver side
+
+    def summarise(self, trials: pd.DataFrame, series: dict) -> pd.DataFrame:
+        return summarise_tbd(trials, series)
+
+    def apply_calibration(self, summary: pd.DataFrame, trials: pd.DataFrame, cal) -> None:
+        """The Pfa columns of a TBD config are the scene Pfa of the threshold
+        used, measured on the calibration's null scenes."""
+        rows = (summary.scenario == cal.scenario) & (summary.config == cal.method)
+        summary.loc[rows, ["pfa", "pfa_low", "pfa_high"]] = [cal.used_pfa, cal.used_pfa_low, cal.used_pfa_high]
+
+    def steps(self, trials: pd.DataFrame, series: dict[str, np.ndarray]) -> pd.DataFrame:
+        """Per frame: position RMSE over detected trials and over every trial."""
+        detected = trials["detected"].to_numpy(bool)
+        return pd.DataFrame({"rmse_position": per_step_rmse(series["sq_err_m2"][detected]),
+                             "n_trials": int(detected.sum()),
+                             "rmse_position_all": per_step_rmse(series["sq_err_m2"])})
+
+    def log_trial(self, stream, layout: TrialLayout, rec: TrialRecord) -> None:
+        t = np.asarray(rec.t, dtype=np.float64)
+        image = _image_shape(rec)
+        if "frames" in rec.images:
+            self._log_frames(stream, layout, rec, t, image)
+        for m in layout.methods_of(self):
+            self._log_method(stream, layout, m, rec.methods[m.label], t, image)
+
+    @staticmethod
+    def _log_frames(stream, layout: TrialLayout, rec: TrialRecord, t: np.ndarray, image) -> None:
+        """The frames as one image column, then the true cells over them."""
+        q = rec.quantised("frames")
+        if q.codes.shape[0] == 0 or q.codes.size == 0:
+            return
+        grid = rec.info.get("grid")
+        log_image_series(stream, layout.path("frames"), q, t, _FRAMES_COLORMAP,
+                         None if grid is None else {f"grid_{k}": v for k, v in grid.items()})
+        if "truth_cells" in rec.arrays and image is not None:
+            log_track(stream, layout.path("frames/truth_track"), t, cell_pixels(rec.arrays["truth_cells"], image),
+                      TRUTH_COLOR, radius=3.0)
+
+    @staticmethod
+    def _log_method(stream, layout: TrialLayout, m: MethodLayout, tr: MethodTrace, t: np.ndarray, image) -> None:
+        import rerun as rr
+
+        k, drawn = t.shape[0], _drawn(tr, image)
+        every = np.arange(k)
+        if drawn["score"]:
+            # A scene-level number: a flat line, to compare with the threshold.
+            log_series(stream, m.path("score"), t, every, np.full(k, tr.info["score"]),
+                       rr.SeriesLines(names=f"{m.label} score", colors=[m.color], widths=[2.0]))
+        if drawn["threshold"]:
+            log_series(stream, m.path("threshold"), t, every, np.full(k, tr.threshold),
+                       rr.SeriesLines(names=f"{m.label} threshold", colors=[(*m.color, 150)], widths=[1.0]))
+        if drawn["track"]:
+            log_track(stream, _track_path(layout, m), t, cell_pixels(tr.arrays["track_cells"], image), m.color,
+                      radius=3.0)
+        if drawn["value"]:
+            log_image(stream, m.path("value"), tr.quantised("value"), _VALUE_COLORMAP)
+
+    def views(self, layout: TrialLayout, rec: TrialRecord) -> Views:
+        """The frames with every track and each value map with its method's
+        track on top; the scores against their thresholds below."""
+        import rerun.blueprint as rrb
+
+        origin, image = rerun_path(layout.root), _image_shape(rec)
+        images = ([rrb.Spatial2DView(origin=rerun_path(layout.path("frames")), name="frames (north up)")]
+                  if "frames" in rec.images else [])
+        scores = []
+        for m in layout.methods_of(self):
+            drawn = _drawn(rec.methods[m.label], image)
+            if drawn["value"]:
+                contents = [relative(layout, m.path("value"))] + (
+                    [relative(layout, _track_path(layout, m))] if drawn["track"] else [])
+                images.append(rrb.Spatial2DView(origin=origin, name=f"{m.label} value", contents=contents))
+            scores += [relative(layout, m.path(c)) for c in ("score", "threshold") if drawn[c]]
+        top = [rrb.Grid(*images) if len(images) > 3 else rrb.Horizontal(*images)] if images else []
+        bottom = [rrb.TimeSeriesView(origin=origin, name="scores", contents=scores)] if scores else []
+        return Views(top=top, bottom=bottom, draws_scene=bool(images))
+
+    def report_sections(self, ctx: ReportContext) -> list[str]:
+        from bench.tasks import tbd_report
+        return tbd_report.sections(ctx)
