@@ -145,7 +145,7 @@ def cell_exceedances(order_stats: np.ndarray, threshold: float) -> tuple[np.ndar
     """Per trial, bounds (low, high) on the number of cells at or above
     ``threshold``: with v_j the value at rank r_j, the count is r_j for the
     last j with v_j >= threshold, up to r_(j+1) - 1 (exact where the kept
-    ranks are consecutive, i.e. up to EXACT_CELL_RANKS cells)."""
+    ranks are consecutive, i.e. for fewer than EXACT_CELL_RANKS cells)."""
     ranks, vals = order_stats[:, 0], order_stats[:, 1]
     above = vals >= threshold
     j = above.sum(axis=1)                       # values are decreasing: the first j are above

@@ -21,14 +21,14 @@ def test_ranks_start_exact_and_end_at_the_cell_count(cells):
 @given(seed=st.integers(0, 2**31), cells=st.integers(1, 3000), q=st.floats(0.0, 1.0))
 def test_exceedance_bracket_contains_the_true_count(seed, cells, q):
     """The kept order statistics bracket the number of cells at or above any threshold,
-    exactly when it is at most EXACT_CELL_RANKS."""
+    exactly when it is below EXACT_CELL_RANKS."""
     rng = np.random.default_rng(seed)
     maps = rng.standard_normal((3, cells)).round(1)      # ties included
     t = float(np.quantile(maps, q))
     low, high = cell_exceedances(cell_order_statistics(maps), t)
     true = (maps >= t).sum(axis=1)
     assert np.all(low <= true) and np.all(true <= high)
-    exact = true <= EXACT_CELL_RANKS
+    exact = true < EXACT_CELL_RANKS
     assert np.array_equal(low[exact], true[exact]) and np.array_equal(high[exact], true[exact])
 
 
