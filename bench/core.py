@@ -4,7 +4,13 @@ Everything is batched over Monte Carlo trials: arrays carry a leading trial
 axis ``n``.
 
 * A :class:`Scenario` generates a :class:`Batch` of ``n`` trials at one SNR
-  (or under the null hypothesis, ``snr_db=None``).
+  (or under the null hypothesis, ``snr_db=None``). What the scenario tells the
+  methods and the harness beyond times, truth and measurements rides on the
+  batch as a :class:`Scene`: a frozen, validated object of the type its task
+  defines (:class:`bench.tasks.detection.DetectionScene`,
+  :class:`bench.tasks.tracking.TrackingScene`, :class:`bench.tasks.tbd.TBDScene`;
+  docs/architecture.md, 'Scenes'), so a misspelt or misshapen field fails in
+  :meth:`Scenario.generate`, not deep inside a worker.
 * A :class:`Method` turns a Batch into an output for its task:
   :class:`DetectionOutput` for ``maneuver-detection``, :class:`TrackingOutput`
   for ``tracking``, :class:`TBDOutput` for ``tbd``.
@@ -28,6 +34,88 @@ TBD = "tbd"
 TASKS = (MANEUVER_DETECTION, TRACKING, TBD)
 
 
+class SceneError(ValueError):
+    """A scene (or a value inside one) has a field of the wrong type, shape or
+    value. The message names the field, e.g. ``DetectionScene.onset_step:
+    expected ...``; :attr:`field` is its name."""
+
+    def __init__(self, owner: str, field: str, problem: str):
+        self.owner, self.field, self.problem = owner, field, problem
+        super().__init__(f"{owner}.{field}: {problem}")
+
+
+def has_shape(value, shape: tuple, kinds: str | None = None) -> bool:
+    """Whether ``value`` is an array of ``shape`` (None: any length) whose
+    dtype kind is one of ``kinds`` (e.g. ``"iu"``; None: any)."""
+    if not isinstance(value, np.ndarray):
+        return False
+    return (value.ndim == len(shape) and all(s is None or s == d for s, d in zip(shape, value.shape))
+            and (kinds is None or value.dtype.kind in kinds))
+
+
+def _describe(value) -> str:
+    if isinstance(value, np.ndarray):
+        return f"an array of shape {value.shape} ({value.dtype})"
+    text = repr(value)
+    return f"{type(value).__name__} {text if len(text) <= 60 else text[:57] + '...'}"
+
+
+def require(owner, field: str, ok: bool, expected: str) -> None:
+    """SceneError naming ``Owner.field`` unless ``ok``: the field of ``owner``
+    (a scene, or a value of one) holds something other than ``expected``."""
+    if not ok:
+        raise SceneError(type(owner).__name__, field,
+                         f"expected {expected}, got {_describe(getattr(owner, field))}")
+
+
+def _is_index(x) -> bool:
+    return isinstance(x, (int, np.integer)) and not isinstance(x, bool) and x >= 0
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Scene:
+    """What a scenario tells the methods and the harness about a batch, beyond
+    its times, truth and measurements (docs/architecture.md, 'Scenes').
+
+    Each task defines its own scene type, derived from this one
+    (``Task.scene_type``), with typed, documented fields; a scenario builds the
+    scene of its task in :meth:`Scenario.generate`. Scenes are frozen (fields
+    cannot be rebound) and validated twice: on their own when built
+    (:meth:`__post_init__`: types, shapes, ranges) and against the batch they
+    ride on (:meth:`check`, called by :class:`Batch`). A misspelt or missing
+    field is a TypeError of the constructor; a bad value a :class:`SceneError`
+    naming the field. Fields here are the ones the harness reads for every task.
+    """
+
+    #: how the scenario defines SNR, in one sentence (quoted by the report); "": not given
+    snr_definition: str = ""
+    #: (n,) SNR each trial realised (dB; NaN where undefined, e.g. under the null); None: not measured
+    realised_snr_db: np.ndarray | None = None
+    #: indices of the position components of the state; the first two are drawn in the plane
+    position_index: tuple[int, ...] = (0, 1)
+    #: (n, K, 2) measurements in the plane (m), for recordings; None: the first two components of ``z``
+    measurements_xy: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        require(self, "snr_definition", isinstance(self.snr_definition, str), "a str")
+        require(self, "realised_snr_db", self.realised_snr_db is None
+                or has_shape(self.realised_snr_db, (None,), "fiu"), "None or an (n,) float array")
+        require(self, "position_index", isinstance(self.position_index, tuple) and len(self.position_index) >= 2
+                and all(_is_index(j) for j in self.position_index), "a tuple of at least two state indices >= 0")
+        require(self, "measurements_xy", self.measurements_xy is None
+                or has_shape(self.measurements_xy, (None, None, 2), "fiu"), "None or an (n, K, 2) float array")
+
+    def check(self, batch: Batch) -> None:
+        """SceneError unless the scene fits ``batch`` (its trials, steps and
+        state size). Subclasses extend it, calling ``super().check(batch)``."""
+        n, K, d = batch.n, batch.steps, batch.truth.shape[-1]
+        require(self, "realised_snr_db", self.realised_snr_db is None or self.realised_snr_db.shape == (n,),
+                f"({n},) values, one per trial")
+        require(self, "position_index", max(self.position_index) < d, f"indices < {d}, the state size")
+        require(self, "measurements_xy", self.measurements_xy is None
+                or self.measurements_xy.shape == (n, K, 2), f"shape ({n}, {K}, 2)")
+
+
 @dataclass
 class Batch:
     """``n`` Monte Carlo trials of one scenario config at one SNR.
@@ -40,23 +128,9 @@ class Batch:
         True state per trial and step.
     z : (n, K, m) float
         Point measurements (or ``(n, K, H, W)`` frames for TBD scenes).
-    meta : dict
-        Scenario facts the methods and metrics need. Keys used by the harness:
-        ``onset_step`` / ``offset_step`` (maneuver step indices, ``None``
-        under the null), ``null_onset_step`` (under the null, the step where
-        the maneuver would start: the harness measures there how often a
-        detector "detects" by chance), ``detect_window_steps``, ``warmup_steps``,
-        ``snr_definition`` (one sentence), ``realised_snr_db`` ((n,) array),
-        ``position_index`` (indices of the position components of the state).
-        A scenario may add a ``filter`` model for methods that run a filter.
-        Used by the harness for the other tasks: ``grid`` and ``target_cells``
-        ((n, K, 2) true cells, ``None`` under the null) and
-        ``hit_tolerance_cells`` (TBD metrics and recordings); ``state_labels``,
-        ``divergence_bound_m``, ``glint_outlier`` ((n, K, m) flags, drawn
-        in recordings) and ``derived_components`` (a picklable function of
-        states (..., d) returning named (...) arrays, e.g. range, bearing and
-        elevation, scored per step like the state components) for tracking; ``z_xy`` (measurements in the plane,
-        for recordings).
+    scene : Scene
+        Everything else the methods and the harness need, as the scene type of
+        the scenario's task (:class:`Scene`); checked against the batch here.
     trials : (n,) int
         Global index of each trial within its SNR level (for seeds and CSV).
     """
@@ -64,8 +138,14 @@ class Batch:
     t: np.ndarray
     truth: np.ndarray
     z: np.ndarray
-    meta: dict[str, Any]
+    scene: Scene
     trials: np.ndarray
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.scene, Scene):
+            raise TypeError(f"Batch.scene: expected a bench.core.Scene (the scene type of the scenario's "
+                            f"task), got {type(self.scene).__name__}")
+        self.scene.check(self)
 
     @property
     def n(self) -> int:
@@ -117,7 +197,7 @@ class TBDOutput:
     score : (n,) float — the scene statistic (e.g. the largest merit at the
         last frame); the harness thresholds it at a scene-level Pfa.
     track : (n, K, 2) int — the backtracked cell per frame, ``(row, col)``
-        of the batch's grid (row ↔ y, col ↔ x; see ``meta["grid"]``).
+        of the batch's grid (row ↔ y, col ↔ x; see ``scene.grid``).
     value : (n, H, W) float32 or None — the merit (value) map at the last
         frame, for recordings.
     """
@@ -171,7 +251,9 @@ class Scenario(Component):
         """``n`` trials at ``snr_db`` (``None``: the null hypothesis).
 
         ``rng`` is a :class:`bench.rng.TrialRNG`: one independent stream per
-        trial, so a trial's draws do not depend on how trials are chunked.
+        trial, so a trial's draws do not depend on how trials are chunked. The
+        batch's scene is of the scene type of every task in :attr:`tasks`
+        (``Task.scene_type``).
         """
         raise NotImplementedError
 

@@ -37,7 +37,7 @@ from bench.provenance import provenance
 from bench.recording.record import TrialRecord
 from bench.rng import CALIBRATION, EVALUATION, TrialRNG
 from bench.store import MethodRun, Store, UnitResult
-from bench.tasks.base import Scene
+from bench.tasks.base import RecordedScene
 
 RUN_FILES = ("results.sqlite", "results.sqlite-wal", "results.sqlite-shm", "plan.toml", "trials.csv",
              "summary.csv", "calibration.csv", "steps.csv", "report.md", "recording.rrd")
@@ -112,10 +112,10 @@ def _error_text(exc: BaseException) -> str:
 
 
 def _measurements_xy(batch, i: int):
-    """Trial ``i``'s measurements in the plane: the scenario's ``z_xy``, else
-    the first two components of point measurements ``z`` (n, K, m >= 2); None
-    for other measurements (scalars, frames)."""
-    z_xy = batch.meta.get("z_xy")
+    """Trial ``i``'s measurements in the plane: the scene's ``measurements_xy``,
+    else the first two components of point measurements ``z`` (n, K, m >= 2);
+    None for other measurements (scalars, frames)."""
+    z_xy = batch.scene.measurements_xy
     if z_xy is not None:
         return z_xy[i]
     return batch.z[i][:, :2] if batch.z.ndim == 3 and batch.z.shape[-1] >= 2 else None
@@ -125,8 +125,8 @@ def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict, tasks) ->
     """Trial ``i`` as the record the driver draws: the harness's truth and
     measurements, what each of ``tasks`` keeps of the scene, the methods' traces."""
     sc = plan.scenarios[unit.scenario_index]
-    pos = list(batch.meta.get("position_index", (0, 1)))
-    scene = Scene.union(task.recorded_scene(batch, i) for task in tasks)
+    pos = list(batch.scene.position_index)
+    scene = RecordedScene.union(task.recorded_scene(batch, i) for task in tasks)
     rec = TrialRecord(sc.label, unit.snr_db, int(batch.trials[i]), batch.t, truth_xy=batch.truth[i][:, pos[:2]],
                       measurements_xy=_measurements_xy(batch, i), methods=traces, arrays=scene.arrays,
                       images=scene.images, info=scene.info)
@@ -144,9 +144,9 @@ def execute_unit(work: UnitTask) -> UnitResult:
     batch = registry.get_scenario(sc.name)().generate(sc.params, unit.snr_db, unit.n, rng)
     result = UnitResult(unit.key, unit.phase, sc.label, unit.snr_db, unit.trial_start, unit.n,
                         time.perf_counter() - t0)
+    realised = batch.scene.realised_snr_db
     result.common = {"trial": np.asarray(batch.trials, np.int64), "seed": rng.seed_values(),
-                     "realised_snr_db": np.asarray(batch.meta.get("realised_snr_db",
-                                                                   np.full(unit.n, np.nan)), float)}
+                     "realised_snr_db": np.asarray(np.full(unit.n, np.nan) if realised is None else realised, float)}
     recorded = [i for i, t in enumerate(batch.trials) if t < plan.record_trials] \
         if unit.phase == "evaluation" else []
     traces: dict[int, dict] = {i: {} for i in recorded}
@@ -158,6 +158,7 @@ def execute_unit(work: UnitTask) -> UnitResult:
         t1 = time.perf_counter()
         try:
             task = registry.get_task(method_cls.task)
+            task.check_scene(batch)
             method = method_cls()
             if unit.phase == "evaluation" and task.calibrated and work.thresholds.get(mc.label) is None:
                 raise RuntimeError("no threshold: the calibration of this method failed")
@@ -181,7 +182,7 @@ def execute_unit(work: UnitTask) -> UnitResult:
     tasks = list(dict.fromkeys(_task_of(mc) for mc in methods))
     result.records = [(int(batch.trials[i]), _trial_record(plan, unit, batch, i, traces[i], tasks))
                       for i in recorded]
-    result.snr_definition = str(batch.meta.get("snr_definition", ""))
+    result.snr_definition = batch.scene.snr_definition
     return result
 
 

@@ -6,25 +6,37 @@ Under a matched model the innovations nu_k of a linear-Gaussian filter are
 white, N(0, S_k), and the whitened L_k^-1 nu_k (S_k = L_k L_k') i.i.d.
 N(0, I); a maneuver shows as a departure from that (Bar-Shalom, Li &
 Kirubarajan, *Estimation with Applications to Tracking and Navigation*, 2001,
-sec. 5.4 and 11.2). Each detector computes its statistic from
-:func:`models.kalman.innovations` of the batch; what they share, written once
-here, is their task and how ``bench perf`` measures them.
+sec. 5.4 and 11.2). Each detector computes its statistic from the innovations
+of the detection scene's ``reference_filter`` (docs/architecture.md,
+'Scenes'); what they share, written once here, is their task, where the
+innovations come from and how ``bench perf`` measures them.
 """
 
 from __future__ import annotations
 
-import dataclasses
-
 from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Method
+from models.kalman import InnovationSequence, LinearGaussianFilter, innovations, reference_innovations
+
+
+def reference_filter(batch: Batch) -> LinearGaussianFilter:
+    """The scene's reference filter; TypeError, naming the field, when the
+    scenario gave none (or something else)."""
+    filt = getattr(batch.scene, "reference_filter", None)
+    if not isinstance(filt, LinearGaussianFilter):
+        raise TypeError(f"{type(batch.scene).__name__}.reference_filter: the innovation detectors need a "
+                        f"models.kalman.LinearGaussianFilter, got {type(filt).__name__}")
+    return filt
 
 
 class InnovationDetector(Method):
     """A maneuver detector on the scenario's reference-filter innovations
-    (``batch.meta["filter"]``, see :func:`models.kalman.innovations`).
+    (the scene's ``reference_filter``, see :func:`models.kalman.innovations`).
+    Subclasses implement :meth:`detect`.
 
     Reference implementation (``bench perf``): the same detector with the
     innovations computed by a per-trial, per-step filterpy ``KalmanFilter``
-    loop instead of the batched filter: the speed-up is that of the batching.
+    loop (:func:`models.kalman.reference_innovations`) instead of the batched
+    filter: the speed-up is that of the batching.
     """
 
     task = MANEUVER_DETECTION
@@ -34,9 +46,18 @@ class InnovationDetector(Method):
     #: the batched filter should beat the per-trial loop fifty-fold, at every size
     perf_targets = {"*": {"speedup": 50.0}}
 
+    def run(self, batch: Batch, params) -> DetectionOutput:
+        return self.detect(batch, innovations(reference_filter(batch), batch.z), params)
+
     def reference_run(self, batch: Batch, params) -> DetectionOutput:
-        """:meth:`run` on innovations from the filterpy loop
-        (``meta["kalman_backend"] = "filterpy"``, honoured by
-        :func:`models.kalman.innovations`); ``batch`` itself is not modified."""
-        on_filterpy = dataclasses.replace(batch, meta={**batch.meta, "kalman_backend": "filterpy"})
-        return self.run(on_filterpy, params)
+        """:meth:`detect` on innovations from the filterpy loop."""
+        return self.detect(batch, reference_innovations(reference_filter(batch), batch.z), params)
+
+    def detect(self, batch: Batch, inn: InnovationSequence, params) -> DetectionOutput:
+        """The detector's output from the innovations ``inn`` of ``batch``."""
+        raise NotImplementedError
+
+    @staticmethod
+    def measurement_dim(batch: Batch) -> int:
+        """n_z, the size of the reference filter's measurement (and innovation)."""
+        return reference_filter(batch).dim_z

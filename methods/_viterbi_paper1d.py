@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from models.glint import glint_logpdf
+from models.glint import GlintModel, glint_logpdf
 from models.spherical import measurement_jacobian, spherical, wrap_angle
 
 try:                                    # numba is optional: NumPy versions are the fallback
@@ -213,22 +213,22 @@ def paper_1d_component(c: Component, metric, K: int, n: int, Lb: int, start_node
     return est
 
 
-def spherical_prior(model: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def spherical_prior(model: GlintModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Prior mean, std and rate (3,) of (range, bearing, elevation) at step 0,
     from the Cartesian prior (x0, P0) linearised at its mean."""
-    x0, P0 = np.asarray(model["x0"], float), np.asarray(model["P0"], float)
+    x0, P0 = np.asarray(model.x0, float), np.asarray(model.P0, float)
     Jac = measurement_jacobian(x0[:3], "active")
     std = np.sqrt(np.diag(Jac @ P0[:3, :3] @ Jac.T))
     return spherical(x0[:3]), std, Jac @ x0[3:]
 
 
-def prior_prediction(model: dict, K: int) -> np.ndarray:
+def prior_prediction(model: GlintModel, K: int) -> np.ndarray:
     """(K, 6) zero-disturbance prediction of the prior mean, x(k+1) = F x(k) + G u."""
     out = np.empty((K, 6))
-    x = np.asarray(model["x0"], float)
+    x = np.asarray(model.x0, float)
     for k in range(K):
         out[k] = x
-        x = model["F"] @ x + model["Bu"]
+        x = model.F @ x + model.Bu
     return out
 
 
@@ -246,7 +246,7 @@ def cartesian_from_spherical(s: np.ndarray, rate: np.ndarray) -> np.ndarray:
     return np.concatenate([r[..., None] * u_r, vel], axis=-1)
 
 
-def paper_1d_track(z: np.ndarray, model: dict, params) -> np.ndarray:
+def paper_1d_track(z: np.ndarray, model: GlintModel, params) -> np.ndarray:
     """Estimates (n, K, 6) of the paper's 1-D trellis (:func:`paper_1d_component`).
 
     Each measured component (bearing and elevation; range too for an active
@@ -267,9 +267,9 @@ def paper_1d_track(z: np.ndarray, model: dict, params) -> np.ndarray:
     """
     z = np.asarray(z, float)
     n, K, _ = z.shape
-    T, P2 = float(model["dt_s"]), float(model["G"][0, 0])
+    T, P2 = float(model.dt_s), float(model.G[0, 0])
     mean0, std0, rate0 = spherical_prior(model)
-    labels = list(model["measurement_labels"])
+    labels = list(model.measurement_labels)
     sph = np.empty((n, K, 3))
     rate = np.empty((n, K, 3))
     pred = prior_prediction(model, K)
@@ -284,12 +284,12 @@ def paper_1d_track(z: np.ndarray, model: dict, params) -> np.ndarray:
         comp = Component(delta=params.quantisation_steps[i], T=T, P2=P2, w=w, logpi=logpi,
                          mean0=float(mean0[i]), std0=float(std0[i]), rate0=float(rate0[i]),
                          initial_nodes=params.initial_nodes)
-        sigma, eta = float(model["sigma"][col]), float(model["eta"][col])
+        sigma, eta = float(model.sigma[col]), float(model.eta[col])
 
         def metric(k, values, trials, col=col, sigma=sigma, eta=eta, wrap=label == "bearing"):
             res = z[trials, k, col] - values
-            return glint_logpdf(wrap_angle(res) if wrap else res, sigma, eta, float(model["epsilon"]),
-                                model["glint_model"])
+            return glint_logpdf(wrap_angle(res) if wrap else res, sigma, eta, float(model.epsilon),
+                                model.glint_model)
 
         sph[..., i] = paper_1d_component(comp, metric, K, n, params.Lb, params.start_nodes)
         rate[:, 0, i] = rate0[i]

@@ -14,7 +14,7 @@ from bench.params import param
 from bench.registry import register_method
 from bench.windows import sliding_sum
 from methods._innovation_base import InnovationDetector
-from models.kalman import innovations
+from models.kalman import InnovationSequence
 
 
 def window_lengths(steps: int, M: int) -> np.ndarray:
@@ -193,8 +193,8 @@ class Cumulant(InnovationDetector):
                 raise ConfigError("variance", 'moment = "lagged" needs variance = "sample" '
                                   "(no closed-form null variance)")
 
-    def run(self, batch: Batch, params) -> DetectionOutput:
-        x = innovations(batch).whitened                    # (n, K, m)
+    def detect(self, batch: Batch, inn: InnovationSequence, params) -> DetectionOutput:
+        x = inn.whitened                                   # (n, K, m)
         if params.variance == "sample":
             return self._run_sample_variance(x, params)
         centred = params.moment == "centred"
@@ -223,7 +223,7 @@ class Cumulant(InnovationDetector):
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
         """The chi2 quantile of eq. (8): chi2(n_z) for the sum, chi2(1) per
         component (at the Sidak level 1 - (1 - pfa)^(1/n_z)) for the max."""
-        n_z = batch.meta["filter"].dim_z
+        n_z = self.measurement_dim(batch)
         if params.combine == "sum":
             return float(scipy.stats.chi2.ppf(1.0 - pfa, n_z))
         return float(scipy.stats.chi2.isf(1.0 - (1.0 - pfa) ** (1.0 / n_z), 1))

@@ -10,7 +10,7 @@
   density. Derived in :class:`DpTbdMf`.
 
 Both run on ``tbd-grid`` batches (frames ``z`` (n, K, H, W)) with the grid,
-the frame period and the noise statistics from ``batch.meta``; the compiled
+the frame period and the noise statistics from ``batch.scene``; the compiled
 recursions are in :mod:`methods._tbd_kernels`. Scores are scene statistics:
 there is no analytic threshold for the maximum over a scene, so
 ``nominal_threshold`` is NaN and the harness calibrates on null scenes
@@ -46,8 +46,8 @@ def window_radius(max_speed_m_s: float, batch: Batch) -> int:
     move it 2 cells). The box (an L-inf ball) contains every such move; it
     also admits diagonal moves up to sqrt(2) q cells.
     """
-    T = float(batch.meta["frame_period_s"])
-    cell = float(batch.meta["grid"]["cell_m"])
+    T = float(batch.scene.frame_period_s)
+    cell = float(batch.scene.grid.cell_m)
     q = max(1, math.ceil(max_speed_m_s * T / cell - 1e-9))
     if q > MAX_WINDOW_RADIUS:
         raise ValueError(f"max_speed_m_s = {max_speed_m_s} gives a window radius of {q} cells at "
@@ -154,7 +154,7 @@ class DpTbd(Method):
 
 def prewhiten(z: np.ndarray, batch: Batch) -> np.ndarray:
     """(n, K, H, W) float32 innovations of each cell's series under the
-    scene's AR model (``meta["ar_coefficients"]``, sigma = ``meta["noise_std"]``).
+    scene's AR model (``scene.ar_coefficients``, sigma = ``scene.noise_std``).
 
     From frame P on: eps_k = (z_k + a1 z_(k-1) + ... + aP z_(k-P)) / sigma_w
     (the convention v_k + sum_i a_i v_(k-i) = w_k of the scene, sigma_w the
@@ -166,8 +166,8 @@ def prewhiten(z: np.ndarray, batch: Batch) -> np.ndarray:
     N(0, 1), independent of the others, under H0. White noise (no AR
     model): z / sigma.
     """
-    a = batch.meta.get("ar_coefficients")
-    sigma = float(batch.meta.get("noise_std", 1.0))
+    a = batch.scene.ar_coefficients
+    sigma = float(batch.scene.noise_std)
     if not a:
         return np.ascontiguousarray(z / np.float32(sigma), dtype=np.float32)
     a = tuple(float(x) for x in a)
@@ -310,10 +310,9 @@ def noise_autocovariance(batch: Batch) -> tuple[float, float, float]:
     """gamma(0), gamma(1), gamma(2) of the per-cell noise from the batch
     (``noise_autocovariance``; missing lags are 0; without it, white noise
     of variance ``noise_std``^2)."""
-    meta = batch.meta
-    gamma = meta.get("noise_autocovariance")
+    gamma = batch.scene.noise_autocovariance
     if gamma is None:
-        gamma = [float(meta.get("noise_std", 1.0)) ** 2]
+        gamma = [float(batch.scene.noise_std) ** 2]
     gamma = list(np.asarray(gamma, float)[:3]) + [0.0] * max(0, 3 - len(gamma))
     return tuple(gamma)
 
@@ -325,9 +324,9 @@ class DpTbdMf(Method):
     **Model.** Frame k (k = 0..K-1) holds z_k(x) = n_k(x) + s 1[x = x_k] on
     cells x, the target at x_k. The noise is independent across cells and, in
     each cell, a zero-mean stationary Gaussian process over frames with
-    autocovariance gamma(h) (``meta["noise_autocovariance"]``). The amplitude
+    autocovariance gamma(h) (``scene.noise_autocovariance``). The amplitude
     s is not known to the method: it assumes s = sigma 10^(design_snr_db/20)
-    (sigma = ``meta["noise_std"]``). A mismatch costs power only; the
+    (sigma = ``scene.noise_std``). A mismatch costs power only; the
     threshold is calibrated on null scenes, so the false-alarm rate holds.
 
     **State.** (x_k, d_k), d_k = x_k - x_(k-1) in the box window of radius q

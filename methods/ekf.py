@@ -9,6 +9,7 @@ import numpy as np
 from bench.core import TRACKING, Batch, Method, TrackingOutput
 from bench.params import param
 from bench.registry import register_method
+from models.glint import GlintModel, glint_model_of
 from models.spherical import measure, measurement_jacobian, measurement_residual
 
 
@@ -29,7 +30,7 @@ class EKFResult:
     nis: np.ndarray
 
 
-def ekf_filter(z: np.ndarray, model: dict, R: np.ndarray) -> EKFResult:
+def ekf_filter(z: np.ndarray, model: GlintModel, R: np.ndarray) -> EKFResult:
     """Batched EKF over ``n`` trials of ``K`` spherical measurements.
 
     Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking
@@ -42,19 +43,19 @@ def ekf_filter(z: np.ndarray, model: dict, R: np.ndarray) -> EKFResult:
         x_k+1|k = F x_k|k + G u,  P_k+1|k = F P_k|k F' + Q
 
     The dynamics are linear (the ``glint`` model), only the measurement is
-    linearised. ``model`` is ``batch.meta["model"]`` (F, Bu = G u, Q, x0, P0,
-    sensor); ``x0``, ``P0`` are the prior of step 0 (step 0 updates with
+    linearised. ``model`` is the tracking scene's :class:`~models.glint.GlintModel`
+    (F, Bu = G u, Q, x0, P0, sensor); ``x0``, ``P0`` are the prior of step 0 (step 0 updates with
     ``z[:, 0]`` first, as in :func:`models.kalman.kalman_filter`). Covariances
     depend on the data through the Jacobian, so they carry the trial axis;
     the loop runs over time only.
     """
     z = np.asarray(z, float)
     n, K, m = z.shape
-    F, Bu, Q, sensor = model["F"], model["Bu"], model["Q"], model["sensor"]
+    F, Bu, Q, sensor = model.F, model.Bu, model.Q, model.sensor
     d = F.shape[0]
     eye = np.eye(d)
-    x = np.broadcast_to(np.asarray(model["x0"], float), (n, d)).copy()
-    P = np.broadcast_to(np.asarray(model["P0"], float), (n, d, d)).copy()
+    x = np.broadcast_to(np.asarray(model.x0, float), (n, d)).copy()
+    P = np.broadcast_to(np.asarray(model.P0, float), (n, d, d)).copy()
     out = EKFResult(x_post=np.empty((n, K, d)), P_post=np.empty((n, K, d, d)),
                     x_prior=np.empty((n, K, d)), nu=np.empty((n, K, m)), nis=np.empty((n, K)))
     for k in range(K):
@@ -77,14 +78,14 @@ def ekf_filter(z: np.ndarray, model: dict, R: np.ndarray) -> EKFResult:
     return out
 
 
-def filterpy_ekf(z: np.ndarray, model: dict, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def filterpy_ekf(z: np.ndarray, model: GlintModel, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The reference: FilterPy's ``ExtendedKalmanFilter`` on one trial, same
     conventions as :func:`ekf_filter` (update then predict with control
     B u); returns x_post (K, d) and P_post (K, d, d). The tests' oracle and
     ``bench perf``'s baseline."""
     from filterpy.kalman import ExtendedKalmanFilter
 
-    sensor, d, m = model["sensor"], model["F"].shape[0], z.shape[-1]
+    sensor, d, m = model.sensor, model.F.shape[0], z.shape[-1]
 
     def jacobian(x):
         H = np.zeros((m, d))
@@ -92,33 +93,33 @@ def filterpy_ekf(z: np.ndarray, model: dict, R: np.ndarray) -> tuple[np.ndarray,
         return H
 
     f = ExtendedKalmanFilter(dim_x=d, dim_z=m, dim_u=3)
-    f.x, f.P = model["x0"].copy(), model["P0"].copy()
-    f.F, f.Q, f.R, f.B = model["F"], model["Q"], R, model["G"]
+    f.x, f.P = model.x0.copy(), model.P0.copy()
+    f.F, f.Q, f.R, f.B = model.F, model.Q, R, model.G
     xs, Ps = [], []
     for zk in z:
         f.update(zk, HJacobian=jacobian, Hx=lambda x: measure(x[:3], sensor), residual=measurement_residual)
         xs.append(f.x.copy())
         Ps.append(f.P.copy())
-        f.predict(u=model["u"])
+        f.predict(u=model.u)
     return np.array(xs), np.array(Ps)
 
 
-def noise_covariance(model: dict, which: str) -> np.ndarray:
+def noise_covariance(model: GlintModel, which: str) -> np.ndarray:
     """Diagonal R (m, m) the EKF assumes: the Gaussian core's sigma^2
     (``"core"``) or the glint noise's total variance (``"mixture"``)."""
     if which == "core":
-        return np.diag(np.asarray(model["sigma"], float) ** 2)
-    return np.diag(np.asarray(model["noise_variance"], float))
+        return np.diag(np.asarray(model.sigma, float) ** 2)
+    return np.diag(np.asarray(model.noise_variance, float))
 
 
 @register_method
 class EKF(Method):
     """Extended Kalman filter assuming Gaussian measurement noise (batched over trials).
 
-    Runs :func:`ekf_filter` on the ``glint`` scenario's model
-    (``batch.meta["model"]``): the exact linear dynamics with the known
-    control, the spherical measurement linearised at the prediction, angle
-    residuals wrapped to (-pi, pi]. The filter assumes Gaussian measurement
+    Runs :func:`ekf_filter` on the ``glint`` scenario's model (the tracking
+    scene's :class:`~models.glint.GlintModel`): the exact linear dynamics with
+    the known control, the spherical measurement linearised at the
+    prediction, angle residuals wrapped to (-pi, pi]. The filter assumes Gaussian measurement
     noise with the Gaussian core's variance sigma^2 (``noise_variance =
     "core"``: ignores the glint, so outliers pass into the estimate with the
     full gain) or with the glint noise's total variance, (1 - eps) sigma^2 +
@@ -140,13 +141,13 @@ class EKF(Method):
             "sigma^2, 'mixture' = the glint noise's total variance", choices=("core", "mixture"))
 
     def run(self, batch: Batch, params) -> TrackingOutput:
-        model = batch.meta["model"]
+        model = glint_model_of(batch.scene)
         res = ekf_filter(batch.z, model, noise_covariance(model, params.noise_variance))
         return TrackingOutput(estimate=res.x_post, covariance=res.P_post, traces={"nis": res.nis})
 
     def reference_run(self, batch: Batch, params) -> TrackingOutput:
         """The straightforward per-trial loop ``bench perf`` compares against."""
-        model = batch.meta["model"]
+        model = glint_model_of(batch.scene)
         R = noise_covariance(model, params.noise_variance)
         runs = [filterpy_ekf(z, model, R) for z in batch.z]
         return TrackingOutput(estimate=np.stack([x for x, _ in runs]), covariance=np.stack([P for _, P in runs]))

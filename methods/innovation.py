@@ -14,7 +14,7 @@ from bench.params import param
 from bench.registry import register_method
 from bench.windows import sliding_sum
 from methods._innovation_base import InnovationDetector
-from models.kalman import innovations
+from models.kalman import InnovationSequence
 
 #: the fading-memory statistic counts as formed once the weight of the
 #: missing (pre-start) past is below this fraction of its steady total
@@ -74,8 +74,8 @@ class Innovation(InnovationDetector):
                 raise ConfigError("delta", "the fading-memory statistic (delta > 0) "
                                   f"needs window = 1, got window = {self.window}")
 
-    def run(self, batch: Batch, params) -> DetectionOutput:
-        nis = innovations(batch).nis
+    def detect(self, batch: Batch, inn: InnovationSequence, params) -> DetectionOutput:
+        nis = inn.nis
         if params.delta > 0.0:
             statistic = fading_sum(nis, params.delta)
             valid_from = fading_valid_from(params.delta)
@@ -86,7 +86,7 @@ class Innovation(InnovationDetector):
                                traces={"nis": nis})
 
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
-        n_z = batch.meta["filter"].dim_z
+        n_z = self.measurement_dim(batch)
         if params.delta > 0.0:
             d = params.delta
             df = n_z * (1.0 + d) / (1.0 - d)          # moment match, approximate

@@ -12,7 +12,7 @@ from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
 from methods._viterbi_paper1d import paper_1d_track
-from models.glint import glint_logpdf
+from models.glint import GlintModel, glint_logpdf, glint_model_of
 from models.kalman import LinearGaussianModel, covariance_sequence
 from models.spherical import measure, measurement_residual
 
@@ -303,7 +303,7 @@ class Viterbi(Method):
     **Axes.** The ``glint`` dynamics are the same on every Cartesian axis,
     with isotropic process noise, so they are the same on the axes of any
     rotated frame. The trellis runs in the line-of-sight frame of the prior
-    mean (``meta["model"]["los_rotation"]``: radial, bearing and elevation
+    mean (the model's ``los_rotation``: radial, bearing and elevation
     directions), where the spherical measurement nearly decouples: range
     depends on the radial coordinate, bearing on the bearing-direction one,
     elevation on the elevation-direction one (up to terms of the order of
@@ -439,37 +439,37 @@ class Viterbi(Method):
 
     def run(self, batch: Batch, params) -> TrackingOutput:
         track = paper_1d_track if params.trellis == "paper-1d" else viterbi_track
-        return TrackingOutput(estimate=track(batch.z, batch.meta["model"], params))
+        return TrackingOutput(estimate=track(batch.z, glint_model_of(batch.scene), params))
 
 
-def process_noise_los(model: dict) -> np.ndarray:
+def process_noise_los(model: GlintModel) -> np.ndarray:
     """(3,) disturbance std (m/s^2) along the radial, bearing and elevation
     directions of the prior mean (isotropic: sigma_w three times)."""
-    return np.asarray(model.get("process_noise_los", np.full(3, float(model["process_noise_m_s2"]))), float)
+    return np.asarray(model.process_noise_los, float)
 
 
-def axis_model(model: dict) -> tuple[np.ndarray, np.ndarray]:
+def axis_model(model: GlintModel) -> tuple[np.ndarray, np.ndarray]:
     """(F2, g2): the per-axis 2-state transition and input gain of the model."""
-    F, G = model["F"], model["G"]
+    F, G = model.F, model.G
     return np.array([[1.0, F[0, 3]], [0.0, F[3, 3]]]), np.array([G[0, 0], G[3, 0]])
 
 
-def _axes(model: dict, K: int, params) -> tuple[list[_Axis], list[int]]:
+def _axes(model: GlintModel, K: int, params) -> tuple[list[_Axis], list[int]]:
     """Per line-of-sight axis: prior, control and quantisation steps; and the
     observed axes (a passive sensor does not observe the radial axis)."""
-    R = model["los_rotation"]
+    R = model.los_rotation
     F2, g2 = axis_model(model)
     sigma_w = process_noise_los(model)
-    x0, P0 = np.asarray(model["x0"], float), np.asarray(model["P0"], float)
+    x0, P0 = np.asarray(model.x0, float), np.asarray(model.P0, float)
     T = np.zeros((6, 6))
     T[:3, :3] = T[3:, 3:] = R
     x0los, P0los = T @ x0, T @ P0 @ T.T
     r0 = float(np.linalg.norm(x0[:3]))
     cos_e0 = math.sqrt(max(1.0 - (x0[2] / r0) ** 2, 0.0))
-    variance = np.asarray(model["noise_variance"], float)
-    if params.gate_noise == "glint" and float(model["epsilon"]) > 0.0:
-        variance = np.maximum(variance, 2.0 * np.asarray(model["eta"], float) ** 2)
-    var = dict(zip(model["measurement_labels"], variance))
+    variance = np.asarray(model.noise_variance, float)
+    if params.gate_noise == "glint" and float(model.epsilon) > 0.0:
+        variance = np.maximum(variance, 2.0 * np.asarray(model.eta, float) ** 2)
+    var = dict(zip(model.measurement_labels, variance))
     in_metres = {0: var.get("range"), 1: var["bearing"] * (r0 * cos_e0) ** 2, 2: var["elevation"] * r0 ** 2}
     half = np.array([(params.position_levels - 1) / 2, max((params.velocity_levels - 1) / 2, 1.0)])
     axes, observed = [], []
@@ -484,21 +484,21 @@ def _axes(model: dict, K: int, params) -> tuple[list[_Axis], list[int]]:
             P_prior = np.broadcast_to(P0j, (K, 2, 2))
         std = np.sqrt(np.stack([P_prior[:, 0, 0], P_prior[:, 1, 1]], axis=-1))
         w, logpi = disturbance_levels(params.disturbance_levels, float(sigma_w[j]), params.disturbance_span)
-        axes.append(_Axis(j=j, u=float(R[j] @ model["u"]), x0=x0los[[j, j + 3]], P0=P0j,
+        axes.append(_Axis(j=j, u=float(R[j] @ model.u), x0=x0los[[j, j + 3]], P0=P0j,
                           step=params.gate_sigmas * std / half, w=w, logpi=logpi))
     return axes, observed
 
 
-def viterbi_track(z: np.ndarray, model: dict, params) -> np.ndarray:
+def viterbi_track(z: np.ndarray, model: GlintModel, params) -> np.ndarray:
     """Estimates (n, K, 6) in the world frame; see :class:`Viterbi`."""
     z = np.asarray(z, float)
     n, K, _ = z.shape
-    R = model["los_rotation"]
+    R = model.los_rotation
     F2, g2 = axis_model(model)
     axes, observed = _axes(model, K, params)
-    density = {"sigma": np.asarray(model["sigma"], float), "eta": np.asarray(model["eta"], float),
-               "epsilon": float(model["epsilon"]), "model": model["glint_model"]}
-    ctx = _Context(z=z, R=R, F2=F2, g2=g2, sensor=model["sensor"], density=density,
+    density = {"sigma": np.asarray(model.sigma, float), "eta": np.asarray(model.eta, float),
+               "epsilon": float(model.epsilon), "model": model.glint_model}
+    ctx = _Context(z=z, R=R, F2=F2, g2=g2, sensor=model.sensor, density=density,
                    Lp=params.position_levels, Lv=params.velocity_levels, snap=params.node_value == "centre")
 
     est = np.empty((n, K, 3, 2))                       # line-of-sight (p, v) per axis

@@ -14,7 +14,7 @@ from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
 from methods._innovation_base import InnovationDetector
-from models.kalman import innovations
+from models.kalman import InnovationSequence
 
 MODES = ("decimated", "sliding")
 COEFFICIENTS = ("approximation", "detail", "both")
@@ -344,13 +344,13 @@ class Wavelet(InnovationDetector):
                 raise ConfigError("coarsest", f"expected an int between 1 and levels = "
                                   f"{self.levels}, got {self.coarsest}")
 
-    def run(self, batch: Batch, params) -> DetectionOutput:
+    def detect(self, batch: Batch, inn: InnovationSequence, params) -> DetectionOutput:
         start = valid_from(params.wavelet, params.levels, params.coarsest, params.mode)
         if start >= batch.steps:
             raise ConfigError("levels", f"level {params.levels} of {params.wavelet!r} "
                               f"({params.mode}) first forms at step {start}, but the scenario "
                               f"has {batch.steps} steps; use fewer levels")
-        x = innovations(batch).whitened                    # (n, K, m)
+        x = inn.whitened                                   # (n, K, m)
         result = wavelet_statistic(x, params.wavelet, params.levels, params.coarsest,
                                    params.coefficients, params.mode)
         traces = {f"innovation_{i}": x[..., i] for i in range(x.shape[-1])}
@@ -359,6 +359,6 @@ class Wavelet(InnovationDetector):
                                traces=traces)
 
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
-        n_z = batch.meta["filter"].dim_z
+        n_z = self.measurement_dim(batch)
         df = n_z * (2 if params.coefficients == "both" else 1)
         return null_threshold(pfa, df, params.coarsest)

@@ -5,13 +5,17 @@ it; keeping the model here lets neither import the other, and keeps the
 harness (:mod:`bench`) free of domain maths. Modules:
 
 * :mod:`models.kalman` — the batched linear Kalman filter and its innovations
-  (with the per-trial filterpy loop as oracle);
+  (with the per-trial filterpy loop as oracle); :class:`~models.kalman.LinearGaussianFilter`,
+  the reference filter a detection scene carries;
 * :mod:`models.glint` — glint measurement-noise densities (Gaussian core plus
-  Laplace spikes);
+  Laplace spikes); :class:`~models.glint.GlintModel`, the tracking model a
+  ``glint`` tracking scene carries;
 * :mod:`models.spherical` — range / bearing / elevation measurements of a
   Cartesian position, Jacobian and angle-aware residual;
 * :mod:`models.ar_noise` — autoregressive noise: stationarity, autocovariance,
   exact predictors.
 
+The models a scenario hands to methods are frozen dataclasses with typed,
+documented fields, validated when built (docs/architecture.md, 'Scenes').
 Models import neither :mod:`methods` nor :mod:`scenarios` (nor the harness).
 """

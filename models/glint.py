@@ -1,4 +1,5 @@
-"""Densities of glint measurement noise, in log space, vectorised.
+"""Densities of glint measurement noise, in log space, vectorised; and
+:class:`GlintModel`, the tracking model under that noise.
 
 Radar glint is modelled per measurement component as a Gaussian receiver
 noise with occasional heavy-tailed (Laplacian) glint spikes (Hewer, Martin &
@@ -41,10 +42,14 @@ finite (and asymptotically the Laplace tail -|x|/eta + const) for any finite x.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.special
 import scipy.stats
+
+from models._fields import require, require_arrays
+from models.spherical import MEASUREMENT_LABELS
 
 GLINT_MODELS = ("mixture", "additive")
 
@@ -144,3 +149,100 @@ def glint_tail_probability(c, sigma, eta, epsilon, model: str = "mixture"):
                                                        + scipy.special.log_ndtr(-c / sigma - r))
         out_tail = up + down          # 2 * (1/2)(up + down)
     return (1.0 - eps) * gauss_tail + eps * out_tail
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+@dataclass(frozen=True, eq=False)
+class GlintModel:
+    """Everything a tracker knows of a target seen by a spherical sensor under
+    glint noise: linear Cartesian dynamics with a known control, the prior of
+    step 0, and the measurement (which components, their glint noise).
+
+    The ``glint`` scenario builds it (Song & Sun, "Filtering method with
+    non-Gaussian noise"; the model is derived there) and hands it to the
+    trackers as the tracking scene's ``model`` (docs/architecture.md,
+    'Scenes'). State [x, y, z, vx, vy, vz] (d = 6), ENU metres;
+    x_(k+1) = F x_k + G (u + w_k), w_k = noise_factor g_k, g_k ~ N(0, I_3);
+    z_k = h(x_k) + v_k (:mod:`models.spherical`), v_k glint noise per
+    measured component (:func:`glint_logpdf`). The line-of-sight basis
+    ``los_rotation`` (rows: radial, bearing, elevation unit vectors at the
+    prior mean position) is where the control and the disturbance are given.
+    """
+
+    #: (d, d) state transition over one step
+    F: np.ndarray
+    #: (d, 3) gain of the held acceleration (control plus disturbance) into the state
+    G: np.ndarray
+    #: (3,) known control, Cartesian acceleration (m/s^2)
+    u: np.ndarray
+    #: (d,) G u, the control's contribution per step
+    Bu: np.ndarray
+    #: (d, d) process-noise covariance G noise_factor noise_factor' G'
+    Q: np.ndarray
+    #: (3, 3) the disturbance is w = noise_factor g, g standard normal
+    noise_factor: np.ndarray
+    #: (3,) disturbance std (m/s^2) along the radial, bearing and elevation directions
+    process_noise_los: np.ndarray
+    #: isotropic disturbance std sigma_w (m/s^2) of the scenario's parameters
+    process_noise_m_s2: float
+    #: (d,) prior mean of the state at step 0
+    x0: np.ndarray
+    #: (d, d) prior covariance of the state at step 0
+    P0: np.ndarray
+    #: "passive" (bearing, elevation) or "active" (range, bearing, elevation)
+    sensor: str
+    #: names of the measured components, in the order of z
+    measurement_labels: tuple[str, ...]
+    #: (m,) std of the Gaussian core per measured component (m or rad)
+    sigma: np.ndarray
+    #: (m,) Laplace glint scale per measured component (variance 2 eta^2)
+    eta: np.ndarray
+    #: glint probability per measured component
+    epsilon: float
+    #: how core and glint combine: one of :data:`GLINT_MODELS`
+    glint_model: str
+    #: (m,) total variance of the glint noise (:func:`glint_variance`)
+    noise_variance: np.ndarray
+    #: sampling interval T (s)
+    dt_s: float
+    #: (3, 3) line-of-sight basis at the prior mean position (rows: radial, bearing, elevation)
+    los_rotation: np.ndarray
+    #: (3,) the control along the radial, bearing and elevation directions (m/s^2)
+    control_los: np.ndarray
+    #: every noise std is its reference value times this (10^(-snr_db/20))
+    noise_scale: float
+
+    def __post_init__(self) -> None:
+        require_arrays(self, {"F": (None, None)})
+        d = self.F.shape[0]
+        require(self, "sensor", self.sensor in MEASUREMENT_LABELS, f"one of {tuple(MEASUREMENT_LABELS)}")
+        labels = MEASUREMENT_LABELS[self.sensor]
+        m = len(labels)
+        require_arrays(self, {"F": (d, d), "G": (d, 3), "u": (3,), "Bu": (d,), "Q": (d, d), "noise_factor": (3, 3),
+                              "process_noise_los": (3,), "x0": (d,), "P0": (d, d), "sigma": (m,), "eta": (m,),
+                              "noise_variance": (m,), "los_rotation": (3, 3), "control_los": (3,)})
+        require(self, "measurement_labels", self.measurement_labels == labels, f"{labels} (the {self.sensor} sensor's)")
+        require(self, "epsilon", _is_number(self.epsilon) and 0.0 <= self.epsilon <= 1.0, "a probability in [0, 1]")
+        require(self, "glint_model", self.glint_model in GLINT_MODELS, f"one of {GLINT_MODELS}")
+        for name in ("dt_s", "noise_scale"):
+            require(self, name, _is_number(getattr(self, name)) and getattr(self, name) > 0, "a number > 0")
+        require(self, "process_noise_m_s2", _is_number(self.process_noise_m_s2) and self.process_noise_m_s2 >= 0,
+                "a number >= 0")
+
+    @property
+    def dim_z(self) -> int:
+        """m, the number of measured components."""
+        return len(self.measurement_labels)
+
+
+def glint_model_of(scene) -> GlintModel:
+    """The :class:`GlintModel` a tracking scene carries (its ``model``);
+    TypeError naming the field when it holds something else."""
+    model = getattr(scene, "model", None)
+    if not isinstance(model, GlintModel):
+        raise TypeError(f"{type(scene).__name__}.model: expected a models.glint.GlintModel, "
+                        f"got {type(model).__name__}")
+    return model

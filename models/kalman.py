@@ -1,8 +1,11 @@
 """The one batched linear Kalman filter of the project.
 
 Every maneuver detector looks at the innovation of a reference linear filter
-that the scenario supplies (``batch.meta["filter"]``). This module runs that
-filter over all Monte Carlo trials at once and whitens its innovations.
+that the scenario supplies (a :class:`LinearGaussianFilter`, the detection
+scene's ``reference_filter``; docs/architecture.md, 'Scenes'). This module
+runs that filter over all Monte Carlo trials at once and whitens its
+innovations; :func:`reference_innovations` is the same by a per-trial
+filterpy loop (the oracle of the tests, the baseline of ``bench perf``).
 
 Notation after Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to
 Tracking and Navigation* (2001), sec. 5.2 (and the FilterPy names)::
@@ -29,19 +32,26 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from models._fields import require, require_arrays
 
-@dataclass(frozen=True)
+
+@dataclass(frozen=True, eq=False)
 class LinearGaussianModel:
-    """A time-invariant linear-Gaussian state-space model.
+    """A time-invariant linear-Gaussian state-space model (d states, m measured)."""
 
-    F : (d, d) state transition; H : (m, d) measurement matrix;
-    Q : (d, d) process-noise covariance; R : (m, m) measurement-noise covariance.
-    """
-
+    #: (d, d) state transition
     F: np.ndarray
+    #: (m, d) measurement matrix
     H: np.ndarray
+    #: (d, d) process-noise covariance
     Q: np.ndarray
+    #: (m, m) measurement-noise covariance
     R: np.ndarray
+
+    def __post_init__(self) -> None:
+        require_arrays(self, {"F": (None, None), "H": (None, None)})
+        d, m = self.F.shape[0], self.H.shape[0]
+        require_arrays(self, {"F": (d, d), "H": (m, d), "Q": (d, d), "R": (m, m)})
 
     @property
     def dim_x(self) -> int:
@@ -50,6 +60,36 @@ class LinearGaussianModel:
     @property
     def dim_z(self) -> int:
         return int(self.H.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class LinearGaussianFilter:
+    """A linear Kalman filter ready to run: its model and the prior of step 0
+    (x_0|-1, P_0|-1; see :func:`kalman_filter`). What a maneuver-detection
+    scenario hands to the innovation detectors (the detection scene's
+    ``reference_filter``)."""
+
+    #: the model the filter assumes (F, H, Q, R)
+    model: LinearGaussianModel
+    #: (n, d) prior mean of step 0 per trial, or (d,) shared by all trials
+    x0: np.ndarray
+    #: (d, d) prior covariance of step 0
+    P0: np.ndarray
+
+    def __post_init__(self) -> None:
+        require(self, "model", isinstance(self.model, LinearGaussianModel), "a LinearGaussianModel")
+        d = self.model.dim_x
+        require(self, "x0", isinstance(self.x0, np.ndarray) and self.x0.ndim in (1, 2) and self.x0.shape[-1] == d,
+                f"an array of shape (n, {d}) or ({d},)")
+        require_arrays(self, {"P0": (d, d)})
+
+    @property
+    def dim_x(self) -> int:
+        return self.model.dim_x
+
+    @property
+    def dim_z(self) -> int:
+        return self.model.dim_z
 
 
 @dataclass(frozen=True)
@@ -173,28 +213,29 @@ def whiten(nu: np.ndarray, S: np.ndarray):
     return whitened, nis
 
 
-def innovations(batch) -> InnovationSequence:
-    """Innovations of the scenario's reference filter on ``batch``.
-
-    Uses ``batch.meta["filter"]`` (a :class:`LinearGaussianModel`),
-    ``batch.meta["x0"]`` (n, d) and ``batch.meta["P0"]`` (d, d), the prior of
-    step 0 (see :func:`kalman_filter`).
-    """
-    meta = batch.meta
-    if meta.get("kalman_backend") == "filterpy":
-        nu, S = filterpy_innovations(meta["filter"], batch.z, meta["x0"], meta["P0"])
-    else:
-        result = kalman_filter(meta["filter"], batch.z, meta["x0"], meta["P0"])
-        nu, S = result.nu, result.S
+def _sequence(nu: np.ndarray, S: np.ndarray) -> InnovationSequence:
     whitened, nis = whiten(nu, S)
     return InnovationSequence(nu=nu, S=S, whitened=whitened, nis=nis)
+
+
+def innovations(filt: LinearGaussianFilter, z: np.ndarray) -> InnovationSequence:
+    """Innovations of ``filt`` on measurements ``z`` (n, K, m), all trials at
+    once (:func:`kalman_filter`), with their whitened form."""
+    result = kalman_filter(filt.model, z, filt.x0, filt.P0)
+    return _sequence(result.nu, result.S)
+
+
+def reference_innovations(filt: LinearGaussianFilter, z: np.ndarray) -> InnovationSequence:
+    """The same as :func:`innovations` by the per-trial filterpy loop
+    (:func:`filterpy_innovations`): the reference implementation."""
+    return _sequence(*filterpy_innovations(filt.model, z, filt.x0, filt.P0))
 
 
 def filterpy_innovations(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
     """The reference: innovations by a per-trial, per-step filterpy ``KalmanFilter``
     loop, same conventions as :func:`kalman_filter` (update, then predict).
-    Used by ``bench perf`` as the baseline and by the tests as the oracle;
-    ``meta["kalman_backend"] = "filterpy"`` makes :func:`innovations` use it."""
+    Used by ``bench perf`` as the baseline and by the tests as the oracle
+    (through :func:`reference_innovations`)."""
     from filterpy.kalman import KalmanFilter
 
     n, steps, m = z.shape

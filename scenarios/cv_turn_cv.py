@@ -12,7 +12,8 @@ from bench.core import MANEUVER_DETECTION, Batch, Scenario
 from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_scenario
-from models.kalman import LinearGaussianModel, kalman_filter, steady_state
+from bench.tasks.detection import DetectionScene
+from models.kalman import LinearGaussianFilter, LinearGaussianModel, kalman_filter, steady_state
 
 #: indices of x and y in the state [x, vx, y, vy]
 POSITION_INDEX = (0, 2)
@@ -130,9 +131,10 @@ class CvTurnCv(Scenario):
     The process-noise part is superposed linearly: n_k = F n_{k-1} + G w_k,
     n_{-1} = 0, with the CV ``F``.
 
-    The reference filter (``meta["filter"]``) is the per-axis DWNA CV filter
-    (:func:`cv_model`). It starts in steady state: ``meta["P0"]`` is the
-    steady-state prior covariance and ``meta["x0"]`` = truth at step 0 +
+    The reference filter (the scene's ``reference_filter``, a
+    :class:`models.kalman.LinearGaussianFilter`) is the per-axis DWNA CV
+    filter (:func:`cv_model`). It starts in steady state: its ``P0`` is the
+    steady-state prior covariance and its ``x0`` = truth at step 0 +
     chol(P0) e, so under the matched model its innovations are white and
     stationary from step 0.
 
@@ -143,6 +145,14 @@ class CvTurnCv(Scenario):
     whatever the SNR or hypothesis: initial estimate error (4,), process noise
     (K, 2), measurement noise (K, 2); trial i sees the same standard normals
     at every SNR.
+
+    **Scene** (a :class:`~bench.tasks.detection.DetectionScene`;
+    docs/architecture.md, 'Scenes'): ``onset_step`` / ``offset_step`` (None
+    under the null), ``null_onset_step`` (the onset, also under the null),
+    ``detect_window_steps``, ``warmup_steps``, ``reference_filter``,
+    ``position_index`` (0, 2), ``snr_definition``, ``realised_snr_db`` (n,).
+    The measurements are the plane positions themselves (no
+    ``measurements_xy``).
     """
 
     name = "cv-turn-cv"
@@ -212,24 +222,13 @@ class CvTurnCv(Scenario):
         z = truth[..., POSITION_INDEX] + sigma_w * v
         x0 = truth[:, 0] + e @ np.linalg.cholesky(P0).T
 
-        meta = {
-            "onset_step": None if null else onset,
-            "null_onset_step": onset,
-            "offset_step": None if null else onset + p.turn_steps,
-            "detect_window_steps": p.detect_window_steps,
-            "warmup_steps": p.warmup_steps,
-            "snr_definition": SNR_DEFINITION,
-            "realised_snr_db": self._realised_snr_db(p, model, z, x0, P0, onset, null),
-            "position_index": POSITION_INDEX,
-            "filter": model,
-            "x0": x0,
-            "P0": P0,
-            "noise_std_m": sigma_w,
-            "dt_s": T,
-            "z_xy": z,
-        }
-        return Batch(t=T * np.arange(K), truth=truth, z=z, meta=meta,
-                     trials=np.asarray(rng.trials))
+        scene = DetectionScene(
+            onset_step=None if null else onset, null_onset_step=onset,
+            offset_step=None if null else onset + p.turn_steps, detect_window_steps=p.detect_window_steps,
+            warmup_steps=p.warmup_steps, reference_filter=LinearGaussianFilter(model=model, x0=x0, P0=P0),
+            snr_definition=SNR_DEFINITION, realised_snr_db=self._realised_snr_db(p, model, z, x0, P0, onset, null),
+            position_index=POSITION_INDEX)
+        return Batch(t=T * np.arange(K), truth=truth, z=z, scene=scene, trials=np.asarray(rng.trials))
 
     @staticmethod
     def _onsets(p, rng):

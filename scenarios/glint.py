@@ -12,7 +12,8 @@ from bench.core import TRACKING, Batch, Scenario
 from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_scenario
-from models.glint import GLINT_MODELS, glint_variance
+from bench.tasks.tracking import TrackingScene
+from models.glint import GLINT_MODELS, GlintModel, glint_variance
 from models.spherical import MEASURED, MEASUREMENT_LABELS, los_basis, spherical, wrap_angle
 
 #: state components, in order (metres, m/s; x east, y north, z up)
@@ -90,13 +91,13 @@ class Glint(Scenario):
     *prior mean* initial position (:func:`models.spherical.los_basis`), a constant Cartesian
     vector ``u`` (so the model stays linear and the control is exactly
     known). Reading u_b, u_e as angular accelerations (rad/s^2) times range
-    would mean 350 m/s^2 at 5 km, not a plausible target. ``los_rotation`` in
-    ``meta["model"]`` is that basis; with the default geometry (bearing 0,
+    would mean 350 m/s^2 at 5 km, not a plausible target. The model's
+    ``los_rotation`` (:class:`models.glint.GlintModel`) is that basis; with the default geometry (bearing 0,
     elevation 0) it is the world frame up to axis order: y is the radial
     (range) direction, x the bearing and z the elevation direction, so the
     per-component errors read as range / cross-range errors.
 
-    **Initial state**: the prior mean (``meta["model"]["x0"]``) is at
+    **Initial state**: the prior mean (the model's ``x0``) is at
     ``initial_range_m``, ``initial_bearing_deg``, ``initial_elevation_deg``
     with velocity ``initial_velocity_m_s`` in line-of-sight coordinates; the
     prior covariance P0 is diagonal in line-of-sight coordinates (range,
@@ -130,8 +131,8 @@ class Glint(Scenario):
     the line-of-sight frame of the prior mean, w = R' diag(sigma_los) g, Q =
     G R' diag(sigma_los^2) R G' (the paper's disturbance variances (7.0,
     0.07, 0.07) along range, bearing and elevation); empty (default): the
-    isotropic ``process_noise_m_s2``. ``meta["model"]["process_noise_los"]``
-    is the per-direction std either way. The paper's spherical control and
+    isotropic ``process_noise_m_s2``. The model's ``process_noise_los`` is
+    the per-direction std either way. The paper's spherical control and
     disturbance rotate with the line of sight (its appendix, A-4 to A-6); ours
     are fixed at the prior mean's (the target stays within a few degrees of
     it at the paper's rates).
@@ -154,15 +155,15 @@ class Glint(Scenario):
     only adds outliers; noise = sigma g (core) or eta l (outlier) for the
     mixture, sigma g + [outlier] eta l for the additive model.
 
-    **meta**: ``position_index``, ``state_labels``, ``measurement_labels``,
-    ``z_xy`` (n, K, 2) measurements in the horizontal plane (active: the
-    measured range; passive: the *true* range, there being no measured one —
-    for plotting only), ``glint_outlier`` (n, K, m) bool, ``model`` (F, G, u,
-    Bu = G u, Q, sensor, sigma, eta, epsilon, glint_model, x0, P0, dt_s,
-    damping_per_s, process_noise_m_s2, los_rotation, control_los,
-    noise_scale), ``divergence_bound_m``, ``snr_definition``,
-    ``realised_snr_db`` (n,), ``onset_step`` = ``null_onset_step`` = None,
-    ``dt_s``.
+    **Scene** (a :class:`~bench.tasks.tracking.TrackingScene`; docs/architecture.md,
+    'Scenes'): ``model`` the :class:`models.glint.GlintModel` at the SNR
+    (:meth:`model`), ``position_index``, ``state_labels``,
+    ``measurement_labels``, ``derived_components`` (range, bearing,
+    elevation), ``measurements_xy`` (n, K, 2) measurements in the horizontal
+    plane (active: the measured range; passive: the *true* range, there being
+    no measured one — for plotting only), ``outlier_flags`` (n, K, m) the
+    glint outliers, ``divergence_bound_m``, ``snr_definition``,
+    ``realised_snr_db`` (n,).
     """
 
     name = "glint"
@@ -258,15 +259,15 @@ class Glint(Scenario):
         sel = rng.uniform((K, 3))
 
         model = self.model(p, snr_db)
-        F, G, u = model["F"], model["G"], model["u"]
+        F, G, u = model.F, model.G, model.u
         idx = list(MEASURED[p.sensor])
-        sigma_all = p.sigma_ref() * model["noise_scale"]
-        eta_all = p.eta_ref() * model["noise_scale"]
+        sigma_all = p.sigma_ref() * model.noise_scale
+        eta_all = p.eta_ref() * model.noise_scale
 
         truth = np.empty((n, K, 6))
-        x = model["x0"] + e0 @ np.linalg.cholesky(model["P0"]).T
+        x = model.x0 + e0 @ np.linalg.cholesky(model.P0).T
         if p.process_noise_los_m_s2:                            # (n, K, 3)
-            drive = u + w @ model["noise_factor"].T
+            drive = u + w @ model.noise_factor.T
         else:
             drive = u + p.process_noise_m_s2 * w
         for k in range(K):
@@ -288,26 +289,16 @@ class Glint(Scenario):
         z_xy = np.stack([rng_xy * ce * np.sin(z_all[..., 1]), rng_xy * ce * np.cos(z_all[..., 1])], axis=-1)
 
         snr = 0.0 if snr_db is None else float(snr_db)
-        meta = {
-            "onset_step": None,
-            "null_onset_step": None,
-            "snr_definition": SNR_DEFINITION,
-            "realised_snr_db": np.full(n, snr),
-            "position_index": POSITION_INDEX,
-            "state_labels": STATE_LABELS,
-            "derived_components": spherical_components,
-            "measurement_labels": MEASUREMENT_LABELS[p.sensor],
-            "z_xy": z_xy,
-            "glint_outlier": outlier[..., idx],
-            "model": model,
-            "divergence_bound_m": p.divergence_bound_m,
-            "dt_s": p.dt_s,
-        }
-        return Batch(t=p.dt_s * np.arange(K), truth=truth, z=z, meta=meta, trials=np.asarray(rng.trials))
+        scene = TrackingScene(
+            snr_definition=SNR_DEFINITION, realised_snr_db=np.full(n, snr), position_index=POSITION_INDEX,
+            measurements_xy=z_xy, model=model, state_labels=STATE_LABELS,
+            measurement_labels=MEASUREMENT_LABELS[p.sensor], divergence_bound_m=p.divergence_bound_m,
+            derived_components=spherical_components, outlier_flags=outlier[..., idx])
+        return Batch(t=p.dt_s * np.arange(K), truth=truth, z=z, scene=scene, trials=np.asarray(rng.trials))
 
     @staticmethod
-    def model(p, snr_db: float | None = None) -> dict:
-        """Everything a tracker needs (``meta["model"]``), at ``snr_db``."""
+    def model(p, snr_db: float | None = None) -> GlintModel:
+        """Everything a tracker needs (the scene's ``model``), at ``snr_db``."""
         F, G = transition_matrices(p.damping_per_s, p.dt_s)
         R_los = los_basis(math.radians(p.initial_bearing_deg), math.radians(p.initial_elevation_deg))
         control_los = np.asarray(p.control_m_s2, float)
@@ -339,13 +330,10 @@ class Glint(Scenario):
         idx = list(MEASURED[p.sensor])
         sigma = p.sigma_ref()[idx] * scale
         eta = p.eta_ref()[idx] * scale
-        return {
-            "F": F, "G": G, "u": u, "Bu": G @ u, "Q": Q, "noise_factor": noise_factor,
-            "process_noise_los": process_los,
-            "sensor": p.sensor, "measurement_labels": MEASUREMENT_LABELS[p.sensor],
-            "sigma": sigma, "eta": eta, "epsilon": p.epsilon, "glint_model": p.glint_model,
-            "noise_variance": glint_variance(sigma, eta, p.epsilon, p.glint_model),
-            "x0": np.concatenate([pos0, vel0]), "P0": P0,
-            "dt_s": p.dt_s, "damping_per_s": p.damping_per_s, "process_noise_m_s2": p.process_noise_m_s2,
-            "los_rotation": R_los, "control_los": control_los, "noise_scale": scale,
-        }
+        return GlintModel(
+            F=F, G=G, u=u, Bu=G @ u, Q=Q, noise_factor=noise_factor, process_noise_los=process_los,
+            process_noise_m_s2=p.process_noise_m_s2, x0=np.concatenate([pos0, vel0]), P0=P0,
+            sensor=p.sensor, measurement_labels=MEASUREMENT_LABELS[p.sensor], sigma=sigma, eta=eta,
+            epsilon=p.epsilon, glint_model=p.glint_model,
+            noise_variance=glint_variance(sigma, eta, p.epsilon, p.glint_model),
+            dt_s=p.dt_s, los_rotation=R_los, control_los=control_los, noise_scale=scale)

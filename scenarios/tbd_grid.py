@@ -20,6 +20,7 @@ from bench.core import TBD, Batch, Scenario
 from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_scenario
+from bench.tasks.tbd import Grid, TBDScene
 from models.ar_noise import ar_autocovariance, ar_innovation_std, ar_stationarity_problem, stationary_predictors
 
 #: the paper's surveillance area (m): x and y ranges
@@ -285,17 +286,17 @@ class TbdGrid(Scenario):
     for the Swerling draw (always drawn, used only by ``swerling1``). Trial i
     sees the same noise at every SNR and whatever the batch it is in.
 
-    **meta**: ``grid`` {rows, cols, cell_m, x_min_m, y_min_m},
-    ``target_cells`` (n, K, 2) int (row, col) or None, ``target_present``,
-    ``frame_period_s``, ``noise_std`` (sigma), ``noise_autocovariance``
-    (gamma(0..K-1) of the stationary noise for that sigma: all lags that occur
-    in a scene; white noise: (sigma^2, 0, ...)), ``ar_coefficients`` (None for
-    white noise), ``hit_tolerance_cells``, ``snr_definition``,
-    ``realised_snr_db`` (n,), ``amplitude`` (n, K) (the target amplitude per
-    frame; zeros under the null), ``position_index`` (0, 1) and
-    ``null_onset_step`` None. ``truth`` is (n, K, 4) [x_m, y_m, vx_m_s,
-    vy_m_s], the same trajectory in every trial; ``z`` is (n, K, H, W)
-    float32.
+    **Scene** (a :class:`~bench.tasks.tbd.TBDScene`; docs/architecture.md,
+    'Scenes'): ``grid`` (a :class:`~bench.tasks.tbd.Grid`), ``target_cells``
+    (n, K, 2) int (row, col) or None, ``frame_period_s``, ``noise_std``
+    (sigma), ``noise_autocovariance`` (gamma(0..K-1) of the stationary noise
+    for that sigma: all lags that occur in a scene; white noise: (sigma^2, 0,
+    ...)), ``ar_coefficients`` (None for white noise),
+    ``hit_tolerance_cells``, ``snr_definition``, ``realised_snr_db`` (n,),
+    ``amplitude`` (n, K) (the target amplitude per frame; zeros under the
+    null), ``position_index`` (0, 1). ``truth`` is (n, K, 4) [x_m, y_m,
+    vx_m_s, vy_m_s], the same trajectory in every trial; ``z`` is (n, K, H,
+    W) float32.
     """
 
     name = "tbd-grid"
@@ -371,20 +372,10 @@ class TbdGrid(Scenario):
             gamma[0] = NOISE_STD ** 2
         else:
             gamma = np.array(ar_autocovariance(ar, K - 1, NOISE_STD ** 2))
-        meta = {
-            "grid": grid,
-            "target_cells": target_cells,
-            "target_present": not null,
-            "frame_period_s": float(p.frame_period_s),
-            "noise_std": NOISE_STD,
-            "noise_autocovariance": gamma,
-            "ar_coefficients": ar,
-            "hit_tolerance_cells": int(p.hit_tolerance_cells),
-            "snr_definition": SNR_DEFINITION,
-            "realised_snr_db": realised,
-            "amplitude": amp,
-            "position_index": (0, 1),
-            "null_onset_step": None,
-        }
-        return Batch(t=p.frame_period_s * np.arange(K), truth=truth, z=z, meta=meta,
+        scene = TBDScene(
+            grid=Grid(**grid), frame_period_s=float(p.frame_period_s), target_cells=target_cells,
+            noise_std=NOISE_STD, noise_autocovariance=gamma, ar_coefficients=ar,
+            hit_tolerance_cells=int(p.hit_tolerance_cells), amplitude=amp, snr_definition=SNR_DEFINITION,
+            realised_snr_db=realised, position_index=(0, 1))
+        return Batch(t=p.frame_period_s * np.arange(K), truth=truth, z=z, scene=scene,
                      trials=np.asarray(rng.trials))

@@ -1,4 +1,5 @@
-"""Every registered method on every compatible scenario: shapes, no NaN, determinism."""
+"""Every registered method on every compatible scenario: shapes, no NaN, determinism;
+every scenario's batch carries the scene type of each of its tasks."""
 
 import dataclasses
 
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 
 from bench import registry
-from bench.core import MANEUVER_DETECTION
+from bench.core import MANEUVER_DETECTION, Scene
 from bench.params import build_params
 from bench.rng import TrialRNG
 from bench.registry import get_task
@@ -65,3 +66,22 @@ def test_scenario_streams_are_per_trial(scenario):
     part = cls().generate(_params(cls), 5.0, 2, TrialRNG(9, 0, 1, range(2, 4)))
     np.testing.assert_array_equal(whole.z[2:], part.z)
     np.testing.assert_array_equal(whole.truth[2:], part.truth)
+
+
+@pytest.mark.parametrize("scenario", list(registry.scenarios()))
+def test_scenario_batches_carry_the_scene_of_each_task(scenario):
+    """The scene is a frozen instance of each task's ``scene_type``, built (and
+    so validated) in generate(), at every SNR and under the null."""
+    cls = registry.get_scenario(scenario)
+    assert cls.tasks
+    for snr in (None, 0.0, 10.0):
+        batch = _batch(scenario, snr)
+        assert isinstance(batch.scene, Scene)
+        for name in cls.tasks:
+            task = get_task(name)
+            assert task.scene_type is not Scene, f"task {name} defines no scene type"
+            assert isinstance(batch.scene, task.scene_type), (scenario, name)
+            task.check_scene(batch)
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            batch.scene.snr_definition = "changed"
+        assert not hasattr(batch, "meta")

@@ -1,14 +1,18 @@
 """Scenario cv-turn-cv: shapes, the maneuver innovation, the SNR definition."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.stats
 
+from bench.core import SceneError
 from bench.errors import ConfigError
 from bench.params import build_params
 from bench.registry import get_scenario
 from bench.rng import TrialRNG
-from models.kalman import innovations, steady_state
+from bench.tasks.detection import DetectionScene
+from models.kalman import LinearGaussianFilter, innovations, steady_state
 from scenarios.cv_turn_cv import (CvTurnCv, cv_model, deterministic_track,
                                   filter_response, maneuver_power)
 
@@ -26,24 +30,64 @@ def test_registered():
     assert CvTurnCv.summary().startswith("Constant velocity, coordinated turn")
 
 
-def test_shapes_and_meta():
+def test_shapes_and_scene():
     b = make(10.0, n=7)
     K = DEFAULT.steps
     assert b.t.shape == (K,) and b.truth.shape == (7, K, 4) and b.z.shape == (7, K, 2)
-    assert b.meta["x0"].shape == (7, 4) and b.meta["P0"].shape == (4, 4)
-    assert b.meta["realised_snr_db"].shape == (7,)
-    assert b.meta["z_xy"].shape == (7, K, 2)
-    assert b.meta["onset_step"] == 80 and b.meta["offset_step"] == 120
-    assert b.meta["position_index"] == (0, 2)
-    assert isinstance(b.meta["snr_definition"], str) and "S_11" in b.meta["snr_definition"]
+    sc = b.scene
+    assert type(sc) is DetectionScene
+    assert isinstance(sc.reference_filter, LinearGaussianFilter)
+    assert sc.reference_filter.x0.shape == (7, 4) and sc.reference_filter.P0.shape == (4, 4)
+    assert sc.realised_snr_db.shape == (7,)
+    assert sc.measurements_xy is None                     # z is already the plane position
+    assert sc.onset_step == 80 and sc.offset_step == 120 and sc.null_onset_step == 80
+    assert sc.detect_window_steps == 40 and sc.warmup_steps == 10
+    assert sc.position_index == (0, 2)
+    assert isinstance(sc.snr_definition, str) and "S_11" in sc.snr_definition
     np.testing.assert_array_equal(b.trials, np.arange(7))
     assert np.all(np.isfinite(b.z))
+
+
+def _scene_fields(b) -> dict:
+    sc = b.scene
+    return {"onset_step": sc.onset_step, "null_onset_step": sc.null_onset_step, "offset_step": sc.offset_step,
+            "detect_window_steps": sc.detect_window_steps, "warmup_steps": sc.warmup_steps,
+            "reference_filter": sc.reference_filter, "snr_definition": sc.snr_definition,
+            "realised_snr_db": sc.realised_snr_db, "position_index": sc.position_index}
+
+
+def test_a_misspelt_or_missing_scene_field_fails_naming_it():
+    """The scene is built in generate(): a misspelt keyword, a missing field or
+    a bad value fails there, naming the field."""
+    fields = _scene_fields(make(10.0, n=3))
+    DetectionScene(**fields)                                            # as generated: fine
+    with pytest.raises(TypeError, match="onset_stp"):
+        DetectionScene(**{**fields, "onset_stp": 80})
+    missing = {k: v for k, v in fields.items() if k != "detect_window_steps"}
+    with pytest.raises(TypeError, match="detect_window_steps"):
+        DetectionScene(**missing)
+    for field, bad in (("detect_window_steps", 0), ("onset_step", -1), ("warmup_steps", 2.5),
+                       ("onset_step", np.zeros((3, 2), int)), ("realised_snr_db", np.zeros((3, 1)))):
+        with pytest.raises(SceneError, match=f"DetectionScene.{field}: expected") as err:
+            DetectionScene(**{**fields, field: bad})
+        assert err.value.field == field
+
+
+def test_a_scene_that_does_not_fit_the_batch_names_the_field():
+    b = make(10.0, n=3)
+    fields = _scene_fields(b)
+    with pytest.raises(SceneError, match=r"DetectionScene.realised_snr_db: expected \(3,\)"):
+        dataclasses.replace(b, scene=DetectionScene(**{**fields, "realised_snr_db": np.zeros(4)}))
+    with pytest.raises(SceneError, match="DetectionScene.onset_step"):
+        dataclasses.replace(b, scene=DetectionScene(**{**fields, "onset_step": np.array([80, 90, 95, 99])}))
+    with pytest.raises(SceneError, match="DetectionScene.position_index"):
+        dataclasses.replace(b, scene=DetectionScene(**{**fields, "position_index": (0, 4)}))
 
 
 def test_deterministic_given_rng():
     a, b = make(5.0, n=4), make(5.0, n=4)
     np.testing.assert_array_equal(a.z, b.z)
-    np.testing.assert_array_equal(a.meta["x0"], b.meta["x0"])
+    np.testing.assert_array_equal(a.scene.reference_filter.x0, b.scene.reference_filter.x0)
 
 
 def test_maneuver_innovation_starts_at_onset():
@@ -71,24 +115,25 @@ def test_noise_innovation_power_matches_S(snr_db):
     """
     n, p = 400, DEFAULT
     b = make(snr_db, n=n, seed=2004)
-    nu = innovations(b).nu
-    nu_m = filter_response(b.meta["filter"], deterministic_track(p, turn=True))
+    nu = innovations(b.scene.reference_filter, b.z).nu
+    nu_m = filter_response(b.scene.reference_filter.model, deterministic_track(p, turn=True))
     turn = slice(p.onset_step, p.onset_step + p.turn_steps)
     power = np.mean((nu - nu_m)[:, turn] ** 2)
     snr = 10 * np.log10(maneuver_power(p) / power)
     N = 2 * p.turn_steps * n
     lo, hi = scipy.stats.chi2.ppf([1e-6, 1 - 1e-6], N) / N
     assert -10 * np.log10(hi) < snr - snr_db < -10 * np.log10(lo)
-    S11 = steady_state(b.meta["filter"])[2][0, 0]
+    S11 = steady_state(b.scene.reference_filter.model)[2][0, 0]
     assert lo < power / S11 < hi
     # the per-trial realised SNR agrees with the pooled one on average
-    assert abs(np.mean(b.meta["realised_snr_db"]) - snr_db) < 0.5
+    assert abs(np.mean(b.scene.realised_snr_db) - snr_db) < 0.5
 
 
 def test_null_has_no_turn():
     b0 = make(None, n=5, process_noise=False)
-    assert b0.meta["onset_step"] is None and b0.meta["offset_step"] is None
-    assert np.all(np.isnan(b0.meta["realised_snr_db"]))
+    assert b0.scene.onset_step is None and b0.scene.offset_step is None
+    assert b0.scene.null_onset_step == DEFAULT.onset_step
+    assert np.all(np.isnan(b0.scene.realised_snr_db))
     np.testing.assert_allclose(b0.truth[..., 2:], 0.0, atol=1e-9)       # y, vy stay 0
     np.testing.assert_allclose(b0.truth[..., 1], DEFAULT.speed_m_s)
 
@@ -100,7 +145,7 @@ def test_null_and_alternative_share_noise():
     turn = deterministic_track(DEFAULT, True) - deterministic_track(DEFAULT, False)
     np.testing.assert_allclose(diff, np.broadcast_to(turn, diff.shape), atol=1e-6)
     np.testing.assert_allclose(alt.z - null.z, diff[..., [0, 2]], atol=1e-6)
-    assert alt.meta["noise_std_m"] == null.meta["noise_std_m"]
+    np.testing.assert_array_equal(alt.scene.reference_filter.model.R, null.scene.reference_filter.model.R)
 
 
 @pytest.mark.parametrize("values, field", [
@@ -124,7 +169,7 @@ def test_onset_jitter_draws_one_onset_per_trial_shared_by_every_snr_and_the_null
     trial's own stream: the same at every SNR level and under the null (common
     random numbers), and spread over the whole range."""
     jitter, n = 15, 400
-    onsets = [np.asarray(make(snr, n=n, onset_jitter_steps=jitter).meta["null_onset_step"]) for snr in (-5.0, 10.0, None)]
+    onsets = [np.asarray(make(snr, n=n, onset_jitter_steps=jitter).scene.null_onset_step) for snr in (-5.0, 10.0, None)]
     np.testing.assert_array_equal(onsets[0], onsets[1])
     np.testing.assert_array_equal(onsets[0], onsets[2])
     o = onsets[0]
@@ -136,9 +181,9 @@ def test_onset_jitter_draws_one_onset_per_trial_shared_by_every_snr_and_the_null
     b = make(10.0, n=6, onset_jitter_steps=jitter)
     turn = np.abs(np.diff(np.arctan2(b.truth[..., 3], b.truth[..., 1]), axis=1))   # heading change per step
     rate = np.deg2rad(DEFAULT.turn_rate_deg_s) * DEFAULT.dt_s
-    for i, onset in enumerate(np.asarray(b.meta["onset_step"])):
+    for i, onset in enumerate(np.asarray(b.scene.onset_step)):
         assert turn[i, onset - 1:onset + 7].mean() > 0.7 * rate > turn[i, onset - 9:onset - 1].mean()
 
 
 def test_zero_jitter_keeps_the_single_onset():
-    assert make(10.0, n=3, onset_jitter_steps=0).meta["onset_step"] == DEFAULT.onset_step
+    assert make(10.0, n=3, onset_jitter_steps=0).scene.onset_step == DEFAULT.onset_step

@@ -7,6 +7,7 @@ import pytest
 import scipy.integrate
 
 from bench.core import TBD, Batch, TBDOutput
+from bench.tasks.tbd import Grid, TBDScene
 from bench.params import build_params
 from bench.registry import get_method
 from bench.rng import TrialRNG
@@ -33,10 +34,9 @@ def scene(snr_db, n=2, seed=3, **values):
 def frames_batch(z, gamma=(1.0, 0.0, 0.0), cell_m=100.0, period_s=1.0):
     z = np.asarray(z, np.float32)
     n, K, H, W = z.shape
-    meta = {"grid": {"rows": H, "cols": W, "cell_m": cell_m, "x_min_m": 0.0, "y_min_m": 0.0},
-            "frame_period_s": period_s, "noise_std": math.sqrt(gamma[0]),
-            "noise_autocovariance": np.asarray(gamma, float)}
-    return Batch(t=period_s * np.arange(K), truth=np.zeros((n, K, 4)), z=z, meta=meta, trials=np.arange(n))
+    sc = TBDScene(grid=Grid(rows=H, cols=W, cell_m=cell_m, x_min_m=0.0, y_min_m=0.0), frame_period_s=period_s,
+                  noise_std=math.sqrt(gamma[0]), noise_autocovariance=np.asarray(gamma, float))
+    return Batch(t=period_s * np.arange(K), truth=np.zeros((n, K, 4)), z=z, scene=sc, trials=np.arange(n))
 
 
 def test_registered_with_the_tbd_task():
@@ -64,7 +64,7 @@ def test_window_radius_from_max_speed():
 
 
 def test_paper_true_path_is_admissible_with_the_default_window():
-    cells = scene(6.0, n=1).meta["target_cells"][0]
+    cells = scene(6.0, n=1).scene.target_cells[0]
     steps = np.abs(np.diff(cells, axis=0)).max(axis=1)
     assert steps.max() == 2                       # q = 1 would cut the turn
     assert window_radius(DpTbd.Params().max_speed_m_s, scene(None, n=1, frames=4)) == 2
@@ -90,7 +90,7 @@ def test_strong_target_is_tracked(cls):
     """At 15 dB both methods follow the true cells (the turn included)."""
     b = scene(15.0, n=2)
     out = cls().run(b, cls.Params())
-    off = np.abs(out.track - b.meta["target_cells"]).max(axis=-1)
+    off = np.abs(out.track - b.scene.target_cells).max(axis=-1)
     assert np.all((off <= 1).sum(axis=1) >= 18)
 
 
@@ -99,7 +99,7 @@ def test_mf_finds_a_weak_target_in_correlated_noise():
     default AR(3) noise the MF track sits on the target."""
     b = scene(0.0, n=2)
     out = DpTbdMf().run(b, DpTbdMf.Params())
-    off = np.abs(out.track - b.meta["target_cells"]).max(axis=-1)
+    off = np.abs(out.track - b.scene.target_cells).max(axis=-1)
     assert np.all((off <= 1).sum(axis=1) >= 15)
 
 
@@ -177,7 +177,7 @@ def test_transition_weights_and_zero_displacement():
 
 def test_conditional_llr_of_the_default_noise():
     """The numbers quoted in the DpTbdMf docstring."""
-    gamma = np.asarray(scene(None, n=1, frames=4).meta["noise_autocovariance"])[:3]
+    gamma = np.asarray(scene(None, n=1, frames=4).scene.noise_autocovariance)[:3]
     llr = ConditionalLLR.from_autocovariance(gamma, 1.0)
     assert (llr.beta1, llr.beta2) == pytest.approx((1.544715, -0.711382), abs=1e-6)
     assert llr.var == pytest.approx(0.0915213, abs=1e-6)

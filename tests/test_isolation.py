@@ -30,7 +30,7 @@ class Fragile(Method):
         fail_above_db: float = param(5.0, "raise on units above this SNR (dB)")
 
     def run(self, batch, params):
-        if batch.meta["realised_snr_db"].mean() > params.fail_above_db:
+        if batch.scene.realised_snr_db.mean() > params.fail_above_db:
             raise FloatingPointError("simulated failure")
         return Innovation().run(batch, Innovation.Params(window=1))
 
@@ -91,10 +91,10 @@ class Flaky(Method):
 
     def run(self, batch, params):
         if os.environ.get("FLAKY_FAIL"):
-            null = batch.meta.get("onset_step") is None
+            null = batch.scene.onset_step is None
             if params.fail_in == "calibration" and null and 0 in batch.trials:
                 raise ConnectionError("transient fault (calibration)")
-            if params.fail_in == "evaluation" and not null and batch.meta["realised_snr_db"].mean() > 5:
+            if params.fail_in == "evaluation" and not null and batch.scene.realised_snr_db.mean() > 5:
                 raise ConnectionError("transient fault (evaluation)")
         return Innovation().run(batch, Innovation.Params(window=1))
 

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
-from models.kalman import (LinearGaussianModel, covariance_sequence, innovations,
-                           kalman_filter, steady_state, whiten)
+from models.kalman import (LinearGaussianFilter, LinearGaussianModel, covariance_sequence, innovations,
+                           kalman_filter, reference_innovations, steady_state, whiten)
 
 
 def random_model(rng, d=4, m=2):
@@ -76,12 +76,24 @@ def test_whitening(setup):
     np.testing.assert_allclose(np.einsum("kij,nkj->nki", L, whitened), res.nu, rtol=1e-10, atol=1e-12)
 
 
-def test_innovations_reads_batch_meta(setup):
-    from bench.core import Batch
+def test_innovations_of_a_filter_and_the_filterpy_reference(setup):
     model, z, x0, P0 = setup
     n, K, _ = z.shape
-    batch = Batch(t=np.arange(K, dtype=float), truth=np.zeros((n, K, 4)), z=z,
-                  meta={"filter": model, "x0": x0, "P0": P0}, trials=np.arange(n))
-    inn = innovations(batch)
+    filt = LinearGaussianFilter(model=model, x0=x0, P0=P0)
+    inn = innovations(filt, z)
     np.testing.assert_array_equal(inn.nu, kalman_filter(model, z, x0, P0).nu)
     assert inn.whitened.shape == (n, K, 2) and inn.nis.shape == (n, K) and inn.S.shape == (K, 2, 2)
+    ref = reference_innovations(filt, z)                 # the per-trial filterpy loop, called explicitly
+    np.testing.assert_allclose(ref.nu, inn.nu, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(ref.nis, inn.nis, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("field, change", [("x0", lambda x0, P0: (x0[:, :3], P0)),
+                                           ("P0", lambda x0, P0: (x0, P0[:3, :3]))])
+def test_a_misshapen_filter_names_the_field(setup, field, change):
+    model, _, x0, P0 = setup
+    x0, P0 = change(x0, P0)
+    with pytest.raises(ValueError, match=f"LinearGaussianFilter.{field}: expected"):
+        LinearGaussianFilter(model=model, x0=x0, P0=P0)
+    with pytest.raises(ValueError, match="LinearGaussianModel.R: expected an array of shape"):
+        LinearGaussianModel(F=model.F, H=model.H, Q=model.Q, R=np.eye(3))

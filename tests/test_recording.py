@@ -23,7 +23,7 @@ from bench.recording import (
     snr_part,
     write_recording,
 )
-from bench.tasks import Scene, detection, tbd, tracking
+from bench.tasks import RecordedScene, detection, tbd, tracking
 from bench.tasks.detection import DetectionTask
 from bench.tasks.tbd import TBDTask
 from bench.tasks.tracking import TrackingTask
@@ -37,7 +37,7 @@ DET, TRK, TBD = DetectionTask(), TrackingTask(), TBDTask()
 
 def _record_of(scenario, snr_db, trial, t, truth, z, methods, scene=None) -> TrialRecord:
     """A record as the runner builds it: the harness's fields plus a task's scene."""
-    scene = scene or Scene()
+    scene = scene or RecordedScene()
     return TrialRecord(scenario, snr_db, trial, t, truth, z, methods, arrays=scene.arrays, images=scene.images,
                        info=scene.info)
 

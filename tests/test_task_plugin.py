@@ -1,6 +1,7 @@
 """A task from outside bench/: registered through the entry-point group
 ``bench.tasks`` (with its scenario and method through ``bench.scenarios`` and
 ``bench.methods``), run end to end by ``bench run``, with no edit in bench/.
+The task defines its scene type next to it; its scenario builds that scene.
 
 The plugin is a package plus a ``.dist-info`` folder (its entry points) on a
 temporary PYTHONPATH entry, which is what ``pip install`` leaves behind.
@@ -16,19 +17,36 @@ import pytest
 
 TASK = '''
 """Peak finding: a method names the step of a single bump; scored as right or wrong."""
+from dataclasses import dataclass
+
 import numpy as np
 import pandas as pd
 
+from bench.core import Scene, require
 from bench.metrics import binomial_interval, by_cell, mean_realised_snr
 from bench.recording.draw import log_series
 from bench.recording.record import MethodTrace
 from bench.tasks.base import OutputError, Task
 
 
+@dataclass(frozen=True, kw_only=True, eq=False)
+class PeakScene(Scene):
+    """What a peak-finding scenario tells the harness."""
+
+    #: (n,) the step of each trial's bump
+    peak_step: np.ndarray
+
+    def __post_init__(self):
+        super().__post_init__()
+        require(self, "peak_step", isinstance(self.peak_step, np.ndarray) and self.peak_step.ndim == 1,
+                "an (n,) array of steps")
+
+
 class PeakFinding(Task):
     """Peak finding: the step of a bump in noise."""
 
     name = "peak-finding"
+    scene_type = PeakScene
     noun = short_noun = "peak finders"
     recording_text = "per peak finder the step it named"
     summary_columns = ("n_trials", "accuracy", "accuracy_low", "accuracy_high", "realised_snr_db")
@@ -42,7 +60,7 @@ class PeakFinding(Task):
         return out
 
     def trial_metrics(self, batch, out, threshold):
-        return {"correct": out == batch.meta["peak_step"]}
+        return {"correct": out == batch.scene.peak_step}
 
     def recorded_method(self, batch, out, i, threshold):
         return MethodTrace(arrays={"named": (np.arange(batch.steps) == out[i]).astype(float)})
@@ -76,6 +94,7 @@ import numpy as np
 
 from bench.core import Batch, Scenario
 from bench.params import param
+from benchdemo.task import PeakScene
 
 
 class Bumps(Scenario):
@@ -94,8 +113,8 @@ class Bumps(Scenario):
         peak = np.minimum((rng.uniform(()) * k).astype(int), k - 1)
         if snr_db is not None:
             z[np.arange(n), peak, 0] += 10 ** (snr_db / 20)
-        return Batch(t=np.arange(k, dtype=float), truth=np.zeros((n, k, 2)), z=z,
-                     meta={"peak_step": peak, "realised_snr_db": np.full(n, np.nan if snr_db is None else snr_db)},
+        scene = PeakScene(peak_step=peak, realised_snr_db=np.full(n, np.nan if snr_db is None else snr_db))
+        return Batch(t=np.arange(k, dtype=float), truth=np.zeros((n, k, 2)), z=z, scene=scene,
                      trials=np.asarray(rng.trials))
 '''
 

@@ -1,20 +1,20 @@
 """Scenario tbd-grid: geometry, noise model, SNR definition, null, per-trial streams."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from bench.core import TBD
+from bench.core import TBD, SceneError
 from bench.errors import ConfigError
 from bench.params import build_params
 from bench.registry import get_scenario
 from bench.rng import TrialRNG
+from bench.tasks.tbd import Grid, TBDScene
 from models.ar_noise import ar_autocovariance, ar_innovation_std, ar_roots, stationary_predictors
 from scenarios.tbd_grid import EDGE_MARGIN_CELLS, TbdGrid, generate_noise, scene_geometry, true_track
 
 DEFAULT = build_params(TbdGrid.Params, {})
-META_KEYS = {"grid", "target_cells", "target_present", "frame_period_s", "noise_std", "noise_autocovariance",
-             "ar_coefficients", "hit_tolerance_cells", "snr_definition", "realised_snr_db", "position_index",
-             "null_onset_step"}
 
 
 def make(snr_db, n=3, seed=1, trials=None, **values):
@@ -31,33 +31,62 @@ def test_registered():
         (500, 20, "ar", (-2.0, 1.7, -0.64))
 
 
-def test_shapes_and_meta():
+def test_shapes_and_scene():
     b = make(6.0, n=3, frames=12)
     assert b.t.shape == (12,) and np.allclose(np.diff(b.t), 1.0)
     assert b.z.shape == (3, 12, 32, 32) and b.z.dtype == np.float32
     assert b.truth.shape == (3, 12, 4)
     np.testing.assert_array_equal(b.trials, np.arange(3))
-    assert META_KEYS <= set(b.meta)
-    grid = b.meta["grid"]
-    assert set(grid) == {"rows", "cols", "cell_m", "x_min_m", "y_min_m"}
-    assert (grid["rows"], grid["cols"], grid["cell_m"]) == (32, 32, 100.0)
-    cells = b.meta["target_cells"]
+    sc = b.scene
+    assert type(sc) is TBDScene and type(sc.grid) is Grid
+    assert set(sc.grid.as_dict()) == {"rows", "cols", "cell_m", "x_min_m", "y_min_m"}
+    assert (sc.grid.rows, sc.grid.cols, sc.grid.cell_m) == (32, 32, 100.0)
+    cells = sc.target_cells
     assert cells.shape == (3, 12, 2) and np.issubdtype(cells.dtype, np.integer)
-    assert b.meta["target_present"] is True
-    assert b.meta["position_index"] == (0, 1) and b.meta["null_onset_step"] is None
-    assert b.meta["hit_tolerance_cells"] == 1 and b.meta["frame_period_s"] == 1.0
-    np.testing.assert_allclose(b.meta["realised_snr_db"], 6.0)
-    gamma = np.asarray(b.meta["noise_autocovariance"])
-    assert gamma.shape == (12,) and gamma[0] == pytest.approx(b.meta["noise_std"] ** 2)
+    assert sc.target_present is True
+    assert sc.position_index == (0, 1)
+    assert sc.hit_tolerance_cells == 1 and sc.frame_period_s == 1.0
+    assert sc.ar_coefficients == DEFAULT.ar_coefficients
+    np.testing.assert_allclose(sc.realised_snr_db, 6.0)
+    gamma = sc.noise_autocovariance
+    assert gamma.shape == (12,) and gamma[0] == pytest.approx(sc.noise_std ** 2)
     np.testing.assert_allclose(gamma[1:4], [0.902613, 0.682898, 0.471354], atol=1e-6)
-    assert "stationary" in b.meta["snr_definition"]
+    assert "stationary" in sc.snr_definition
+
+
+def _scene_fields(b) -> dict:
+    return {f.name: getattr(b.scene, f.name) for f in dataclasses.fields(b.scene)}
+
+
+def test_a_misspelt_or_misshapen_scene_field_fails_naming_it():
+    """The scene is built in generate(): a misspelt keyword, a missing field or
+    a wrong shape fails there, naming the field."""
+    b = make(6.0, n=2, frames=10)
+    fields = _scene_fields(b)
+    TBDScene(**fields)                                                  # as generated: fine
+    with pytest.raises(TypeError, match="target_cell"):
+        TBDScene(**{k: v for k, v in fields.items() if k != "target_cells"}, target_cell=fields["target_cells"])
+    with pytest.raises(TypeError, match="frame_period_s"):
+        TBDScene(**{k: v for k, v in fields.items() if k != "frame_period_s"})
+    for field, bad in (("target_cells", fields["target_cells"].astype(float)), ("noise_std", 0.0),
+                       ("grid", fields["grid"].as_dict()), ("ar_coefficients", [-2.0, 1.7, -0.64]),
+                       ("hit_tolerance_cells", -1), ("noise_autocovariance", np.ones((2, 3)))):
+        with pytest.raises(SceneError, match=f"TBDScene.{field}: expected") as err:
+            TBDScene(**{**fields, field: bad})
+        assert err.value.field == field
+    with pytest.raises(SceneError, match="Grid.cell_m: expected a number > 0"):
+        Grid(rows=32, cols=32, cell_m=0.0, x_min_m=0.0, y_min_m=0.0)
+    for field, bad in (("target_cells", fields["target_cells"][:, :4]), ("amplitude", fields["amplitude"][:1]),
+                       ("grid", dataclasses.replace(fields["grid"], rows=16))):
+        with pytest.raises(SceneError, match=f"TBDScene.{field}"):
+            dataclasses.replace(b, scene=TBDScene(**{**fields, field: bad}))
 
 
 def test_cell_convention_matches_truth():
     """The target cell contains the true position: centre within half a cell."""
     b = make(6.0, n=1)
-    g = b.meta["grid"]
-    rc = b.meta["target_cells"][0]
+    g = b.scene.grid.as_dict()
+    rc = b.scene.target_cells[0]
     centre_x = g["x_min_m"] + (rc[:, 1] + 0.5) * g["cell_m"]
     centre_y = g["y_min_m"] + (rc[:, 0] + 0.5) * g["cell_m"]
     assert np.all(np.abs(centre_x - b.truth[0, :, 0]) <= 0.5 * g["cell_m"])
@@ -111,19 +140,19 @@ def test_snr_definition_and_target_amplitude():
     null, sig = make(None, n=2), make(9.0, n=2)
     diff = sig.z.astype(np.float64) - null.z
     s = 10 ** (9.0 / 20)
-    cells = sig.meta["target_cells"]
+    cells = sig.scene.target_cells
     n_idx, k_idx = np.meshgrid(range(2), range(DEFAULT.frames), indexing="ij")
     np.testing.assert_allclose(diff[n_idx, k_idx, cells[..., 0], cells[..., 1]], s, rtol=1e-6)
     diff[n_idx, k_idx, cells[..., 0], cells[..., 1]] = 0.0
     assert np.all(np.abs(diff) < 1e-5)
-    np.testing.assert_allclose(sig.meta["amplitude"], s)
+    np.testing.assert_allclose(sig.scene.amplitude, s)
 
 
 def test_null_has_no_target():
     b = make(None, n=2)
-    assert b.meta["target_cells"] is None and b.meta["target_present"] is False
-    assert np.all(np.isnan(b.meta["realised_snr_db"]))
-    assert np.all(b.meta["amplitude"] == 0)
+    assert b.scene.target_cells is None and b.scene.target_present is False
+    assert np.all(np.isnan(b.scene.realised_snr_db))
+    assert np.all(b.scene.amplitude == 0)
     np.testing.assert_array_equal(b.truth, make(3.0, n=2).truth)      # truth kept for reference
 
 
@@ -133,15 +162,15 @@ def test_swerling1_amplitude():
     Exp(1) draws has standard error 1 / sqrt(N); 5 standard errors)."""
     b = make(3.0, n=40, amplitude="swerling1", cells=24)
     s2 = 10 ** 0.3
-    amp = b.meta["amplitude"]
+    amp = b.scene.amplitude
     assert amp.shape == (40, 20) and np.all(amp > 0) and np.std(amp) > 0
-    np.testing.assert_allclose(b.meta["realised_snr_db"], 10 * np.log10(np.mean(amp ** 2, axis=1)))
+    np.testing.assert_allclose(b.scene.realised_snr_db, 10 * np.log10(np.mean(amp ** 2, axis=1)))
     assert abs(np.mean(amp ** 2) / s2 - 1.0) < 5 / np.sqrt(amp.size)
     # the same noise as with a constant amplitude: only the target cells differ
     const = make(3.0, n=40, cells=24)
     assert np.count_nonzero(b.z != const.z) <= 40 * 20
     off_target = np.ones(b.z.shape, bool)
-    cells = b.meta["target_cells"]
+    cells = b.scene.target_cells
     n_idx, k_idx = np.meshgrid(range(40), range(20), indexing="ij")
     off_target[n_idx, k_idx, cells[..., 0], cells[..., 1]] = False
     np.testing.assert_array_equal(b.z[off_target], const.z[off_target])
@@ -153,13 +182,13 @@ def test_trial_is_identical_whatever_its_batch():
     part = make(4.0, trials=[1, 3])
     np.testing.assert_array_equal(whole.z[2], alone.z[0])
     np.testing.assert_array_equal(whole.z[[1, 3]], part.z)
-    np.testing.assert_array_equal(whole.meta["realised_snr_db"][[1, 3]], part.meta["realised_snr_db"])
+    np.testing.assert_array_equal(whole.scene.realised_snr_db[[1, 3]], part.scene.realised_snr_db)
 
 
 def test_white_noise_option():
     b = make(None, n=4, noise="white")
-    assert b.meta["ar_coefficients"] is None
-    np.testing.assert_array_equal(b.meta["noise_autocovariance"], np.r_[1.0, np.zeros(19)])
+    assert b.scene.ar_coefficients is None
+    np.testing.assert_array_equal(b.scene.noise_autocovariance, np.r_[1.0, np.zeros(19)])
     v = b.z.astype(np.float64)
     lag1 = np.mean(v[:, 1:] * v[:, :-1])
     assert abs(lag1) < 5 / np.sqrt(v[:, 1:].size)            # white: uncorrelated over frames

@@ -43,7 +43,7 @@ def test_batched_ekf_equals_filterpy_step_by_step(seed, sensor, bearing, eps, wh
     deg puts the target on the -pi/pi cut, so the wrap is exercised."""
     b = make(n=3, seed=seed % 1000, sensor=sensor, epsilon=eps, steps=40, initial_bearing_deg=bearing,
              initial_cross_range_std_m=40.0)
-    model = b.meta["model"]
+    model = b.scene.model
     R = noise_covariance(model, which)
     res = ekf_filter(b.z, model, R)
     for i in range(b.n):
@@ -54,9 +54,9 @@ def test_batched_ekf_equals_filterpy_step_by_step(seed, sensor, bearing, eps, wh
 
 def test_ekf_output_and_noise_options():
     b = make(n=4, sensor="active", steps=60, epsilon=0.1)
-    model = b.meta["model"]
-    np.testing.assert_allclose(np.diag(noise_covariance(model, "core")), model["sigma"] ** 2)
-    total = (1 - 0.1) * model["sigma"] ** 2 + 2 * 0.1 * model["eta"] ** 2
+    model = b.scene.model
+    np.testing.assert_allclose(np.diag(noise_covariance(model, "core")), model.sigma ** 2)
+    total = (1 - 0.1) * model.sigma ** 2 + 2 * 0.1 * model.eta ** 2
     np.testing.assert_allclose(np.diag(noise_covariance(model, "mixture")), total)
     out = EKF().run(b, build_params(EKF.Params, {}))
     assert isinstance(out, TrackingOutput)
@@ -100,14 +100,14 @@ def test_viterbi_passive_radial_axis_is_the_prediction():
     """A passive sensor does not observe the line of sight: the radial axis's
     estimate is the zero-disturbance prediction from the prior mean."""
     b = make(n=2, sensor="passive", steps=25, initial_bearing_deg=40.0, initial_elevation_deg=15.0)
-    model = b.meta["model"]
+    model = b.scene.model
     est = Viterbi().run(b, build_params(Viterbi.Params, {"position_levels": 11, "velocity_levels": 11}))
-    x = model["x0"].copy()
+    x = model.x0.copy()
     pred = []
     for _ in range(25):
         pred.append(x)
-        x = model["F"] @ x + model["Bu"]
-    R = model["los_rotation"]
+        x = model.F @ x + model.Bu
+    R = model.los_rotation
     np.testing.assert_allclose(est.estimate[..., :3] @ R[0], np.broadcast_to(np.array(pred)[:, :3] @ R[0], (2, 25)),
                                atol=1e-6)
 
@@ -117,7 +117,7 @@ def test_viterbi_tracks_and_resists_glint():
     Viterbi tracker (true density) has a smaller cross-range RMSE than the EKF
     (Gaussian core variance), which takes the outliers with the full gain."""
     b = make(n=6, sensor="active", steps=150, epsilon=0.2, seed=11)
-    R = b.meta["model"]["los_rotation"]
+    R = b.scene.model.los_rotation
     cross = {}
     for cls in (EKF, Viterbi):
         err = (cls().run(b, build_params(cls.Params, {})).estimate - b.truth)[..., :3] @ R.T

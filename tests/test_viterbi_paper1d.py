@@ -152,7 +152,7 @@ def test_more_start_nodes_track_better_on_the_papers_simulation():
 def test_passive_range_is_the_prior_prediction():
     b = paper_passive(n=2)
     est = Viterbi().run(b, build_params(Viterbi.Params, {"trellis": "paper-1d"})).estimate
-    pred = vit.prior_prediction(b.meta["model"], b.truth.shape[1])
+    pred = vit.prior_prediction(b.scene.model, b.truth.shape[1])
     np.testing.assert_allclose(np.linalg.norm(est[..., :3], axis=-1),
                                np.broadcast_to(np.linalg.norm(pred[:, :3], axis=1), (2, 100)), rtol=1e-12)
 

@@ -58,7 +58,8 @@ def test_shapes_no_nan_deterministic(values, batch):
         assert trace.shape == (batch.n, batch.steps) and np.all(np.isfinite(trace))
     stacked = np.max([out.traces[name] for name in levels], axis=0)
     np.testing.assert_array_equal(out.statistic[:, out.valid_from:], stacked[:, out.valid_from:])
-    np.testing.assert_array_equal(out.traces["innovation_1"], innovations(batch).whitened[..., 1])
+    whitened = innovations(batch.scene.reference_filter, batch.z).whitened
+    np.testing.assert_array_equal(out.traces["innovation_1"], whitened[..., 1])
     np.testing.assert_array_equal(out.statistic, run(values, batch).statistic)
 
 
@@ -207,6 +208,6 @@ def test_accepted_wavelets():
 @pytest.mark.parametrize("mode", ["decimated", "sliding"])
 def test_detector_responds_to_the_turn(batch, mode):
     """At 10 dB the turn raises the statistic well above its null level."""
-    on = batch.meta["onset_step"]
+    on = batch.scene.onset_step
     s = run({"mode": mode}, batch).statistic
     assert np.mean(s[:, on:on + 20]) > 3 * np.mean(s[:, 20:on])

@@ -14,12 +14,13 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from bench.metrics import CELL_KEYS
-from bench.tasks.base import OutputError, ReportContext, Scene, Task, Views
-from bench.tasks.detection import DetectionTask
-from bench.tasks.tbd import TBDTask
-from bench.tasks.tracking import TrackingTask
+from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, Views
+from bench.tasks.detection import DetectionScene, DetectionTask
+from bench.tasks.tbd import TBDScene, TBDTask
+from bench.tasks.tracking import TrackingScene, TrackingTask
 
-__all__ = ["BUILTIN_TASKS", "OutputError", "ReportContext", "Scene", "Task", "Views", "summary_columns"]
+__all__ = ["BUILTIN_TASKS", "DetectionScene", "OutputError", "RecordedScene", "ReportContext", "TBDScene", "Task",
+           "TrackingScene", "Views", "summary_columns"]
 
 #: The built-in tasks, in registry order.
 BUILTIN_TASKS = (DetectionTask, TrackingTask, TBDTask)

@@ -10,10 +10,21 @@ the tasks present; they never name one. Tasks are found by
 :func:`bench.registry.tasks`: the built-ins and the entry-point group
 ``bench.tasks``.
 
+A task also defines its *scene type* (:attr:`Task.scene_type`): a frozen
+dataclass derived from :class:`bench.core.Scene` with typed, documented,
+validated fields, everything its methods and metrics read of a batch beyond
+times, truth and measurements (docs/architecture.md, 'Scenes'). The
+built-ins' are :class:`~bench.tasks.detection.DetectionScene`,
+:class:`~bench.tasks.tracking.TrackingScene` and
+:class:`~bench.tasks.tbd.TBDScene`, defined in the task's module; the
+scenarios of a task build its scene in ``generate`` (a plugin task defines
+its own, next to its Task, and its scenarios import it). A scenario serving
+two tasks builds a scene deriving from both types.
+
 Worker side (must stay light: no rerun, no matplotlib at import):
-:meth:`check_output`, :meth:`null_values`, :meth:`null_peaks`,
-:meth:`null_cells`, :meth:`trial_metrics`, :meth:`recorded_scene`,
-:meth:`recorded_method`. Driver side: :meth:`summarise`,
+:meth:`check_scene`, :meth:`check_output`, :meth:`null_values`,
+:meth:`null_peaks`, :meth:`null_cells`, :meth:`trial_metrics`,
+:meth:`recorded_scene`, :meth:`recorded_method`. Driver side: :meth:`summarise`,
 :meth:`apply_calibration`, :meth:`steps`, :meth:`log_trial`, :meth:`views`,
 :meth:`report_sections`, :meth:`trial_sections`.
 
@@ -31,12 +42,12 @@ from typing import Any, ClassVar
 import numpy as np
 import pandas as pd
 
-from bench.core import Batch
+from bench.core import Batch, Scene
 from bench.recording.blueprint import Views
 from bench.recording.layout import TrialLayout
 from bench.recording.record import MethodTrace, TrialRecord
 
-__all__ = ["OutputError", "ReportContext", "Scene", "Task", "Views", "check_finite", "time_series"]
+__all__ = ["OutputError", "RecordedScene", "ReportContext", "Task", "Views", "check_finite", "time_series"]
 
 
 class OutputError(RuntimeError):
@@ -44,17 +55,18 @@ class OutputError(RuntimeError):
 
 
 @dataclass
-class Scene:
+class RecordedScene:
     """What a task keeps of a recorded trial's scene, beyond the harness's
     truth and measurements: the record's ``arrays`` (per step), ``images``
-    (quantised) and ``info`` (JSON)."""
+    (quantised) and ``info`` (JSON). (Not the batch's :class:`bench.core.Scene`,
+    which is what a scenario hands to the methods.)"""
 
     arrays: dict[str, np.ndarray] = field(default_factory=dict)
     images: dict[str, np.ndarray] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
-    def union(cls, scenes) -> Scene:
+    def union(cls, scenes) -> RecordedScene:
         """The scenes of several tasks in one; ValueError when two keep the same name."""
         out = cls()
         for scene in scenes:
@@ -105,6 +117,8 @@ class Task:
 
     #: registry name, the value of ``Method.task`` and ``Scenario.tasks``
     name: ClassVar[str] = ""
+    #: the scene type its scenarios put on a batch (:class:`bench.core.Scene` or a subclass)
+    scene_type: ClassVar[type[Scene]] = Scene
     #: whether a threshold is calibrated on null trials for this task
     calibrated: ClassVar[bool] = False
     #: calibration modes that apply (any mode is accepted when none applies)
@@ -140,6 +154,13 @@ class Task:
 
     # -------------------------------------------------------------- worker side
 
+    def check_scene(self, batch: Batch) -> None:
+        """TypeError unless ``batch.scene`` is of this task's :attr:`scene_type`
+        (a scenario listing the task in ``Scenario.tasks`` must build one)."""
+        if not isinstance(batch.scene, self.scene_type):
+            raise TypeError(f"task {self.name!r} needs a {self.scene_type.__name__} on the batch, "
+                            f"the scenario gave a {type(batch.scene).__name__}")
+
     def check_output(self, out, batch: Batch):
         """``out`` if it is a well-formed output for ``batch``, else OutputError."""
         raise NotImplementedError
@@ -160,9 +181,9 @@ class Task:
         """Per-trial metrics at ``threshold`` (NaN for uncalibrated tasks): (n,) columns and (n, K) series."""
         raise NotImplementedError
 
-    def recorded_scene(self, batch: Batch, i: int) -> Scene:
+    def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:
         """What trial ``i``'s record keeps of the scene for this task."""
-        return Scene()
+        return RecordedScene()
 
     def recorded_method(self, batch: Batch, out, i: int, threshold: float) -> MethodTrace:
         """What trial ``i``'s record keeps of one method config's output."""

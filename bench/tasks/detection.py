@@ -7,6 +7,10 @@ scores detection, delay and false alarms around the maneuver onset
 'Metrics'). The chance detection rate and the equal-chance Pd follow Song,
 Ji & Gao 2004 (the cumulant detector's paper) in reading Pd per window.
 
+Its scenarios put a :class:`DetectionScene` on the batch: the onset, the
+detection window, the warm-up and the reference filter the innovation
+detectors run (docs/architecture.md, 'Scenes').
+
 A recorded trial keeps, per detector, the statistic, the alarms and the
 threshold in force, drawn under ``.../{method}/statistic``, ``threshold``
 (Scalars at every step) and ``alarms`` (Scalars at alarm steps only, drawn
@@ -16,11 +20,13 @@ as points), with a "statistics" view on top of the trial's tab.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput
+from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Scene, has_shape, require
 from bench.recording.blueprint import Views, relative
 from bench.recording.draw import log_series
 from bench.recording.layout import TrialLayout
@@ -29,7 +35,58 @@ from bench.recording.record import MethodTrace, TrialRecord, check_shape
 from bench.tasks.base import OutputError, ReportContext, Task
 from bench.tasks.detection_metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
 
-__all__ = ["DetectionTask", "method_trace"]
+__all__ = ["DetectionScene", "DetectionTask", "method_trace"]
+
+
+def _is_steps(value) -> bool:
+    """A step index (int >= 0) or one per trial ((n,) integers >= 0)."""
+    if isinstance(value, np.ndarray):
+        return has_shape(value, (None,), "iu") and bool(np.all(value >= 0))
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 0
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class DetectionScene(Scene):
+    """What a maneuver-detection scenario tells the detectors and the harness
+    (docs/architecture.md, 'Scenes'), besides :class:`~bench.core.Scene`'s fields.
+
+    Steps are indices into the batch's K steps; a step field holds one int for
+    every trial or an (n,) integer array (e.g. onsets drawn per trial).
+    """
+
+    #: first step the maneuver moves, per trial; None under the null (no maneuver)
+    onset_step: int | np.ndarray | None
+    #: where the maneuver would start: on null trials the harness reads the chance
+    #: detection rate there (Song, Ji & Gao 2004 read Pd per window); None: not measured
+    null_onset_step: int | np.ndarray | None = None
+    #: first step after the maneuver; None under the null or when it never ends
+    offset_step: int | np.ndarray | None = None
+    #: a detection counts if the first alarm at or after the onset comes within this many steps
+    detect_window_steps: int
+    #: steps ignored before false alarms are counted (and before calibration samples)
+    warmup_steps: int = 0
+    #: the reference filter the innovation detectors run: a
+    #: :class:`models.kalman.LinearGaussianFilter` (F, H, Q, R and the prior x0, P0 of
+    #: step 0); None: the scenario has none. Typed Any here because the harness never
+    #: imports models; the methods check its type.
+    reference_filter: Any = None
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("onset_step", "null_onset_step", "offset_step"):
+            value = getattr(self, name)
+            require(self, name, value is None or _is_steps(value), "None, a step index >= 0 or (n,) of them")
+        require(self, "detect_window_steps", _is_steps(self.detect_window_steps) and self.detect_window_steps >= 1,
+                "an int >= 1")
+        require(self, "warmup_steps", _is_steps(self.warmup_steps), "an int >= 0")
+
+    def check(self, batch: Batch) -> None:
+        super().check(batch)
+        n, K = batch.n, batch.steps
+        for name in ("onset_step", "null_onset_step", "offset_step"):
+            value = getattr(self, name)
+            require(self, name, value is None or (np.ndim(value) == 0 or np.shape(value) == (n,))
+                    and bool(np.all(np.asarray(value) <= K)), f"steps <= {K}, one or ({n},)")
 
 
 def method_trace(statistic, threshold: float | None, alarms, traces: dict | None = None) -> MethodTrace:
@@ -53,6 +110,7 @@ class DetectionTask(Task):
     """Maneuver detection: a per-step statistic, alarms at a calibrated per-step Pfa."""
 
     name = MANEUVER_DETECTION
+    scene_type = DetectionScene
     calibrated = True
     calibration_modes = ("nominal", "empirical")
     pfa_unit = "per step"
@@ -92,7 +150,7 @@ class DetectionTask(Task):
 
     def null_start(self, batch: Batch, out: DetectionOutput) -> int:
         """First step of the null region: after warm-up and once the statistic is formed."""
-        return max(int(batch.meta.get("warmup_steps", 0)), int(out.valid_from))
+        return max(int(batch.scene.warmup_steps), int(out.valid_from))
 
     def null_values(self, batch: Batch, out: DetectionOutput) -> np.ndarray:
         """Per-step statistic values of a null batch, after warm-up: the calibration sample."""
@@ -102,16 +160,16 @@ class DetectionTask(Task):
         """Per null trial, the largest statistic in the detection window placed
         where the maneuver would start: ``mean(peaks >= threshold)`` is the
         chance detection rate, the floor Pd falls to as SNR goes down."""
-        onset = batch.meta.get("null_onset_step")
+        onset = batch.scene.null_onset_step
         if onset is None:
             return None
-        steps = np.asarray(onset)[..., None] + np.arange(int(batch.meta["detect_window_steps"]))
+        steps = np.asarray(onset)[..., None] + np.arange(int(batch.scene.detect_window_steps))
         steps = np.broadcast_to(steps, (batch.n, steps.shape[-1]))   # per-trial onsets (jitter)
         return np.take_along_axis(out.statistic, np.minimum(steps, batch.steps - 1), axis=1).max(axis=1)
 
     def trial_metrics(self, batch: Batch, out: DetectionOutput, threshold: float) -> dict[str, np.ndarray]:
-        return detection_trial_metrics(out.statistic, threshold, onset=np.asarray(batch.meta["onset_step"]),
-                                       detect_window=int(batch.meta["detect_window_steps"]),
+        return detection_trial_metrics(out.statistic, threshold, onset=np.asarray(batch.scene.onset_step),
+                                       detect_window=int(batch.scene.detect_window_steps),
                                        null_start=self.null_start(batch, out))
 
     def recorded_method(self, batch: Batch, out: DetectionOutput, i: int, threshold: float) -> MethodTrace:

@@ -8,6 +8,10 @@ per cell on the null value maps, and scores detection and position error
 (:mod:`bench.tasks.tbd_metrics`; docs/architecture.md, 'Tasks'), as the
 multi-frame DP-TBD paper and Tonissen & Evans (IEEE TAES 32(4), 1996) do.
 
+Its scenarios put a :class:`TBDScene` on the batch: the :class:`Grid`, the
+frame period, the true cells and the noise model
+(docs/architecture.md, 'Scenes').
+
 A recorded trial keeps, of the scene, the frames (quantised), the grid and
 the true cells; per method, the backtracked cells, the last-frame value map
 (quantised) and the scene score. Entities::
@@ -29,28 +33,126 @@ that is non-finite is not drawn.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
 from bench.calibration import cell_order_statistics
-from bench.core import TBD, Batch, TBDOutput
+from bench.core import TBD, Batch, Scene, TBDOutput, has_shape, require
 from bench.metrics import per_step_rmse
 from bench.recording.blueprint import Views, relative
 from bench.recording.draw import log_image, log_image_series, log_series, log_track
 from bench.recording.layout import TRUTH_COLOR, MethodLayout, TrialLayout
 from bench.recording.paths import rerun_path
 from bench.recording.record import MethodTrace, TrialRecord, check_shape
-from bench.tasks.base import OutputError, ReportContext, Scene, Task, check_finite, time_series
+from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, time_series
 from bench.tasks.tbd_metrics import summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
 
-__all__ = ["GRID_KEYS", "TBDTask", "method_trace", "scene"]
+__all__ = ["GRID_KEYS", "Grid", "TBDScene", "TBDTask", "method_trace", "scene"]
 
 #: Keys of a grid: cell ``(row, col)`` has its centre at
 #: ``x = x_min_m + (col + 0.5)·cell_m``, ``y = y_min_m + (row + 0.5)·cell_m``.
 GRID_KEYS = ("rows", "cols", "cell_m", "x_min_m", "y_min_m")
 _FRAMES_COLORMAP = "viridis"
 _VALUE_COLORMAP = "inferno"
+
+
+# ------------------------------------------------------------------ what the scenario tells the methods
+
+def _count(x) -> bool:
+    return isinstance(x, (int, np.integer)) and not isinstance(x, bool)
+
+
+def _number(x) -> bool:
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+@dataclass(frozen=True, eq=False)
+class Grid:
+    """The cell grid of a TBD scene. Cell ``(row, col)`` covers x in
+    [x_min_m + col cell_m, x_min_m + (col + 1) cell_m) and likewise y for rows;
+    its centre is ``x_min_m + (col + 0.5) cell_m`` (row ↔ y, col ↔ x)."""
+
+    #: number of rows H (cells along y)
+    rows: int
+    #: number of columns W (cells along x)
+    cols: int
+    #: cell size (m)
+    cell_m: float
+    #: x of the grid's west edge (m)
+    x_min_m: float
+    #: y of the grid's south edge (m)
+    y_min_m: float
+
+    def __post_init__(self) -> None:
+        for name in ("rows", "cols"):
+            require(self, name, _count(getattr(self, name)) and getattr(self, name) > 0, "an int > 0")
+        require(self, "cell_m", _number(self.cell_m) and self.cell_m > 0, "a number > 0 (m)")
+        for name in ("x_min_m", "y_min_m"):
+            require(self, name, _number(getattr(self, name)), "a finite number (m)")
+
+    def as_dict(self) -> dict:
+        """The grid as a dict of :data:`GRID_KEYS` (metrics, recordings)."""
+        return {k: getattr(self, k) for k in GRID_KEYS}
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class TBDScene(Scene):
+    """What a track-before-detect scenario tells the methods and the harness
+    (docs/architecture.md, 'Scenes'), besides :class:`~bench.core.Scene`'s
+    fields. The frames ``z`` are (n, K, rows, cols); the noise of each cell is
+    a zero-mean stationary process over frames (the multi-frame DP-TBD paper's
+    AR model, or white), independent across cells.
+    """
+
+    #: the cell grid of the frames
+    grid: Grid
+    #: frame period T (s)
+    frame_period_s: float
+    #: (n, K, 2) integer (row, col) of the target per frame; None under the null (no target)
+    target_cells: np.ndarray | None = None
+    #: sigma, the stationary noise std per cell
+    noise_std: float = 1.0
+    #: (L,) gamma(0..L-1), the noise autocovariance over frames at lags 0..L-1 (lags
+    #: beyond are 0); None: white noise of variance noise_std^2
+    noise_autocovariance: np.ndarray | None = None
+    #: (a1, ..., aP) of the noise's AR model v_k + a1 v_(k-1) + ... + aP v_(k-P) = w_k; None: white
+    ar_coefficients: tuple[float, ...] | None = None
+    #: a backtracked cell is a hit within this Chebyshev distance of the true cell (cells)
+    hit_tolerance_cells: int = 1
+    #: (n, K) target amplitude per frame (zeros under the null); None: not given
+    amplitude: np.ndarray | None = None
+
+    @property
+    def target_present(self) -> bool:
+        """Whether the scene has a target (false under the null)."""
+        return self.target_cells is not None
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        require(self, "grid", isinstance(self.grid, Grid), "a bench.tasks.tbd.Grid")
+        require(self, "frame_period_s", _number(self.frame_period_s) and self.frame_period_s > 0, "a number > 0 (s)")
+        require(self, "target_cells", self.target_cells is None or has_shape(self.target_cells, (None, None, 2), "iu"),
+                "None or an (n, K, 2) integer array")
+        require(self, "noise_std", _number(self.noise_std) and self.noise_std > 0, "a number > 0")
+        require(self, "noise_autocovariance", self.noise_autocovariance is None
+                or has_shape(self.noise_autocovariance, (None,), "f"), "None or an (L,) float array")
+        require(self, "ar_coefficients", self.ar_coefficients is None or (isinstance(self.ar_coefficients, tuple)
+                and all(_number(a) for a in self.ar_coefficients)), "None or a tuple of numbers")
+        require(self, "hit_tolerance_cells", _count(self.hit_tolerance_cells) and self.hit_tolerance_cells >= 0,
+                "an int >= 0")
+        require(self, "amplitude", self.amplitude is None or has_shape(self.amplitude, (None, None), "f"),
+                "None or an (n, K) float array")
+
+    def check(self, batch: Batch) -> None:
+        super().check(batch)
+        n, K, g = batch.n, batch.steps, self.grid
+        require(self, "grid", batch.z.shape[2:] == (g.rows, g.cols),
+                f"rows x cols = frames' {batch.z.shape[2:]}, not {g.rows} x {g.cols}")
+        for name, shape in (("target_cells", (n, K, 2)), ("amplitude", (n, K))):
+            value = getattr(self, name)
+            require(self, name, value is None or value.shape == shape, f"shape {shape}")
 
 
 # ------------------------------------------------------------------ what a recorded trial keeps
@@ -74,10 +176,10 @@ def _cells(cells, where: str) -> np.ndarray:
     return cells.astype(np.int32)
 
 
-def scene(frames=None, grid: dict | None = None, truth_cells=None) -> Scene:
+def scene(frames=None, grid: dict | None = None, truth_cells=None) -> RecordedScene:
     """What a recorded trial keeps of a TBD scene: frames (K, H, W), the grid
     (must match the frames) and the true cells (K, 2) (None under the null)."""
-    kept = Scene()
+    kept = RecordedScene()
     if grid is not None:
         kept.info["grid"] = grid = _grid(grid)
     if frames is not None:
@@ -147,6 +249,7 @@ class TBDTask(Task):
     """Track-before-detect: a scene score at a calibrated per-scene Pfa, and a backtracked track."""
 
     name = TBD
+    scene_type = TBDScene
     calibrated = True
     calibration_modes = ("nominal", "empirical", "gumbel")
     pfa_unit = "per scene"
@@ -172,8 +275,8 @@ class TBDTask(Task):
         if track.shape != (batch.n, batch.steps, 2) or not np.issubdtype(track.dtype, np.integer):
             raise OutputError(f"track has shape {track.shape} ({track.dtype}), expected integer cells "
                               f"{(batch.n, batch.steps, 2)}")
-        grid = batch.meta["grid"]
-        if track.min() < 0 or (track[..., 0] >= grid["rows"]).any() or (track[..., 1] >= grid["cols"]).any():
+        grid = batch.scene.grid
+        if track.min() < 0 or (track[..., 0] >= grid.rows).any() or (track[..., 1] >= grid.cols).any():
             raise OutputError("track leaves the grid")
         return out
 
@@ -187,25 +290,25 @@ class TBDTask(Task):
         return None if out.value is None else cell_order_statistics(out.value)
 
     def trial_metrics(self, batch: Batch, out: TBDOutput, threshold: float) -> dict[str, np.ndarray]:
-        meta = batch.meta
-        if meta.get("target_cells") is None:
+        sc = batch.scene
+        if sc.target_cells is None:
             raise OutputError("an evaluation batch has no target (target_cells is None)")
-        offset = (unit_innovation_snr_offset_db(meta["ar_coefficients"], meta["noise_autocovariance"])
-                  if "noise_autocovariance" in meta else np.nan)
-        return (tbd_trial_metrics(out.score, out.track, threshold, target_cells=meta["target_cells"],
-                                  truth_xy_m=batch.truth[..., :2], grid=meta["grid"],
-                                  tolerance_cells=int(meta.get("hit_tolerance_cells", 1)))
+        offset = (unit_innovation_snr_offset_db(sc.ar_coefficients, sc.noise_autocovariance)
+                  if sc.noise_autocovariance is not None else np.nan)
+        return (tbd_trial_metrics(out.score, out.track, threshold, target_cells=sc.target_cells,
+                                  truth_xy_m=batch.truth[..., :2], grid=sc.grid.as_dict(),
+                                  tolerance_cells=int(sc.hit_tolerance_cells))
                 | {"snr_offset_unit_innovation_db": np.full(batch.n, offset)} | time_series(batch))
 
-    def recorded_scene(self, batch: Batch, i: int) -> Scene:
-        cells = batch.meta.get("target_cells")
-        return scene(batch.z[i], dict(batch.meta["grid"]), None if cells is None else np.asarray(cells[i]))
+    def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:
+        cells = batch.scene.target_cells
+        return scene(batch.z[i], batch.scene.grid.as_dict(), None if cells is None else np.asarray(cells[i]))
 
     def recorded_method(self, batch: Batch, out: TBDOutput, i: int, threshold: float) -> MethodTrace:
-        grid = batch.meta["grid"]
+        grid = batch.scene.grid
         return method_trace(threshold, np.asarray(out.track[i]),
                             None if out.value is None else np.asarray(out.value[i]), float(out.score[i]),
-                            image_shape=(int(grid["rows"]), int(grid["cols"])))
+                            image_shape=(int(grid.rows), int(grid.cols)))
 
     # -------------------------------------------------------------- driver side
 

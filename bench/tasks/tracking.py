@@ -8,26 +8,85 @@ glint paper (Viterbi vs EKF under glint noise) compares its trackers.
 A recorded trial keeps, per tracker, the position estimate (drawn as a track
 under ``.../{method}/estimate``, north up) and its error per state component
 (traces ``error_<component>``); of the scene, the steps whose measurement had
-a glint outlier (``meta["glint_outlier"]``), drawn in red under
+a glint outlier (:attr:`TrackingScene.outlier_flags`), drawn in red under
 ``.../measurements/glint``.
+
+Its scenarios put a :class:`TrackingScene` on the batch: the state labels,
+the divergence bound, the outlier flags and the model the trackers run on
+(docs/architecture.md, 'Scenes').
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 import pandas as pd
 
-from bench.core import TRACKING, Batch, TrackingOutput
+from bench.core import TRACKING, Batch, Scene, TrackingOutput, require
 from bench.recording.blueprint import Views
 from bench.recording.draw import log_static_points, log_track, north_up
 from bench.recording.layout import TrialLayout
 from bench.recording.record import MethodTrace, TrialRecord, check_shape
-from bench.tasks.base import OutputError, ReportContext, Scene, Task, check_finite, time_series
+from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, time_series
 from bench.tasks.tracking_metrics import summarise_tracking, tracking_steps, tracking_trial_metrics
 
-__all__ = ["TrackingTask", "method_trace", "scene"]
+__all__ = ["TrackingScene", "TrackingTask", "method_trace", "scene"]
 
 _GLINT_COLOR = (255, 40, 90)
+
+
+def _labels(value) -> bool:
+    return isinstance(value, tuple) and all(isinstance(x, str) for x in value)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class TrackingScene(Scene):
+    """What a tracking scenario tells the trackers and the harness
+    (docs/architecture.md, 'Scenes'), besides :class:`~bench.core.Scene`'s
+    fields (``position_index``: the components the position RMSE is over).
+    """
+
+    #: the state-space model the trackers run on, e.g. a :class:`models.glint.GlintModel`
+    #: (dynamics, known control, prior, spherical measurement under glint noise); None:
+    #: none. Typed Any here because the harness never imports models; the methods check it.
+    model: Any = None
+    #: names of the state components, in order (d of them); None: x0, x1, ...
+    state_labels: tuple[str, ...] | None = None
+    #: names of the measured components, in order (m of them); None: not named
+    measurement_labels: tuple[str, ...] | None = None
+    #: a trial has diverged when its position error exceeds this bound (m) at some step
+    divergence_bound_m: float = math.inf
+    #: a picklable function of states (..., d) returning named (...) arrays (e.g. range,
+    #: bearing, elevation), scored per step like the state components; None: none
+    derived_components: Callable[[np.ndarray], dict[str, np.ndarray]] | None = None
+    #: (n, K, m) bool: which measured components are outliers (glint); drawn in recordings
+    outlier_flags: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("state_labels", "measurement_labels"):
+            require(self, name, getattr(self, name) is None or _labels(getattr(self, name)), "None or a tuple of str")
+        require(self, "divergence_bound_m", isinstance(self.divergence_bound_m, (int, float))
+                and self.divergence_bound_m > 0, "a number > 0 (m)")
+        require(self, "derived_components", self.derived_components is None or callable(self.derived_components),
+                "None or a function of states")
+        flags = self.outlier_flags
+        require(self, "outlier_flags", flags is None or (isinstance(flags, np.ndarray) and flags.dtype == bool
+                                                         and flags.ndim == 3), "None or an (n, K, m) bool array")
+
+    def check(self, batch: Batch) -> None:
+        super().check(batch)
+        n, K, d = batch.n, batch.steps, batch.truth.shape[-1]
+        m = batch.z.shape[-1]
+        require(self, "state_labels", self.state_labels is None or len(self.state_labels) == d, f"{d} labels")
+        require(self, "measurement_labels", self.measurement_labels is None or len(self.measurement_labels) == m,
+                f"{m} labels")
+        require(self, "outlier_flags", self.outlier_flags is None or self.outlier_flags.shape == (n, K, m),
+                f"shape ({n}, {K}, {m})")
 
 
 def method_trace(estimate_xy, traces: dict | None = None) -> MethodTrace:
@@ -38,20 +97,21 @@ def method_trace(estimate_xy, traces: dict | None = None) -> MethodTrace:
     return MethodTrace(threshold=None, traces=traces or {}, arrays={"estimate_xy": estimate_xy})
 
 
-def scene(measurement_flags=None) -> Scene:
+def scene(measurement_flags=None) -> RecordedScene:
     """What a recorded trial keeps of a tracking scene: the (K,) steps whose
     measurement had a glint outlier, if the scenario flags them."""
     if measurement_flags is None:
-        return Scene()
+        return RecordedScene()
     flags = np.asarray(measurement_flags, dtype=bool)
     check_shape(flags, (None,), "measurement_flags")
-    return Scene(arrays={"measurement_flags": flags})
+    return RecordedScene(arrays={"measurement_flags": flags})
 
 
 class TrackingTask(Task):
     """Tracking: state estimates scored against the truth (RMSE, divergence, NEES)."""
 
     name = TRACKING
+    scene_type = TrackingScene
     noun = short_noun = "trackers"
     recording_text = ("per tracker the estimated trajectory and its error per state component, with "
                       "glint-corrupted measurements marked")
@@ -72,24 +132,24 @@ class TrackingTask(Task):
         return out
 
     def labels(self, batch: Batch) -> list[str]:
-        """Names of the state components (``meta["state_labels"]``, else x0, x1, ...)."""
-        d = batch.truth.shape[-1]
-        return list(batch.meta.get("state_labels", [f"x{j}" for j in range(d)]))
+        """Names of the state components (``scene.state_labels``, else x0, x1, ...)."""
+        labels = batch.scene.state_labels
+        return list(labels) if labels is not None else [f"x{j}" for j in range(batch.truth.shape[-1])]
 
     def trial_metrics(self, batch: Batch, out: TrackingOutput, threshold: float) -> dict[str, np.ndarray]:
-        return tracking_trial_metrics(out.estimate, batch.truth,
-                                      position_index=batch.meta.get("position_index", (0, 1)),
+        sc = batch.scene
+        return tracking_trial_metrics(out.estimate, batch.truth, position_index=sc.position_index,
                                       labels=self.labels(batch), covariance=out.covariance,
-                                      divergence_bound_m=float(batch.meta.get("divergence_bound_m", np.inf)),
-                                      derived=batch.meta.get("derived_components")) \
+                                      divergence_bound_m=float(sc.divergence_bound_m),
+                                      derived=sc.derived_components) \
             | time_series(batch)
 
-    def recorded_scene(self, batch: Batch, i: int) -> Scene:
-        flags = batch.meta.get("glint_outlier")
+    def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:
+        flags = batch.scene.outlier_flags
         return scene(None if flags is None else np.asarray(flags[i]).reshape(batch.steps, -1).any(axis=1))
 
     def recorded_method(self, batch: Batch, out: TrackingOutput, i: int, threshold: float) -> MethodTrace:
-        pos = list(batch.meta.get("position_index", (0, 1)))
+        pos = list(batch.scene.position_index)
         err = out.estimate[i] - batch.truth[i]
         return method_trace(out.estimate[i][:, pos[:2]],
                             {f"error_{label}": err[:, j] for j, label in enumerate(self.labels(batch))})

@@ -18,7 +18,7 @@ from bench.params import build_params
 from bench.rng import TrialRNG
 from methods.cumulant import Cumulant, third_moment_null_variance, window_third_moment
 from methods.innovation import Innovation
-from models.kalman import LinearGaussianModel, innovations
+from models.kalman import LinearGaussianFilter, LinearGaussianModel, innovations
 from scenarios.cv_turn_cv import CvTurnCv
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=4)
@@ -37,7 +37,7 @@ def test_nis_mean_is_n_z_under_matched_model(tracking_index, seed):
     (white innovations from a steady-state start), so the standard error of
     the mean over N values is sqrt(4 / N)."""
     b = cv_batch(None, 200, seed=seed, tracking_index=tracking_index)
-    nis = innovations(b).nis
+    nis = innovations(b.scene.reference_filter, b.z).nis
     se = np.sqrt(4.0 / nis.size)
     assert abs(nis.mean() - 2.0) < 4 * se
 
@@ -45,11 +45,12 @@ def test_nis_mean_is_n_z_under_matched_model(tracking_index, seed):
 def scaled(batch: Batch, c: float) -> Batch:
     """The same batch in units c times smaller: z, truth, x0 times c, the
     covariances times c^2. The whitened innovation is unchanged."""
-    f = batch.meta["filter"]
-    model = LinearGaussianModel(F=f.F, H=f.H, Q=c ** 2 * f.Q, R=c ** 2 * f.R)
-    meta = {**batch.meta, "filter": model, "x0": c * batch.meta["x0"],
-            "P0": c ** 2 * batch.meta["P0"]}
-    return dataclasses.replace(batch, truth=c * batch.truth, z=c * batch.z, meta=meta)
+    f = batch.scene.reference_filter
+    m = f.model
+    model = LinearGaussianModel(F=m.F, H=m.H, Q=c ** 2 * m.Q, R=c ** 2 * m.R)
+    scene = dataclasses.replace(batch.scene, reference_filter=LinearGaussianFilter(model=model, x0=c * f.x0,
+                                                                                   P0=c ** 2 * f.P0))
+    return dataclasses.replace(batch, truth=c * batch.truth, z=c * batch.z, scene=scene)
 
 
 @FIXED
@@ -72,7 +73,8 @@ def test_centred_moment_blind_to_constant(a, M):
     """The centred third moment of (whitened innovation + a) equals that of
     the whitened innovation; the tolerance is the float64 cancellation bound
     of the cumulative-sum expansion."""
-    x = innovations(cv_batch(10.0, 4)).whitened[..., 0]
+    b = cv_batch(10.0, 4)
+    x = innovations(b.scene.reference_filter, b.z).whitened[..., 0]
     m3 = window_third_moment(x, M, centred=True)
     m3_shifted = window_third_moment(x + a, M, centred=True)
     scale = (abs(a) + np.abs(x).max()) ** 3

@@ -56,16 +56,16 @@ def test_sampler_moments_and_tail_mass_match_the_glint_law(seed, eps, ratio, mod
     b = Glint().generate(params, snr, 12, TrialRNG(seed % 10_000, 0, 3, range(12)))
     x = measurement_residual(b.z, measure(b.truth[..., :3], "active")).reshape(-1, 3)
     N = x.shape[0]
-    m = b.meta["model"]
+    m = b.scene.model
     for j in range(3):
-        s, e = m["sigma"][j], m["eta"][j]
+        s, e = m.sigma[j], m.eta[j]
         var = glint_variance(s, e, eps, model)
         assert abs(x[:, j].mean()) < 4 * math.sqrt(var / N)
         m4 = fourth_moment(s, e, eps, model)
         assert abs(np.mean(x[:, j] ** 2) - var) < 4 * math.sqrt((m4 - var ** 2) / N)
         p = glint_tail_probability(3 * s, s, e, eps, model)
         assert abs(np.mean(np.abs(x[:, j]) > 3 * s) - p) < 4 * math.sqrt(p * (1 - p) / N)
-    assert abs(b.meta["glint_outlier"].mean() - eps) < 4 * math.sqrt(eps * (1 - eps) / b.meta["glint_outlier"].size) + 1e-12
+    assert abs(b.scene.outlier_flags.mean() - eps) < 4 * math.sqrt(eps * (1 - eps) / b.scene.outlier_flags.size) + 1e-12
 
 
 def _integrate(f, sigma, eta, lo, hi):
@@ -222,7 +222,7 @@ def test_viterbi_and_ekf_agree_without_glint_on_a_near_linear_case(seed):
     disturbance add a little; observed ratios are 0.2-0.7)."""
     params = build_params(Glint.Params, {"sensor": "active", "epsilon": 0.0, "steps": 100})
     b = Glint().generate(params, 10.0, 6, TrialRNG(seed % 10_000, 0, 9, range(6)))
-    R = b.meta["model"]["los_rotation"]
+    R = b.scene.model.los_rotation
     ekf = EKF().run(b, build_params(EKF.Params, {}))
     est = Viterbi().run(b, build_params(Viterbi.Params, {})).estimate
     diff = ((est - ekf.estimate)[:, 20:, :3] @ R.T) ** 2

@@ -18,6 +18,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from bench.core import Batch
+from bench.tasks.tbd import Grid, TBDScene
 from bench.errors import ConfigError
 from bench.params import build_params
 from bench.rng import TrialRNG
@@ -33,9 +34,9 @@ LOG_UNIFORM = -math.log(2 * math.pi)
 def frames_batch(z, gamma=(1.0, 0.0, 0.0)):
     z = np.asarray(z, np.float32)
     n, K, H, W = z.shape
-    meta = {"grid": {"rows": H, "cols": W, "cell_m": 100.0, "x_min_m": 0.0, "y_min_m": 0.0},
-            "frame_period_s": 1.0, "noise_std": math.sqrt(gamma[0]), "noise_autocovariance": np.asarray(gamma)}
-    return Batch(t=np.arange(K, dtype=float), truth=np.zeros((n, K, 4)), z=z, meta=meta, trials=np.arange(n))
+    sc = TBDScene(grid=Grid(rows=H, cols=W, cell_m=100.0, x_min_m=0.0, y_min_m=0.0), frame_period_s=1.0,
+                  noise_std=math.sqrt(gamma[0]), noise_autocovariance=np.asarray(gamma, float))
+    return Batch(t=np.arange(K, dtype=float), truth=np.zeros((n, K, 4)), z=z, scene=sc, trials=np.arange(n))
 
 
 def all_paths(H, W, K, q):
