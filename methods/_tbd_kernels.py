@@ -10,14 +10,38 @@ Conventions shared by every kernel:
   cell x at frame k; the window is the box |dr|, |dc| <= q, and displacements
   are numbered row-major, ``j = (dr + q) (2q + 1) + (dc + q)``, so index
   ``D // 2`` is d = 0 and the index of -d is ``D - 1 - j``;
-* backpointers are int8 (the window has at most 121 entries, q <= 5);
 * ties are broken towards the first candidate in that numbering (the first
   maximum wins, as ``np.argmax`` does); backtracking starts from the first
   maximum of the last frame in row-major order (``dp-tbd``) or in
   (displacement, row, column) order (``dp-tbd-mf``);
 * trials are processed one at a time inside a kernel, so the working memory
-  (merit planes, backpointers) does not grow with n; single-threaded
-  (parallelism comes from the harness's worker processes).
+  does not grow with n; single-threaded (parallelism comes from the
+  harness's worker processes). The public functions allocate the working
+  memory with NumPy and call the compiled kernel.
+
+**Max-only forward pass, argmax recomputed on the track.** The recursions
+(:class:`methods.dp_tbd.DpTbd`, :class:`methods.dp_tbd.DpTbdMf`) are
+
+    J_k(s) = max_(s' in P(s)) [ J_(k-1)(s') + w_k(s', s) ],
+
+with backpointers psi_k(s) = the first maximising s'. The forward pass
+computes only the maxima (an add and a ``vmaxps`` per candidate, no compare
+and select for the argmax) and stores no backpointers: they are needed at
+one state per frame only, the state s_k the track visits, and backtracking
+recomputes them there,
+
+    psi_k(s_k) = first argmax_(s' in P(s_k)) [ J_(k-1)(s') + w_k(s', s_k) ],
+
+scanning the candidates in the original order with "strictly larger wins".
+That is the backpointer the original max + argmax pass stored
+(:mod:`methods._tbd_oracle`): the candidate values are the same float32
+sums of the same operands, J_(k-1) being the forward pass's own values, and
+a float32 maximum is exact, so the maxima do not depend on the order or the
+grouping in which the forward pass takes the candidates (which it changes
+freely for speed: separable box maxima, heading classes below). The price is
+that J_(k-1)(s') must be available at the track's states: ``dp-tbd`` keeps
+I_k of every frame (K H W float32, 20 MB at 500 x 500 x 20); ``dp-tbd-mf``
+keeps checkpoints (:func:`_dp_tbd_mf`).
 
 The kernels are compiled with ``cache=True`` (compiled once per machine).
 No global ``fastmath``: the merits use -inf for inadmissible states and the
@@ -53,100 +77,6 @@ def _fmax(typingctx, a, b):
     return sig, codegen
 
 
-# ---------------------------------------------------------------- dp-tbd
-#
-# The hot loops are written as small helpers over contiguous 1-D views that
-# are indexed by the loop counter from 0 only: numba adds negative-index
-# wraparound logic to an index like ``c - dc``, which stops LLVM from
-# vectorising; with views and non-negative counters the compare/select loops
-# become AVX2 code (about 8x faster on the max + argmax pass).
-
-@numba.njit(cache=True, inline="always")
-def _max_arg(src, m, a, j, length):  # pragma: no cover - compiled
-    """m = max(m, src), a = j where src is strictly larger (first max wins)."""
-    for c in range(length):
-        v = src[c]
-        mc = m[c]
-        ac = a[c]
-        m[c] = _fmax(mc, v)
-        a[c] = j if v > mc else ac
-
-
-@numba.njit(cache=True, inline="always")
-def _max_arg_add(src, wt, m, a, j, length):  # pragma: no cover - compiled
-    """m = max(m, src + wt), a = j where src + wt is strictly larger."""
-    for c in range(length):
-        v = src[c] + wt
-        mc = m[c]
-        ac = a[c]
-        m[c] = _fmax(mc, v)
-        a[c] = j if v > mc else ac
-
-
-@numba.njit(cache=True, inline="always")
-def _max_arg_rows(src, src_arg, base, m, a, length):  # pragma: no cover - compiled
-    """m = max(m, src), a = base + src_arg where src is strictly larger."""
-    for c in range(length):
-        v = src[c]
-        mc = m[c]
-        ac = a[c]
-        sa = base + src_arg[c]      # loaded unconditionally: no masked load
-        m[c] = _fmax(mc, v)
-        a[c] = sa if v > mc else ac
-
-
-@numba.njit(cache=True, inline="always")
-def _copy_rows(src, src_arg, base, m, a, length):  # pragma: no cover - compiled
-    """m = src, a = base + src_arg."""
-    for c in range(length):
-        m[c] = src[c]
-        a[c] = base + src_arg[c]
-
-
-@numba.njit(cache=True)
-def _box_max_argmax(prev, q, m1, a1, z_k, cur, bp_k, best, besti):  # pragma: no cover - compiled
-    """cur = z_k + box max of ``prev`` over the window, bp_k = its argmax.
-
-    The box maximum is separable: first along columns, m1(r, c) =
-    max_dc prev(r, c - dc) with a1 the first maximising dc index, then along
-    rows, max_dr m1(r - dr, c), whose first maximising dr together with
-    a1(r - dr, c) is the lexicographically first (dr, dc) maximiser, i.e. the
-    first in the window numbering. 2 (2q + 1) compare/selects per cell
-    instead of (2q + 1)^2, with contiguous inner loops over columns.
-    Predecessors outside the grid are not candidates (d = 0 always is).
-    """
-    H, W = prev.shape
-    w = 2 * q + 1
-    for r in range(H):
-        pr = prev[r]
-        mr = m1[r]
-        ar = a1[r]
-        for c in range(W):
-            mr[c] = NEG_INF
-            ar[c] = 0
-        for j in range(w):
-            dc = j - q
-            if abs(dc) >= W:
-                continue
-            lo = max(0, dc)
-            hi = min(W, W + dc)
-            _max_arg(pr[lo - dc:hi - dc], mr[lo:hi], ar[lo:hi], np.int32(j), hi - lo)
-    for r in range(H):
-        # valid dr = i - q: 0 <= r - dr < H; the first valid row initialises
-        i_lo = max(0, r + q - H + 1)
-        i_hi = min(w, r + q + 1)
-        _copy_rows(m1[r - (i_lo - q)], a1[r - (i_lo - q)], np.int32(i_lo * w), best, besti, W)
-        for i in range(i_lo + 1, i_hi):
-            rp = r - (i - q)
-            _max_arg_rows(m1[rp], a1[rp], np.int32(i * w), best, besti, W)
-        zr = z_k[r]
-        cr = cur[r]
-        br = bp_k[r]
-        for c in range(W):
-            cr[c] = zr[c] + best[c]
-            br[c] = besti[c]
-
-
 @numba.njit(cache=True)
 def _check_finite(frames):  # pragma: no cover - compiled
     """Raise if any frame value is NaN or infinite (one vectorised pass)."""
@@ -172,195 +102,657 @@ def _first_argmax_2d(a):  # pragma: no cover - compiled
     return best, br, bc
 
 
+# ------------------------------------------------------------ row helpers
+#
+# The hot loops are small helpers over contiguous 1-D views that are indexed
+# by the loop counter from 0 only: numba adds negative-index wraparound logic
+# to an index like ``c - dc``, which stops LLVM from vectorising; with views
+# and non-negative counters the loops become SIMD code (AVX2 / AVX-512). At
+# most eight rows are read per loop: LLVM vectorises a loop only if its
+# runtime overlap checks (one per row read against the row written) number
+# at most eight.
+
+@numba.njit(cache=True, inline="always")
+def _max_into(src, m, length):  # pragma: no cover - compiled
+    """m = max(m, src)."""
+    for c in range(length):
+        m[c] = _fmax(m[c], src[c])
+
+
+@numba.njit(cache=True, inline="always")
+def _max8(first, s0, s1, s2, s3, s4, s5, s6, s7, w0, w1, w2, w3, w4, w5, w6, w7, m,
+          length):  # pragma: no cover - compiled
+    """m = max(m, s0 + w0, ..., s7 + w7) (``first``: m = max(s0 + w0, ...)).
+
+    Eight predecessor rows per pass, so the running maximum is loaded and
+    stored once per eight candidates; folded left to right, as the
+    one-candidate-at-a-time recursion would. ``first`` is a constant at each
+    call site, so the branch is resolved outside the loop.
+    """
+    for c in range(length):
+        mc = s0[c] + w0
+        if not first:
+            mc = _fmax(m[c], mc)
+        mc = _fmax(mc, s1[c] + w1)
+        mc = _fmax(mc, s2[c] + w2)
+        mc = _fmax(mc, s3[c] + w3)
+        mc = _fmax(mc, s4[c] + w4)
+        mc = _fmax(mc, s5[c] + w5)
+        mc = _fmax(mc, s6[c] + w6)
+        mc = _fmax(mc, s7[c] + w7)
+        m[c] = mc
+
+
+@numba.njit(cache=True, inline="always")
+def _max1(first, s0, w0, m, length):  # pragma: no cover - compiled
+    """m = max(m, s0 + w0) (``first``: m = s0 + w0)."""
+    for c in range(length):
+        v = s0[c] + w0
+        m[c] = v if first else _fmax(m[c], v)
+
+
+@numba.njit(cache=True, inline="always")
+def _copy_rows(src, dst, rows, length):  # pragma: no cover - compiled
+    """dst[i, :length] = src[i, :length] for i < rows (an explicit loop:
+    vectorised, unlike a numba slice assignment)."""
+    for i in range(rows):
+        s, t = src[i], dst[i]
+        for c in range(length):
+            t[c] = s[c]
+
+
+@numba.njit(cache=True, inline="always")
+def _fill(out, lo, hi, value):  # pragma: no cover - compiled
+    for c in range(lo, hi):
+        out[c] = value
+
+
+# ---------------------------------------------------------------- dp-tbd
+
+@numba.njit(cache=True, inline="always")
+def _max5(first, s0, s1, s2, s3, s4, m, length):  # pragma: no cover - compiled
+    """m = max(s0, ..., s4) (``first``) or max(m, s0, ..., s4)."""
+    for c in range(length):
+        v = _fmax(_fmax(_fmax(_fmax(s0[c], s1[c]), s2[c]), s3[c]), s4[c])
+        m[c] = v if first else _fmax(m[c], v)
+
+
+@numba.njit(cache=True, inline="always")
+def _plus_max5(zr, s0, s1, s2, s3, s4, out, length):  # pragma: no cover - compiled
+    """out = zr + max(s0, ..., s4)."""
+    for c in range(length):
+        out[c] = zr[c] + _fmax(_fmax(_fmax(_fmax(s0[c], s1[c]), s2[c]), s3[c]), s4[c])
+
+
+@numba.njit(cache=True, inline="always")
+def _add_into(zr, out, length):  # pragma: no cover - compiled
+    for c in range(length):
+        out[c] = zr[c] + out[c]
+
+
 @numba.njit(cache=True)
-def dp_tbd(z, q, score, track, value):  # pragma: no cover - compiled
+def _box_max(prev, q, ring, z_k, cur):  # pragma: no cover - compiled
+    """cur = z_k + box max of ``prev`` over the window (the forward pass of
+    :func:`_dp_tbd`; no argmax, see the module docstring).
+
+    ``prev`` and ``cur`` are (H, W + 2q) with q columns of -inf on each
+    side, so a shifted row is a plain slice and off-grid predecessors lose
+    every maximum (d = 0 is always a candidate). The box maximum is
+    separable: along columns, m1(y, c) = max_dc prev(y, c - dc), then along
+    rows, cur(r, c) = z_k(r, c) + max_dr m1(r - dr, c), 2 (2q + 1) maxima per
+    cell. One pass over the rows: m1 of row r + q goes into ``ring`` (2q + 1
+    rows, row y in slot y mod (2q + 1)) just before row r needs it. Rows off
+    the grid are clipped to the nearest one inside it and windows are padded
+    to groups of five by repeating a row or column: a repeated candidate
+    changes no maximum.
+    """
+    H, W = z_k.shape
+    w = 2 * q + 1
+    S = ring.shape[0]
+    ng = (w + 4) // 5                        # groups of five candidates
+    for rr in range(H + q):
+        if rr < H:                           # m1 of row rr: shifts q - j, j = 0 .. 2q
+            pr = prev[rr]
+            mr = ring[rr % S]
+            for g in range(ng):
+                o0, o1 = 2 * q - min(5 * g, w - 1), 2 * q - min(5 * g + 1, w - 1)
+                o2, o3 = 2 * q - min(5 * g + 2, w - 1), 2 * q - min(5 * g + 3, w - 1)
+                o4 = 2 * q - min(5 * g + 4, w - 1)
+                s0, s1, s2 = pr[o0:o0 + W], pr[o1:o1 + W], pr[o2:o2 + W]
+                s3, s4 = pr[o3:o3 + W], pr[o4:o4 + W]
+                if g == 0:
+                    _max5(True, s0, s1, s2, s3, s4, mr, W)
+                else:
+                    _max5(False, s0, s1, s2, s3, s4, mr, W)
+        r = rr - q
+        if r < 0:
+            continue
+        lo, hi = max(0, r - q), min(H - 1, r + q)          # predecessor rows in the grid
+        cr = cur[r, q:q + W]
+        for g in range(ng):
+            # rows r + q - i for i = 5 g .. 5 g + 4, clipped to [lo, hi]
+            y0, y1 = min(max(r + q - 5 * g, lo), hi), min(max(r + q - 5 * g - 1, lo), hi)
+            y2, y3 = min(max(r + q - 5 * g - 2, lo), hi), min(max(r + q - 5 * g - 3, lo), hi)
+            y4 = min(max(r + q - 5 * g - 4, lo), hi)
+            s0, s1, s2, s3, s4 = ring[y0 % S], ring[y1 % S], ring[y2 % S], ring[y3 % S], ring[y4 % S]
+            if ng == 1:
+                _plus_max5(z_k[r], s0, s1, s2, s3, s4, cr, W)
+            elif g == 0:
+                _max5(True, s0, s1, s2, s3, s4, cr, W)
+            else:
+                _max5(False, s0, s1, s2, s3, s4, cr, W)
+        if ng > 1:
+            _add_into(z_k[r], cr, W)
+
+
+@numba.njit(cache=True)
+def _box_argmax_at(prev, q, r, c):  # pragma: no cover - compiled
+    """The backpointer of cell (r, c): the first displacement j (window
+    numbering) maximising I(r - dr, c - dc) over the predecessors in the
+    grid (``prev``: I padded as in :func:`_box_max`), the one the separable
+    max + argmax recursion stored (its lexicographically first (dr, dc)
+    maximiser is the first in the row-major numbering)."""
+    H = prev.shape[0]
+    W = prev.shape[1] - 2 * q
+    w = 2 * q + 1
+    best = NEG_INF
+    arg = -1
+    for j in range(w * w):
+        rp = r - (j // w - q)
+        cp = c - (j % w - q)
+        if 0 <= rp < H and 0 <= cp < W:
+            v = prev[rp, q + cp]
+            if arg < 0 or v > best:
+                best = v
+                arg = j
+    return arg
+
+
+@numba.njit(cache=True)
+def _dp_tbd(z, q, score, track, value, merit, ring):  # pragma: no cover - compiled
     """Tonissen-Evans DP-TBD, all trials; outputs written in place.
+    See :class:`methods.dp_tbd.DpTbd`.
 
     I_0(x) = z_0(x); I_k(x) = z_k(x) + max_(d in box q) I_(k-1)(x - d);
     score = max_x I_(K-1)(x); track backtracked from its first argmax;
     value = I_(K-1).
 
+    The forward pass (:func:`_box_max`) keeps I_k of every frame and
+    computes no argmax; backtracking recomputes the first maximising
+    displacement at the track's cell of each frame (:func:`_box_argmax_at`),
+    x_(k-1) = x_k - psi_k(x_k).
+
     z (n, K, H, W) float32; score (n,) float64; track (n, K, 2) int64;
-    value (n, H, W) float32.
+    value (n, H, W) float32; working memory: merit (K, H, W + 2q) float32
+    whose q first and last columns are -inf, ring (2q + 1, W) float32.
     """
     n, K, H, W = z.shape
     w = 2 * q + 1
-    a = np.empty((H, W), np.float32)
-    b = np.empty((H, W), np.float32)
-    m1 = np.empty((H, W), np.float32)
-    a1 = np.empty((H, W), np.int32)
-    best = np.empty(W, np.float32)
-    besti = np.empty(W, np.int32)
-    bp = np.empty((max(K, 1), H, W), np.int8)
     for t in range(n):
         _check_finite(z[t])
-        prev, cur = a, b
-        prev[:, :] = z[t, 0]
+        _copy_rows(z[t, 0], merit[0, :, q:q + W], H, W)
         for k in range(1, K):
-            _box_max_argmax(prev, q, m1, a1, z[t, k], cur, bp[k], best, besti)
-            prev, cur = cur, prev
-        s, r, c = _first_argmax_2d(prev)
+            _box_max(merit[k - 1], q, ring, z[t, k], merit[k])
+        last = merit[K - 1, :, q:q + W]
+        s, r, c = _first_argmax_2d(last)
         score[t] = s
-        value[t] = prev
+        _copy_rows(last, value[t], H, W)
         track[t, K - 1, 0] = r
         track[t, K - 1, 1] = c
         for k in range(K - 1, 0, -1):
-            j = bp[k, r, c]
+            j = _box_argmax_at(merit[k - 1], q, r, c)
             r -= j // w - q
             c -= j % w - q
             track[t, k - 1, 0] = r
             track[t, k - 1, 1] = c
 
 
+def dp_tbd(z, q, score, track, value):
+    """:func:`_dp_tbd` with its working memory allocated by NumPy (see
+    :func:`dp_tbd_mf`)."""
+    _, K, H, W = z.shape
+    merit = np.empty((max(K, 1), H, W + 2 * q), np.float32)
+    merit[:, :, :q] = -np.inf
+    merit[:, :, q + W:] = -np.inf
+    _dp_tbd(z, q, score, track, value, merit, np.empty((2 * q + 1, W), np.float32))
+
+
 # ------------------------------------------------------------- dp-tbd-mf
+#
+# Three ideas make the second-order recursion fast (see _dp_tbd_mf):
+#
+# 1. max-only forward pass, argmax recomputed on the track (module docstring);
+# 2. heading classes: the turn weight lp[d', d] depends on d' and d only
+#    through their headings, which factorises the maximum over d'
+#    (_heading_classes);
+# 3. a row wavefront over the frames, so each frame reads the previous
+#    frame's rows from cache, and checkpoints, so only every fourth frame's
+#    volume goes to memory.
 
 @numba.njit(cache=True)
-def _llr_planes(z_k, z_k1, z_k2, beta1, beta2, coef, const, out):  # pragma: no cover - compiled
-    """out[v] = coef[v] * r0 + const[v] for the residual
-    r0 = z_k - beta1 z_(k-1) - beta2 z_(k-2) of each cell (same cell, earlier
-    frames; pass zeros with beta = 0 where a frame does not exist)."""
-    H, W = z_k.shape
-    nv = coef.shape[0]
-    for r in range(H):
-        for c in range(W):
-            r0 = z_k[r, c] - beta1 * z_k1[r, c] - beta2 * z_k2[r, c]
-            for v in range(nv):
-                out[v, r, c] = coef[v] * r0 + const[v]
-
-
-@numba.njit(cache=True, inline="always")
-def _special(src, wt, lam_generic, lam_special, best, besti, j, out, out_bp, length):  # pragma: no cover
-    """out = max(best + lam_generic, src + wt + lam_special) and its pointer."""
-    for c in range(length):
-        g = best[c] + lam_generic[c]
-        v = src[c] + wt + lam_special[c]
-        out[c] = _fmax(g, v)
-        out_bp[c] = j if v > g else besti[c]
-
-
-@numba.njit(cache=True, inline="always")
-def _first4(s0, s1, s2, s3, w0, w1, w2, w3, j0, j1, j2, j3, m, a, length):  # pragma: no cover
-    """m, a = max and first argmax over four shifted predecessor rows (+ weights)."""
-    for c in range(length):
-        mc = s0[c] + w0
-        ac = j0
-        v = s1[c] + w1
-        ac = j1 if v > mc else ac
-        mc = _fmax(mc, v)
-        v = s2[c] + w2
-        ac = j2 if v > mc else ac
-        mc = _fmax(mc, v)
-        v = s3[c] + w3
-        ac = j3 if v > mc else ac
-        mc = _fmax(mc, v)
-        m[c] = mc
-        a[c] = ac
-
-
-@numba.njit(cache=True, inline="always")
-def _next4(s0, s1, s2, s3, w0, w1, w2, w3, j0, j1, j2, j3, m, a, length):  # pragma: no cover
-    """Fold four more predecessor rows into m, a (strictly larger wins)."""
-    for c in range(length):
-        mc = m[c]
-        ac = a[c]
-        v = s0[c] + w0
-        ac = j0 if v > mc else ac
-        mc = _fmax(mc, v)
-        v = s1[c] + w1
-        ac = j1 if v > mc else ac
-        mc = _fmax(mc, v)
-        v = s2[c] + w2
-        ac = j2 if v > mc else ac
-        mc = _fmax(mc, v)
-        v = s3[c] + w3
-        ac = j3 if v > mc else ac
-        mc = _fmax(mc, v)
-        m[c] = mc
-        a[c] = ac
+def _gcd(a, b):  # pragma: no cover - compiled
+    a, b = abs(a), abs(b)
+    while b:
+        a, b = b, a % b
+    return a
 
 
 @numba.njit(cache=True)
-def _mf_frame(prev, cur, bp_k, lp, q, lam_new, lam_back, lam_stay1, lam_stay2, best, besti):  # pragma: no cover
-    """One frame k >= 2 of the second-order recursion.
+def _direction_classes(q):  # pragma: no cover - compiled
+    """Class index of each displacement: displacements with the same heading
+    (the same primitive direction d / gcd(dr, dc), e.g. (0, 1) and (0, 2))
+    share a class; d = 0 is a class of its own. Classes are numbered in the
+    order of their first member."""
+    w = 2 * q + 1
+    D = w * w
+    cls = np.full(D, -1, np.int64)
+    C = 0
+    for d in range(D):
+        if cls[d] >= 0:
+            continue
+        cls[d] = C
+        dr, dc = d // w - q, d % w - q
+        g = _gcd(dr, dc)
+        for e in range(d + 1, D):
+            er, ec = e // w - q, e % w - q
+            ge = _gcd(er, ec)
+            if g > 0 and ge > 0 and er // ge == dr // g and ec // ge == dc // g:
+                cls[e] = C
+        C += 1
+    return cls
 
-    J_k(x, d) = max_d' [ J_(k-1)(x - d, d') + lp[d', d] + Lambda_k(x; d, d') ]
 
-    where Lambda depends on (d, d') only through whether the path sat in cell
-    x at k-1 (d = 0) and at k-2 (d + d' = 0). For each d the candidates split
-    into the generic ones (d' != -d), sharing one Lambda plane
-    (``lam_new`` for d != 0, ``lam_stay1`` for d = 0), and the single special
-    one d' = -d (``lam_back`` for d != 0, ``lam_stay2`` for d = d' = 0).
-    Loop order r, d, d', c: the rows of J_(k-1) a row r touches (2q + 1 rows
-    per d') stay in L2 across d, and the inner loops are contiguous. The
-    D - 1 = 4 q (q + 1) generic predecessors (a multiple of 4) are folded four
-    at a time, so the running max and argmax of a row are loaded and stored
-    once per four candidates; they are taken in increasing d' order, so the
-    first maximum wins.
+@numba.njit(cache=True)
+def _heading_classes(lp, q):  # pragma: no cover - compiled
+    """Tables of the heading factorisation of max_d' [J(y, d') + lp[d', d]].
+
+    If lp[d', d] depends on (d', d) only through their classes
+    (:func:`_direction_classes`; true of any turn-angle weight, the angle
+    being that of the headings, and of the uniform weight of d = 0), then for
+    a class u of d
+
+        max_(d' != -d) [J(y, d') + lp[d', d]]
+            = max( CM_u(y), max_(m in class(-d), m != -d) [J(y, m) + lp[m, d]] ),
+        CM_u(y) = max_(u' != class(-d)) [R_u'(y) + L[u', u]],
+        R_u'(y) = max_(m in u') J(y, m),
+
+    exactly in float32: rounding is monotone, so
+    max_m fl(J_m + w) = fl(max_m J_m + w) for one weight w, and a maximum is
+    exact in any order. CM_u is shared by the members of u, R by all d:
+    at q = 2 (17 classes) this takes 16 weighted candidates per class instead
+    of 24 per displacement. If lp does not have that structure every
+    displacement is its own class and the same code is the direct maximum.
+
+    Returns (cls (D,), members (C, M) padded with -1, nmem (C,),
+    neg (C,) the class of -d, L (C, C) the weight between classes,
+    cand (C, C - 1) the classes u' != neg[u] in increasing order).
+    C - 1 is a multiple of 8 in both cases (the symmetry of the box).
     """
-    D, H, W = prev.shape
+    D = lp.shape[0]
+    cls = _direction_classes(q)
+    rep = np.empty(D, np.int64)                 # rep[d]: the first member of d's class
+    for d in range(D - 1, -1, -1):
+        rep[cls == cls[d]] = d
+    structured = True
+    for dp in range(D):
+        for d in range(D):
+            structured &= lp[dp, d] == lp[rep[dp], rep[d]]
+    if not structured:                          # one class per displacement
+        cls = np.arange(D)
+    C = cls.max() + 1
+    nmem = np.zeros(C, np.int64)
+    for d in range(D):
+        nmem[cls[d]] += 1
+    members = np.full((C, nmem.max()), -1, np.int64)
+    filled = np.zeros(C, np.int64)
+    for d in range(D):
+        members[cls[d], filled[cls[d]]] = d
+        filled[cls[d]] += 1
+    neg = np.empty(C, np.int64)
+    L = np.empty((C, C), np.float32)
+    for u in range(C):
+        neg[u] = cls[D - 1 - members[u, 0]]
+        for v in range(C):
+            L[v, u] = lp[members[v, 0], members[u, 0]]
+    cand = np.empty((C, C - 1), np.int64)
+    for u in range(C):
+        i = 0
+        for v in range(C):
+            if v != neg[u]:
+                cand[u, i] = v
+                i += 1
+    return cls, members, nmem, neg, L, cand
+
+
+@numba.njit(cache=True, inline="always")
+def _max2(a, b, out, length):  # pragma: no cover - compiled
+    for c in range(length):
+        out[c] = _fmax(a[c], b[c])
+
+
+@numba.njit(cache=True)
+def _common_maxima(J, R, CM, members, nmem, L, cand, W):  # pragma: no cover - compiled
+    """For one row y of J_k (J: (D, W')): R_u = max over the members of class
+    u of J (R: (C, W') scratch; a copy for one-member classes, so that every
+    candidate row below is a row of R: row views chosen between two arrays
+    would cost numba reference counting in the loop), then
+    CM_u = max_(u' in cand[u]) R_u' + L[u', u] (CM: (C, W')), eight
+    candidates per pass (:func:`_max8`; the remainder, if the number of
+    candidates is not a multiple of 8, one by one); see
+    :func:`_heading_classes`."""
+    C = L.shape[0]
+    nc = cand.shape[1]
+    n8 = nc - nc % 8
+    for u in range(C):
+        ru = R[u, :W]
+        if nmem[u] == 1:
+            _copy_rows(J[members[u, 0]:members[u, 0] + 1], R[u:u + 1], 1, W)
+        else:
+            _max2(J[members[u, 0], :W], J[members[u, 1], :W], ru, W)
+            for i in range(2, nmem[u]):
+                _max_into(J[members[u, i], :W], ru, W)
+    for u in range(C):
+        cu = cand[u]
+        cm = CM[u, :W]
+        for i in range(n8, nc):                 # the candidates beyond a multiple of 8 first
+            _max1(i == n8, R[cu[i], :W], L[cu[i], u], cm, W)
+        for g in range(0, n8, 8):
+            v0, v1, v2, v3 = cu[g], cu[g + 1], cu[g + 2], cu[g + 3]
+            v4, v5, v6, v7 = cu[g + 4], cu[g + 5], cu[g + 6], cu[g + 7]
+            s0, s1, s2, s3 = R[v0, :W], R[v1, :W], R[v2, :W], R[v3, :W]
+            s4, s5, s6, s7 = R[v4, :W], R[v5, :W], R[v6, :W], R[v7, :W]
+            w0, w1, w2, w3 = L[v0, u], L[v1, u], L[v2, u], L[v3, u]
+            w4, w5, w6, w7 = L[v4, u], L[v5, u], L[v6, u], L[v7, u]
+            if g == 0 and n8 == nc:
+                _max8(True, s0, s1, s2, s3, s4, s5, s6, s7, w0, w1, w2, w3, w4, w5, w6, w7, cm, W)
+            else:
+                _max8(False, s0, s1, s2, s3, s4, s5, s6, s7, w0, w1, w2, w3, w4, w5, w6, w7, cm, W)
+
+
+@numba.njit(cache=True, inline="always")
+def _residual(zk, zk1, zk2, beta1, beta2):  # pragma: no cover - compiled
+    """r0 = z_k - beta1 z_(k-1) - beta2 z_(k-2) of one cell. The forward pass
+    and the backtrack both call it, so they round identically."""
+    return zk - beta1 * zk1 - beta2 * zk2
+
+
+@numba.njit(cache=True)
+def _llr_row(zk, zk1, zk2, beta1, beta2, coef, const, out):  # pragma: no cover - compiled
+    """out[v] = coef[v] r0 + const[v] on one row, r0 = z_k - beta1 z_(k-1)
+    - beta2 z_(k-2) (same cells, earlier frames; zeros with beta = 0 where a
+    frame does not exist). out has one more row than coef: scratch for r0."""
+    nv = coef.shape[0]
+    W = zk.shape[0]
+    r0 = out[nv]
+    for c in range(W):
+        r0[c] = _residual(zk[c], zk1[c], zk2[c], beta1, beta2)
+    for v in range(nv):
+        cv, kv = coef[v], const[v]
+        o = out[v]
+        for c in range(W):
+            o[c] = cv * r0[c] + kv
+
+
+@numba.njit(cache=True, inline="always")
+def _finish0(cm, src, wt, lam_generic, lam_special, out, length):  # pragma: no cover - compiled
+    """out = max(cm + Lambda_generic, src + wt + Lambda_special)."""
+    for c in range(length):
+        out[c] = _fmax(cm[c] + lam_generic[c], src[c] + wt + lam_special[c])
+
+
+@numba.njit(cache=True, inline="always")
+def _finish1(cm, res, wres, src, wt, lam_generic, lam_special, out, length):  # pragma: no cover
+    """out = max(max(cm, res + wres) + Lambda_generic, src + wt + Lambda_special)."""
+    for c in range(length):
+        out[c] = _fmax(_fmax(cm[c], res[c] + wres) + lam_generic[c], src[c] + wt + lam_special[c])
+
+
+@numba.njit(cache=True, inline="always")
+def _fold_into(a, src, wt, out, length):  # pragma: no cover - compiled
+    """out = max(a, src + wt)."""
+    for c in range(length):
+        out[c] = _fmax(a[c], src[c] + wt)
+
+
+@numba.njit(cache=True)
+def _mf_row(jsrc, csrc, r, H, W, lam, lp, q, cls, members, nmem, neg, tmp, out):  # pragma: no cover
+    """Row r of J_k, k >= 2 (out: (D, W')), from the rows of J_(k-1)
+    (``jsrc``: (M, D, W'), row y at y mod M: the stored volume, M = H, or a
+    ring) and their common maxima (``csrc``: ring (2q + 1, C, W'), row y at
+    y mod (2q + 1), :func:`_common_maxima`):
+
+    J_k(x, d) = max( max_(d' != -d) [J_(k-1)(x - d, d') + lp[d', d]] + Lambda_generic(x),
+                     J_(k-1)(x - d, -d) + lp[-d, d] + Lambda_special(x) ),
+
+    the first maximum by heading classes (:func:`_heading_classes`): CM of
+    the class of d, and the other members of the class of -d. The generic
+    candidates share one Lambda plane (new cell for d != 0, stayed since
+    k-1 for d = 0), the special one d' = -d its own (back to the cell of
+    k-2, stayed since k-2); ``lam``: the four planes' row r. -inf where
+    x - d is off the grid."""
+    D = lp.shape[0]
+    M = jsrc.shape[0]
+    S = csrc.shape[0]
     w = 2 * q + 1
     zero = D // 2
-    gen = np.empty(D - 1, np.int64)
-    for r in range(H):
-        for d in range(D):
-            dr = d // w - q
-            dc = d % w - q
-            rp = r - dr
-            cr = cur[d, r]
-            br = bp_k[d, r]
-            if rp < 0 or rp >= H or abs(dc) >= W:      # no predecessor in the grid
-                for c in range(W):
-                    cr[c] = NEG_INF
-                    br[c] = 0
-                continue
-            lo = max(0, dc)
-            hi = min(W, W + dc)
-            L = hi - lo
-            sp = D - 1 - d
-            i = 0
-            for dp in range(D):
-                if dp != sp:
-                    gen[i] = dp
-                    i += 1
-            bl = best[lo:hi]
-            bil = besti[lo:hi]
-            for g in range(0, D - 1, 4):
-                p0, p1, p2, p3 = gen[g], gen[g + 1], gen[g + 2], gen[g + 3]
-                s0 = prev[p0, rp, lo - dc:hi - dc]
-                s1 = prev[p1, rp, lo - dc:hi - dc]
-                s2 = prev[p2, rp, lo - dc:hi - dc]
-                s3 = prev[p3, rp, lo - dc:hi - dc]
-                if g == 0:
-                    _first4(s0, s1, s2, s3, lp[p0, d], lp[p1, d], lp[p2, d], lp[p3, d], np.int32(p0),
-                            np.int32(p1), np.int32(p2), np.int32(p3), bl, bil, L)
-                else:
-                    _next4(s0, s1, s2, s3, lp[p0, d], lp[p1, d], lp[p2, d], lp[p3, d], np.int32(p0),
-                           np.int32(p1), np.int32(p2), np.int32(p3), bl, bil, L)
-            if d == zero:
-                lg = lam_stay1[r]
-                ls = lam_stay2[r]
-            else:
-                lg = lam_new[r]
-                ls = lam_back[r]
-            _special(prev[sp, rp, lo - dc:hi - dc], lp[sp, d], lg[lo:hi], ls[lo:hi], bl, bil,
-                     np.int32(sp), cr[lo:hi], br[lo:hi], L)
-            for c in range(lo):
-                cr[c] = NEG_INF
-                br[c] = 0
-            for c in range(hi, W):
-                cr[c] = NEG_INF
-                br[c] = 0
-
-
-@numba.njit(cache=True, inline="always")
-def _max_into(src, m, length):  # pragma: no cover - compiled
-    for c in range(length):
-        m[c] = _fmax(m[c], src[c])
+    for d in range(D):
+        dr = d // w - q
+        dc = d % w - q
+        rp = r - dr
+        o = out[d]
+        if rp < 0 or rp >= H or abs(dc) >= W:          # no predecessor in the grid
+            _fill(o, 0, W, NEG_INF)
+            continue
+        lo = max(0, dc)
+        hi = min(W, W + dc)
+        a, b, n = lo - dc, hi - dc, hi - lo
+        blk = jsrc[rp % M]
+        sp = D - 1 - d
+        v = neg[cls[d]]
+        cm = csrc[rp % S, cls[d], a:b]
+        ig, is_ = (2, 3) if d == zero else (0, 1)
+        lg, ls = lam[ig, lo:hi], lam[is_, lo:hi]
+        if nmem[v] == 1:                                # -d is alone in its class
+            _finish0(cm, blk[sp, a:b], lp[sp, d], lg, ls, o[lo:hi], n)
+        elif nmem[v] == 2:
+            m = members[v, 0] + members[v, 1] - sp
+            _finish1(cm, blk[m, a:b], lp[m, d], blk[sp, a:b], lp[sp, d], lg, ls, o[lo:hi], n)
+        else:
+            t = tmp[:n]
+            t[:] = cm
+            for i in range(nmem[v]):
+                m = members[v, i]
+                if m != sp:
+                    _fold_into(t, blk[m, a:b], lp[m, d], t, n)
+            _finish0(t, blk[sp, a:b], lp[sp, d], lg, ls, o[lo:hi], n)
+        _fill(o, 0, lo, NEG_INF)
+        _fill(o, hi, W, NEG_INF)
 
 
 @numba.njit(cache=True)
-def dp_tbd_mf(z, q, lp, lp_first, beta_2, beta_3, coef0, const0, coef1, const1, coef2, const2,
-              score, track, value):  # pragma: no cover - compiled
+def _mf_row1(j0, r, lp_first, lam, q, out):  # pragma: no cover - compiled
+    """Row r of J_1(x, d) = J_0(x - d) + lp_first + Lambda_1(x; [d = 0])
+    (out: (D, W'); lam: the "new cell" and "stayed" planes' row r), -inf
+    where x - d is off the grid."""
+    H, W = j0.shape
+    D = (2 * q + 1) ** 2
+    w = 2 * q + 1
+    zero = D // 2
+    for d in range(D):
+        dr = d // w - q
+        dc = d % w - q
+        rp = r - dr
+        o = out[d]
+        lo = max(0, dc)
+        hi = min(W, W + dc)
+        if rp < 0 or rp >= H or lo >= hi:
+            _fill(o, 0, W, NEG_INF)
+            continue
+        src = j0[rp, lo - dc:hi - dc]
+        lr = lam[1 if d == zero else 0, lo:hi]      # an index, not a choice of views
+        ol = o[lo:hi]
+        for c in range(hi - lo):
+            ol[c] = src[c] + lp_first + lr[c]
+        _fill(o, 0, lo, NEG_INF)
+        _fill(o, hi, W, NEG_INF)
+
+
+@numba.njit(cache=True)
+def _mf_state_value(P, lp, d, lam_generic, lam_special):  # pragma: no cover - compiled
+    """J_k(x, d) from P = J_(k-1)(x - d, :) (D,), as :func:`_mf_row` computes
+    it (the maximum is exact, so the candidates' order does not matter)."""
+    D = lp.shape[0]
+    sp = D - 1 - d
+    best = NEG_INF
+    for dp in range(D):
+        if dp != sp:
+            best = _fmax(best, P[dp] + lp[dp, d])
+    return _fmax(best + lam_generic, P[sp] + lp[sp, d] + lam_special)
+
+
+@numba.njit(cache=True)
+def _mf_predecessor(P, lp, d, lam_generic, lam_special):  # pragma: no cover - compiled
+    """psi_k(x, d): the d' the forward recursion maximised J_k(x, d) over,
+    from P = J_(k-1)(x - d, :) (D,) and Lambda_k(x) of the two cases, with
+    the tie rule of the original max + argmax pass: the generic candidates
+    d' != -d in increasing order, the first maximum wins; the special
+    d' = -d only if strictly larger than the generic maximum. (Same float32
+    sums as the forward pass, so the same comparisons.)"""
+    D = lp.shape[0]
+    sp = D - 1 - d
+    best = NEG_INF
+    arg = -1
+    for dp in range(D):
+        if dp == sp:
+            continue
+        v = P[dp] + lp[dp, d]
+        if arg < 0 or v > best:
+            best = v
+            arg = dp
+    if P[sp] + lp[sp, d] + lam_special > best + lam_generic:
+        return sp
+    return arg
+
+
+@numba.njit(cache=True)
+def _lambda_at(zt, k, r, c, b1, b2, coef2, const2, d, zero):  # pragma: no cover - compiled
+    """(Lambda_generic, Lambda_special) of frame k >= 2 at cell (r, c) for
+    displacement d, with the float32 operations of :func:`_llr_row`."""
+    res = _residual(zt[k, r, c], zt[k - 1, r, c], zt[k - 2, r, c], b1, b2)
+    g, s = (2, 3) if d == zero else (0, 1)
+    return coef2[g] * res + const2[g], coef2[s] * res + const2[s]
+
+
+@numba.njit(cache=True)
+def _mf_column(store, slot, j, yr, yc, zt, b1, b2, coef2, const2, lp, q):  # pragma: no cover
+    """J_j(y, :) (D,) at cell y = (yr, yc). Read from the stored volume if
+    frame j is a checkpoint; otherwise recomputed from the last checkpoint
+    c < j on the cone of cells y depends on (box radius q (j - i) at frame
+    i), with the forward pass's float32 operations (:func:`_mf_state_value`,
+    :func:`_lambda_at`), so the values are the same bits."""
+    D = lp.shape[0]
+    H, _, W = store.shape[1:]
+    if slot[j] >= 0:
+        return store[slot[j], yr, :, yc].copy()
+    c0 = j - 1
+    while slot[c0] < 0:
+        c0 -= 1
+    w = 2 * q + 1
+    zero = D // 2
+    n = j - c0
+    R = q * n
+    loc = np.full((2 * R + 1, 2 * R + 1, D), NEG_INF, np.float32)
+    for i in range(2 * R + 1):
+        for ii in range(2 * R + 1):
+            rr, cc = yr - R + i, yc - R + ii
+            if 0 <= rr < H and 0 <= cc < W:
+                loc[i, ii] = store[slot[c0], rr, :, cc]
+    for f in range(c0 + 1, j + 1):
+        Rn = R - q
+        new = np.full((2 * Rn + 1, 2 * Rn + 1, D), NEG_INF, np.float32)
+        for i in range(2 * Rn + 1):
+            for ii in range(2 * Rn + 1):
+                rr, cc = yr - Rn + i, yc - Rn + ii
+                if not (0 <= rr < H and 0 <= cc < W):
+                    continue
+                for d in range(D):
+                    pr, pc = rr - (d // w - q), cc - (d % w - q)
+                    if 0 <= pr < H and 0 <= pc < W:
+                        lg, ls = _lambda_at(zt, f, rr, cc, b1, b2, coef2, const2, d, zero)
+                        new[i, ii, d] = _mf_state_value(loc[pr - yr + R, pc - yc + R], lp, d, lg, ls)
+        loc = new
+        R = Rn
+    return loc[0, 0].copy()
+
+
+@numba.njit(cache=True)
+def _mf_start(last, vt):  # pragma: no cover - compiled
+    """Last frame of a second-order DP-TBD, J_(K-1) stored as (H, D, W):
+    value map vt = max over displacements, the score its maximum, and the
+    first state in (d, r, c) order that attains it. Returns (score, d, r, c)."""
+    H, D, W = last.shape
+    for r in range(H):
+        vr = vt[r]
+        vr[:] = last[r, 0]
+        for d in range(1, D):
+            _max_into(last[r, d], vr, W)
+    sb = _first_argmax_2d(vt)[0]
+    for d in range(D):
+        for r in range(H):
+            for c in range(W):
+                if last[r, d, c] == sb:
+                    return sb, d, r, c
+    return sb, 0, 0, 0      # not reached: sb is one of the values
+
+
+@numba.njit(cache=True)
+def _mf_backtrack(store, slot, zt, b1, b2, coef2, const2, lp, q, vt, track_t):  # pragma: no cover
+    """Score, value map ``vt`` and track ``track_t`` (K, 2) of one trial from
+    the stored volumes: start at the first maximum of J_(K-1) in (d, r, c)
+    order, then x_(k-1) = x_k - d_k and d_(k-1) = psi_k(x_k, d_k), recomputed
+    from the column J_(k-1)(x_k - d_k, :) (frame 1's predecessor is a cell).
+    Returns the score."""
+    K = track_t.shape[0]
+    w = 2 * q + 1
+    zero = lp.shape[0] // 2
+    s, d, r, c = _mf_start(store[slot[K - 1]], vt)
+    track_t[K - 1, 0] = r
+    track_t[K - 1, 1] = c
+    for k in range(K - 1, 0, -1):
+        dn = 0
+        yr = r - (d // w - q)
+        yc = c - (d % w - q)
+        if k >= 2:
+            P = _mf_column(store, slot, k - 1, yr, yc, zt, b1, b2, coef2, const2, lp, q)
+            lg, ls = _lambda_at(zt, k, r, c, b1, b2, coef2, const2, d, zero)
+            dn = _mf_predecessor(P, lp, d, lg, ls)
+        r, c = yr, yc
+        track_t[k - 1, 0] = r
+        track_t[k - 1, 1] = c
+        d = dn
+    return s
+
+
+#: frames 1, 1 + CHECKPOINT_EVERY, 1 + 2 CHECKPOINT_EVERY, ... and the last
+#: are stored; the backtrack recomputes the others on a small cone
+CHECKPOINT_EVERY = 4
+
+
+@numba.njit(cache=True)
+def _checkpoint_slots(K):  # pragma: no cover - compiled
+    """slot[k] = index of frame k's stored volume, -1 if not stored."""
+    slot = np.full(max(K, 1), -1, np.int64)
+    n = 0
+    for k in range(1, K):
+        if (k - 1) % CHECKPOINT_EVERY == 0 or k == K - 1:
+            slot[k] = n
+            n += 1
+    return slot, n
+
+
+@numba.njit(cache=True)
+def _dp_tbd_mf(z, q, lp, lp_first, beta_2, beta_3, coef0, const0, coef1, const1, coef2, const2,
+               score, track, value, store, ring, cring):  # pragma: no cover - compiled
     """Second-order (cell, displacement) DP-TBD with the conditional LLR, all
     trials; outputs written in place. See :class:`methods.dp_tbd.DpTbdMf`.
 
@@ -368,28 +760,49 @@ def dp_tbd_mf(z, q, lp, lp_first, beta_2, beta_3, coef0, const0, coef1, const1, 
     Frame 1: J_1(x, d) = Lambda_1(x; [d = 0]) + lp_first + J_0(x - d)
              (coef1/const1: planes for "new cell" and "stayed"; residual with
              beta_2 = gamma1 / gamma0).
-    Frame k >= 2: :func:`_mf_frame` (coef2/const2: planes new, back, stay1,
-             stay2; residual with beta_3 = (beta1, beta2)).
+    Frame k >= 2: J_k(x, d) = max_d' [J_(k-1)(x - d, d') + lp[d', d]
+             + Lambda_k(x; d, d')] (:func:`_mf_row`; coef2/const2: planes
+             new, back, stay1, stay2; residual with beta_3 = (beta1, beta2)).
     score = max_(x, d) J_(K-1); value = max_d J_(K-1)(x, d); track
-    backtracked: x_(k-1) = x_k - d_k, d_(k-1) = bp_k(x_k, d_k).
+    backtracked from the first maximum in (d, row, col) order:
+    x_(k-1) = x_k - d_k, d_(k-1) = psi_k(x_k, d_k).
+
+    Evaluation (the values are the original recursion's, bit for bit):
+
+    * **heading classes** (:func:`_heading_classes`): the maximum over d'
+      is taken by classes of displacements with one heading, the shared
+      part CM computed once per row of J_(k-1) (:func:`_common_maxima`) and
+      finished per displacement (:func:`_mf_row`);
+    * **wavefront**: row r of J_k needs rows r - q .. r + q of J_(k-1), so
+      the frames advance together, frame k on row t - q (k - 1) at step t,
+      each keeping its last 2q + 1 rows (``ring``, slot r mod (2q + 1)) and
+      their CM (``cring``): a frame reads the previous frame's rows from
+      cache instead of memory; the Lambda planes are computed row by row
+      (:func:`_llr_row`);
+    * **checkpoints**: the rows of frames 1, 1 + 4, 1 + 8, ... and K - 1 go
+      to ``store`` instead of a ring ((H, D, W) float32 per frame, 25 MB at
+      500 x 500, q = 2);
+    * **max only**: no backpointers; backtracking recomputes them on the
+      track (:func:`_mf_backtrack`).
     """
     n, K, H, W = z.shape
-    D = lp.shape[0]
-    w = 2 * q + 1
-    zero = D // 2
-    prev = np.empty((D, H, W), np.float32)
-    cur = np.empty((D, H, W), np.float32)
+    S = 2 * q + 1                           # ring slots per frame
+    cls, members, nmem, neg, L, cand = _heading_classes(lp, q)
+    C = L.shape[0]
+    slot = _checkpoint_slots(K)[0]
+    R = np.empty((C, W), np.float32)
+    tmp = np.empty(W, np.float32)
     j0 = np.empty((H, W), np.float32)
-    lam = np.empty((4, H, W), np.float32)
-    zeros = np.zeros((H, W), np.float32)
-    bp = np.empty((max(K, 3), D, H, W), np.int8)
-    best = np.empty(W, np.float32)
-    besti = np.empty(W, np.int32)
+    lam = np.empty((5, W), np.float32)
+    zrow = np.zeros(W, np.float32)
+    zero32 = np.float32(0.0)
+    b1, b2 = beta_3[0], beta_3[1]
     for t in range(n):
         zt = z[t]
         _check_finite(zt)
-        _llr_planes(zt[0], zeros, zeros, np.float32(0.0), np.float32(0.0), coef0, const0, lam[:1])
-        j0[:, :] = lam[0]
+        for r in range(H):
+            _llr_row(zt[0, r], zrow, zrow, zero32, zero32, coef0, const0, lam[:2])
+            j0[r] = lam[0]
         if K == 1:
             s, r, c = _first_argmax_2d(j0)
             score[t] = s
@@ -397,62 +810,39 @@ def dp_tbd_mf(z, q, lp, lp_first, beta_2, beta_3, coef0, const0, coef1, const1, 
             track[t, 0, 0] = r
             track[t, 0, 1] = c
             continue
-        # frame 1: from single-cell states to (cell, displacement) states
-        _llr_planes(zt[1], zt[0], zeros, beta_2, np.float32(0.0), coef1, const1, lam[:2])
-        for d in range(D):
-            dr = d // w - q
-            dc = d % w - q
-            lamd = lam[1] if d == zero else lam[0]
-            for r in range(H):
-                rp = r - dr
-                for c in range(W):
-                    cp = c - dc
-                    if rp < 0 or rp >= H or cp < 0 or cp >= W:
-                        prev[d, r, c] = NEG_INF
-                    else:
-                        prev[d, r, c] = j0[rp, cp] + lp_first + lamd[r, c]
-        for k in range(2, K):
-            _llr_planes(zt[k], zt[k - 1], zt[k - 2], beta_3[0], beta_3[1], coef2, const2, lam)
-            _mf_frame(prev, cur, bp[k], lp, q, lam[0], lam[1], lam[2], lam[3], best, besti)
-            prev, cur = cur, prev
-        score[t] = _mf_score_and_backtrack(prev, bp, value[t], track[t], q)
-
-
-@numba.njit(cache=True)
-def _mf_score_and_backtrack(prev, bp, vt, track_t, q):  # pragma: no cover - compiled
-    """Last frame of a second-order DP-TBD: value map = max over displacements
-    (contiguous passes), the score its maximum, backtracking from the first
-    (d, r, c) state that attains it through the displacement backpointers
-    ``bp[k]`` (k >= 2; frame 1's predecessor is the single-cell state).
-    Returns the score; writes ``vt`` (H, W) and ``track_t`` (K, 2)."""
-    D, H, W = prev.shape
-    K = track_t.shape[0]
-    w = 2 * q + 1
-    vt[:, :] = prev[0]
-    for d in range(1, D):
-        for r in range(H):
-            _max_into(prev[d, r], vt[r], W)
-    sb = _first_argmax_2d(vt)[0]
-    d, r, c = 0, 0, 0
-    found = False
-    for d2 in range(D):
-        for r2 in range(H):
-            for c2 in range(W):
-                if prev[d2, r2, c2] == sb:
-                    d, r, c = d2, r2, c2
-                    found = True
+        for step in range(H + q * (K - 2)):
+            for k in range(1, K):
+                r = step - q * (k - 1)
+                if r < 0:
                     break
-            if found:
-                break
-        if found:
-            break
-    track_t[K - 1, 0] = r
-    track_t[K - 1, 1] = c
-    for k in range(K - 1, 0, -1):
-        dn = bp[k, d, r, c] if k >= 2 else 0
-        r -= d // w - q
-        c -= d % w - q
-        track_t[k - 1, 0] = r
-        track_t[k - 1, 1] = c
-        d = dn
-    return sb
+                if r >= H:
+                    continue
+                out = store[slot[k], r] if slot[k] >= 0 else ring[k, r % S]     # where row r lives
+                if k == 1:
+                    _llr_row(zt[1, r], zt[0, r], zrow, beta_2, zero32, coef1, const1, lam[:3])
+                    _mf_row1(j0, r, lp_first, lam, q, out)
+                else:
+                    _llr_row(zt[k, r], zt[k - 1, r], zt[k - 2, r], b1, b2, coef2, const2, lam)
+                    jsrc = store[slot[k - 1]] if slot[k - 1] >= 0 else ring[k - 1]
+                    _mf_row(jsrc, cring[k - 1], r, H, W, lam, lp, q, cls, members, nmem, neg, tmp, out)
+                if k < K - 1:
+                    _common_maxima(out, R, cring[k, r % S], members, nmem, L, cand, W)
+        score[t] = _mf_backtrack(store, slot, zt, b1, b2, coef2, const2, lp, q, value[t], track[t])
+
+
+def dp_tbd_mf(z, q, lp, lp_first, beta_2, beta_3, coef0, const0, coef1, const1, coef2, const2,
+              score, track, value):
+    """:func:`_dp_tbd_mf` with its working memory allocated here by NumPy:
+    the checkpoint volumes (25 MB each at 500 x 500, q = 2) and the rings.
+    NumPy asks for transparent huge pages on large arrays, which makes their
+    first touch several times cheaper than numba's allocations."""
+    _, K, H, W = z.shape
+    D = lp.shape[0]
+    S = 2 * q + 1
+    C = int(_heading_classes(lp, q)[4].shape[0])
+    nstore = int(_checkpoint_slots(K)[1])
+    store = np.empty((max(nstore, 1), H, D, W), np.float32)     # checkpoint frames' J
+    ring = np.empty((max(K, 2), S, D, W), np.float32)           # the other frames' last rows
+    cring = np.empty((max(K, 2), S, C, W), np.float32)          # CM of every frame's last rows
+    _dp_tbd_mf(z, q, lp, lp_first, beta_2, beta_3, coef0, const0, coef1, const1, coef2, const2,
+               score, track, value, store, ring, cring)
