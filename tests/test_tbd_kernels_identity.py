@@ -21,18 +21,19 @@ import methods._tbd_oracle as oracle
 from bench.core import Batch
 from bench.params import build_params
 from bench.rng import TrialRNG
+from bench.tasks.tbd import Grid, TBDScene
 from methods import dp_tbd
 from methods.dp_tbd import LOG_UNIFORM_ANGLE, DpTbd, DpTbdMf
 from scenarios.tbd_grid import TbdGrid
 
 
 def frames_batch(z, gamma=(1.0, 0.0, 0.0)):
+    """A TBD batch of the frames ``z`` on 100 m cells at 1 s, noise autocovariance ``gamma``."""
     z = np.asarray(z, np.float32)
     n, K, H, W = z.shape
-    meta = {"grid": {"rows": H, "cols": W, "cell_m": 100.0, "x_min_m": 0.0, "y_min_m": 0.0},
-            "frame_period_s": 1.0, "noise_std": math.sqrt(gamma[0]),
-            "noise_autocovariance": np.asarray(gamma, float)}
-    return Batch(t=np.arange(K, dtype=float), truth=np.zeros((n, K, 4)), z=z, meta=meta, trials=np.arange(n))
+    scene = TBDScene(grid=Grid(rows=H, cols=W, cell_m=100.0, x_min_m=0.0, y_min_m=0.0), frame_period_s=1.0,
+                     noise_std=math.sqrt(gamma[0]), noise_autocovariance=np.asarray(gamma, float))
+    return Batch(t=np.arange(K, dtype=float), truth=np.zeros((n, K, 4)), z=z, scene=scene, trials=np.arange(n))
 
 
 def run_both(monkeypatch, cls, batch, params):
