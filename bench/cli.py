@@ -1,24 +1,47 @@
 """The ``bench`` command: ``list``, ``run``, ``report``, ``view``, ``perf``.
 
-Bad input ends with one line on stderr (``error: FILE: FIELD: PROBLEM``) and
-exit code 2, before anything is written.
+Every fault ends with one line on stderr (``error: WHERE: PROBLEM``), never a
+traceback, and an exit code (:data:`EXIT_CODES`): 2 for bad input (before anything
+is written), 3 when the machine refuses (file system, disk, store), 4 when another
+bench holds the run folder, 130 on Ctrl-C.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib.resources
+import os
 import shlex
 import shutil
+import sqlite3
 import subprocess
 import sys
+import traceback
 from pathlib import Path
 
 from bench import registry
-from bench.errors import ConfigError
+from bench.errors import ConfigError, Fault, os_fault
 
+EXIT_BUG = 1
 EXIT_BAD_INPUT = 2
+EXIT_ENVIRONMENT = 3
+EXIT_IN_USE = 4
 EXIT_INTERRUPTED = 130
+
+EXIT_CODES = f"""exit codes:
+  0    done
+  {EXIT_BUG}    a bug in bench or a plugin (one line; BENCH_TRACEBACK=1 shows the traceback)
+  {EXIT_BAD_INPUT}    bad input: the command line, the sweep file, or the folder named (a file, a name
+       too long, a non-empty folder that holds no bench run, a results.sqlite that is not
+       a bench store, a run of another sweep, a symbolic link inside the run folder);
+       nothing is written
+  {EXIT_ENVIRONMENT}    the machine refused: permission denied, read-only file system, disk full,
+       file-size limit, I/O error; nothing is half-written, and the same command
+       resumes once the cause is fixed
+  {EXIT_IN_USE}    the run folder is in use by another bench run or report
+  {EXIT_INTERRUPTED}  interrupted (Ctrl-C); the same command resumes
+"""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -43,14 +66,16 @@ def _positive_int(text: str) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     from bench.executors import default_workers
-    p = _Parser(prog="bench", description="Benchmark radar maneuver detectors, trackers and TBD methods.")
+    p = _Parser(prog="bench", description="Benchmark radar maneuver detectors, trackers and TBD methods.",
+                epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     ls = sub.add_parser("list", help="tasks, methods and scenarios, with task and summary")
     ls.add_argument("-v", "--verbose", action="store_true", help="show every parameter with its default")
     run = sub.add_parser("run", help="run (or resume) a sweep")
     run.add_argument("sweep", nargs="?", help="sweep file (TOML)")
     run.add_argument("--preset", help=f"a packaged sweep: {', '.join(sorted(_presets()))}")
-    run.add_argument("--out", help="run folder (default: reports/<name>/)")
+    run.add_argument("--out", help="run folder (default: reports/<name>/): new, empty, or a run folder; "
+                                   "one run at a time")
     run.add_argument("--workers", type=_positive_int, default=default_workers(),
                      help="worker processes (default: CPU count)")
     run.add_argument("--executor", default="local", choices=["local", "dask"],
@@ -60,7 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "(default: a local cluster of --workers processes)")
     run.add_argument("--retry-failed", action="store_true",
                      help="also re-run the (unit, method config) pairs whose run failed")
-    run.add_argument("--fresh", action="store_true", help="discard stored results and start over")
+    run.add_argument("--fresh", action="store_true",
+                     help="discard stored results and start over (removes only the files listed in the "
+                          "folder's bench-manifest.txt)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--no-record", action="store_true", help="do not write recording.rrd")
     run.add_argument("--viewer", action="store_true", help="stream trials live to a spawned Rerun viewer")
@@ -161,15 +188,39 @@ def _interrupted(out_dir: Path, command: str, stored: int, total: int) -> int:
     return EXIT_INTERRUPTED
 
 
+@contextlib.contextmanager
+def _store_errors(out_dir: Path):
+    """SQLite failures as one line naming the store (bench.store.store_fault)."""
+    try:
+        yield
+    except sqlite3.Error as exc:
+        from bench.store import store_fault
+        raise store_fault(out_dir / "results.sqlite", exc) from None
+
+
 def cmd_run(args) -> int:
-    from bench.report import build_outputs
-    from bench.runner import Interrupted, plan_record, run_sweep, write_plan_toml
+    from bench import runfolder
     _check_executor(args)
     plan = _load_plan(args)
     out_dir = Path(args.out) if args.out else Path("reports") / plan.name
-    if out_dir.exists() and not out_dir.is_dir():
-        raise ConfigError("--out", f"{out_dir} exists and is not a folder")
     command = _command_line(args)
+    created = not os.path.lexists(out_dir)
+    lock = runfolder.open_for_run(out_dir, fresh=args.fresh, what=f"bench run, {plan.name}")
+    try:
+        with runfolder.writing(out_dir), _store_errors(out_dir):
+            return _run_locked(args, plan, out_dir, command)
+    except (ConfigError, Fault, OSError, sqlite3.Error):
+        if created:
+            runfolder.discard_new(out_dir)      # a folder this command made, if it holds no result
+        raise
+    finally:
+        lock.release()
+
+
+def _run_locked(args, plan, out_dir: Path, command: str) -> int:
+    """The run, in the locked folder."""
+    from bench.report import build_outputs
+    from bench.runner import Interrupted, plan_record, run_sweep, write_plan_toml
     viewer = None
     if args.viewer:
         from bench.recording import LiveViewer
@@ -187,7 +238,7 @@ def cmd_run(args) -> int:
             viewer.log_records([TrialRecord.from_bytes(b) for _, b in result.records])
     try:
         store = run_sweep(plan, out_dir, plan_record=plan_record(plan, command), workers=args.workers,
-                          executor=args.executor, fresh=args.fresh, quiet=args.quiet, on_result=on_result,
+                          executor=args.executor, fresh=False, quiet=args.quiet, on_result=on_result,
                           scheduler=args.scheduler, retry_failed=args.retry_failed)
     except Interrupted as exc:
         return _interrupted(out_dir, command, exc.stored, exc.total)
@@ -197,8 +248,8 @@ def cmd_run(args) -> int:
         if viewer is not None:
             viewer.close()
     try:
-        write_plan_toml(out_dir / "plan.toml", plan, command)
         store.close()
+        write_plan_toml(out_dir / "plan.toml", plan, command)
         report = build_outputs(out_dir, recording=not args.no_record)
     except KeyboardInterrupt:
         return _interrupted(out_dir, command, *_stored_units(plan, out_dir))
@@ -207,8 +258,11 @@ def cmd_run(args) -> int:
 
 
 def cmd_report(args) -> int:
+    from bench import runfolder
     from bench.report import build_outputs
-    report = build_outputs(Path(args.dir), recording=not args.no_record)
+    out_dir = Path(args.dir)
+    with runfolder.open_for_report(out_dir), _store_errors(out_dir):
+        report = build_outputs(out_dir, recording=not args.no_record)
     print(f"wrote {report}")
     return 0
 
@@ -223,11 +277,12 @@ def cmd_view(args) -> int:
 
 
 def cmd_perf(args) -> int:
-    from bench.perf import run_perf
+    from bench.perf import prepare_out, run_perf
     known = set(registry.methods())
     for name in args.methods or []:
         if name not in known:
             raise ConfigError("--methods", f"unknown method {name!r} (known: {', '.join(sorted(known))})")
+    prepare_out(Path(args.out))            # a file, a read-only folder: refused before hours of measuring
     report = run_perf(Path(args.out), methods=args.methods, sizes=args.sizes, executors=args.executors,
                       workers=args.workers, progress=lambda line: print(line, file=sys.stderr))
     print(f"wrote {report}")
@@ -244,16 +299,46 @@ def one_line(text: str, limit: int = 400) -> str:
 COMMANDS = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "view": cmd_view, "perf": cmd_perf}
 
 
+def _error(text: str) -> None:
+    if sys.stderr.isatty():
+        sys.stderr.write("\r\033[K")     # off the progress bar's line
+    print(f"error: {one_line(text)}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
+    # rerun's file writer logs its failures from a thread; write_recording checks the file
+    # itself and reports them as one line: silence the log (unless the user set RUST_LOG).
+    os.environ.setdefault("RUST_LOG", "warn,re_log_encoding::rrd::file_sink=off")
     try:
         args = build_parser().parse_args(argv)
         return COMMANDS[args.command](args)
     except ConfigError as err:
-        print(f"error: {one_line(str(err))}", file=sys.stderr)
+        _error(str(err))
         return EXIT_BAD_INPUT
+    except Fault as err:
+        _error(str(err))
+        return err.exit_code
+    except OSError as err:                 # a file-system fault no writer named more precisely
+        fault = os_fault(err)
+        _error(str(fault))
+        return EXIT_BAD_INPUT if isinstance(fault, ConfigError) else EXIT_ENVIRONMENT
+    except sqlite3.Error as err:
+        _error(f"results store: {err}")
+        return EXIT_ENVIRONMENT
+    except MemoryError:
+        _error("out of memory")
+        return EXIT_ENVIRONMENT
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except Exception as exc:               # a bug: one line still, the traceback on request
+        if os.environ.get("BENCH_TRACEBACK"):
+            raise
+        frames = traceback.extract_tb(exc.__traceback__)
+        where = f" ({Path(frames[-1].filename).name}:{frames[-1].lineno})" if frames else ""
+        _error(f"internal error, a bug: {type(exc).__name__}: {exc}{where}; "
+               "BENCH_TRACEBACK=1 shows the traceback")
+        return EXIT_BUG
 
 
 if __name__ == "__main__":

@@ -1,4 +1,23 @@
-"""Errors the harness reports to users as one line, never as a traceback."""
+"""Errors the harness reports to users as one line, never as a traceback.
+
+Each kind has its exit code (README, 'Commands'; ``bench --help``):
+
+* :class:`ConfigError`, exit 2: bad input, fixed by changing the command, the sweep
+  file or the folder named (a sweep error, an ``--out`` under a regular file, a
+  folder that is not a run folder, a ``results.sqlite`` that is not a bench store);
+* :class:`Fault`, exit 3: the machine refused (permission denied, read-only file
+  system, disk full, file-size limit, I/O error); nothing is half-written, and the
+  same command resumes once the cause is fixed;
+* :class:`FolderInUse`, exit 4: another ``bench`` holds the run folder's lock.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import resource
+import shutil
+from pathlib import Path
 
 
 class ConfigError(ValueError):
@@ -18,3 +37,56 @@ class ConfigError(ValueError):
         """The same error with its field placed under ``prefix``."""
         field = f"{prefix}.{self.field}" if self.field else prefix
         return ConfigError(field, self.problem)
+
+
+class Fault(Exception):
+    """The environment refused (file system, disk, store I/O): ``PATH: CAUSE``, exit 3."""
+
+    exit_code = 3
+
+    def __init__(self, path: str | os.PathLike, problem: str):
+        self.path, self.problem = str(path), problem
+        super().__init__(f"{self.path}: {problem}" if self.path else problem)
+
+
+class FolderInUse(Fault):
+    """Another ``bench`` process holds the run folder's lock: exit 4."""
+
+    exit_code = 4
+
+
+#: errno values that mean "the path given cannot be used" (bad input, exit 2)
+#: rather than "the machine refused" (exit 3).
+_BAD_PATH_ERRNOS = {errno.ENOTDIR, errno.ENAMETOOLONG, errno.ELOOP, errno.EISDIR, errno.EEXIST}
+
+
+def space_hint(path: str | os.PathLike) -> str:
+    """Why a write may have failed although the error does not say (SQLite's "disk I/O
+    error"): a full file system or a file-size limit; "" when neither applies."""
+    limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    if limit != resource.RLIM_INFINITY:
+        return f" (a file-size limit of {limit} bytes is set: `ulimit -f`)"
+    try:
+        free = shutil.disk_usage(Path(path).parent if not Path(path).is_dir() else path).free
+    except OSError:
+        return ""
+    return f" (only {free} bytes free on the device)" if free < 16 << 20 else ""
+
+
+def _short(path: str, limit: int = 160) -> str:
+    """A path short enough to leave room for the cause on the error's one line."""
+    return path if len(path) <= limit else f"{path[:limit // 2]}...{path[-(limit // 2 - 3):]}"
+
+
+def os_fault(exc: OSError, path: str | os.PathLike | None = None, doing: str = "") -> ConfigError | Fault:
+    """The one-line error for an OSError on ``path`` (default: the one the error names):
+    exit 2 when the path itself is unusable (a file where a folder should be, a name too
+    long, a symbolic link bench refuses to follow), exit 3 when the machine refused."""
+    where = _short(str(path if path is not None else (exc.filename or "")))
+    cause = exc.strerror or str(exc) or type(exc).__name__
+    if exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+        cause += space_hint(where) if exc.errno == errno.EFBIG else ""
+    problem = f"{doing}: {cause}" if doing else cause
+    if exc.errno in _BAD_PATH_ERRNOS:
+        return ConfigError(where, problem)
+    return Fault(where, problem)

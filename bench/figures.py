@@ -15,11 +15,14 @@ DPI = 110
 
 
 def _save(fig, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=DPI, bbox_inches="tight")
-    plt.close(fig)
-    tmp.replace(path)
+    """Write ``fig`` to ``path`` whole (:func:`bench.runfolder.atomic_output`)."""
+    from bench import runfolder
+    try:
+        runfolder.folder_for(path.parent)
+        with runfolder.atomic_output(path) as (f, _):
+            fig.savefig(f, format="png", dpi=DPI, bbox_inches="tight")
+    finally:
+        plt.close(fig)
     return path
 
 

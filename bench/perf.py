@@ -272,9 +272,21 @@ def _target_text(targets: dict, row: dict, tps: float) -> str:
 
 
 def _write_csv(df: pd.DataFrame, path: Path) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    df.to_csv(tmp, index=False, lineterminator="\n")
-    tmp.replace(path)
+    from bench.runfolder import write_text      # whole, under a unique temporary name
+    write_text(path, df.to_csv(index=False, lineterminator="\n"))
+
+
+def prepare_out(out_dir: Path) -> Path:
+    """Check and create the output folder before anything is measured: one line (exit 2)
+    when it is a file or lies under one, exit 3 when the machine refuses."""
+    from bench.errors import ConfigError
+    from bench.runfolder import folder_for, probe
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ConfigError("--out", f"{out_dir} exists and is not a folder")
+    folder_for(out_dir)
+    probe(out_dir)
+    return out_dir
 
 
 def _scene_section(scenes: pd.DataFrame) -> list[str]:
@@ -296,7 +308,7 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
     """``perf.csv``, ``scene.csv`` and ``report.md``; ``scaling_sweep`` describes the sweep
     ``scaling`` timed."""
     from bench.provenance import provenance
-    out_dir.mkdir(parents=True, exist_ok=True)
+    prepare_out(out_dir)
     _write_csv(perf, out_dir / "perf.csv")
     if scenes is not None:
         _write_csv(scenes, out_dir / "scene.csv")
@@ -331,8 +343,5 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
     parts.append("## Machine\n\n" + table(["", ""], [["CPU count", os.cpu_count()], ["platform", platform.platform()],
                                                     ["python", platform.python_version()]] +
                                           [[k, v] for k, v in prov.items()]))
-    report = out_dir / "report.md"
-    tmp = out_dir / "report.md.tmp"
-    tmp.write_text("\n\n".join(parts) + "\n", encoding="utf-8")
-    tmp.replace(report)
-    return report
+    from bench.runfolder import write_text
+    return write_text(out_dir / "report.md", "\n\n".join(parts) + "\n")

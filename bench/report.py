@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench import figures, registry
+from bench import figures, registry, runfolder
 from bench.calibration import EQUAL_CHANCE_PD
 from bench.errors import ConfigError
 from bench.markdown import fmt as _fmt
@@ -35,10 +35,18 @@ TRIAL_KEYS = ["scenario", "method", "config", "params", "snr_db", "trial", "seed
 RECORDING_KEYS = ("scenario", "method", "snr_db", "n_trials")
 
 
+#: C0 controls but newline and tab, DEL and the C1 controls: shown escaped (``\x1b``) in
+#: report.md, so no text from a sweep (a description) sends terminal escapes or NULs.
+_CONTROLS = {i: repr(chr(i))[1:-1] for i in [*range(0x20), *range(0x7f, 0xa0)] if chr(i) not in "\n\t"}
+
+
+def escape_controls(text: str) -> str:
+    """``text`` with its control characters (but newline and tab) written as escapes."""
+    return text.translate(_CONTROLS)
+
+
 def _write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    runfolder.write_text(path, text)
 
 
 def _write_csv(df: pd.DataFrame, path: Path) -> None:
@@ -285,27 +293,18 @@ def preset_notes(source: str) -> str:
 
 
 def build_outputs(out_dir: Path, *, recording: bool = True) -> Path:
-    """(Re)build every output of a run folder from its store; returns report.md's path."""
+    """(Re)build every output of a run folder from its store; returns report.md's path.
+
+    Every file is written whole (a temporary file renamed into place) and listed in the
+    folder's manifest (:mod:`bench.runfolder`); the caller holds the folder's lock."""
     out_dir = Path(out_dir)
     db = out_dir / "results.sqlite"
     if not db.exists():
         raise ConfigError("", f"{out_dir} has no results.sqlite (not a bench run folder)")
     store = Store(db)
     try:
-        return _build(store, out_dir, recording)
-    finally:
-        store.close()
-
-
-def build_outputs(out_dir: Path, *, recording: bool = True) -> Path:
-    """(Re)build every output of a run folder from its store; returns report.md's path."""
-    out_dir = Path(out_dir)
-    db = out_dir / "results.sqlite"
-    if not db.exists():
-        raise ConfigError("", f"{out_dir} has no results.sqlite (not a bench run folder)")
-    store = Store(db)
-    try:
-        return _build(store, out_dir, recording)
+        with runfolder.writing(out_dir):
+            return _build(store, out_dir, recording)
     finally:
         store.close()
 
@@ -336,6 +335,7 @@ def _recording_summary(summary: pd.DataFrame, tasks) -> pd.DataFrame:
 
 
 def _build(store: Store, out_dir: Path, recording: bool) -> Path:
+    runfolder.folder_for(out_dir / "figures")     # refuses a linked figures/ before anything is written
     record = store.plan()
     sweep = record["sweep"]
     runs, units = store.runs(), store.units()
@@ -348,6 +348,7 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
     summary = summary_frame(trials, series, runs, record, cals)
     t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}
     steps = steps_frame(trials, series, record, t_of)
+    records = [TrialRecord.from_bytes(b) for b in store.records()]   # every read before the first write
     _write_csv(trials, out_dir / "trials.csv")
     _write_csv(summary, out_dir / "summary.csv")
     _write_csv(pd.DataFrame([c.as_row() for c in cals]), out_dir / "calibration.csv")
@@ -355,7 +356,6 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
         _write_csv(steps, out_dir / "steps.csv")
     fig_dir = out_dir / "figures"
     title = sweep["name"]
-    records = [TrialRecord.from_bytes(b) for b in store.records()]
     contexts = _task_contexts(present, task_of, summary, trials, steps, series, cals, records, store, out_dir, sweep)
     done, total = len(units), int(store.meta("units_total") or len(units))
     parts = [f"# {title}", sweep.get("description") or "",
@@ -372,5 +372,5 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
         parts.append(_section_recording(sweep["record"]["trials"], out_dir, present))
     parts.append(_section_provenance(record, store, provenance()))
     report = out_dir / "report.md"
-    _write_text(report, "\n\n".join(p for p in parts if p) + "\n")
+    _write_text(report, escape_controls("\n\n".join(p for p in parts if p) + "\n"))
     return report

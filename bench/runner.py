@@ -302,6 +302,5 @@ def write_plan_toml(path: Path, plan: Plan, command: str) -> None:
     body = {**plan.to_dict(), "provenance": {"command": command, "fingerprint": plan.fingerprint(),
                                              **provenance()}}
     text = "# Resolved plan written by bench; `bench run plan.toml` reproduces the results.\n" + tomlw.dumps(body)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    from bench.runfolder import write_text      # whole, a unique temporary name, listed in the manifest
+    write_text(path, text)

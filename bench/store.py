@@ -20,6 +20,7 @@ records     per recorded trial: a serialised :class:`bench.recording.TrialRecord
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import sqlite3
@@ -31,7 +32,7 @@ from typing import Iterator
 import numpy as np
 import pandas as pd
 
-from bench.errors import ConfigError
+from bench.errors import ConfigError, Fault, space_hint
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -116,16 +117,51 @@ def _merge_record(old: bytes, new: bytes, labels: set[str], order: list[str]) ->
     return rec.to_bytes()
 
 
+def store_fault(path: str | Path, exc: sqlite3.Error) -> ConfigError | Fault:
+    """The one-line error for an SQLite failure on the store at ``path``: a file that is
+    not a (readable) store is bad input (exit 2); the rest is the machine's (exit 3:
+    disk full, file-size limit, read-only, I/O)."""
+    name = getattr(exc, "sqlite_errorname", "") or ""
+    if name.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB")):
+        return ConfigError(str(path), f"not a readable bench results store ({exc}); move it away, "
+                                      "or discard it with --fresh")
+    hint = space_hint(path) if name.startswith(("SQLITE_FULL", "SQLITE_IOERR")) else ""
+    return Fault(str(path), f"store failed: {exc}{hint}")
+
+
 class Store:
+    """Writes are transactions (``BEGIN IMMEDIATE``: a check and the write that depends
+    on it see one state of the store, whoever else writes)."""
+
     def __init__(self, path: str | Path):
         self.path = Path(path)
-        self.db = sqlite3.connect(self.path, timeout=30)
-        self.db.execute("PRAGMA journal_mode=WAL")
-        self.db.execute("PRAGMA synchronous=NORMAL")
-        self.db.executescript(SCHEMA)
-        columns = {row[1] for row in self.db.execute("PRAGMA table_info(null_stats)")}
-        if "cells" not in columns:      # a store written before per-cell statistics existed
-            self.db.execute("ALTER TABLE null_stats ADD COLUMN cells BLOB")
+        # isolation_level=None: no implicit transactions; writes use _write().
+        self.db = sqlite3.connect(self.path, timeout=30, isolation_level=None)
+        try:
+            self.db.execute("PRAGMA journal_mode=WAL")
+            self.db.execute("PRAGMA synchronous=NORMAL")
+            with self._write():
+                for statement in SCHEMA.split(";"):
+                    if statement.strip():
+                        self.db.execute(statement)
+                columns = {row[1] for row in self.db.execute("PRAGMA table_info(null_stats)")}
+                if "cells" not in columns:      # a store written before per-cell statistics existed
+                    self.db.execute("ALTER TABLE null_stats ADD COLUMN cells BLOB")
+        except sqlite3.Error as exc:
+            self.db.close()
+            raise store_fault(self.path, exc) from None
+
+    @contextlib.contextmanager
+    def _write(self):
+        """One write transaction, taken at once (``BEGIN IMMEDIATE``), committed at the end,
+        rolled back on any error."""
+        self.db.execute("BEGIN IMMEDIATE")
+        try:
+            yield
+        except BaseException:
+            self.db.rollback()
+            raise
+        self.db.commit()
 
     def close(self) -> None:
         self.db.close()
@@ -133,11 +169,11 @@ class Store:
     # ---------------------------------------------------------------- plan
     def bind_plan(self, fingerprint: str, plan: dict) -> None:
         """Tie the store to a plan; refuse results of a different sweep."""
-        row = self.db.execute("SELECT value FROM meta WHERE key='fingerprint'").fetchone()
-        if row is not None and row[0] != fingerprint:
-            raise ConfigError("--out", f"{self.path.parent} holds results of a different sweep; "
-                                       "use --fresh to start over or choose another --out")
-        with self.db:
+        with self._write():
+            row = self.db.execute("SELECT value FROM meta WHERE key='fingerprint'").fetchone()
+            if row is not None and row[0] != fingerprint:
+                raise ConfigError("--out", f"{self.path.parent} holds results of a different sweep; "
+                                           "use --fresh to start over or choose another --out")
             self.db.execute("INSERT OR REPLACE INTO meta VALUES ('fingerprint', ?)", (fingerprint,))
             self.db.execute("INSERT OR REPLACE INTO meta VALUES ('plan', ?)", (json.dumps(plan),))
             self.db.execute("INSERT OR IGNORE INTO meta VALUES ('created', ?)", (repr(time.time()),))
@@ -147,7 +183,7 @@ class Store:
         return None if row is None else row[0]
 
     def set_meta(self, key: str, value: str) -> None:
-        with self.db:
+        with self._write():
             self.db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, value))
 
     def plan(self) -> dict:
@@ -166,9 +202,10 @@ class Store:
         A unit is stored once: a second result for a stored unit (a unit dask ran
         again after losing a worker, or a re-run with ``--retry-failed``) only
         replaces the runs of method configs that *failed* in the stored result;
-        everything else of it is ignored, so nothing is counted twice.
+        everything else of it is ignored, so nothing is counted twice. The check and the
+        write are one transaction, so two writers never both insert a unit.
         """
-        with self.db:
+        with self._write():
             if self.db.execute("SELECT 1 FROM units WHERE key=?", (r.key,)).fetchone() is not None:
                 return self._replace_failed_runs(r)
             self.db.execute("INSERT INTO units VALUES (?,?,?,?,?,?,?,?)",

@@ -6,15 +6,25 @@ those (nested arrays too), tables and arrays of tables.
 
 from __future__ import annotations
 
-import json
 import math
 from typing import Any, Mapping
 
 _BARE_KEY = set("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-")
+#: Escaped in strings: what TOML forbids raw (C0 controls, DEL) and the C1 controls, so
+#: no control character (a terminal escape, a NUL) reaches the file; tomllib reads the
+#: escapes back to the same string.
+_ESCAPES = {**{i: f"\\u{i:04x}" for i in [*range(0x20), *range(0x7f, 0xa0)]},
+            0x08: "\\b", 0x09: "\\t", 0x0A: "\\n", 0x0C: "\\f", 0x0D: "\\r",
+            ord('"'): '\\"', ord("\\"): "\\\\"}
+
+
+def _string(s: str) -> str:
+    """A TOML basic string holding ``s`` exactly, every control character escaped."""
+    return '"' + s.translate(_ESCAPES) + '"'
 
 
 def _key(k: str) -> str:
-    return k if k and set(k) <= _BARE_KEY else json.dumps(k)
+    return k if k and set(k) <= _BARE_KEY else _string(k)
 
 
 def _value(v: Any) -> str:
@@ -27,7 +37,7 @@ def _value(v: Any) -> str:
             raise ValueError(f"TOML cannot hold {v!r}")
         return repr(v)
     if isinstance(v, str):
-        return json.dumps(v, ensure_ascii=False)
+        return _string(v)
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_value(x) for x in v) + "]"
     if isinstance(v, Mapping):

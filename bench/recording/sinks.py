@@ -10,14 +10,17 @@ not carry it, the plan does.
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
 import socket
+import struct
 import sys
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Self
 
+from bench.errors import space_hint
 from bench.recording import blueprint as bp
 from bench.recording.draw import log_records
 from bench.recording.layout import trial_layout
@@ -41,23 +44,26 @@ def write_recording(
 ) -> Path:
     """Write ``records`` (and the ``summary`` curves) to an ``.rrd`` file.
 
-    Atomic: the file is written to ``path.with_suffix(".rrd.tmp")`` and renamed
-    only once complete (footer written), so a crash never leaves a truncated
-    ``recording.rrd``. ``summary`` needs columns ``method`` and ``snr_db``;
-    ``pd`` and ``rmse_mean`` (either, both or none; NaN rows skipped) become
-    bar charts, every row and column goes into the table. Returns ``path``.
+    Atomic: the file is written to a temporary file of a unique name beside ``path``
+    (:func:`bench.runfolder.atomic_output`) and renamed only once complete (footer
+    written, and checked: rerun's writer thread only logs a failed write, a full disk
+    or a file-size limit would otherwise leave a truncated ``recording.rrd``).
+    ``summary`` needs columns ``method`` and ``snr_db``; ``pd`` and ``rmse_mean``
+    (either, both or none; NaN rows skipped) become bar charts, every row and column
+    goes into the table. Returns ``path``.
     """
     import rerun as rr
 
+    from bench import runfolder
+
     path = Path(path)
-    tmp = path.with_suffix(".rrd.tmp")
-    tmp.parent.mkdir(parents=True, exist_ok=True)
     records = list(records)  # iterated twice: blueprint, then logging
     layouts = [trial_layout(r, tasks) for r in records]  # fails on bad names before any I/O
     tabs = [bp.trial_tab(lay, rec) for lay, rec in zip(layouts, records)]
     charts = summary_charts(summary)
-    stream = rr.RecordingStream(application_id, recording_id=recording_id)
-    try:
+    runfolder.folder_for(path.parent)
+    with runfolder.atomic_output(path) as (_, tmp):
+        stream = rr.RecordingStream(application_id, recording_id=recording_id)
         # The sink (and its blueprint) must be attached before logging.
         stream.save(tmp, default_blueprint=bp.blueprint(tabs, charts))
         try:
@@ -66,11 +72,30 @@ def write_recording(
             stream.flush()
         finally:
             stream.disconnect()  # writes the footer
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+        if not rrd_complete(tmp):
+            raise OSError(errno.EIO, "the recording could not be written whole"
+                                     f"{space_hint(path) or ' (is the disk full?)'}", str(path))
     return path
+
+
+#: The end of an .rrd file: footer offset and length (u64 each), a checksum (u32), this
+#: magic and the format version (u32): offset + length + 32 == the file's size.
+_RRD_FOOTER_MAGIC = b"RRF2FOOT"
+
+
+def rrd_complete(path: str | os.PathLike) -> bool:
+    """Whether the .rrd file at ``path`` ends with its footer (written whole)."""
+    try:
+        with open(path, "rb") as f:
+            size = f.seek(0, os.SEEK_END)
+            if size < 32:
+                return False
+            f.seek(size - 32)
+            tail = f.read(32)
+    except OSError:
+        return False
+    offset, length = struct.unpack("<QQ", tail[:16])
+    return tail[20:28] == _RRD_FOOTER_MAGIC and offset + length + 32 == size
 
 
 def _has_display() -> bool:
