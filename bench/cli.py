@@ -245,6 +245,8 @@ COMMANDS = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "view": cmd_
 
 
 def main(argv: list[str] | None = None) -> int:
+    from bench.executors import sigterm_as_interrupt
+    restore_sigterm = sigterm_as_interrupt()       # SIGTERM ends a command as Ctrl-C does (exit 130)
     try:
         args = build_parser().parse_args(argv)
         return COMMANDS[args.command](args)
@@ -254,6 +256,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    finally:
+        restore_sigterm()
 
 
 if __name__ == "__main__":
