@@ -309,6 +309,8 @@ def main(argv: list[str] | None = None) -> int:
     # rerun's file writer logs its failures from a thread; write_recording checks the file
     # itself and reports them as one line: silence the log (unless the user set RUST_LOG).
     os.environ.setdefault("RUST_LOG", "warn,re_log_encoding::rrd::file_sink=off")
+    from bench.executors import sigterm_as_interrupt
+    restore_sigterm = sigterm_as_interrupt()       # SIGTERM ends a command as Ctrl-C does (exit 130)
     try:
         args = build_parser().parse_args(argv)
         return COMMANDS[args.command](args)
@@ -339,6 +341,8 @@ def main(argv: list[str] | None = None) -> int:
         _error(f"internal error, a bug: {type(exc).__name__}: {exc}{where}; "
                "BENCH_TRACEBACK=1 shows the traceback")
         return EXIT_BUG
+    finally:
+        restore_sigterm()
 
 
 if __name__ == "__main__":

@@ -41,7 +41,7 @@ from bench.params import build_params, is_tuple_field, params_as_dict
 from bench.rng import stable_key
 
 TOP_KEYS = {"name", "description", "scenario", "scenarios", "trials", "seed", "snr_db", "chunk",
-            "scenario_params", "methods", "calibration", "record", "provenance"}
+            "scenario_params", "methods", "calibration", "record", "provenance", "unit_timeout_s"}
 SCENARIO_KEYS = {"name", "params", "label", "snr_db", "trials"}
 METHOD_KEYS = {"name", "params", "label"}
 CALIBRATION_MODES = ("nominal", "empirical", "gumbel")
@@ -56,6 +56,8 @@ MAX_SWEEP_BYTES = 1_000_000
 MAX_CONFIGS = 1000
 #: trial-runs (trials x SNR levels x configs) above which a sweep needs --yes
 LARGE_SWEEP_TRIAL_RUNS = 50_000_000
+#: longest per-unit time limit (``unit_timeout_s``): a week
+MAX_UNIT_TIMEOUT_S = 7 * 24 * 3600.0
 
 
 @dataclass(frozen=True)
@@ -110,6 +112,7 @@ class Plan:
     source: str
     method_tasks: tuple[str, ...] = ()   # task of each method config, in order
     timeline_snr_db: float | None = None  # report: the recorded trial shown over time (None: highest SNR)
+    unit_timeout_s: float | None = None   # a unit running longer fails (timeout); None: no limit
 
     def pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
         """The method configs that run on ``scenario`` (those whose task it serves)."""
@@ -131,6 +134,8 @@ class Plan:
                      "chunk": self.chunk,
                      "scenarios": [{"name": s.name, "label": s.label, "params": params_as_dict(s.params),
                                     "snr_db": list(s.snr_db), "trials": s.trials} for s in self.scenarios]}
+        # written only when set, so plans without it keep their plan.toml
+        head |= {} if self.unit_timeout_s is None else {"unit_timeout_s": self.unit_timeout_s}
         return head | {
             "methods": [{"name": m.name, "label": m.label, "params": params_as_dict(m.params)}
                         for m in self.methods],
@@ -147,6 +152,7 @@ class Plan:
         """Identity of the results a run of this plan produces (for resume)."""
         d = self.to_dict()
         d.pop("description")
+        d.pop("unit_timeout_s", None)     # a time limit changes no result: a run may resume under another
         return f"{stable_key(d):016x}"
 
 
@@ -431,8 +437,9 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     record_trials = _expect_int(record.get("trials", 1), "record.trials", 0, 1000)
     timeline_snr_db = None if "timeline_snr_db" not in record else \
         _check_snr_bound(_expect_number(record["timeline_snr_db"], "record.timeline_snr_db"), "record.timeline_snr_db")
+    unit_timeout_s = _parse_unit_timeout(data["unit_timeout_s"]) if "unit_timeout_s" in data else None
     plan = Plan(name, description, scenario, scenarios, trials, seed, snr_db, chunk,
-                methods, calibration, record_trials, source, method_tasks, timeline_snr_db)
+                methods, calibration, record_trials, source, method_tasks, timeline_snr_db, unit_timeout_s)
     idle = [s.label for s in scenarios if not plan.pairs(s)]
     if idle:
         raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0]!r}")
@@ -445,6 +452,15 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
                                                    f"trial-runs (h0_trials x calibrated configs) besides "
                                                    f"{plan.trial_runs:,} others; pass --yes to run it anyway")
     return plan
+
+
+def _parse_unit_timeout(value: Any) -> float:
+    """``unit_timeout_s``: seconds in (0, a week] (an int too large for a float is out of range too)."""
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if not number or not (isinstance(value, float) and math.isfinite(value) or isinstance(value, int)) \
+            or not 0 < value <= MAX_UNIT_TIMEOUT_S:
+        raise ConfigError("unit_timeout_s", f"expected seconds in (0, {MAX_UNIT_TIMEOUT_S:g}], got {value!r}"[:200])
+    return float(value)
 
 
 def _calibration_trial_runs(plan: Plan) -> int:

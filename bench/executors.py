@@ -1,15 +1,24 @@
 """Executors map units of work to results; results never depend on them.
 
-An executor has one job: ``imap_unordered(fn, tasks)`` yields ``fn(task)`` for
-every task, in any order, as they finish. The driver stores each result as it
-arrives, so the store, the recording and the progress bar stay in one process.
+An executor has one job: ``imap_unordered(fn, tasks, stop=..., timeout=...)``
+yields ``fn(task)`` for every task, in any order, as they finish. The driver
+stores each result as it arrives, so the store, the recording and the progress
+bar stay in one process. ``tasks`` is read one task at a time, when a worker is
+free: the driver may add tasks while it consumes results. A task that yields
+no result — its worker died, it ran past ``timeout`` seconds, its result could
+not be sent back — yields a :class:`UnitFailure` instead, and the executor goes
+on (it replaces the worker). Once ``stop()`` is true no task is started; the
+ones in flight end and are yielded, then the iteration ends.
 
-* :class:`SerialExecutor` — in the driver process (``--workers 1``).
-* :class:`LocalExecutor` — a process pool (default: one worker per CPU). Workers
-  ignore SIGINT: Ctrl-C reaches the driver, which drops the units not yet
-  started, lets the ones in flight end (a second Ctrl-C kills them) and keeps
-  what is stored.
-
+* :class:`LocalExecutor` — ``--workers`` processes (default: one per CPU), forked
+  by a forkserver. Each worker holds one unit at a time, so a worker that dies
+  (``os._exit`` in a plugin, a crash, the out-of-memory killer) or overruns the
+  sweep's ``unit_timeout_s`` costs exactly its unit. Workers ignore SIGINT and
+  SIGTERM (a terminal or a service manager signals the whole process group): the
+  driver alone handles them. Workers exit when the driver dies (they watch it),
+  the forkserver too, so no process of a run outlives it.
+* :class:`SerialExecutor` — units in the calling process (``executor="serial"``:
+  tests and library use; a unit that kills its process kills the caller).
 * :class:`DaskExecutor` — a dask.distributed cluster (``--executor dask``):
   an existing one (``--scheduler tcp://HOST:8786``) or a ``LocalCluster`` of
   ``--workers`` processes. Optional: ``pip install "radar-maneuver-bench[dask]"``.
@@ -17,25 +26,71 @@ arrives, so the store, the recording and the progress bar stay in one process.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
+import atexit
 import contextlib
 import multiprocessing
 import os
 import signal
 import threading
 import time
+import traceback
+import weakref
 from multiprocessing import forkserver
+from multiprocessing.connection import wait as _wait
+from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
 from bench.errors import ConfigError
+
+#: the signals the driver handles and the workers ignore
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class UnitFailure:
+    """A task that produced no result, and why (one line)."""
+
+    __slots__ = ("task", "cause")
+
+    def __init__(self, task, cause: str):
+        self.task, self.cause = task, cause
+
+    def __repr__(self) -> str:
+        return f"UnitFailure({self.cause!r})"
+
+
+def error_text(exc: BaseException) -> str:
+    """``Type: message (file.py:line)`` of an exception, on one line."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    where = f" ({Path(frames[-1].filename).name}:{frames[-1].lineno})" if frames else ""
+    message = " ".join(str(exc).split())
+    return f"{type(exc).__name__}{': ' + message if message else ''}{where}"[:500]
+
+
+_END = object()
+_IN_WORKER = False
+
+
+def in_worker() -> bool:
+    """Whether this process is a worker of :class:`LocalExecutor` (no user at its terminal:
+    a KeyboardInterrupt there can only come from the code it runs)."""
+    return _IN_WORKER
 
 
 class SerialExecutor:
     workers = 1
 
-    def imap_unordered(self, fn: Callable, tasks: Iterable) -> Iterator:
-        for task in tasks:
-            yield fn(task)
+    def imap_unordered(self, fn: Callable, tasks: Iterable, *, stop: Callable[[], bool] | None = None,
+                       timeout: float | None = None) -> Iterator:
+        todo = iter(tasks)
+        while not (stop is not None and stop()):
+            task = next(todo, _END)
+            if task is _END:
+                return
+            try:
+                out = fn(task)
+            except Exception as exc:  # noqa: BLE001 - a unit's failure, never the run's
+                out = UnitFailure(task, error_text(exc))
+            yield out
 
     def shutdown(self, cancel: bool = False) -> None:
         pass
@@ -44,83 +99,300 @@ class SerialExecutor:
         pass
 
 
-def _ignore_sigint() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 @contextlib.contextmanager
-def _sigint_deferred():
-    """Hold Ctrl-C until the block ends, then raise KeyboardInterrupt as usual.
+def _signals_deferred():
+    """Hold SIGINT and SIGTERM until the block ends, then deliver them to the
+    handlers in force before it (an interrupt that lands while a worker is being
+    spawned would leave it half-born).
 
     A Python-level handler (it always runs in the main thread), not a signal
-    mask: the pool's helper threads would take a masked signal instead.
+    mask: helper threads would take a masked signal instead.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    received = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    received: list[int] = []
+    previous = {}
+    for sig in STOP_SIGNALS:
+        previous[sig] = signal.signal(sig, lambda signum, frame: received.append(signum))
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
-    if received:
-        raise KeyboardInterrupt
+        for sig, handler in previous.items():
+            restore_handler(sig, handler)
+        for sig in dict.fromkeys(received):
+            signal.raise_signal(sig)
+
+
+def restore_handler(sig: int, handler) -> None:
+    """Put back a handler ``signal.signal`` returned (None: one set outside Python, taken as the default)."""
+    signal.signal(sig, signal.SIG_DFL if handler is None else handler)
+
+
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def sigterm_as_interrupt() -> Callable[[], None]:
+    """From now on SIGTERM is handled as Ctrl-C (KeyboardInterrupt in the main thread):
+    a command stopped by a service manager or ``kill`` ends as cleanly as one stopped
+    at the terminal. Returns the function that restores the previous handler. A SIGTERM
+    ignored when the process started stays ignored."""
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGTERM) is signal.SIG_IGN:
+        return lambda: None
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    return lambda: restore_handler(signal.SIGTERM, previous)
+
+
+#: environment variable naming the driver to the forkserver it starts (bench._forkserver)
+DRIVER_ENV = "BENCH_FORKSERVER_DRIVER"
 
 
 def _start_forkserver(preload: list[str]) -> None:
     """Start the forkserver (if not running) with SIGINT ignored, a disposition
-    that survives exec: the server and every worker it forks ignore Ctrl-C (a
-    terminal sends it to the whole process group) and the driver alone handles it."""
+    that survives exec: the server ignores Ctrl-C (a terminal sends it to the
+    whole process group) and the driver alone handles it. The server is told
+    the driver's pid (:data:`DRIVER_ENV`) so that it exits when the driver dies
+    (:mod:`bench._forkserver`)."""
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(preload)
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    os.environ[DRIVER_ENV] = str(os.getpid())
     try:
         forkserver.ensure_running()
     finally:
-        signal.signal(signal.SIGINT, previous)
+        os.environ.pop(DRIVER_ENV, None)
+        if main:
+            restore_handler(signal.SIGINT, previous)
+
+
+def _exit_with_driver() -> None:
+    """In a worker: exit at once when the driver (the parent process) dies, even in the
+    middle of a unit. A thread waits on the parent's sentinel (a pipe only the driver
+    holds open), so it works whatever started the worker and on every platform."""
+    parent = multiprocessing.parent_process()
+    sentinel = getattr(parent, "sentinel", None)
+    if sentinel is None:
+        return
+
+    def watch() -> None:
+        try:
+            _wait([sentinel])
+        finally:
+            os._exit(EXIT_DRIVER_GONE)
+
+    threading.Thread(target=watch, name="bench-driver-watch", daemon=True).start()
+
+
+#: exit status of a worker whose driver died
+EXIT_DRIVER_GONE = 75
+
+
+def _worker_main(conn) -> None:
+    """A LocalExecutor worker: ``(fn, task)`` in, ``("ok", result)`` or ``("error", text)`` out,
+    until ``None`` or the driver's end of the pipe closes."""
+    global _IN_WORKER
+    _IN_WORKER = True
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, signal.SIG_IGN)
+    _exit_with_driver()
+    from multiprocessing.reduction import ForkingPickler
+
+    while True:
+        try:
+            raw = conn.recv_bytes()
+        except (EOFError, OSError):
+            return
+        try:
+            msg = ForkingPickler.loads(raw)
+        except BaseException as exc:  # noqa: BLE001 - e.g. a plugin class this process cannot import
+            msg = ("unreadable", error_text(exc))
+        if msg is None:
+            return
+        fn, task = msg
+        try:
+            if fn == "unreadable":
+                raise RuntimeError(f"the worker cannot read the unit: {task}")
+            out = ("ok", fn(task))
+        except BaseException as exc:  # noqa: BLE001 - SystemExit too: a failed unit, never a dead worker
+            out = ("error", error_text(exc))
+        try:
+            conn.send(out)
+        except (EOFError, OSError):
+            return
+        except BaseException as exc:  # noqa: BLE001 - e.g. a result that cannot be pickled
+            try:
+                conn.send(("error", f"the unit's result could not be sent back: {error_text(exc)}"))
+            except (EOFError, OSError):
+                return
+
+
+def _death_cause(proc) -> str:
+    proc.join(timeout=2)
+    code = proc.exitcode
+    if code is None:
+        how = "stopped answering"
+    elif code < 0:
+        try:
+            name = signal.Signals(-code).name
+        except ValueError:
+            name = f"signal {-code}"
+        how = f"was killed by {name}" + (" (out of memory, or killed by hand?)" if -code == signal.SIGKILL else "")
+    else:
+        how = f"exited with code {code}"
+    return f"worker process died: it {how} while running this unit"
+
+
+class _Worker:
+    __slots__ = ("proc", "conn", "task", "started")
+
+    def __init__(self, proc, conn):
+        self.proc, self.conn = proc, conn
+        self.task = None
+        self.started = 0.0
+
+    def kill(self) -> None:
+        """SIGKILL (workers ignore SIGTERM), then reap."""
+        with contextlib.suppress(Exception):
+            self.conn.close()
+        if self.proc.pid is not None:
+            with contextlib.suppress(ProcessLookupError, PermissionError, ValueError):
+                # 255: also what a dead forkserver leaves as the status of a live worker
+                if self.proc.exitcode in (None, 255):
+                    os.kill(self.proc.pid, signal.SIGKILL)
+        with contextlib.suppress(Exception):
+            self.proc.join(timeout=2)
+
+
+_LIVE: "weakref.WeakSet[LocalExecutor]" = weakref.WeakSet()
+
+
+@atexit.register
+def _kill_live_executors() -> None:
+    """At exit (an error path that skipped shutdown): no worker outlives the driver."""
+    for ex in list(_LIVE):
+        ex.kill()
 
 
 class LocalExecutor:
-    """A process pool with a bounded number of units in flight."""
+    """``workers`` processes, one unit each at a time; a dead or overdue worker is replaced."""
 
     def __init__(self, workers: int):
         self.workers = workers
         # forkserver: no fork of a driver that may hold threads (rerun, BLAS).
-        _start_forkserver(["bench._forkserver"])
-        ctx = multiprocessing.get_context("forkserver")
-        self.pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
-                                           initializer=_ignore_sigint)
-        # Start every worker now, with Ctrl-C held back: an interrupt that
-        # lands while a worker is being spawned would leave it half-born.
-        with _sigint_deferred():
-            cf.wait([self.pool.submit(os.getpid) for _ in range(workers)])
+        self._ctx = multiprocessing.get_context("forkserver")
+        self._pool: list[_Worker] = []
+        _LIVE.add(self)
+        try:
+            # Start every worker now, with signals held back: an interrupt that
+            # lands while a worker is being spawned would leave it half-born.
+            with _signals_deferred():
+                for _ in range(workers):
+                    self._pool.append(self._spawn())
+        except BaseException:
+            self.kill()
+            raise
 
-    def imap_unordered(self, fn: Callable, tasks: Iterable) -> Iterator:
-        pending: set[cf.Future] = set()
+    def _spawn(self) -> _Worker:
+        for attempt in range(5):
+            _start_forkserver(["bench._forkserver"])        # again if someone killed it
+            parent, child = self._ctx.Pipe(duplex=True)
+            proc = self._ctx.Process(target=_worker_main, args=(child,), name="bench-worker")
+            try:
+                proc.start()
+                break
+            except (OSError, EOFError):        # a forkserver killed but not yet dead: wait, start another
+                parent.close()
+                child.close()
+                if attempt == 4:
+                    raise
+                time.sleep(0.2 * (attempt + 1))
+        child.close()          # the worker's end lives in the worker only: its death closes the pipe
+        # Reaped by this executor, never by multiprocessing's exit handler (which would
+        # wait forever for a worker that ignores SIGTERM).
+        multiprocessing.process._children.discard(proc)
+        return _Worker(proc, parent)
+
+    def _replace(self, w: _Worker) -> None:
+        w.kill()
+        self._pool[self._pool.index(w)] = self._spawn()
+
+    def imap_unordered(self, fn: Callable, tasks: Iterable, *, stop: Callable[[], bool] | None = None,
+                       timeout: float | None = None) -> Iterator:
         todo = iter(tasks)
-        limit = 2 * self.workers
         while True:
-            while len(pending) < limit:
-                task = next(todo, None)
-                if task is None:
-                    break
-                pending.add(self.pool.submit(fn, task))
-            if not pending:
+            if not (stop is not None and stop()):
+                for i, w in enumerate(self._pool):
+                    if w.task is None:
+                        task = next(todo, _END)
+                        if task is _END:
+                            break
+                        self._send(i, fn, task)
+            busy = [w for w in self._pool if w.task is not None]
+            if not busy:
                 return
-            done, pending = cf.wait(pending, return_when=cf.FIRST_COMPLETED)
-            for fut in done:
-                yield fut.result()
+            wait_s = None
+            if timeout is not None:
+                wait_s = max(0.0, min(w.started for w in busy) + timeout - time.monotonic())
+            ready = set(_wait([w.conn for w in busy], timeout=wait_s))
+            now = time.monotonic()
+            for w in busy:
+                if w.conn in ready:
+                    out = self._receive(w)
+                elif timeout is not None and now - w.started >= timeout:
+                    task = w.task
+                    self._replace(w)
+                    out = UnitFailure(task, f"timeout: the unit ran longer than unit_timeout_s = {timeout:g} s; "
+                                            "its worker was stopped")
+                else:
+                    continue
+                yield out       # the consumer may add tasks meanwhile: the next round starts them
+
+    def _send(self, i: int, fn: Callable, task) -> None:
+        for _ in range(3):
+            w = self._pool[i]
+            try:
+                w.conn.send((fn, task))
+            except (OSError, EOFError):      # it died while idle (killed by hand): a new one takes the unit
+                self._replace(w)
+                continue
+            w.task, w.started = task, time.monotonic()
+            return
+        raise RuntimeError("the worker processes die as soon as they start")
+
+    def _receive(self, w: _Worker):
+        task = w.task
+        try:
+            kind, payload = w.conn.recv()
+        except Exception:  # noqa: BLE001 - EOF (the worker died) or a torn message
+            cause = _death_cause(w.proc)
+            self._replace(w)
+            return UnitFailure(task, cause)
+        w.task = None
+        return payload if kind == "ok" else UnitFailure(task, payload)
 
     def shutdown(self, cancel: bool = False) -> None:
-        """Wait for the units in flight; with ``cancel``, drop those not started."""
-        self.pool.shutdown(wait=True, cancel_futures=cancel)
+        """Stop the workers (none holds a unit once an iteration has ended)."""
+        for w in self._pool:
+            if w.task is None:
+                with contextlib.suppress(Exception):
+                    w.conn.send(None)
+        deadline = time.monotonic() + 5
+        for w in self._pool:
+            if w.task is None:
+                w.proc.join(timeout=max(0.0, deadline - time.monotonic()))
+            w.kill()
+        self._pool.clear()
+        _LIVE.discard(self)
 
     def kill(self) -> None:
-        """Stop at once: terminate the workers (their units are lost, never half-stored)."""
-        for proc in list((getattr(self.pool, "_processes", None) or {}).values()):
-            proc.terminate()
-        self.pool.shutdown(wait=False, cancel_futures=True)
+        """Stop at once: kill the workers (their units are lost, never half-stored)."""
+        for w in self._pool:
+            w.kill()
+        self._pool.clear()
+        _LIVE.discard(self)
 
 
 DASK_INSTALL_HINT = 'pip install "radar-maneuver-bench[dask]"'
@@ -184,8 +456,9 @@ class DaskExecutor:
                 self.shutdown(cancel=True)
                 raise
         else:
+            check_scheduler(scheduler)
             try:
-                self.client = Client(scheduler, timeout=self.connect_timeout, set_as_default=False)
+                self.client = _client(scheduler, self.connect_timeout)
             except (OSError, TimeoutError, ValueError) as exc:
                 raise ConfigError("--scheduler", f"cannot connect to {scheduler}: "
                                                  f"{type(exc).__name__}: {exc}"[:300]) from None
@@ -227,29 +500,40 @@ class DaskExecutor:
             self.workers = self._threads() or self.workers
         return max(2, 2 * self.workers)
 
-    def imap_unordered(self, fn: Callable, tasks: Iterable) -> Iterator:
+    def imap_unordered(self, fn: Callable, tasks: Iterable, *, stop: Callable[[], bool] | None = None,
+                       timeout: float | None = None) -> Iterator:
+        """As :meth:`LocalExecutor.imap_unordered`; a unit dask gives up on (its workers kept
+        dying, ``KilledWorker``) yields a :class:`UnitFailure`. ``timeout`` is not enforced:
+        a dask worker cannot be stopped in the middle of a unit."""
         from distributed import as_completed
 
         todo = iter(tasks)
         running = as_completed(loop=self.client.loop)
-        end = object()
+        task_of: dict = {}
 
         def refill() -> None:
-            while len(self._futures) < self._limit():
-                task = next(todo, end)
-                if task is end:
+            while not (stop is not None and stop()) and len(self._futures) < self._limit():
+                task = next(todo, _END)
+                if task is _END:
                     return
                 fut = self.client.submit(fn, task, pure=False, retries=self.retries)
                 self._futures.add(fut)
+                task_of[fut.key] = task
                 running.add(fut)
 
         refill()
-        for fut in running:
-            self._futures.discard(fut)
-            result = fut.result()         # the unit's own exception, after its retries
-            fut.release()
+        while self._futures:
+            for fut in running:
+                self._futures.discard(fut)
+                task = task_of.pop(fut.key)
+                try:
+                    result = fut.result()         # the unit's own exception, after its retries
+                except Exception as exc:  # noqa: BLE001 - KilledWorker and the like: this unit failed
+                    result = UnitFailure(task, f"on the Dask cluster: {error_text(exc)}")
+                fut.release()
+                yield result
+                refill()
             refill()
-            yield result
 
     def shutdown(self, cancel: bool = False) -> None:
         """Close the client (and the LocalCluster); with ``cancel``, drop the units in flight.
@@ -276,6 +560,52 @@ class DaskExecutor:
         self.shutdown(cancel=True)
 
 
+def check_scheduler(address: str) -> None:
+    """A scheduler address dask can use, and something listening there: one ConfigError line
+    at once, never dask's retries for a scheme it does not know or a port nobody listens on."""
+    import socket
+
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import get_backend
+
+    try:
+        scheme, location = parse_address(address, strict=True)
+        get_backend(scheme)
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            host, port = parse_host_port(location, 8786)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError("--scheduler", f"{address!r} is not a scheduler address such as "
+                                         f"tcp://HOST:8786 ({exc})"[:300]) from None
+    if scheme in ("tcp", "tls", "ws", "wss"):
+        try:
+            with socket.create_connection((host, port), timeout=10):
+                pass
+        except OSError as exc:
+            raise ConfigError("--scheduler", f"cannot connect to {address}: "
+                                             f"{exc.strerror or type(exc).__name__}"[:300]) from None
+
+
+def _client(address: str, timeout: str):
+    """A dask Client of ``address``; one that fails to connect is closed at once and
+    quietly (dask's own clean-up would wait 30 s, then print a traceback)."""
+    from distributed import Client
+
+    class QuietClient(Client):
+        def __del__(self):
+            if not getattr(self, "_bench_failed", False):
+                super().__del__()
+
+    client = QuietClient.__new__(QuietClient)
+    try:
+        client.__init__(address, timeout=timeout, set_as_default=False)
+    except BaseException:
+        client._bench_failed = True
+        with contextlib.suppress(BaseException):
+            client.close(timeout=1)
+        raise
+    return client
+
+
 def worker_environment() -> dict[str, str]:
     """What must match between the driver and a worker for results to be the same: the
     harness version and the registered plugins (importing them warms the worker up)."""
@@ -295,11 +625,15 @@ EXECUTORS = ("local", "dask")
 
 
 def make_executor(name: str, workers: int, scheduler: str | None = None):
-    """``local`` (``workers`` = 1: in the driver) or ``dask`` (``scheduler``: an existing cluster)."""
+    """``local`` (``workers`` processes, even one: a unit that kills its process never kills
+    the run), ``dask`` (``scheduler``: an existing cluster) or ``serial`` (in this process;
+    for tests and library use)."""
     if name == "dask":
         return DaskExecutor(workers, scheduler)
     if scheduler is not None:
         raise ConfigError("--scheduler", "only with --executor dask")
+    if name == "serial":
+        return SerialExecutor()
     if name != "local":
         raise ConfigError("--executor", f"unknown executor {name!r} (available: {', '.join(EXECUTORS)})")
-    return SerialExecutor() if workers == 1 else LocalExecutor(workers)
+    return LocalExecutor(workers)

@@ -12,15 +12,23 @@ A plugin module registers its classes with the decorators::
 :func:`discover` imports every module of the ``methods`` and ``scenarios``
 packages and every entry point of the groups ``bench.methods`` and
 ``bench.scenarios`` (third-party packages). Tasks (:mod:`bench.tasks`) are
-the built-ins and the entry points of the group ``bench.tasks``, found before
-any method registers (a method's task must exist). A module that fails to
-import is kept as an :class:`Unavailable` entry with its error, shown by
-``bench list``; it never breaks the rest. The harness never imports a plugin
-by name (docs/architecture.md, 'Plugins').
+the built-ins and the entry points of the group ``bench.tasks``. The built-ins
+come first (tasks, scenarios, methods), then the entry points (tasks before the
+scenarios and methods that may name them), so a plugin can never take a
+built-in's name.
+
+One bad plugin never breaks the tool: a module that fails to import (whatever
+it raises, ``SystemExit`` from a ``sys.exit`` at import included), an entry
+point that reuses a registered name, names a class of another group, or
+declares an unknown task is kept as an :class:`Unavailable` entry with the
+reason, shown by ``bench list``; a sweep that names it is told it is
+unavailable and why. The harness never imports a plugin by name
+(docs/architecture.md, 'Plugins').
 """
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import importlib.metadata
 import pkgutil
@@ -39,37 +47,71 @@ _TASKS: dict = {}        # name -> the instance of its class (bench.tasks.base.T
 
 @dataclass(frozen=True)
 class Unavailable:
-    """A plugin module that could not be imported."""
+    """A plugin that could not be imported or registered."""
 
     source: str   # module or entry point
     error: str    # last line of the exception
+    name: str = ""   # the registry name it claimed, when known
+
+
+class PluginError(TypeError):
+    """A class that cannot be registered; ``name`` is the registry name it claimed."""
+
+    def __init__(self, message: str, name=""):
+        super().__init__(message)
+        self.name = name if isinstance(name, str) else ""
+
+
+#: registry names: what a sweep file can spell and a terminal can print
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}\Z")
 
 
 _UNAVAILABLE: list[Unavailable] = []
 _DISCOVERED = False
 _TASKS_DISCOVERED = False
+_BUILTIN_TASKS_DONE = False
 
 
 def _register(table: dict, cls: type, kind: str) -> type:
-    if not cls.name:
-        raise TypeError(f"{cls.__qualname__} has no registry name")
-    existing = table.get(cls.name)
+    name = getattr(cls, "name", "")
+    if not isinstance(name, str) or not name:
+        raise PluginError(f"{cls.__qualname__} has no registry name")
+    if not NAME_PATTERN.match(name):
+        raise PluginError(f"{kind} name {name!r}: expected letters, digits and '_.+-' (at most 64)", "")
+    existing = table.get(name)
     if existing is not None and existing is not cls and \
             f"{existing.__module__}.{existing.__qualname__}" != f"{cls.__module__}.{cls.__qualname__}":
-        raise TypeError(f"{kind} name {cls.name!r} registered twice "
-                        f"({existing.__module__} and {cls.__module__})")
-    table[cls.name] = cls
+        raise PluginError(f"{kind} name {name!r} registered twice "
+                          f"({existing.__module__} and {cls.__module__})")
+    table[name] = cls
     return cls
+
+
+def _check_params(cls: type, kind: str) -> None:
+    if not dataclasses.is_dataclass(getattr(cls, "Params", None)):
+        raise PluginError(f"{kind} {cls.name!r}: Params is not a dataclass", cls.name)
 
 
 def register_method(cls: type[Method]) -> type[Method]:
     known = tasks()
-    if cls.task not in known:
-        raise TypeError(f"method {cls.name!r}: task {cls.task!r} is not one of {tuple(known)}")
+    task = getattr(cls, "task", None)
+    if not isinstance(task, str) or task not in known:
+        raise PluginError(f"method {getattr(cls, 'name', cls.__qualname__)!r}: task {task!r} is not one of "
+                          f"{tuple(known)}", getattr(cls, "name", ""))
+    _check_params(cls, "method")
     return _register(_METHODS, cls, "method")
 
 
 def register_scenario(cls: type[Scenario]) -> type[Scenario]:
+    known = tasks()
+    served = getattr(cls, "tasks", ())
+    name = getattr(cls, "name", cls.__qualname__)
+    if not isinstance(served, (tuple, list)) or not all(isinstance(t, str) for t in served):
+        raise PluginError(f"scenario {name!r}: tasks must be a tuple of task names, got {served!r}"[:300], name)
+    unknown = [t for t in served if t not in known]
+    if unknown:
+        raise PluginError(f"scenario {name!r}: task {unknown[0]!r} is not one of {tuple(known)}", name)
+    _check_params(cls, "scenario")
     return _register(_SCENARIOS, cls, "scenario")
 
 
@@ -78,86 +120,131 @@ def register_task(cls: type) -> type:
     from bench.tasks.base import Task
 
     if not (isinstance(cls, type) and issubclass(cls, Task)):
-        raise TypeError(f"{cls!r} is not a Task subclass")
+        raise PluginError(f"{cls!r} is not a Task subclass")
+    instance = cls()
     _register(_TASK_CLASSES, cls, "task")
-    _TASKS[cls.name] = cls()
+    _TASKS[cls.name] = instance
     return cls
+
+
+def _failure(exc: BaseException) -> None:
+    """Let a Ctrl-C through; anything else a plugin raises is its own failure."""
+    if isinstance(exc, KeyboardInterrupt):
+        raise exc
+
+
+def _unavailable(source: str, exc: BaseException, name: str = "") -> None:
+    claimed = exc.name if isinstance(exc, PluginError) else ""
+    _UNAVAILABLE.append(Unavailable(source, _last_line(exc), claimed or name))
 
 
 def _import_package_modules(package: str) -> None:
     try:
         pkg = importlib.import_module(package)
-    except Exception as exc:  # noqa: BLE001 - reported, not raised
-        _UNAVAILABLE.append(Unavailable(package, _last_line(exc)))
+    except BaseException as exc:  # noqa: BLE001 - reported, not raised (SystemExit too)
+        _failure(exc)
+        _unavailable(package, exc)
         return
     for info in pkgutil.iter_modules(pkg.__path__, prefix=f"{package}."):
         if info.name.rsplit(".", 1)[-1].startswith("_"):
             continue
         try:
             importlib.import_module(info.name)
-        except Exception as exc:  # noqa: BLE001
-            _UNAVAILABLE.append(Unavailable(info.name, _last_line(exc)))
+        except BaseException as exc:  # noqa: BLE001
+            _failure(exc)
+            _unavailable(info.name, exc)
+
+
+#: the kind of class each entry-point group registers
+_GROUP_KIND = {"bench.tasks": "Task", "bench.scenarios": "Scenario", "bench.methods": "Method"}
 
 
 def _load_entry_points(group: str) -> None:
-    for ep in importlib.metadata.entry_points(group=group):
+    try:
+        eps = list(importlib.metadata.entry_points(group=group))
+    except BaseException as exc:  # noqa: BLE001 - e.g. unreadable package metadata
+        _failure(exc)
+        _unavailable(group, exc)
+        return
+    for ep in eps:
+        source = f"{group}:{ep.name}"
         try:
             obj = ep.load()
-        except Exception as exc:  # noqa: BLE001
-            _UNAVAILABLE.append(Unavailable(f"{group}:{ep.name}", _last_line(exc)))
+        except BaseException as exc:  # noqa: BLE001 - SystemExit at import too
+            _failure(exc)
+            _unavailable(source, exc, ep.name)
             continue
-        # An entry point may name a module (whose decorators register) or a class.
+        # An entry point may name a module (whose decorators register) or a class of its group.
         try:
-            _register_class(obj)
-        except Exception as exc:  # noqa: BLE001
-            _UNAVAILABLE.append(Unavailable(f"{group}:{ep.name}", _last_line(exc)))
+            _register_class(obj, group)
+        except BaseException as exc:  # noqa: BLE001
+            _failure(exc)
+            _unavailable(source, exc, ep.name)
 
 
-def _register_class(obj) -> None:
+def _register_class(obj, group: str) -> None:
     from bench.tasks.base import Task
 
-    if isinstance(obj, type):
-        if issubclass(obj, Method):
-            register_method(obj)
-        elif issubclass(obj, Scenario):
-            register_scenario(obj)
-        elif issubclass(obj, Task):
-            register_task(obj)
+    if not isinstance(obj, type):
+        return                       # a module: its decorators registered what it holds
+    kinds = {"Task": Task, "Scenario": Scenario, "Method": Method}
+    wanted = _GROUP_KIND[group]
+    if not issubclass(obj, kinds[wanted]):
+        actual = next((k for k, base in kinds.items() if issubclass(obj, base)), None)
+        raise PluginError(f"{obj.__module__}.{obj.__qualname__} is "
+                          f"{f'a {actual}' if actual else 'not a Task, Scenario or Method'}, "
+                          f"not a {wanted} (entry-point group {group})", getattr(obj, "name", "") or "")
+    {"Task": register_task, "Scenario": register_scenario, "Method": register_method}[wanted](obj)
 
 
 def _last_line(exc: BaseException) -> str:
-    return traceback.format_exception_only(type(exc), exc)[-1].strip()
+    """The exception as one printable line (a plugin's message may hold newlines or terminal codes)."""
+    if isinstance(exc, SystemExit):
+        return f"SystemExit: {exc.code!r} (sys.exit called at import)"
+    line = str(exc) if isinstance(exc, PluginError) else traceback.format_exception_only(type(exc), exc)[-1].strip()
+    line = "".join(c if c.isprintable() else repr(c)[1:-1] for c in line[:1200])
+    return line if len(line) <= 300 else line[:297] + "..."
 
 
 def discover() -> None:
-    """Import all plugins once per process."""
+    """Import all plugins once per process: the built-ins, then the entry points."""
     global _DISCOVERED
     if _DISCOVERED:
         return
     _DISCOVERED = True
-    _discover_tasks()
+    _builtin_tasks()
     _import_package_modules("scenarios")
     _import_package_modules("methods")
+    _discover_tasks()
     _load_entry_points("bench.scenarios")
     _load_entry_points("bench.methods")
 
 
-def _discover_tasks() -> None:
-    """The built-in tasks, then the entry points of ``bench.tasks``, once per process."""
-    global _TASKS_DISCOVERED
-    if _TASKS_DISCOVERED:
+def _builtin_tasks() -> None:
+    global _BUILTIN_TASKS_DONE
+    if _BUILTIN_TASKS_DONE:
         return
-    _TASKS_DISCOVERED = True
+    _BUILTIN_TASKS_DONE = True
     from bench.tasks import BUILTIN_TASKS
 
     for cls in BUILTIN_TASKS:
         register_task(cls)
+
+
+def _discover_tasks() -> None:
+    """The entry points of ``bench.tasks``, once per process, after the built-ins (a plugin
+    task cannot take a built-in's name, nor register a method before the built-in ones)."""
+    global _TASKS_DISCOVERED
+    if _TASKS_DISCOVERED:
+        return
+    _TASKS_DISCOVERED = True
     _load_entry_points("bench.tasks")
 
 
 def tasks() -> dict:
     """Task name -> :class:`bench.tasks.base.Task`: the built-ins, then the plugins'."""
-    _discover_tasks()
+    if not _DISCOVERED:
+        discover()
     return dict(_TASKS)
 
 
@@ -184,7 +271,8 @@ def unavailable() -> list[Unavailable]:
 def _lookup(table: dict, name: str, kind: str, field: str):
     if name in table:
         return table[name]
-    hint = next((u for u in unavailable() if re.split(r"[.:]", u.source)[-1].replace("_", "-") == name), None)
+    hint = next((u for u in unavailable()
+                 if name in (u.name, re.split(r"[.:]", u.source)[-1].replace("_", "-"))), None)
     if hint is not None:
         raise ConfigError(field, f"{kind} {name!r} is unavailable: {hint.error}")
     known = ", ".join(table) or "none"

@@ -20,10 +20,12 @@ the store are skipped, which is what makes an interrupted run resumable.
 from __future__ import annotations
 
 import shutil
+import signal
 import sys
+import threading
 import time
-import traceback
-from dataclasses import dataclass, field
+from collections import deque
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +33,8 @@ import numpy as np
 from bench import registry, tomlw
 from bench.calibration import EQUAL_CHANCE_PD, CalibrationResult, calibrate
 from bench.config import Plan
-from bench.executors import make_executor
+from bench.executors import (STOP_SIGNALS, SerialExecutor, UnitFailure, error_text, in_worker, make_executor,
+                             restore_handler)
 from bench.progress import Progress
 from bench.provenance import provenance
 from bench.recording.record import TrialRecord
@@ -66,6 +69,7 @@ class UnitTask:
     unit: Unit
     thresholds: dict[str, float | None] = field(default_factory=dict)   # evaluation only
     methods: tuple[str, ...] | None = None     # only these method configs (--retry-failed); None: all
+    isolated: bool = False     # one method config run alone, after the whole unit failed to come back
 
 
 class Interrupted(Exception):
@@ -105,10 +109,32 @@ def plan_units(plan: Plan) -> tuple[list[Unit], list[Unit]]:
 
 # ------------------------------------------------------------------ worker side
 
-def _error_text(exc: BaseException) -> str:
-    frames = traceback.extract_tb(exc.__traceback__)
-    where = f" ({Path(frames[-1].filename).name}:{frames[-1].lineno})" if frames else ""
-    return f"{type(exc).__name__}: {exc}{where}"
+_error_text = error_text
+
+
+def unit_methods(work: UnitTask) -> list:
+    """The method configs ``work`` runs: on a calibration unit those whose task is
+    calibrated, on an evaluation unit all that run on its scenario config; only
+    ``work.methods`` when it is set."""
+    plan, unit = work.plan, work.unit
+    sc = plan.scenarios[unit.scenario_index]
+    methods = _calibrated(plan, sc) if unit.phase == "calibration" else plan.pairs(sc)
+    return [mc for mc in methods if work.methods is None or mc.label in work.methods]
+
+
+def failed_result(work: UnitTask, cause: str) -> UnitResult:
+    """``work``'s unit with every method config it runs failed for ``cause`` (stored like any
+    result: a re-run skips it, ``--retry-failed`` runs it again)."""
+    unit = work.unit
+    return UnitResult(unit.key, unit.phase, unit.scenario_label, unit.snr_db, unit.trial_start, unit.n, 0.0,
+                      runs=[MethodRun(mc.label, 0.0, error=cause) for mc in unit_methods(work)])
+
+
+def _let_through(exc: BaseException) -> bool:
+    """A Ctrl-C in the driver (the serial executor) stops the run; anything else a plugin
+    raises — SystemExit included, and KeyboardInterrupt in a worker, where no user can
+    type it — is the failure of a unit."""
+    return isinstance(exc, KeyboardInterrupt) and not in_worker()
 
 
 def _measurements_xy(batch, i: int):
@@ -140,18 +166,23 @@ def execute_unit(work: UnitTask) -> UnitResult:
     sc = plan.scenarios[unit.scenario_index]
     domain = CALIBRATION if unit.phase == "calibration" else EVALUATION
     rng = TrialRNG(plan.seed, domain, sc.key, range(unit.trial_start, unit.trial_start + unit.n))
+    methods = unit_methods(work)
     t0 = time.perf_counter()
-    batch = registry.get_scenario(sc.name)().generate(sc.params, unit.snr_db, unit.n, rng)
+    try:
+        batch = registry.get_scenario(sc.name)().generate(sc.params, unit.snr_db, unit.n, rng)
+        realised = batch.scene.realised_snr_db
+        common = {"trial": np.asarray(batch.trials, np.int64), "seed": rng.seed_values(),
+                  "realised_snr_db": np.asarray(np.full(unit.n, np.nan) if realised is None else realised, float)}
+        recorded = [i for i, t in enumerate(batch.trials) if t < plan.record_trials] \
+            if unit.phase == "evaluation" else []
+    except BaseException as exc:  # noqa: BLE001 - the scenario's failure: every method config's on this unit
+        if _let_through(exc):
+            raise
+        return failed_result(work, f"the scenario failed to generate the unit: {error_text(exc)}")
     result = UnitResult(unit.key, unit.phase, sc.label, unit.snr_db, unit.trial_start, unit.n,
                         time.perf_counter() - t0)
-    realised = batch.scene.realised_snr_db
-    result.common = {"trial": np.asarray(batch.trials, np.int64), "seed": rng.seed_values(),
-                     "realised_snr_db": np.asarray(np.full(unit.n, np.nan) if realised is None else realised, float)}
-    recorded = [i for i, t in enumerate(batch.trials) if t < plan.record_trials] \
-        if unit.phase == "evaluation" else []
+    result.common = common
     traces: dict[int, dict] = {i: {} for i in recorded}
-    methods = _calibrated(plan, sc) if unit.phase == "calibration" else plan.pairs(sc)
-    methods = [mc for mc in methods if work.methods is None or mc.label in work.methods]
     for mc in methods:
         method_cls = registry.get_method(mc.name)
         run = MethodRun(mc.label, 0.0)
@@ -175,8 +206,10 @@ def execute_unit(work: UnitTask) -> UnitResult:
                 run.metrics["threshold"] = np.full(unit.n, threshold)
                 for i in recorded:
                     traces[i][mc.label] = task.recorded_method(batch, out, i, threshold)
-        except Exception as exc:  # noqa: BLE001 - one method's failure never stops the others
-            run.error = _error_text(exc)
+        except BaseException as exc:  # noqa: BLE001 - one method's failure never stops the others
+            if _let_through(exc):
+                raise
+            run.error = error_text(exc)
         run.seconds = time.perf_counter() - t1
         result.runs.append(run)
     tasks = list(dict.fromkeys(_task_of(mc) for mc in methods))
@@ -219,14 +252,136 @@ def retry_tasks(plan: Plan, units: list[Unit], failed: dict[str, set[str]],
             for u in units if u.key in failed]
 
 
-def _run_phase(executor, tasks, store: Store, progress: Progress, on_result=None) -> None:
-    for result in executor.imap_unordered(execute_unit, tasks):
+class _TaskQueue:
+    """The tasks of a phase, handed to the executor one at a time; the runner adds
+    tasks while it consumes results (a unit's method configs run one by one)."""
+
+    def __init__(self, tasks):
+        self._items = deque(tasks)
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        if not self._items:
+            raise StopIteration
+        return self._items.popleft()
+
+    def extend(self, tasks) -> None:
+        self._items.extend(tasks)
+
+
+def _merge_records(parts: list[UnitResult], order: list[str]) -> list[tuple[int, bytes]]:
+    """The trial records of one unit whose method configs ran separately: one record per
+    trial holding every config's trace (in plan order) and every task's view of the scene."""
+    if len(parts) == 1:
+        return parts[0].records
+    merged: dict[int, TrialRecord] = {}
+    for part in parts:
+        for trial, blob in part.records:
+            rec = TrialRecord.from_bytes(blob)
+            if trial not in merged:
+                merged[trial] = rec
+                continue
+            base = merged[trial]
+            base.methods.update(rec.methods)
+            base.arrays.update(rec.arrays)
+            base.images.update(rec.images)
+            base.info.update(rec.info)
+    rank = {label: i for i, label in enumerate(order)}
+    out = []
+    for trial in sorted(merged):
+        rec = merged[trial]
+        rec.methods = dict(sorted(rec.methods.items(), key=lambda kv: rank.get(kv[0], len(rank))))
+        out.append((trial, rec.to_bytes()))
+    return out
+
+
+@dataclass
+class _Split:
+    """A unit whose whole run failed to come back (its worker died, it timed out), run
+    again one method config at a time: the configs that fail alone are its failures."""
+
+    work: UnitTask
+    labels: list[str]
+    parts: list[UnitResult] = field(default_factory=list)
+
+    def done(self) -> bool:
+        return {run.label for part in self.parts for run in part.runs} >= set(self.labels)
+
+    def merged(self) -> UnitResult:
+        ok = [p for p in self.parts if p.common]
+        base = ok[0] if ok else self.parts[0]
+        runs = {run.label: run for part in self.parts for run in part.runs}
+        return UnitResult(base.key, base.phase, base.scenario, base.snr_db, base.trial_start, base.n,
+                          base.generate_seconds, runs=[runs[label] for label in self.labels if label in runs],
+                          common=base.common, records=_merge_records(ok, self.labels) if ok else [],
+                          snr_definition=next((p.snr_definition for p in ok if p.snr_definition), ""))
+
+
+def _run_phase(executor, tasks, store: Store, progress: Progress, stop=None, timeout: float | None = None,
+               on_result=None) -> None:
+    queue = _TaskQueue(tasks)
+    splits: dict[str, _Split] = {}
+    for item in executor.imap_unordered(execute_unit, queue, stop=stop, timeout=timeout):
+        if isinstance(item, UnitFailure):
+            work = item.task
+            if not work.isolated:
+                labels = [mc.label for mc in unit_methods(work)]
+                splits[work.unit.key] = _Split(work, labels)
+                queue.extend(replace(work, methods=(label,), isolated=True) for label in labels)
+                if labels:
+                    continue
+            result = failed_result(work, item.cause)
+        else:
+            result = item
+        split = splits.get(result.key)
+        if split is not None:
+            split.parts.append(result)
+            if not split.done():
+                continue
+            result = splits.pop(result.key).merged()
         store.save_unit(result)
         if result.snr_definition and store.meta("snr_definition") is None:
             store.set_meta("snr_definition", result.snr_definition)
         progress.advance()
         if on_result is not None:
             on_result(result)
+
+
+class _StopOnSignal:
+    """While a run computes: the first SIGINT or SIGTERM starts no new unit, lets the
+    units in flight end and stores them (the run then raises :class:`Interrupted`); a
+    second one raises KeyboardInterrupt at once (the units in flight are killed).
+    A signal that was ignored when the run started (``nohup``) stays ignored."""
+
+    def __init__(self):
+        self.signum: int | None = None
+        self._previous: dict = {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in STOP_SIGNALS:
+                if signal.getsignal(sig) is not signal.SIG_IGN:
+                    self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for sig, handler in self._previous.items():
+            restore_handler(sig, handler)
+        self._previous.clear()
+
+    def _handle(self, signum, frame) -> None:
+        if self.signum is not None:
+            raise KeyboardInterrupt
+        self.signum = signum
+        name = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+        lead = "\n" if getattr(sys.stderr, "isatty", lambda: False)() else ""
+        print(f"{lead}stopping ({name}): no new unit starts; the units in flight end and are stored "
+              "(Ctrl-C or SIGTERM again kills them)", file=sys.stderr, flush=True)
+
+    def __call__(self) -> bool:
+        return self.signum is not None
 
 
 def clear_run_folder(out_dir: Path) -> None:
@@ -236,51 +391,85 @@ def clear_run_folder(out_dir: Path) -> None:
     shutil.rmtree(out_dir / "figures", ignore_errors=True)
 
 
+def _capped_workers(workers: int, to_run: int, quiet: bool) -> int:
+    """No more workers than units to run (each would cost a process and its memory)."""
+    if workers <= to_run:
+        return workers
+    n = max(1, to_run)
+    if not quiet:
+        print(f"{to_run} unit{'s' if to_run != 1 else ''} to run: starting {n} worker{'s' if n != 1 else ''} "
+              f"(--workers {workers})", file=sys.stderr)
+    return n
+
+
 def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
               executor: str = "local", fresh: bool = False, quiet: bool = False,
               on_result=None, scheduler: str | None = None, retry_failed: bool = False) -> Store:
     """Run (or resume) a sweep into ``out_dir``; returns the open store.
 
     ``retry_failed``: also re-run the (unit, method config) pairs whose run failed,
-    the calibration ones before the thresholds are computed."""
+    the calibration ones before the thresholds are computed.
+
+    A unit whose worker dies or overruns the plan's ``unit_timeout_s`` is run again one
+    method config at a time; the configs that fail alone are stored as failed with the
+    cause, the others with their results. The first SIGINT or SIGTERM lets the units in
+    flight end, stores them and raises :class:`Interrupted`; a second one kills them.
+    """
     out_dir = Path(out_dir)
-    if fresh and out_dir.exists():
-        clear_run_folder(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    store = Store(out_dir / "results.sqlite")
-    store.bind_plan(plan.fingerprint(), plan_record)
     cal_units, eval_units = plan_units(plan)
-    done = store.done_units()
     total = len(cal_units) + len(eval_units)
-    failed = store.failed_runs() if retry_failed else {}
-    progress = Progress(total + len(failed), sum(u.key in done for u in cal_units + eval_units), quiet=quiet)
-    ex = None
-    started = time.monotonic()
-    try:
-        ex = make_executor(executor, workers, scheduler)
-        _run_phase(ex, [UnitTask(plan, u) for u in cal_units if u.key not in done]
-                   + retry_tasks(plan, cal_units, failed), store, progress)
-        thresholds: dict[str, dict[str, float | None]] = {sc.label: {m.label: None for m in plan.methods}
-                                                          for sc in plan.scenarios}
-        for c in calibrations(store, [s.label for s in plan.scenarios], [m.label for m in plan.methods],
-                              plan.calibration.pfa, plan.calibration.mode, plan.calibration.chance_pd):
-            thresholds[c.scenario][c.method] = c.used if np.isfinite(c.used) else None
-        tasks = [UnitTask(plan, u, thresholds[u.scenario_label]) for u in eval_units if u.key not in done] \
-            + retry_tasks(plan, eval_units, failed, thresholds)
-        _run_phase(ex, tasks, store, progress, on_result)
-    except KeyboardInterrupt:
-        progress.close()
-        if ex is not None:
-            print("stopping: letting the units in flight end (Ctrl-C again to kill them)", file=sys.stderr)
-            try:
-                ex.shutdown(cancel=True)
-            except KeyboardInterrupt:
+    timeout = getattr(plan, "unit_timeout_s", None)
+    ex = store = progress = None
+    with _StopOnSignal() as stop:
+        try:
+            if scheduler is not None:          # an existing cluster: connect before the folder is touched
+                ex = make_executor(executor, workers, scheduler)
+            if fresh and out_dir.exists():
+                clear_run_folder(out_dir)
+            out_dir.mkdir(parents=True, exist_ok=True)
+            store = Store(out_dir / "results.sqlite")
+            store.bind_plan(plan.fingerprint(), plan_record)
+            # before the first unit: a report of a run stopped short says it is incomplete
+            store.set_meta("units_total", str(total))
+            done = store.done_units()
+            failed = store.failed_runs() if retry_failed else {}
+            cal_tasks = [UnitTask(plan, u) for u in cal_units if u.key not in done] \
+                + retry_tasks(plan, cal_units, failed)
+            to_run = len(cal_tasks) + sum(u.key not in done for u in eval_units) \
+                + sum(u.key in failed for u in eval_units)
+            progress = Progress(total + len(failed), sum(u.key in done for u in cal_units + eval_units),
+                                quiet=quiet)
+            if ex is None:
+                ex = SerialExecutor() if to_run == 0 else \
+                    make_executor(executor, _capped_workers(workers, to_run, quiet), scheduler)
+            started = time.monotonic()
+            _run_phase(ex, cal_tasks, store, progress, stop, timeout)
+            if not stop():
+                thresholds: dict[str, dict[str, float | None]] = {
+                    sc.label: {m.label: None for m in plan.methods} for sc in plan.scenarios}
+                for c in calibrations(store, [s.label for s in plan.scenarios], [m.label for m in plan.methods],
+                                      plan.calibration.pfa, plan.calibration.mode, plan.calibration.chance_pd):
+                    thresholds[c.scenario][c.method] = c.used if np.isfinite(c.used) else None
+                tasks = [UnitTask(plan, u, thresholds[u.scenario_label]) for u in eval_units
+                         if u.key not in done] + retry_tasks(plan, eval_units, failed, thresholds)
+                _run_phase(ex, tasks, store, progress, stop, timeout, on_result)
+        except KeyboardInterrupt:              # a second signal: the units in flight are lost
+            if progress is not None:
+                progress.close()
+            if ex is not None:
                 ex.kill()
-        raise Interrupted(len(store.done_units()), total) from None
-    ex.shutdown()
-    progress.close()
+            if store is None:
+                raise
+            raise Interrupted(len(store.done_units()), total) from None
+        except BaseException:
+            if ex is not None:
+                ex.kill()
+            raise
+        ex.shutdown()
+        progress.close()
+    if stop():
+        raise Interrupted(len(store.done_units()), total)
     store.set_meta("last_wall_seconds", repr(time.monotonic() - started))
-    store.set_meta("units_total", str(total))
     return store
 
 

@@ -49,7 +49,9 @@ def test_a_failing_method_is_recorded_and_the_rest_completes(fragile, tmp_path):
     plan = parse_sweep({"name": "iso", "scenario": "cv-turn-cv", "trials": 6, "chunk": 3, "snr_db": [0, 10],
                         "methods": [{"name": "fragile"}, {"name": "innovation"}],
                         "calibration": {"h0_trials": 30}})
-    store = run_sweep(plan, tmp_path, plan_record=plan_record(plan, "test"), workers=1, quiet=True)
+    # a method registered in this process only: the units run here too (the serial executor)
+    store = run_sweep(plan, tmp_path, plan_record=plan_record(plan, "test"), workers=1, quiet=True,
+                      executor="serial")
     runs = store.runs()
     store.close()
     failed = runs[runs.error.notna()]
@@ -126,8 +128,12 @@ trials = 1
 
 
 @pytest.fixture
-def flaky():
+def flaky(monkeypatch):
     registry.register_method(Flaky)
+    # registered in this process only: `bench run` runs its units here (no worker process knows it)
+    from bench import runner
+    from bench.executors import SerialExecutor
+    monkeypatch.setattr(runner, "make_executor", lambda name, workers, scheduler=None: SerialExecutor())
     yield
     registry._METHODS.pop("flaky", None)
 
