@@ -33,8 +33,8 @@ from methods.innovation import Innovation
 
 
 def _misbehaves(batch):
-    return (not os.environ.get("HOSTILE_OFF") and batch.meta.get("onset_step") is not None
-            and batch.meta["realised_snr_db"].mean() > 5)
+    return (not os.environ.get("HOSTILE_OFF") and batch.scene.onset_step is not None
+            and batch.scene.realised_snr_db.mean() > 5)
 
 
 class Crash(Method):
