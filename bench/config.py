@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 import re
 import tomllib
 from dataclasses import dataclass
@@ -37,11 +38,12 @@ from typing import Any, Mapping
 
 from bench import registry
 from bench.errors import ConfigError
-from bench.params import build_params, is_tuple_field, params_as_dict
+from bench.params import as_float, build_params, field_types, is_tuple_field, params_as_dict, show
 from bench.rng import stable_key
 
 TOP_KEYS = {"name", "description", "scenario", "scenarios", "trials", "seed", "snr_db", "chunk",
-            "scenario_params", "methods", "calibration", "record", "provenance", "unit_timeout_s"}
+            "scenario_params", "methods", "calibration", "record", "provenance", "unit_timeout_s",
+            "max_unit_memory_gb"}
 SCENARIO_KEYS = {"name", "params", "label", "snr_db", "trials"}
 METHOD_KEYS = {"name", "params", "label"}
 CALIBRATION_MODES = ("nominal", "empirical", "gumbel")
@@ -58,6 +60,50 @@ MAX_CONFIGS = 1000
 LARGE_SWEEP_TRIAL_RUNS = 50_000_000
 #: longest per-unit time limit (``unit_timeout_s``): a week
 MAX_UNIT_TIMEOUT_S = 7 * 24 * 3600.0
+#: the smallest ``calibration.pfa``: every nominal threshold (chi-square upper quantiles by
+#: the survival-function inverse, Sidak shares pfa / k down to k = 8 levels) is finite at it,
+#: where a share of a smaller pfa could underflow to 0 (an infinite threshold)
+MIN_PFA = 1e-300
+#: significant digits of an SNR level in a unit's key (:func:`snr_key`): levels that
+#: agree to this many digits are one level, and a sweep listing two of them is refused
+SNR_KEY_DIGITS = 9
+#: the default ``max_unit_memory_gb`` is this fraction of the machine's memory
+#: (:func:`machine_memory_bytes`); N workers hold up to N units at once
+UNIT_MEMORY_FRACTION = 0.5
+#: bounds of ``max_unit_memory_gb`` (GB = 2^30 bytes): a megabyte at least, a petabyte at most
+MIN_UNIT_MEMORY_GB, MAX_UNIT_MEMORY_GB = 0.001, 1e6
+GIB = 2 ** 30
+
+
+def snr_key(snr_db: float | None) -> str:
+    """The canonical text of an SNR level, as in a unit's key (``"null"`` for the
+    null hypothesis): two levels are the same level exactly when their keys are
+    equal, which the sweep's duplicate check uses (:func:`_parse_snr`) and
+    :attr:`bench.runner.Unit.key` must use too."""
+    return "null" if snr_db is None else f"{snr_db:+.{SNR_KEY_DIGITS}g}"
+
+
+def machine_memory_bytes() -> int:
+    """Physical memory of the machine (or the container's cgroup limit, if lower);
+    8 GiB when neither can be read."""
+    total = None
+    try:
+        total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, OSError, ValueError):
+        pass
+    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(path).read_text(encoding="ascii").strip()
+        except (OSError, UnicodeDecodeError):
+            continue
+        if text.isdigit() and 0 < int(text) < (total or math.inf):
+            total = int(text)
+    return int(total) if total and total > 0 else 8 * GIB
+
+
+def default_unit_memory_gb() -> float:
+    """The default ``max_unit_memory_gb``: :data:`UNIT_MEMORY_FRACTION` of the machine's memory."""
+    return UNIT_MEMORY_FRACTION * machine_memory_bytes() / GIB
 
 
 @dataclass(frozen=True)
@@ -113,6 +159,11 @@ class Plan:
     method_tasks: tuple[str, ...] = ()   # task of each method config, in order
     timeline_snr_db: float | None = None  # report: the recorded trial shown over time (None: highest SNR)
     unit_timeout_s: float | None = None   # a unit running longer fails (timeout); None: no limit
+    #: the single-scenario form: the grid axes of ``scenario_params`` in the order the
+    #: sweep wrote them (the order of the labels), which plan.toml keeps
+    scenario_axes: tuple[str, ...] = ()
+    #: the sweep's ``max_unit_memory_gb`` when it set one (None: the machine's default)
+    max_unit_memory_gb: float | None = None
 
     def pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
         """The method configs that run on ``scenario`` (those whose task it serves)."""
@@ -128,7 +179,7 @@ class Plan:
         if self.scenario:
             head |= {"scenario": self.scenario, "trials": self.trials, "seed": self.seed,
                      "snr_db": list(self.snr_db), "chunk": self.chunk,
-                     "scenario_params": _merge_scenario_grid(self.scenarios)}
+                     "scenario_params": _merge_scenario_grid(self.scenarios, self.scenario_axes)}
         else:
             head |= {"trials": self.trials, "seed": self.seed, "snr_db": list(self.snr_db),
                      "chunk": self.chunk,
@@ -146,13 +197,15 @@ class Plan:
                               else {"chance_pd": self.calibration.chance_pd}),
             "record": {"trials": self.record_trials}
                       | ({} if self.timeline_snr_db is None else {"timeline_snr_db": self.timeline_snr_db}),
-        }
+        } | ({} if self.max_unit_memory_gb is None else {"max_unit_memory_gb": self.max_unit_memory_gb})
 
     def fingerprint(self) -> str:
-        """Identity of the results a run of this plan produces (for resume)."""
+        """Identity of the results a run of this plan produces (for resume): the
+        description and the memory limit do not change results."""
         d = self.to_dict()
         d.pop("description")
         d.pop("unit_timeout_s", None)     # a time limit changes no result: a run may resume under another
+        d.pop("max_unit_memory_gb", None)
         return f"{stable_key(d):016x}"
 
 
@@ -166,15 +219,24 @@ def _format_value(v: Any) -> str:
     return str(v)
 
 
-def _merge_scenario_grid(configs: tuple[ComponentConfig, ...]) -> dict[str, Any]:
-    """Scenario params of the plan: resolved values, lists where a grid varies."""
+def _merge_scenario_grid(configs: tuple[ComponentConfig, ...], axes: tuple[str, ...] = ()) -> dict[str, Any]:
+    """Scenario params of the plan: resolved values, lists where a grid varies.
+
+    Keys in declaration order, except that the grid axes (the keys that vary)
+    keep the order ``axes`` gives them (the sweep's): the order of the axes is
+    the order of the configs and of the names in their labels, so
+    ``bench run plan.toml`` gives the same labels and resumes the same units."""
     dicts = [params_as_dict(c.params) for c in configs]
     merged = {}
     for key in dicts[0]:
         values = [d[key] for d in dicts]
         distinct = [v for i, v in enumerate(values) if v not in values[:i]]
         merged[key] = distinct[0] if len(distinct) == 1 else distinct
-    return merged
+    varying = [k for k in merged if len(configs) > 1 and any(d[k] != dicts[0][k] for d in dicts)]
+    ordered = [k for k in axes if k in varying] + [k for k in varying if k not in axes]
+    slots = iter(ordered)                  # the varying keys' places, filled in the sweep's order
+    keys = [next(slots) if k in varying else k for k in merged]
+    return {k: merged[k] for k in keys}
 
 
 # --------------------------------------------------------------------------- checks
@@ -187,14 +249,15 @@ def _expect_table(value: Any, field: str) -> dict:
 
 def _expect_int(value: Any, field: str, lo: int, hi: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise ConfigError(field, f"expected int in [{lo}, {hi}], got {value!r}"[:200])
+        raise ConfigError(field, f"expected int in [{lo}, {hi}], got {show(value)}"[:200])
     return value
 
 
 def _expect_number(value: Any, field: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(field, f"expected a finite number, got {value!r}"[:200])
-    return float(value)
+    number = as_float(value)           # None for non-numbers and integers beyond a float's range
+    if number is None or not math.isfinite(number):
+        raise ConfigError(field, f"expected a finite number, got {show(value)}"[:200])
+    return number
 
 
 def _reject_unknown(table: Mapping, allowed: set, field: str) -> None:
@@ -237,8 +300,16 @@ def _parse_snr(value: Any, field: str = "snr_db") -> tuple[float, ...]:
                   for i, v in enumerate(value)]
     else:
         values = [round(_check_snr_bound(_expect_number(value, field), field), 9)]
-    if len(set(values)) != len(values):
-        raise ConfigError(field, "repeated SNR values")
+    seen: dict[str, float] = {}
+    for v in values:
+        if v in seen.values():         # by value: -0.0 repeats 0.0
+            raise ConfigError(field, f"repeated SNR value {v:g}")
+        key = snr_key(v)
+        if key in seen:
+            raise ConfigError(field, f"SNR levels {seen[key]!r} and {v!r} are one level at the precision of "
+                                     f"a unit's key ({SNR_KEY_DIGITS} significant digits, {key}); "
+                                     "keep one of them")
+        seen[key] = v
     return tuple(sorted(values))
 
 
@@ -283,6 +354,49 @@ def _expand(name: str, params_cls: type, values: Mapping[str, Any], field: str, 
     return configs
 
 
+def _split_top_level(text: str) -> list[str]:
+    """``text`` split at the commas outside parentheses (tuple values are "(a,b)")."""
+    parts, depth, start = [], 0, 0
+    for i, c in enumerate(text):
+        depth += (c == "(") - (c == ")")
+        if c == "," and depth == 0:
+            parts.append(text[start:i])
+            start = i + 1
+    return parts + [text[start:]]
+
+
+def _label_problem(name: str, label: str, params: Any, *, bare_means_defaults: bool) -> str | None:
+    """Why a user's ``label`` for a config of component ``name`` with ``params``
+    would misstate it (None if it does not): a label cannot look like another
+    config's. The generated labels are ``name`` and ``name[k=v,...]``, so a
+    label that is another component's name, or ``other[...]``, is refused; one
+    of the form ``name[k=v,...]`` must say the config's own values (as the
+    generated label would write them); a bare ``name`` (for a method, whose
+    generated label lists every parameter the sweep set) only the defaults."""
+    others = (set(registry.methods()) | set(registry.scenarios())) - {name}
+    match = re.fullmatch(r"([A-Za-z0-9][A-Za-z0-9_.\-]*)\[(.*)\]", label, re.DOTALL)
+    if match is None:
+        if label in others:
+            return f"{label!r} is the label of a {label} config; this is a {name} config"
+        if label == name and bare_means_defaults and params != type(params)():
+            changed = [k for k, v in params_as_dict(params).items() if v != params_as_dict(type(params)())[k]]
+            return (f"{label!r} is the label of the default {name} config, but this one sets "
+                    f"{', '.join(changed)}; name it otherwise (or {name}[...] with its values)")
+        return None
+    owner, inner = match.groups()
+    if owner != name:
+        return f"{label!r} looks like the label of a {owner} config; this is a {name} config" \
+            if owner in others else None
+    fields = field_types(type(params))
+    for part in _split_top_level(inner):        # free text ("dp-tbd[prewhiten]") says nothing checkable
+        key, eq, text = (x.strip() for x in part.partition("="))
+        if eq and key in fields:
+            actual = _format_value(getattr(params, key))
+            if text != actual:
+                return f"{label!r} says {key}={text}, but this config has {key}={actual}"[:300]
+    return None
+
+
 def _params_text_of_label(name: str, label: str) -> str:
     """``window=32`` from ``cumulant[window=32]``; a free-form label is its own text."""
     if label == name:
@@ -292,10 +406,13 @@ def _params_text_of_label(name: str, label: str) -> str:
     return label
 
 
-def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]) -> tuple[ComponentConfig, ...]:
+def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]
+                   ) -> tuple[tuple[ComponentConfig, ...], tuple[str, ...]]:
+    """The method configs, and the sweep field (``methods[i]``) each comes from."""
     if not isinstance(value, list) or not value:
         raise ConfigError("methods", "expected at least one [[methods]] table")
     configs: list[ComponentConfig] = []
+    fields: list[str] = []
     seen: dict[str, str] = {}
     for i, entry in enumerate(value):
         field = f"methods[{i}]"
@@ -318,15 +435,19 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]) -> tuple[C
             if len(expanded) != 1:
                 raise ConfigError(f"{field}.label", "a label names one config; remove the grid (list) values")
             c = expanded[0]
+            problem = _label_problem(c.name, label, c.params, bare_means_defaults=True)
+            if problem:
+                raise ConfigError(f"{field}.label", problem)
             expanded = [ComponentConfig(c.name, c.params, label, _params_text_of_label(c.name, label))]
         for c in expanded:
             if c.label in seen:
                 raise ConfigError(field, f"config {c.label!r} repeats {seen[c.label]}")
             seen[c.label] = field
         configs.extend(expanded)
+        fields.extend([field] * len(expanded))
     if len(configs) > MAX_CONFIGS:
         raise ConfigError("methods", f"{len(configs)} method configs; at most {MAX_CONFIGS}")
-    return tuple(configs)
+    return tuple(configs), tuple(fields)
 
 
 def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, ...], trials: int,
@@ -340,13 +461,22 @@ def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, .
                                                                   f"'_.,=+-[]()' (at most 200), got {label!r}"[:200])
         if len(expanded) != 1:
             raise ConfigError(field.replace(".params", ".label"), "a label names one config; remove the grid")
+        problem = _label_problem(cls.name, label, expanded[0].params, bare_means_defaults=False)
+        if problem:
+            raise ConfigError(field.replace(".params", ".label"), problem)
         expanded = [ComponentConfig(cls.name, expanded[0].params, label, expanded[0].params_text)]
+    labels = [c.label for c in expanded]
+    for i, label in enumerate(labels):
+        if label in labels[:i]:                  # e.g. a float axis [1, 1.0]
+            raise ConfigError(field, f"two configs of the grid are both {label!r}; remove the repeated value")
     return [ScenarioConfig(c.name, c.params, c.label, c.params_text, snr_db, trials, tuple(cls.tasks))
             for c in expanded]
 
 
-def _parse_scenarios(data: Mapping[str, Any], trials: int) -> tuple[str, tuple[ScenarioConfig, ...]]:
-    """``(scenario name or "", configs)`` from either scenario form."""
+def _parse_scenarios(data: Mapping[str, Any], trials: int
+                     ) -> tuple[str, tuple[ScenarioConfig, ...], tuple[str, ...]]:
+    """``(scenario name or "", configs, the sweep field of each config's params)`` from
+    either scenario form."""
     if "scenarios" in data:
         for key in ("scenario", "scenario_params"):
             if key in data:
@@ -358,6 +488,7 @@ def _parse_scenarios(data: Mapping[str, Any], trials: int) -> tuple[str, tuple[S
             raise ConfigError("scenarios", f"{len(entries)} entries; at most {MAX_CONFIGS}")
         names = [e.get("name") if isinstance(e, dict) else None for e in entries]
         configs: list[ScenarioConfig] = []
+        fields: list[str] = []
         for i, entry in enumerate(entries):
             field = f"scenarios[{i}]"
             entry = _expect_table(entry, field)
@@ -370,15 +501,17 @@ def _parse_scenarios(data: Mapping[str, Any], trials: int) -> tuple[str, tuple[S
                 else _parse_snr(data["snr_db"])
             n = _expect_int(entry.get("trials", trials), f"{field}.trials", 1, 10_000_000)
             identity = "explicit" if names.count(entry["name"]) > 1 else "grid"
-            configs += _scenario_configs(entry["name"], entry.get("params", {}), f"{field}.params", snr, n,
-                                         identity, entry.get("label"))
+            added = _scenario_configs(entry["name"], entry.get("params", {}), f"{field}.params", snr, n,
+                                      identity, entry.get("label"))
+            configs += added
+            fields += [f"{field}.params"] * len(added)
         seen: set[str] = set()
         for c in configs:
             if c.label in seen:
                 raise ConfigError("scenarios", f"two scenario configs are both named {c.label!r}; "
                                                "give one of them a 'label'")
             seen.add(c.label)
-        return "", tuple(configs)
+        return "", tuple(configs), tuple(fields)
     for key in ("scenario", "snr_db"):
         if key not in data:
             raise ConfigError(key, "missing")
@@ -386,7 +519,7 @@ def _parse_scenarios(data: Mapping[str, Any], trials: int) -> tuple[str, tuple[S
         raise ConfigError("scenario", f"expected a scenario name, got {data['scenario']!r}"[:200])
     configs = _scenario_configs(data["scenario"], data.get("scenario_params", {}), "scenario_params",
                                 _parse_snr(data["snr_db"]), trials, "grid")
-    return configs[0].name, tuple(configs)
+    return configs[0].name, tuple(configs), ("scenario_params",) * len(configs)
 
 
 def _parse_calibration(value: Any) -> CalibrationConfig:
@@ -394,8 +527,9 @@ def _parse_calibration(value: Any) -> CalibrationConfig:
     _reject_unknown(table, {"pfa", "mode", "h0_trials", "chance_pd"}, "calibration")
     default = CalibrationConfig()
     pfa = _expect_number(table.get("pfa", default.pfa), "calibration.pfa")
-    if not 0 < pfa < 0.5:
-        raise ConfigError("calibration.pfa", f"expected a number in (0, 0.5), got {pfa!r}")
+    if not MIN_PFA <= pfa < 0.5:
+        raise ConfigError("calibration.pfa", f"expected a number in [{MIN_PFA:g}, 0.5), got {pfa!r} "
+                                             "(smaller ones underflow the thresholds' tail probabilities)")
     mode = table.get("mode", default.mode)
     if mode not in CALIBRATION_MODES:
         raise ConfigError("calibration.mode", f"expected one of {', '.join(map(repr, CALIBRATION_MODES))}, got {mode!r}"[:200])
@@ -420,11 +554,11 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     if not isinstance(description, str):
         raise ConfigError("description", f"expected a string, got {description!r}"[:200])
     trials = _expect_int(data.get("trials", 100), "trials", 1, 10_000_000)
-    scenario, scenarios = _parse_scenarios(data, trials)
+    scenario, scenarios, scenario_fields = _parse_scenarios(data, trials)
     seed = _expect_int(data.get("seed", 0), "seed", 0, 2**63 - 1)
     chunk = _expect_int(data.get("chunk", 50), "chunk", 1, 1_000_000)
     snr_db = _parse_snr(data["snr_db"]) if "snr_db" in data else scenarios[0].snr_db
-    methods = _parse_methods(data["methods"], scenarios)
+    methods, method_fields = _parse_methods(data["methods"], scenarios)
     method_tasks = tuple(registry.get_method(m.name).task for m in methods)
     calibration = _parse_calibration(data.get("calibration", {}))
     for i, (m, task) in enumerate(zip(methods, method_tasks)):
@@ -438,11 +572,21 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     timeline_snr_db = None if "timeline_snr_db" not in record else \
         _check_snr_bound(_expect_number(record["timeline_snr_db"], "record.timeline_snr_db"), "record.timeline_snr_db")
     unit_timeout_s = _parse_unit_timeout(data["unit_timeout_s"]) if "unit_timeout_s" in data else None
+    memory_gb = None
+    if "max_unit_memory_gb" in data:
+        memory_gb = _expect_number(data["max_unit_memory_gb"], "max_unit_memory_gb")
+        if not MIN_UNIT_MEMORY_GB <= memory_gb <= MAX_UNIT_MEMORY_GB:
+            raise ConfigError("max_unit_memory_gb", f"expected a number in [{MIN_UNIT_MEMORY_GB:g}, "
+                                                    f"{MAX_UNIT_MEMORY_GB:g}] (GB), got {memory_gb:g}")
+    axes = tuple(k for k in data.get("scenario_params", {}) if isinstance(k, str)) if scenario else ()
     plan = Plan(name, description, scenario, scenarios, trials, seed, snr_db, chunk,
-                methods, calibration, record_trials, source, method_tasks, timeline_snr_db, unit_timeout_s)
+                methods, calibration, record_trials, source, method_tasks, timeline_snr_db, unit_timeout_s, axes, memory_gb)
     idle = [s.label for s in scenarios if not plan.pairs(s)]
     if idle:
         raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0]!r}")
+    _check_snr_levels(plan, scenario_fields)
+    _check_pairs(plan, method_fields)
+    _check_unit_memory(plan, scenario_fields)
     if plan.trial_runs > LARGE_SWEEP_TRIAL_RUNS and not allow_large:
         raise ConfigError("trials", f"the sweep asks for {plan.trial_runs:,} trial-runs "
                                     f"(trials x SNR levels x configs); pass --yes to run it anyway")
@@ -461,6 +605,72 @@ def _parse_unit_timeout(value: Any) -> float:
             or not 0 < value <= MAX_UNIT_TIMEOUT_S:
         raise ConfigError("unit_timeout_s", f"expected seconds in (0, {MAX_UNIT_TIMEOUT_S:g}], got {value!r}"[:200])
     return float(value)
+
+
+def _check_snr_levels(plan: Plan, scenario_fields: tuple[str, ...]) -> None:
+    """Every SNR level of every scenario config, by the scenario's
+    :meth:`~bench.core.Scenario.check_snr` (e.g. noise scaled below what its
+    trackers resolve in float64)."""
+    for s, field in zip(plan.scenarios, scenario_fields):
+        scenario = registry.get_scenario(s.name)()
+        where = field.replace(".params", ".snr_db") if field != "scenario_params" else "snr_db"
+        for snr in s.snr_db:
+            problem = scenario.check_snr(s.params, snr)
+            if problem:
+                raise ConfigError(where, f"{snr:g} dB on scenario config {s.label!r}: {problem}"[:400])
+
+
+def _check_pairs(plan: Plan, method_fields: tuple[str, ...]) -> None:
+    """Every (method config, scenario config) pair that will run, checked by the
+    method's :meth:`~bench.core.Method.check_scenario` after grid expansion: a
+    constraint across the two (a window longer than the scene) fails here, in
+    one line naming both configs, rather than on every unit."""
+    for m, field, task in zip(plan.methods, method_fields, plan.method_tasks):
+        method = registry.get_method(m.name)()
+        for s in plan.scenarios:
+            if task in s.tasks:
+                problem = method.check_scenario(m.params, s.params)
+                if problem:
+                    raise ConfigError(f"{field}.params", f"{m.label!r} cannot run on scenario config "
+                                                         f"{s.label!r}: {problem}"[:400])
+
+
+def unit_memory_bytes(plan: Plan, scenario: ScenarioConfig, n: int, calibration: bool) -> tuple[int, str]:
+    """Estimated peak bytes of a unit of ``n`` trials of ``scenario`` (its batch, plus the
+    largest working memory of the method configs that run on it, which run one after
+    the other), and the label of that method config ("" if none declares any)."""
+    batch = registry.get_scenario(scenario.name)().unit_memory_bytes(scenario.params, n) or 0
+    worst, label = 0, ""
+    for m in plan.pairs(scenario):
+        if calibration and not registry.get_task(registry.get_method(m.name).task).calibrated:
+            continue
+        need = registry.get_method(m.name)().unit_memory_bytes(m.params, scenario.params, n) or 0
+        if need > worst:
+            worst, label = need, m.label
+    return int(batch) + int(worst), label
+
+
+def _check_unit_memory(plan: Plan, scenario_fields: tuple[str, ...]) -> None:
+    """Refuse a sweep whose units would need more memory than ``max_unit_memory_gb``
+    (default: :func:`default_unit_memory_gb`), estimated from the array sizes
+    before anything is allocated."""
+    limit_gb = plan.max_unit_memory_gb if plan.max_unit_memory_gb is not None else default_unit_memory_gb()
+    limit = limit_gb * GIB
+    for s, field in zip(plan.scenarios, scenario_fields):
+        calibrated = any(registry.get_task(registry.get_method(m.name).task).calibrated for m in plan.pairs(s))
+        units = [(min(plan.chunk, s.trials), False)] + \
+            ([(min(plan.chunk, plan.calibration.h0_trials), True)] if calibrated else [])
+        for n, calibration in units:
+            need, method = unit_memory_bytes(plan, s, n, calibration)
+            if need > limit:
+                one, _ = unit_memory_bytes(plan, s, 1, calibration)
+                with_method = f" with {method!r}" if method else ""
+                set_by = "the sweep's" if plan.max_unit_memory_gb is not None else \
+                    f"the default ({UNIT_MEMORY_FRACTION:g} of this machine's memory)"
+                raise ConfigError(field, f"a unit of {n} trials of {s.label!r}{with_method} needs about "
+                                         f"{need / GIB:.3g} GB ({one / GIB:.3g} GB per trial), above "
+                                         f"max_unit_memory_gb = {limit_gb:.3g}, {set_by}; make the scene "
+                                         f"smaller, lower 'chunk', or raise max_unit_memory_gb"[:400])
 
 
 def _calibration_trial_runs(plan: Plan) -> int:
@@ -493,6 +703,8 @@ def parse_sweep_text(raw: bytes, source: str, *, allow_large: bool = False) -> P
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError("", f"invalid TOML: {exc}") from None
+    except ValueError as exc:                 # an integer of more than 4300 digits
+        raise ConfigError("", f"invalid TOML: {str(exc).split(';')[0]}") from None
     except RecursionError:
         raise ConfigError("", "invalid TOML: nested too deeply") from None
     return parse_sweep(data, source, allow_large=allow_large)

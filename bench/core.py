@@ -257,6 +257,18 @@ class Scenario(Component):
         """
         raise NotImplementedError
 
+    def check_snr(self, params, snr_db: float) -> str | None:
+        """Why this config cannot be generated at ``snr_db`` (one phrase), or None
+        (the default): checked for every SNR level of a sweep before anything runs."""
+        return None
+
+    def unit_memory_bytes(self, params, n: int) -> int | None:
+        """Bytes a batch of ``n`` trials of ``params`` takes (its arrays and the
+        scratch :meth:`generate` needs), estimated from the array sizes before
+        anything is generated; the sweep refuses a unit above its
+        ``max_unit_memory_gb``. None (the default): not estimated."""
+        return None
+
 
 class Method(Component):
     """A detector, tracker or TBD algorithm. Subclasses implement :meth:`run`.
@@ -300,5 +312,22 @@ class Method(Component):
     def transitions(self, batch: Batch, params) -> int | None:
         """State transitions a DP method evaluates per trial of ``batch``;
         None (the default): not a DP method, nothing to count."""
+        return None
+
+    def check_scenario(self, params, scenario_params) -> str | None:
+        """Why this config cannot run on a scenario config with ``scenario_params``
+        (the scenario's resolved Params), in one phrase (e.g. "window = 64 is longer
+        than the scenario's 50 steps"); None (the default): it can. Checked for every
+        (method config, scenario config) pair of a sweep after grid expansion,
+        before anything runs, so a constraint that would fail every unit is refused
+        up front. Read the scenario's parameters by name (``getattr`` with a
+        default): a method does not import scenarios."""
+        return None
+
+    def unit_memory_bytes(self, params, scenario_params, n: int) -> int | None:
+        """Working memory (bytes) of :meth:`run` on ``n`` trials of a scenario
+        config with ``scenario_params``, beyond the batch itself (added to
+        :meth:`Scenario.unit_memory_bytes` for the sweep's memory check).
+        None (the default): not estimated."""
         return None
 

@@ -12,12 +12,23 @@ fields are made with :func:`param` (after Stone Soup's ``Property``)::
 value at the boundary (scikit-learn style) and raising
 :class:`~bench.errors.ConfigError` naming the field. A dataclass may add a
 ``validate(self)`` method for checks across fields; it raises ``ConfigError``.
+
+**Bounds.** Every number a component declares is bounded on both sides
+(``ge``/``gt`` and ``le``/``lt``) and the reason for the bounds is documented
+with ``why=`` (e.g. "beyond it the trellis has more nodes than a unit can
+hold"): validation must cover what runs, so a value the checks accept is one
+the component runs to completion at a small size (``tests/property/
+test_hostile_input.py`` runs every bound). Bounds are metadata: they never
+change a config's resolved values (:func:`params_as_dict`) nor its random
+stream. Integers of any size and floats are compared exactly; an integer too
+large for a float is refused with one line, never an ``OverflowError``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import operator
 import typing
 from typing import Any, Mapping
 
@@ -26,15 +37,16 @@ from bench.errors import ConfigError
 
 def param(default: Any, doc: str, *, ge=None, gt=None, le=None, lt=None,
           choices: tuple | None = None, min_len: int | None = None,
-          max_len: int | None = None) -> Any:
+          max_len: int | None = None, why: str | None = None) -> Any:
     """A dataclass field with documentation and range checks.
 
     ``ge``/``gt``/``le``/``lt`` bound numbers (and each element of a tuple of
     numbers); ``choices`` restricts strings; ``min_len``/``max_len`` bound the
-    length of a tuple.
+    length of a tuple; ``why`` says why the bounds are where they are (shown by
+    ``bench list -v``).
     """
     meta = {"doc": doc, "ge": ge, "gt": gt, "le": le, "lt": lt,
-            "choices": choices, "min_len": min_len, "max_len": max_len}
+            "choices": choices, "min_len": min_len, "max_len": max_len, "why": why}
     if isinstance(default, list):
         default = tuple(default)
     return dataclasses.field(default=default, metadata=meta)
@@ -54,36 +66,75 @@ def _describe_bounds(meta: Mapping[str, Any]) -> str:
     return " and ".join(parts)
 
 
+#: integers with more digits than this are shown by their size, not their digits
+_SHOWN_DIGITS = 40
+
+
+def show(value: Any, limit: int = 120) -> str:
+    """``repr(value)`` for an error message: an integer too long to print
+    (Python refuses to convert one above 4300 digits) by its size, anything
+    else cut to ``limit`` characters."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 3.33 * _SHOWN_DIGITS:
+        digits = int(value.bit_length() * math.log10(2)) + 1
+        return f"{'-' if value < 0 else ''}an integer of about {digits} digits"
+    if isinstance(value, (list, tuple, dict)) and len(value) > 50:
+        return f"a {type(value).__name__} of {len(value)} values"
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def as_float(value: Any) -> float | None:
+    """``value`` (an int or a float, not a bool) as a float; None if it is not
+    a number or an integer too large for a float (never an OverflowError)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        return float(value)
+    except OverflowError:
+        return None
+
+
+_COMPARE = {"ge": operator.ge, "gt": operator.gt, "le": operator.le, "lt": operator.lt}
+
+
+def within_bounds(value: Any, meta: Mapping[str, Any]) -> bool:
+    """Whether the number ``value`` satisfies the ``ge``/``gt``/``le``/``lt`` of ``meta``
+    (compared exactly, ints with floats too: ``int.__ge__(float)`` is NotImplemented)."""
+    return all(meta.get(key) is None or holds(value, meta[key]) for key, holds in _COMPARE.items())
+
+
 def _check_scalar(tp: type, value: Any, meta: Mapping[str, Any]) -> Any:
     """Coerce ``value`` to ``tp`` or raise ConfigError('', problem)."""
     bounds = _describe_bounds(meta)
     want = f"{_type_name(tp)}{' ' + bounds if bounds else ''}"
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError("", f"expected true or false, got {value!r}")
+            raise ConfigError("", f"expected true or false, got {show(value)}")
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError("", f"expected {want}, got {value!r}")
+            raise ConfigError("", f"expected {want}, got {show(value)}")
     elif tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError("", f"expected {want}, got {value!r}")
-        value = float(value)
-        if not math.isfinite(value):
-            raise ConfigError("", f"expected a finite {want}, got {value!r}")
+            raise ConfigError("", f"expected {want}, got {show(value)}")
+        number = as_float(value)
+        if number is None or not math.isfinite(number):
+            raise ConfigError("", f"expected a finite {want}, got {show(value)}")
+        value = number
     elif tp is str:
         if not isinstance(value, str):
-            raise ConfigError("", f"expected a string, got {value!r}")
+            raise ConfigError("", f"expected a string, got {show(value)}")
         choices = meta.get("choices")
         if choices and value not in choices:
-            raise ConfigError("", f"expected one of {', '.join(map(repr, choices))}, got {value!r}")
+            raise ConfigError("", f"expected one of {', '.join(map(repr, choices))}, got {show(value)}")
         return value
     else:  # pragma: no cover - a component declared an unsupported type
         raise TypeError(f"unsupported parameter type {tp!r}")
-    tests = {"ge": value.__ge__, "gt": value.__gt__, "le": value.__le__, "lt": value.__lt__}
-    for key, holds in tests.items():
-        if meta.get(key) is not None and not holds(meta[key]):
-            raise ConfigError("", f"expected {want}, got {value!r}")
+    for key, holds in _COMPARE.items():
+        if meta.get(key) is not None and not holds(value, meta[key]):     # name the bound it breaks
+            why = meta.get("why")
+            raise ConfigError("", f"expected {_type_name(tp)} {_describe_bounds({key: meta[key]})}, "
+                                  f"got {show(value)}" + (f" ({why})" if why else ""))
     return value
 
 
@@ -92,7 +143,7 @@ def check_value(tp: Any, value: Any, meta: Mapping[str, Any]) -> Any:
     if typing.get_origin(tp) is tuple:
         elem = typing.get_args(tp)[0]
         if not isinstance(value, (list, tuple)):
-            raise ConfigError("", f"expected a {_type_name(tp)}, got {value!r}")
+            raise ConfigError("", f"expected a {_type_name(tp)}, got {show(value)}")
         n = len(value)
         if meta.get("min_len") is not None and n < meta["min_len"]:
             raise ConfigError("", f"expected at least {meta['min_len']} values, got {n}")
@@ -151,8 +202,22 @@ def params_as_dict(params: Any) -> dict[str, Any]:
     return out
 
 
+def bounds_of(cls: type, name: str) -> dict[str, Any]:
+    """The declared ``ge``/``gt``/``le``/``lt``/``why`` of field ``name`` (those set)."""
+    meta = {f.name: f.metadata for f in dataclasses.fields(cls)}[name]
+    return {k: meta[k] for k in ("ge", "gt", "le", "lt", "why") if meta.get(k) is not None}
+
+
 def describe_params(cls: type) -> list[tuple[str, str, Any, str]]:
-    """(name, type, default, doc) of each field, for ``bench list`` and docs."""
+    """(name, type, default, doc) of each field, for ``bench list`` and docs;
+    the doc ends with the bounds and their reason when declared."""
     types = field_types(cls)
-    return [(f.name, _type_name(types[f.name]), f.default, f.metadata.get("doc", ""))
-            for f in dataclasses.fields(cls)]
+    out = []
+    for f in dataclasses.fields(cls):
+        doc = f.metadata.get("doc", "")
+        bounds = _describe_bounds(f.metadata)
+        if bounds:
+            why = f.metadata.get("why")
+            doc += f" [{bounds}{': ' + why if why else ''}]"
+        out.append((f.name, _type_name(types[f.name]), f.default, doc))
+    return out

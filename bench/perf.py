@@ -45,6 +45,7 @@ import numpy as np
 import pandas as pd
 
 from bench import registry
+from bench.errors import ConfigError
 from bench.markdown import fmt, table
 from bench.params import build_params
 from bench.rng import EVALUATION, TrialRNG, stable_key
@@ -152,9 +153,27 @@ def _in_fresh_process(job: Job | SceneJob) -> dict:
         return pool.submit(measure_scene if isinstance(job, SceneJob) else measure, job).result()
 
 
+def check_sizes(methods: list[str] | None, sizes: list[str] | None) -> None:
+    """Raise ConfigError('--sizes', ...) naming an unknown size and the known ones (the
+    sizes of the scenarios the chosen methods run on), before anything is measured
+    or written."""
+    registry.discover()
+    if not sizes:
+        return
+    names: set[str] = set()
+    for name, cls in registry.methods().items():
+        scenario = next((s for s in registry.scenarios().values() if cls.task in s.tasks), None)
+        if scenario is not None and (not methods or name in methods):
+            names |= set(scenario.perf_sizes)
+    known = sorted(names)
+    for size in sizes:
+        if size not in known:
+            raise ConfigError("--sizes", f"unknown size {size!r} (known: {', '.join(known) or 'none'})")
+
+
 def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> list[tuple[Job, int]]:
     """(job, reference trials) for every method x its scenario's sizes."""
-    registry.discover()
+    check_sizes(methods, sizes)
     out = []
     for name, cls in registry.methods().items():
         if methods and name not in methods:

@@ -32,7 +32,7 @@ import numpy as np
 
 from bench import registry, tomlw
 from bench.calibration import EQUAL_CHANCE_PD, CalibrationResult, calibrate
-from bench.config import Plan
+from bench.config import Plan, snr_key
 from bench.executors import (STOP_SIGNALS, SerialExecutor, UnitFailure, error_text, in_worker, make_executor,
                              restore_handler)
 from bench.progress import Progress
@@ -57,8 +57,7 @@ class Unit:
 
     @property
     def key(self) -> str:
-        snr = "null" if self.snr_db is None else f"{self.snr_db:+.9g}"
-        return f"{self.phase}/{self.scenario_label}/{snr}/{self.trial_start:09d}+{self.n}"
+        return f"{self.phase}/{self.scenario_label}/{snr_key(self.snr_db)}/{self.trial_start:09d}+{self.n}"
 
 
 @dataclass

@@ -14,6 +14,9 @@ innovations come from and how ``bench perf`` measures them.
 
 from __future__ import annotations
 
+import dataclasses
+import math
+
 from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Method
 from models.kalman import InnovationSequence, LinearGaussianFilter, innovations, reference_innovations
 
@@ -26,6 +29,29 @@ def reference_filter(batch: Batch) -> LinearGaussianFilter:
         raise TypeError(f"{type(batch.scene).__name__}.reference_filter: the innovation detectors need a "
                         f"models.kalman.LinearGaussianFilter, got {type(filt).__name__}")
     return filt
+
+#: the longest detector window (steps): the longest scene a built-in detection scenario
+#: generates (``cv-turn-cv`` ``steps`` <= 10 000)
+MAX_WINDOW_STEPS = 10_000
+
+
+def sidak_level(pfa: float, k: int) -> float:
+    """1 - (1 - pfa)^(1/k): the level of each of k independent tests whose
+    maximum has level ``pfa`` (Sidak), as -expm1(log1p(-pfa) / k), which does
+    not cancel for small pfa; pfa / k (its first-order value) where that
+    underflows to 0, so a threshold from it is always finite."""
+    level = -math.expm1(math.log1p(-pfa) / k)
+    return level if level > 0.0 else pfa / k
+
+
+def steps_problem(first_valid: int, what: str, scenario_params) -> str | None:
+    """None if a statistic first formed at step ``first_valid`` leaves null steps in a scene
+    of the scenario's ``steps`` (read by name; unknown: not checked), else the reason: with
+    none, calibration has no null value and every unit fails."""
+    steps = getattr(scenario_params, "steps", None)
+    if isinstance(steps, int) and first_valid >= steps:
+        return f"{what} first forms at step {first_valid}, but the scenario has {steps} steps"
+    return None
 
 
 class InnovationDetector(Method):

@@ -13,7 +13,7 @@ from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
 from bench.windows import sliding_sum
-from methods._innovation_base import InnovationDetector
+from methods._innovation_base import MAX_WINDOW_STEPS, InnovationDetector, sidak_level, steps_problem
 from models.kalman import InnovationSequence
 
 
@@ -174,7 +174,10 @@ class Cumulant(InnovationDetector):
 
     @dataclass(frozen=True)
     class Params:
-        window: int = param(32, "sliding-window length M (steps)", ge=3)
+        window: int = param(32, "sliding-window length M (steps)", ge=3, le=MAX_WINDOW_STEPS,
+                            why="3 samples are the fewest with a non-zero centred third moment; at most the "
+                                "longest scene (10 000 steps), and at most the scenario's steps (checked "
+                                "per scenario config)")
         moment: str = param("centred", "centred: de-meaned third moment (cumulant); "
                             "raw: (1/M) sum x^3; lagged: the paper's Steps 1-2, de-meaned by the "
                             "mean of the M samples before each sample", choices=("centred", "raw", "lagged"))
@@ -222,11 +225,16 @@ class Cumulant(InnovationDetector):
 
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
         """The chi2 quantile of eq. (8): chi2(n_z) for the sum, chi2(1) per
-        component (at the Sidak level 1 - (1 - pfa)^(1/n_z)) for the max."""
+        component (at the Sidak level 1 - (1 - pfa)^(1/n_z)) for the max, both
+        by the survival-function inverse (finite down to the smallest pfa)."""
         n_z = self.measurement_dim(batch)
         if params.combine == "sum":
-            return float(scipy.stats.chi2.ppf(1.0 - pfa, n_z))
-        return float(scipy.stats.chi2.isf(1.0 - (1.0 - pfa) ** (1.0 / n_z), 1))
+            return float(scipy.stats.chi2.isf(pfa, n_z))
+        return float(scipy.stats.chi2.isf(sidak_level(pfa, n_z), 1))
+
+    def check_scenario(self, params, scenario_params) -> str | None:
+        return steps_problem(params.window - 1, f"the window of {params.window} steps", scenario_params)
+
 
 
 def sample_normalised_cumulant(x: np.ndarray, M: int, moment: str, normalisation: str) -> np.ndarray:

@@ -30,11 +30,17 @@ from bench.params import param
 from bench.registry import register_method
 from methods import _tbd_alongtrack, _tbd_kernels
 from methods._tbd_reference import reference_dp_tbd
-from models.ar_noise import ar_innovation_std, stationary_predictors
+from models.ar_noise import ar_autocovariance, ar_innovation_std, stationary_predictors
 
 #: the largest window radius supported: (2q + 1)^2 <= 127 displacements, the
 #: most an int8 can number (the reference kernels' backpointers)
 MAX_WINDOW_RADIUS = 5
+#: the largest ``max_speed_m_s``: Mach 30, faster than any target; the window radius it
+#: gives at the scenario's frame period and cell size is checked per scenario config
+MAX_SPEED_M_S = 10_000.0
+SPEED_WHY = ("a speed (> 0) up to Mach 30; the window radius ceil(v T / cell_m) must be at most "
+             f"{MAX_WINDOW_RADIUS} cells at the scenario's frame period and cell size (checked per "
+             "scenario config)")
 LOG_UNIFORM_ANGLE = -math.log(2.0 * math.pi)
 
 
@@ -54,6 +60,26 @@ def window_radius(max_speed_m_s: float, batch: Batch) -> int:
         raise ValueError(f"max_speed_m_s = {max_speed_m_s} gives a window radius of {q} cells at "
                          f"T = {T} s and {cell} m cells; at most {MAX_WINDOW_RADIUS} is supported")
     return q
+
+
+def radius_problem(max_speed_m_s: float, scenario_params) -> str | None:
+    """The pair check of both DP methods: the window radius
+    (:func:`window_radius`) at the scenario's ``frame_period_s`` and ``cell_m``
+    (read by name; unknown: not checked) must be at most MAX_WINDOW_RADIUS."""
+    T, cell = getattr(scenario_params, "frame_period_s", None), getattr(scenario_params, "cell_m", None)
+    if not isinstance(T, float) or not isinstance(cell, float):
+        return None
+    q = max(1, math.ceil(max_speed_m_s * T / cell - 1e-9))
+    if q > MAX_WINDOW_RADIUS:
+        return (f"max_speed_m_s = {max_speed_m_s:g} gives a window radius of {q} cells at "
+                f"T = {T:g} s and {cell:g} m cells; at most {MAX_WINDOW_RADIUS} is supported")
+    return None
+
+
+def scene_shape(scenario_params) -> tuple[int, int, int] | None:
+    """(K, H, W) of the ``tbd-grid`` scenario's frames (``frames``, ``cells``), or None."""
+    K, H = getattr(scenario_params, "frames", None), getattr(scenario_params, "cells", None)
+    return (K, H, H) if isinstance(K, int) and isinstance(H, int) else None
 
 
 def _frames32(batch: Batch) -> np.ndarray:
@@ -126,7 +152,7 @@ class DpTbd(Method):
     class Params:
         max_speed_m_s: float = param(150.0, "largest target speed the transition window admits "
                                             "(m/s); window radius q = ceil(v T / cell_m) cells",
-                                     gt=0.0, le=1e6)
+                                     gt=0.0, le=MAX_SPEED_M_S, why=SPEED_WHY)
         prewhiten: bool = param(False, "replace each cell's time series by its unit-variance AR "
                                        "innovations (the scene's known model) before the DP; an "
                                        "ablation, not Tonissen's method")
@@ -150,6 +176,19 @@ class DpTbd(Method):
         q = window_radius(params.max_speed_m_s, batch)
         _, K, H, W = batch.z.shape
         return H * W * (2 * q + 1) ** 2 * (K - 1)
+
+    def check_scenario(self, params, scenario_params) -> str | None:
+        return radius_problem(params.max_speed_m_s, scenario_params)
+
+    def unit_memory_bytes(self, params, scenario_params, n: int) -> int | None:
+        """The kernel's int8 back-pointers (K, H, W) and a few float32 (H, W)
+        planes for one trial at a time, the (n, H, W) value maps; ``prewhiten``
+        adds a float32 copy of the frames (n, K, H, W)."""
+        shape = scene_shape(scenario_params)
+        if shape is None:
+            return None
+        K, H, W = shape
+        return K * H * W + 24 * H * W + 4 * n * H * W + (4 * n * K * H * W if params.prewhiten else 0)
 
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
         """NaN: the score is a maximum over all cells and paths of a scene,
@@ -465,17 +504,21 @@ class DpTbdMf(Method):
     class Params:
         max_speed_m_s: float = param(150.0, "largest target speed the transition window admits "
                                             "(m/s); window radius q = ceil(v T / cell_m) cells",
-                                     gt=0.0, le=1e6)
+                                     gt=0.0, le=MAX_SPEED_M_S, why=SPEED_WHY)
         design_snr_db: float = param(2.0, "assumed target SNR 10 log10(s^2 / sigma^2) (dB) that sets "
                                           "the amplitude s in the log-likelihood ratio (methods are not "
                                           "told the true SNR); keep it within ~8 dB above the SNRs of "
-                                          "interest (see the class docstring)", ge=-30.0, le=40.0)
+                                          "interest (see the class docstring)", ge=-30.0, le=40.0,
+                                     why="-30..40 dB spans every scene SNR of interest; the float32 "
+                                         "merits keep their resolution within it")
         turn_prior: str = param("von-mises", "turn-angle density p(theta) on (-pi, pi]: "
                                              "'von-mises' or 'laplace' (truncated)",
                                 choices=("von-mises", "laplace"))
         turn_concentration: float = param(5.0, "kappa of the turn-angle density (von Mises "
                                                "concentration, dimensionless; Laplace rate, 1/rad); "
-                                               "0: uniform", ge=0.0, le=100.0)
+                                               "0: uniform", ge=0.0, le=100.0,
+                                      why="0 is the uniform density; at 100 the density is a spike "
+                                          "(std 0.1 rad) and exp(kappa) stays far from float overflow")
         likelihood: str = param("per-cell", "index term: 'per-cell' (conditional LLR of the cell's own "
                                             "previous frames) or 'along-track' (the paper's 3-D / 2-D "
                                             "Gaussian ratio of the values along the track)",
@@ -510,6 +553,37 @@ class DpTbdMf(Method):
         q = window_radius(params.max_speed_m_s, batch)
         _, K, H, W = batch.z.shape
         return H * W * (2 * q + 1) ** 4 * max(K - 2, 0)
+
+    def check_scenario(self, params, scenario_params) -> str | None:
+        """The window radius (:func:`radius_problem`), and for AR noise the 3 x 3
+        covariance of frames k, k-1, k-2 the conditional LLR needs, as
+        :func:`noise_autocovariance` reads it from the scene (the lags the scene's
+        frames hold, missing ones 0): it must be positive definite."""
+        problem = radius_problem(params.max_speed_m_s, scenario_params)
+        a = tuple(getattr(scenario_params, "ar_coefficients", ()) or ())
+        frames = getattr(scenario_params, "frames", None)
+        if problem or getattr(scenario_params, "noise", None) != "ar" or not a or not isinstance(frames, int):
+            return problem
+        gamma = list(ar_autocovariance(a, max(frames - 1, 0))[:3]) + [0.0] * max(0, 3 - frames)
+        try:
+            ConditionalLLR.from_autocovariance(gamma, 1.0)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            return f"{exc} ({frames} frames of AR({len(a)}) noise)"
+        return None
+
+    def unit_memory_bytes(self, params, scenario_params, n: int) -> int | None:
+        """The kernel's int8 back-pointers (K, D, H, W) and float32 merit volumes
+        (D, H, W) (four with the along-track likelihood, two otherwise) for one
+        trial at a time, D = (2q + 1)^2 predecessors, and the (n, H, W) value maps."""
+        shape = scene_shape(scenario_params)
+        T, cell = getattr(scenario_params, "frame_period_s", None), getattr(scenario_params, "cell_m", None)
+        if shape is None or not isinstance(T, float) or not isinstance(cell, float):
+            return None
+        K, H, W = shape
+        q = max(1, math.ceil(params.max_speed_m_s * T / cell - 1e-9))
+        D = (2 * q + 1) ** 2
+        volumes = 4 if params.likelihood == "along-track" else 2
+        return max(K, 3) * D * H * W + (4 * volumes + 1) * D * H * W + 32 * H * W + 4 * n * H * W
 
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
         """NaN: the score is a maximum over all cells and paths of a scene,

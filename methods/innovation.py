@@ -13,12 +13,14 @@ from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
 from bench.windows import sliding_sum
-from methods._innovation_base import InnovationDetector
+from methods._innovation_base import MAX_WINDOW_STEPS, InnovationDetector, steps_problem
 from models.kalman import InnovationSequence
 
 #: the fading-memory statistic counts as formed once the weight of the
 #: missing (pre-start) past is below this fraction of its steady total
 FADING_SETTLE = 0.01
+#: the largest fading-memory factor: the statistic settles after 4 603 steps
+MAX_DELTA = 0.999
 
 
 def fading_sum(x: np.ndarray, delta: float) -> np.ndarray:
@@ -63,11 +65,15 @@ class Innovation(InnovationDetector):
 
     @dataclass(frozen=True)
     class Params:
-        window: int = param(5, "sliding-window length s (steps); 1 with fading memory", ge=1)
+        window: int = param(5, "sliding-window length s (steps); 1 with fading memory", ge=1,
+                            le=MAX_WINDOW_STEPS, why="at most the longest scene (10 000 steps), and at "
+                            "most the scenario's steps (checked per scenario config)")
         delta: float = param(
             0.0, "fading-memory factor (dimensionless); 0 selects the sliding "
             "window, > 0 the statistic e_k = delta e_(k-1) + eps_k (needs window = 1)",
-            ge=0.0, lt=1.0)
+            ge=0.0, le=MAX_DELTA, why="the statistic is formed once delta^(k+1) < 0.01: 4 603 steps "
+                                      "at 0.999, beyond any scene above it (and the scenario's steps "
+                                      "must exceed it, checked per scenario config)")
 
         def validate(self) -> None:
             if self.delta > 0.0 and self.window != 1:
@@ -86,9 +92,17 @@ class Innovation(InnovationDetector):
                                traces={"nis": nis})
 
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
+        """chi2 upper quantiles by the survival-function inverse, ``isf(pfa)``
+        (``ppf(1 - pfa)`` loses pfa below 1e-16 to rounding and gives inf)."""
         n_z = self.measurement_dim(batch)
         if params.delta > 0.0:
             d = params.delta
             df = n_z * (1.0 + d) / (1.0 - d)          # moment match, approximate
-            return float(scipy.stats.chi2.ppf(1.0 - pfa, df) / (1.0 + d))
-        return float(scipy.stats.chi2.ppf(1.0 - pfa, params.window * n_z))
+            return float(scipy.stats.chi2.isf(pfa, df) / (1.0 + d))
+        return float(scipy.stats.chi2.isf(pfa, params.window * n_z))
+
+    def check_scenario(self, params, scenario_params) -> str | None:
+        if params.delta > 0.0:
+            return steps_problem(fading_valid_from(params.delta), f"the fading-memory statistic "
+                                 f"(delta = {params.delta:g})", scenario_params)
+        return steps_problem(params.window - 1, f"the window of {params.window} steps", scenario_params)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -350,7 +351,8 @@ class Viterbi(Method):
     * Step 0 is built in stages: the prior's gate on a coarse grid (metric
       log N(node; x0, P0) + log p(z_0 | node)) locates the best position
       level, then grids each spanning at least +-2 steps of the previous one
-      around the best level refine it down to the step of step 1. The
+      around the best level (with 3 or 5 position levels, halving the step:
+      :func:`refined_step`) refine it down to the step of step 1. The
       prior's gate is ~10-100x wider than later ones, and a coarse start
       would leave offsets that the exact dynamics correct only slowly.
 
@@ -394,22 +396,38 @@ class Viterbi(Method):
     @dataclass(frozen=True)
     class Params:
         Lb: int = param(4, "block length Lb (steps): the best path is backtracked and the trellis "
-                        "re-seeded every Lb steps (the paper: 4)", ge=1, le=1000)
+                        "re-seeded every Lb steps (the paper: 4)", ge=1, le=1000,
+                        why="one step at least; a block's nodes are all kept until it ends, so at most "
+                            "1000 steps (and the unit's memory is checked)")
         survivors: int = param(256, "best end nodes of a block that seed the next block (the paper's "
-                               "n; 1 = Demirbas's original)", ge=1, le=100_000)
+                               "n; 1 = Demirbas's original)", ge=1, le=100_000,
+                               why="one node at least; more than a trellis step's nodes are never kept")
         position_levels: int = param(41, "quantisation levels of an axis's position within its gate "
-                                     "(odd)", ge=3, le=1001)
+                                     "(odd)", ge=3, le=1001,
+                                     why="a level on the prediction and one each side; at most 1001 (the "
+                                         "trellis has position x velocity levels nodes per step and the "
+                                         "unit's memory is checked)")
         velocity_levels: int = param(61, "quantisation levels of an axis's velocity within its gate "
-                                     "(odd)", ge=1, le=1001)
+                                     "(odd)", ge=1, le=1001,
+                                     why="1 holds the velocity at the prediction; at most 1001 (see "
+                                         "position_levels)")
         gate_sigmas: float = param(4.0, "gate half-width, in standard deviations of a linear filter's "
-                                   "predicted position and velocity for the axis", gt=0.0)
+                                   "predicted position and velocity for the axis", ge=0.1, le=100.0,
+                                   why="below 0.1 sigma the gate misses the target; above 100 sigma a "
+                                       "quantisation step is coarser than the errors it estimates")
         gate_noise: str = param("glint", "measurement variance the gate is sized with: 'glint' = "
                                 "max(2 eta^2, total variance) (total if eps = 0), 'total' = the glint "
                                 "noise's total variance", choices=("glint", "total"))
         disturbance_levels: int = param(9, "discrete levels of the disturbance w per axis, equally "
-                                        "spaced, probabilities from the normal density", ge=1, le=31)
-        disturbance_span: float = param(2.0, "the disturbance levels span +- this many sigma_w", gt=0.0)
-        sweeps: int = param(1, "passes over the axes within a block (block coordinate ascent)", ge=1)
+                                        "spaced, probabilities from the normal density", ge=1, le=31,
+                                        why="1 is the zero disturbance; each level multiplies a node's "
+                                            "successors, 31 resolve the normal law finely")
+        disturbance_span: float = param(2.0, "the disturbance levels span +- this many sigma_w", ge=0.01,
+                                        le=10.0, why="levels beyond +-10 sigma have probabilities below "
+                                                     "e^-50; below 0.01 sigma they all coincide")
+        sweeps: int = param(1, "passes over the axes within a block (block coordinate ascent)", ge=1,
+                            le=16, why="one pass at least; each pass repeats the whole block's work and "
+                                       "the ascent over three axes settles in a few")
         node_value: str = param("survivor", "state a node carries: 'survivor' = the exact state of "
                                 "its best path, 'centre' = the node's grid value",
                                 choices=("survivor", "centre"))
@@ -419,17 +437,24 @@ class Viterbi(Method):
                              "measured spherical component, derivative from differences of the "
                              "estimates (Song & Sun, section 2)", choices=("pv-grid", "paper-1d"))
         start_nodes: int = param(1, "paper-1d: best end nodes of a block that start the next (the "
-                                 "paper's n, not printed; 1 = Demirbas's single node)", ge=1, le=10_000)
+                                 "paper's n, not printed; 1 = Demirbas's single node)", ge=1, le=10_000,
+                                 why="one node at least; more than a window's nodes are never kept")
         quantisation_steps: tuple[float, ...] = param(
             (0.005, 0.001, 0.001), "paper-1d: quantisation gates of range (m), bearing and elevation "
-            "(rad) (the paper's printed values)", gt=0.0, min_len=3, max_len=3)
+            "(rad) (the paper's printed values)", ge=1e-6, le=1000.0, min_len=3, max_len=3,
+            why="a node per micrometre or microradian at the finest (a component's window spans "
+                "+-3 prior stds in nodes, and the unit's memory is checked); above 1000 every value "
+                "falls in one node")
         component_disturbance_variance: tuple[float, ...] = param(
             (7.0, 0.07, 0.07), "paper-1d: variances of the disturbance of range (m^2/s^4), bearing and "
             "elevation (rad^2/s^4), entering a component as P2 w per step (the paper's printed "
-            "values)", ge=0.0, min_len=3, max_len=3)
+            "values)", ge=0.0, le=1e4, min_len=3, max_len=3,
+            why="0 is no disturbance; 1e4 (a std of 100 units/s^2, 10 g in range) is beyond any target")
         initial_nodes: int = param(3, "paper-1d: values of a component at step 0 (the paper's n_i0, not "
                                    "printed): 3 = Gauss-Hermite levels of the prior, 1 = its mean, "
-                                   "else equally spaced on +-3 prior stds", ge=1, le=100_001)
+                                   "else equally spaced on +-3 prior stds", ge=1, le=100_001,
+                                   why="one value at least; more values than nodes of the prior's window "
+                                       "merge")
 
         def validate(self) -> None:
             for name in ("position_levels", "velocity_levels"):
@@ -437,9 +462,49 @@ class Viterbi(Method):
                     raise ConfigError(name, f"must be odd (a level on the prediction), got "
                                       f"{getattr(self, name)}")
 
+    def unit_memory_bytes(self, params, scenario_params, n: int) -> int | None:
+        """The trellis kept over a block, per trial: ``pv-grid``: every node's state,
+        back-pointer and score (32 bytes) for each of the block's steps, per axis in
+        turn; ``paper-1d``: the widest node window of a component (+-3 prior stds
+        in nodes, widened by the disturbance levels at every step), with scores and
+        back-pointers (16 bytes a node) for the block's steps and a few temporaries.
+        Read from the ``glint`` scenario's parameters by name (None if absent)."""
+        steps = getattr(scenario_params, "steps", None)
+        if not isinstance(steps, int):
+            return None
+        block = min(params.Lb, steps)
+        if params.trellis == "pv-grid":
+            nodes = params.position_levels * params.velocity_levels
+            return int(n * nodes * (32 * (block + 1) + 8 * params.disturbance_levels))
+        return int(n * paper_1d_window(params, scenario_params, steps) * 16 * (block + 6))
+
     def run(self, batch: Batch, params) -> TrackingOutput:
         track = paper_1d_track if params.trellis == "paper-1d" else viterbi_track
         return TrackingOutput(estimate=track(batch.z, glint_model_of(batch.scene), params))
+
+
+def paper_1d_window(params, scenario_params, steps: int) -> int:
+    """An upper estimate of the widest node window of the ``paper-1d`` trellis over a
+    scene of ``steps`` steps (:func:`methods._viterbi_paper1d.paper_1d_component`):
+    the prior's +-3 stds (Gauss-Hermite +-sqrt(3) for ``initial_nodes`` = 3, one
+    node for 1) in nodes, plus per step the spread of the three disturbance levels,
+    2 sqrt(3) std_w P2 / delta nodes (P2 <= T^2 / 2), for each measured component;
+    prior stds from the ``glint`` parameters (range: along the line of sight;
+    bearing and elevation: the cross-range std over the range, or the angle stds)."""
+    get = functools.partial(getattr, scenario_params)
+    r0 = float(get("initial_range_m", 5000.0))
+    cos_e0 = max(math.cos(math.radians(float(get("initial_elevation_deg", 0.0)))), 1e-3)
+    cross = float(get("initial_cross_range_std_m", 20.0))
+    angles = tuple(get("initial_angle_std_rad", ()) or ())
+    std0 = (float(get("initial_range_std_m", 100.0)),
+            angles[0] if angles else cross / (r0 * cos_e0), angles[1] if angles else cross / r0)
+    span = {1: 0.0, 3: 2.0 * math.sqrt(3.0)}.get(params.initial_nodes, 6.0)
+    P2 = 0.5 * float(get("dt_s", 0.1)) ** 2
+    widest = 0.0
+    for delta, sd, var in zip(params.quantisation_steps, std0, params.component_disturbance_variance):
+        grow = 2.0 * math.sqrt(3.0) * math.sqrt(var) * P2 / delta + 1.0
+        widest = max(widest, span * sd / delta + 1.0 + steps * grow)
+    return int(min(widest, 2.0 ** 62))
 
 
 def process_noise_los(model: GlintModel) -> np.ndarray:
@@ -559,16 +624,40 @@ def _grid(centre: np.ndarray, step: np.ndarray, Lp: int, Lv: int):
     return levels, nodes.reshape(centre.shape[0], Lp * Lv, 2)
 
 
+#: the most grids step 0 is refined through (a safety net: the shrink factor is at most
+#: 2/3, so a prior gate 10^100 times the target step takes 568 stages)
+MAX_REFINEMENT_STAGES = 1000
+
+
+def refined_step(step: float, Lp: int) -> float:
+    """The position step of the next refinement grid of step 0: 4 step / (Lp - 1),
+    so the new grid of Lp levels spans +-2 steps of the previous one, when that
+    shrinks (Lp >= 7); with 3 or 5 levels such a grid would not shrink (5 levels:
+    the same step, 3: twice it, and refining never ended), so the step is halved
+    instead: the new grid spans +-1/2 (Lp = 3) or +-1 (Lp = 5) previous step
+    around the best level, a bisection."""
+    return 4.0 * step / (Lp - 1) if Lp - 1 > 4 else 0.5 * step
+
+
+def refinement_steps(step0: np.ndarray, target: float, Lp: int) -> list[np.ndarray]:
+    """The (position, velocity) steps of the grids step 0 is built on: the prior's
+    ``step0``, then position steps shrunk by :func:`refined_step` down to
+    ``target`` (never below it), the velocity step unchanged. Ends for every Lp >= 3
+    (each step at most 2/3 of the previous) and every target (at most
+    :data:`MAX_REFINEMENT_STAGES` grids)."""
+    steps = [np.array(step0, dtype=float)]
+    while steps[-1][0] > target and len(steps) < MAX_REFINEMENT_STAGES:
+        steps.append(np.array([max(target, refined_step(steps[-1][0], Lp)), step0[1]]))
+    return steps
+
+
 def _initial_nodes(axis: _Axis, ctx: _Context, others0: np.ndarray):
     """Step 0: states (n, Lp Lv, 2) and scores (n, Lp Lv), refined in stages
     (see :class:`Viterbi`)."""
     n, Lp, Lv = others0.shape[0], ctx.Lp, ctx.Lv
     centre = np.broadcast_to(axis.x0, (n, 2)).copy()
     target = min(axis.step[min(1, len(axis.step) - 1), 0], axis.step[0, 0])
-    steps = [axis.step[0].copy()]
-    while steps[-1][0] > target:          # each grid spans +-2 steps of the previous one at least
-        steps.append(np.array([max(target, 4.0 * steps[-1][0] / (Lp - 1)), axis.step[0, 1]]))
-    for step in steps:
+    for step in refinement_steps(axis.step[0], target, Lp):
         levels, nodes = _grid(centre, step, Lp, Lv)
         metric = _node_metric(ctx, 0, axis.j, levels, others0)
         score = _gaussian2_logpdf(nodes, axis.x0, axis.P0) + np.repeat(metric, Lv, axis=1)

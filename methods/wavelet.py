@@ -13,7 +13,7 @@ from bench.core import Batch, DetectionOutput
 from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
-from methods._innovation_base import InnovationDetector
+from methods._innovation_base import InnovationDetector, sidak_level, steps_problem
 from models.kalman import InnovationSequence
 
 MODES = ("decimated", "sliding")
@@ -249,8 +249,10 @@ def wavelet_statistic(x: np.ndarray, wavelet: str = "haar", levels: int = 4, coa
 
 def null_threshold(pfa: float, df: int, n_levels: int) -> float:
     """Sidak threshold of the max of ``n_levels`` chi2(df) statistics:
-    chi2.ppf(1 - alpha, df) with alpha = 1 - (1 - pfa)^(1 / n_levels)."""
-    return float(scipy.stats.chi2.ppf((1.0 - pfa) ** (1.0 / n_levels), df))
+    chi2.isf(alpha, df) with alpha = 1 - (1 - pfa)^(1 / n_levels), computed as
+    -expm1(log1p(-pfa) / n_levels) (:func:`methods._innovation_base.sidak_level`) so it
+    stays finite down to the smallest pfa."""
+    return float(scipy.stats.chi2.isf(sidak_level(pfa, n_levels), df))
 
 
 @register_method
@@ -307,7 +309,7 @@ class Wavelet(InnovationDetector):
     of white N(0, 1) noise are i.i.d. N(0, 1) and A_j, D_j of the same
     block are orthogonal, so T_j(k) ~ chi2(df) exactly under the null, with
     df = m (one kind) or 2m (``both``). Nominal threshold: Sidak across the
-    tested levels, chi2.ppf(1 - alpha, df) with alpha = 1 - (1 - pfa)^(1/c),
+    tested levels, chi2.isf(alpha, df) with alpha = 1 - (1 - pfa)^(1/c),
     c = ``coarsest``. The levels are correlated (nested blocks: A_J is
     (A_J-1,older + A_J-1,newer)/sqrt 2), so this is approximate; since each
     event {T_j <= t} is a symmetric convex set of Gaussian coefficients, the
@@ -329,9 +331,13 @@ class Wavelet(InnovationDetector):
     class Params:
         wavelet: str = param("haar", "orthogonal discrete wavelet of PyWavelets (haar, dbN, symN, "
                              "coifN); longer filters span more samples per coefficient")
-        levels: int = param(4, "decomposition depth J: the coarsest block is 2^J steps", ge=1, le=8)
+        levels: int = param(4, "decomposition depth J: the coarsest block is 2^J steps", ge=1, le=8,
+                            why="a block of 2^8 = 256 steps is longer than a maneuver; the first complete "
+                                "coarsest block must fall within the scenario's steps (checked per "
+                                "scenario config)")
         coarsest: int = param(2, "number of coarsest levels tested (J-coarsest+1 .. J); "
-                              "1 <= coarsest <= levels", ge=1, le=8)
+                              "1 <= coarsest <= levels", ge=1, le=8,
+                              why="one tested level at least, at most the levels there are")
         coefficients: str = param("both", "coefficients tested: approximation (bias), detail "
                                   "(onset) or both", choices=COEFFICIENTS)
         mode: str = param("decimated", "decimated: non-overlapping blocks, coefficient held "
@@ -362,3 +368,8 @@ class Wavelet(InnovationDetector):
         n_z = self.measurement_dim(batch)
         df = n_z * (2 if params.coefficients == "both" else 1)
         return null_threshold(pfa, df, params.coarsest)
+
+    def check_scenario(self, params, scenario_params) -> str | None:
+        start = valid_from(params.wavelet, params.levels, params.coarsest, params.mode)
+        return steps_problem(start, f"level {params.levels} of {params.wavelet!r} ({params.mode})",
+                             scenario_params)

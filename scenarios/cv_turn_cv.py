@@ -17,6 +17,9 @@ from models.kalman import LinearGaussianFilter, LinearGaussianModel, kalman_filt
 
 #: indices of x and y in the state [x, vx, y, vy]
 POSITION_INDEX = (0, 2)
+#: the longest scene (steps) and the smallest turn rate (deg/s) accepted
+MAX_STEPS = 10_000
+MIN_TURN_RATE_DEG_S = 1e-3
 
 SNR_DEFINITION = (
     "SNR at the detector input: the reference CV filter is linear, so its "
@@ -160,38 +163,60 @@ class CvTurnCv(Scenario):
     #: ``bench perf`` sizes: name -> (scenario params, trials)
     perf_sizes = {"paper": ({}, 1000)}
 
+    def unit_memory_bytes(self, params, n: int) -> int:
+        """About 32 float64 values per trial and step: the truth (4), its process
+        noise (4), the measurements (2) and their draws (6), the reference filter's
+        innovations and covariances and the detectors' sliding sums."""
+        return 8 * 32 * n * params.steps
+
     @dataclass(frozen=True)
     class Params:
-        steps: int = param(160, "number of measurement steps K", ge=2, le=1_000_000)
-        dt_s: float = param(1.0, "sampling interval T (s)", gt=0.0)
-        onset_step: int = param(80, "first step moved by the turn (step index)", ge=1)
-        turn_steps: int = param(40, "duration of the turn (steps)", ge=1)
-        speed_m_s: float = param(200.0, "target speed (m/s)", gt=0.0)
+        steps: int = param(160, "number of measurement steps K", ge=2, le=MAX_STEPS,
+                           why="two steps at least; the track and the filters loop over steps in "
+                               "Python, so at most 10 000 (60 times the paper's 160)")
+        dt_s: float = param(1.0, "sampling interval T (s)", ge=1e-3, le=100.0,
+                            why="radar revisit times, 1 ms to 100 s; the filter's Q grows as T^4 "
+                                "and sigma_a as T^-2, and stays well conditioned within")
+        onset_step: int = param(80, "first step moved by the turn (step index)", ge=1, le=MAX_STEPS,
+                                why="after step 0 and within the steps (checked against them)")
+        turn_steps: int = param(40, "duration of the turn (steps)", ge=1, le=MAX_STEPS,
+                                why="one step at least, within the steps (checked against them)")
+        speed_m_s: float = param(200.0, "target speed (m/s)", ge=0.1, le=10_000.0,
+                                 why="a walking target to Mach 30; the SNR sets the noise relative "
+                                     "to the maneuver, so the speed only sets the scale")
         turn_rate_deg_s: float = param(
-            3.0, "turn rate (deg/s), positive = left (counter-clockwise); non-zero")
+            3.0, "turn rate (deg/s), positive = left (counter-clockwise); non-zero, at least "
+            "0.001 in magnitude", ge=-90.0, le=90.0,
+            why="a quarter turn per second at most (beyond it the turn aliases at T = 1 s); a rate "
+                "below 0.001 deg/s moves the track by less than the noise can be scaled to")
         tracking_index: float = param(
             0.1, "Kalata's tracking index lambda = sigma_a T^2 / sigma_w of the "
             "reference filter (dimensionless); fixes its gain whatever the noise level",
-            gt=0.0)
+            ge=1e-4, le=100.0, why="from a nearly constant-velocity filter (gain ~0.01) to one "
+                                   "that follows every measurement; the steady-state Riccati "
+                                   "solution is well conditioned within")
         process_noise: bool = param(
             True, "truth includes the filter's white-noise acceleration (matched "
             "filter); false: deterministic track (filter Q then over-estimated)")
         detect_window_steps: int = param(
             40, "a detection counts if the first alarm at or after onset comes "
-            "within this many steps", ge=1)
-        warmup_steps: int = param(10, "steps ignored before false alarms are counted", ge=0)
+            "within this many steps", ge=1, le=MAX_STEPS,
+            why="one step at least, within the steps (checked against them)")
+        warmup_steps: int = param(10, "steps ignored before false alarms are counted", ge=0,
+                                  le=MAX_STEPS, why="before the onset (checked against it)")
         onset_jitter_steps: int = param(
             0, "each trial's onset is drawn uniformly from onset_step .. onset_step + this "
             "(steps), from the trial's own stream; 0: every trial starts the turn at onset_step",
-            ge=0)
+            ge=0, le=MAX_STEPS, why="within the steps (checked against them)")
 
         @property
         def last_onset(self) -> int:
             return self.onset_step + self.onset_jitter_steps
 
         def validate(self) -> None:
-            if self.turn_rate_deg_s == 0.0:
-                raise ConfigError("turn_rate_deg_s", "must be non-zero (a zero rate is no maneuver)")
+            if abs(self.turn_rate_deg_s) < MIN_TURN_RATE_DEG_S:
+                raise ConfigError("turn_rate_deg_s", f"must be at least {MIN_TURN_RATE_DEG_S:g} deg/s in "
+                                  f"magnitude (a zero rate is no maneuver), got {self.turn_rate_deg_s!r}")
             if self.last_onset + self.turn_steps > self.steps:
                 raise ConfigError("turn_steps", f"onset_step + onset_jitter_steps + turn_steps = "
                                   f"{self.last_onset + self.turn_steps} exceeds steps = {self.steps}")

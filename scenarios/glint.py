@@ -18,6 +18,17 @@ from models.spherical import MEASURED, MEASUREMENT_LABELS, los_basis, spherical,
 
 #: state components, in order (metres, m/s; x east, y north, z up)
 STATE_LABELS = ("x", "y", "z", "vx", "vy", "vz")
+#: the longest scene (steps) and the smallest noise stds (reference, and scaled by the SNR)
+MAX_STEPS = 10_000
+MIN_RANGE_NOISE_M = 1e-3
+MIN_ANGLE_NOISE_RAD = 1e-6
+RANGE_NOISE_WHY = ("a millimetre to 10 km: below it the trackers' covariances lose definiteness in "
+                   "float64 (the scaled noise at each SNR level is held to the same floor)")
+ANGLE_NOISE_WHY = ("a microradian to 0.1 rad: below it the trackers' covariances lose definiteness in "
+                   "float64 (the scaled noise at each SNR level is held to the same floor); above it "
+                   "the small-angle linearisation of the trackers fails")
+SPREAD_WHY = ("a millimetre to 100 km: the prior covariance stays positive definite in float64 "
+              "beside the velocity spread")
 #: indices of the position components in the state
 POSITION_INDEX = (0, 1, 2)
 
@@ -173,62 +184,102 @@ class Glint(Scenario):
     perf_sizes: ClassVar[dict] = {"paper": ({"sensor": "active"}, 50)}
     perf_snr_db: ClassVar[float] = 0.0
 
+    def check_snr(self, params, snr_db: float) -> str | None:
+        """The SNR axis scales every noise std by 10^(-snr_db/20): the scaled stds
+        must stay at or above the lower bounds of the reference ones (1 mm, 1 urad),
+        below which the trackers' covariances lose definiteness in float64 (the EKF's
+        innovation covariance turns singular near 1e-13 rad)."""
+        scale = 10.0 ** (-snr_db / 20.0)
+        floor = {"range": MIN_RANGE_NOISE_M, "bearing": MIN_ANGLE_NOISE_RAD, "elevation": MIN_ANGLE_NOISE_RAD}
+        for label, sigma, eta in zip(("range", "bearing", "elevation"), params.sigma_ref(), params.eta_ref()):
+            if label == "range" and params.sensor != "active":
+                continue
+            low = min(sigma, eta) * scale
+            if low < floor[label]:
+                unit = "m" if label == "range" else "rad"
+                return (f"the {label} noise scaled to it, {low:.3g} {unit}, is below {floor[label]:g} {unit}; "
+                        f"at most {20.0 * math.log10(min(sigma, eta) / floor[label]):.4g} dB for this config")
+        return None
+
+    def unit_memory_bytes(self, params, n: int) -> int:
+        """About 120 float64 values per trial and step: the truth (6), the draws (12),
+        the noise and measurements (9), their planar projection (2), and a tracker's
+        estimate with its covariance (6 + 36) and per-step scratch."""
+        return 8 * 120 * n * params.steps
+
     @dataclass(frozen=True)
     class Params:
-        steps: int = param(300, "number of measurement steps K (duration K T)", ge=2, le=1_000_000)
-        dt_s: float = param(0.1, "sampling interval T (s)", gt=0.0)
-        damping_per_s: float = param(0.4, "velocity damping mu (1/s) of dv/dt = -mu v + u + w", ge=0.0)
+        steps: int = param(300, "number of measurement steps K (duration K T)", ge=2, le=MAX_STEPS,
+                           why="two steps at least; the simulation and the trackers loop over steps in "
+                               "Python, so at most 10 000 (33 times the paper's 300)")
+        dt_s: float = param(0.1, "sampling interval T (s)", ge=1e-3, le=10.0,
+                            why="sensor revisit times, 1 ms to 10 s")
+        damping_per_s: float = param(0.4, "velocity damping mu (1/s) of dv/dt = -mu v + u + w", ge=0.0,
+                                     le=100.0, why="0 is no damping; at 100 /s the velocity forgets "
+                                                   "itself within 10 ms")
         control_m_s2: tuple[float, ...] = param(
             (1.5, 0.07, 0.06), "known control u (m/s^2) along the radial, bearing and elevation "
             "directions at the prior mean initial position (the paper's u_r, u_b, u_e)",
-            min_len=3, max_len=3)
+            ge=-100.0, le=100.0, min_len=3, max_len=3, why="at most 10 g along each direction")
         process_noise_m_s2: float = param(
             1.0, "std sigma_w (m/s^2) of the white Gaussian disturbance w, per axis, held over each "
-            "interval", ge=0.0)
+            "interval", ge=0.0, le=100.0, why="0 is a deterministic target; at most 10 g")
         process_noise_los_m_s2: tuple[float, ...] = param(
             (), "stds (m/s^2) of the disturbance along the radial, bearing and elevation directions "
             "at the prior mean initial position (3 values; empty: isotropic process_noise_m_s2)",
-            ge=0.0, min_len=0, max_len=3)
+            ge=0.0, le=100.0, min_len=0, max_len=3, why="0 is no disturbance; at most 10 g")
         sensor: str = param("passive", "'passive': bearing and elevation (the paper's case); "
                             "'active': range, bearing and elevation", choices=("passive", "active"))
         epsilon: float = param(0.05, "glint probability eps per measured component (0: Gaussian)",
-                               ge=0.0, le=1.0)
+                               ge=0.0, le=1.0, why="a probability")
         glint_model: str = param(
             "mixture", "'mixture': (1-eps) N(0,sigma^2) + eps Laplace(0,eta); 'additive': "
             "N(0,sigma^2) plus a Laplace(0,eta) spike with probability eps", choices=GLINT_MODELS)
-        sigma_range_m: float = param(5.0, "reference std of the Gaussian core, range (m)", gt=0.0)
-        sigma_bearing_rad: float = param(1e-3, "reference std of the Gaussian core, bearing (rad)", gt=0.0)
+        sigma_range_m: float = param(5.0, "reference std of the Gaussian core, range (m)",
+                                     ge=MIN_RANGE_NOISE_M, le=1e4, why=RANGE_NOISE_WHY)
+        sigma_bearing_rad: float = param(1e-3, "reference std of the Gaussian core, bearing (rad)",
+                                         ge=MIN_ANGLE_NOISE_RAD, le=0.1, why=ANGLE_NOISE_WHY)
         sigma_elevation_rad: float = param(1e-3, "reference std of the Gaussian core, elevation (rad)",
-                                           gt=0.0)
+                                           ge=MIN_ANGLE_NOISE_RAD, le=0.1, why=ANGLE_NOISE_WHY)
         eta_range_m: float = param(25.0, "reference Laplace glint scale eta, range (m); variance "
-                                   "2 eta^2", gt=0.0)
-        eta_bearing_rad: float = param(5e-3, "reference Laplace glint scale eta, bearing (rad)", gt=0.0)
+                                   "2 eta^2", ge=MIN_RANGE_NOISE_M, le=1e4, why=RANGE_NOISE_WHY)
+        eta_bearing_rad: float = param(5e-3, "reference Laplace glint scale eta, bearing (rad)",
+                                       ge=MIN_ANGLE_NOISE_RAD, le=0.1, why=ANGLE_NOISE_WHY)
         eta_elevation_rad: float = param(5e-3, "reference Laplace glint scale eta, elevation (rad)",
-                                         gt=0.0)
-        initial_range_m: float = param(5000.0, "prior mean initial range (m)", gt=0.0)
+                                         ge=MIN_ANGLE_NOISE_RAD, le=0.1, why=ANGLE_NOISE_WHY)
+        initial_range_m: float = param(5000.0, "prior mean initial range (m)", ge=10.0, le=1e6,
+                                       why="10 m to 1000 km; at least 5 prior range stds from the sensor "
+                                           "(checked against initial_range_std_m)")
         initial_bearing_deg: float = param(0.0, "prior mean initial bearing (deg, clockwise from north)",
-                                           ge=-180.0, le=180.0)
-        initial_elevation_deg: float = param(0.0, "prior mean initial elevation (deg)", gt=-80.0, lt=80.0)
+                                           ge=-180.0, le=180.0, why="a bearing")
+        initial_elevation_deg: float = param(0.0, "prior mean initial elevation (deg)", gt=-80.0, lt=80.0,
+                                             why="away from the zenith, where bearing is singular")
         initial_velocity_m_s: tuple[float, ...] = param(
             (0.0, 0.0, 0.0), "prior mean initial velocity (m/s) along the radial, bearing and "
-            "elevation directions", min_len=3, max_len=3)
+            "elevation directions", ge=-1000.0, le=1000.0, min_len=3, max_len=3,
+            why="at most Mach 3 along each direction")
         initial_angle_rate_rad_s: tuple[float, ...] = param(
             (0.0, 0.0), "prior mean initial bearing and elevation rates (rad/s), added to "
             "initial_velocity_m_s as r0 cos(e0) db/dt and r0 de/dt along the bearing and elevation "
-            "directions", min_len=2, max_len=2)
+            "directions", ge=-0.1, le=0.1, min_len=2, max_len=2,
+            why="at most 0.1 rad/s (6 deg/s) of line-of-sight rate")
         initial_angle_std_rad: tuple[float, ...] = param(
             (), "prior stds of the initial bearing and elevation (rad; 2 values): the cross-range "
             "stds become r0 cos(e0) std_b and r0 std_e (empty: initial_cross_range_std_m)",
-            gt=0.0, min_len=0, max_len=2)
+            ge=1e-6, le=0.1, min_len=0, max_len=2,
+            why="a microradian to 0.1 rad: the prior covariance stays positive definite in float64")
         initial_range_std_m: float = param(100.0, "initial-state spread: prior std along the line of "
-                                           "sight (m)", gt=0.0)
+                                           "sight (m)", ge=1e-3, le=1e5, why=SPREAD_WHY)
         initial_cross_range_std_m: float = param(20.0, "initial-state spread: prior std across the "
-                                                 "line of sight, each direction (m)", gt=0.0)
+                                                 "line of sight, each direction (m)", ge=1e-3, le=1e5,
+                                                 why=SPREAD_WHY)
         initial_velocity_std_m_s: float = param(2.0, "initial-state spread: prior velocity std per "
-                                                "axis (m/s)", gt=0.0)
+                                                "axis (m/s)", ge=1e-3, le=1e3,
+                                                why="a millimetre per second to Mach 3: the prior "
+                                                    "covariance stays positive definite in float64")
         divergence_bound_m: float = param(
             500.0, "a trial has diverged when its position error exceeds this bound (m) at some step",
-            gt=0.0)
+            ge=1e-3, le=1e9, why="any distance from a millimetre to beyond any scene")
 
         def validate(self) -> None:
             for name, size in (("process_noise_los_m_s2", 3), ("initial_angle_std_rad", 2)):

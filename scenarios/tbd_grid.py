@@ -309,32 +309,55 @@ class TbdGrid(Scenario):
     #: scene generation at the paper's size, one core
     perf_targets = {"paper": {"seconds_per_trial": 0.020}}
 
+    def unit_memory_bytes(self, params, n: int) -> int:
+        """The float32 frames n K H W, the float64 ring of the AR recursion (P H W)
+        and a recorded trial's copy of its frames (K H W float32)."""
+        K, H = params.frames, params.cells
+        P = len(params.ar_coefficients) if params.noise == "ar" else 0
+        return 4 * n * K * H * H + 8 * P * H * H + 4 * K * H * H
+
     @dataclass(frozen=True)
     class Params:
         cells: int = param(500, "grid side H = W (cells); the paper's scene is 500 (50 km at 100 m); "
                                 "smaller grids keep the cell size and trajectory and move the scene "
-                                "window so the whole track stays inside", ge=8, le=5000)
-        frames: int = param(20, "number of frames K", ge=2, le=1000)
+                                "window so the whole track stays inside", ge=8, le=5000,
+                           why="8 cells hold a short track with its margins; 5000 is 100 times the "
+                               "paper's cells (a unit's memory, n K cells^2 x 4 bytes, is checked)")
+        frames: int = param(20, "number of frames K", ge=2, le=1000,
+                            why="two frames at least (more than the AR order, checked); 1000 is 50 "
+                                "times the paper's (see cells for memory)")
         noise: str = param("ar", "per-cell noise over frames: 'ar' (AR(P), ar_coefficients) or "
                                  "'white'", choices=("ar", "white"))
         ar_coefficients: tuple[float, ...] = param(
             (-2.0, 1.7, -0.64), "AR coefficients (a1, ..., aP) of v_k + a1 v_(k-1) + ... + aP v_(k-P) "
             "= w_k (dimensionless); must be stationary. Default: the paper's (-2, 1.7, 0.64) with the "
-            "sign of a3 flipped (the printed set is explosive)", min_len=1, max_len=8)
+            "sign of a3 flipped (the printed set is explosive)", ge=-70.0, le=70.0, min_len=1, max_len=8,
+            why="AR(1) to AR(8); a stationary AR(8) has coefficients of at most C(8, 4) = 70 in "
+                "magnitude, and stationarity itself is checked")
         amplitude: str = param("constant", "target amplitude model: 'constant' (non-fluctuating) or "
                                            "'swerling1' (independent Rayleigh amplitude per frame, "
                                            "mean power s^2)", choices=("constant", "swerling1"))
         hit_tolerance_cells: int = param(1, "a backtracked cell is a hit within this Chebyshev "
-                                            "distance of the true cell (cells)", ge=0)
-        frame_period_s: float = param(1.0, "frame period T (s)", gt=0.0)
-        cell_m: float = param(100.0, "cell size (m)", gt=0.0)
+                                            "distance of the true cell (cells)", ge=0, le=5000,
+                                         why="0 is the exact cell; at most the grid side")
+        frame_period_s: float = param(1.0, "frame period T (s)", ge=1e-3, le=100.0,
+                                      why="1 ms to 100 s between frames: the target (141 m/s) moves "
+                                          "from 0.14 m to 14 km a frame")
+        cell_m: float = param(100.0, "cell size (m)", ge=1.0, le=1e5,
+                              why="1 m to 100 km: the track spans between 1 and 1e-3 of the paper's "
+                                  "cells (the grid must hold it, checked)")
         turn_rate_rad_s: float = param(0.35, "clockwise turn rate on the transitions into frames "
-                                             "11-15 (rad/s); 0: straight line", ge=0.0, le=3.0)
+                                             "11-15 (rad/s); 0: straight line", ge=0.0, le=3.0,
+                                       why="0 is a straight line; 3 rad/s nearly half a turn a frame")
 
         def validate(self) -> None:
             why = ar_coefficients_problem(self.ar_coefficients)
             if why is not None:
                 raise ConfigError("ar_coefficients", why)
+            if self.noise == "ar" and self.frames <= len(self.ar_coefficients):
+                raise ConfigError("frames", f"AR({len(self.ar_coefficients)}) noise needs more frames than "
+                                  f"its order (its autocovariance to lag {len(self.ar_coefficients)} sets the "
+                                  f"noise power), got frames = {self.frames}")
             need = scene_geometry(self)[1]["cells_needed"]
             if need > self.cells:
                 raise ConfigError("cells", f"the true track over {self.frames} frames spans "

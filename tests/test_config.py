@@ -57,7 +57,7 @@ def test_defaults_are_filled_and_plan_round_trips_as_a_sweep():
     (sweep(scenario="nowhere"), "scenario: unknown scenario 'nowhere'"),
     (sweep(colour="blue"), "colour: unknown key"),
     (sweep(name="../../x"), "name: expected letters"),
-    (sweep(calibration={"pfa": 0.7}), "calibration.pfa: expected a number in (0, 0.5)"),
+    (sweep(calibration={"pfa": 0.7}), "calibration.pfa: expected a number in [1e-300, 0.5)"),
     (sweep(calibration={"mode": "gumbel"}), "calibration.mode: 'gumbel'"),
     (sweep(scenario_params={"turn_steps": 500}), "scenario_params"),
     (sweep(methods=[{"name": "innovation", "params": {"window": []}}]), "methods[0].params.window: empty list"),
