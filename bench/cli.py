@@ -277,11 +277,12 @@ def cmd_view(args) -> int:
 
 
 def cmd_perf(args) -> int:
-    from bench.perf import prepare_out, run_perf
+    from bench.perf import check_sizes, prepare_out, run_perf
     known = set(registry.methods())
     for name in args.methods or []:
         if name not in known:
             raise ConfigError("--methods", f"unknown method {name!r} (known: {', '.join(sorted(known))})")
+    check_sizes(args.methods, args.sizes)  # every bad argument is refused before the folder is touched
     prepare_out(Path(args.out))            # a file, a read-only folder: refused before hours of measuring
     report = run_perf(Path(args.out), methods=args.methods, sizes=args.sizes, executors=args.executors,
                       workers=args.workers, progress=lambda line: print(line, file=sys.stderr))
