@@ -68,6 +68,15 @@ def require(owner, field: str, ok: bool, expected: str) -> None:
                          f"expected {expected}, got {_describe(getattr(owner, field))}")
 
 
+def require_arrays(owner, shapes: dict[str, tuple]) -> None:
+    """:func:`require` that each named field of ``owner`` is a real-valued array of
+    its shape (None: any length)."""
+    for field, shape in shapes.items():
+        require(owner, field, has_shape(getattr(owner, field), shape, "fiu"),
+                "an array of shape (" + ", ".join("?" if s is None else str(s) for s in shape)
+                + (",)" if len(shape) == 1 else ")"))
+
+
 def _is_index(x) -> bool:
     return isinstance(x, (int, np.integer)) and not isinstance(x, bool) and x >= 0
 

@@ -17,5 +17,5 @@ harness (:mod:`bench`) free of domain maths. Modules:
 
 The models a scenario hands to methods are frozen dataclasses with typed,
 documented fields, validated when built (docs/architecture.md, 'Scenes').
-Models import neither :mod:`methods` nor :mod:`scenarios` (nor the harness).
+Models import neither :mod:`methods` nor :mod:`scenarios`; of the harness, only its public field checks (:mod:`bench.core`).
 """

@@ -48,7 +48,7 @@ import numpy as np
 import scipy.special
 import scipy.stats
 
-from models._fields import require, require_arrays
+from bench.core import require, require_arrays
 from models.spherical import MEASUREMENT_LABELS
 
 GLINT_MODELS = ("mixture", "additive")

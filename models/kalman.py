@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from models._fields import require, require_arrays
+from bench.core import require, require_arrays
 
 
 @dataclass(frozen=True, eq=False)
