@@ -34,7 +34,7 @@ recomputes them there,
 
 scanning the candidates in the original order with "strictly larger wins".
 That is the backpointer the original max + argmax pass stored
-(:mod:`methods._tbd_oracle`): the candidate values are the same float32
+(``tests/tbd_kernels_oracle.py``): the candidate values are the same float32
 sums of the same operands, J_(k-1) being the forward pass's own values, and
 a float32 maximum is exact, so the maxima do not depend on the order or the
 grouping in which the forward pass takes the candidates (which it changes

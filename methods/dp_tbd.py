@@ -139,7 +139,7 @@ class DpTbd(Method):
     track's cell from I_(k-1), with the first-maximum tie rule. Score, track
     and value map are those of the stacked-argmax reference
     (:mod:`methods._tbd_reference`) and of the original max + argmax kernel
-    (:mod:`methods._tbd_oracle`), bit for bit.
+    (``tests/tbd_kernels_oracle.py``), bit for bit.
     """
 
     name = "dp-tbd"
@@ -490,7 +490,7 @@ class DpTbdMf(Method):
     q = 2); the frames advance together row by row, and only the volumes
     J_k of frames 1, 5, 9, ... and K - 1 are kept (about 150 MB at
     500 x 500 x 20, q = 2, for one trial at a time). Results are those of
-    the original max + argmax kernels (:mod:`methods._tbd_oracle`) bit for
+    the original max + argmax kernels (``tests/tbd_kernels_oracle.py``) bit for
     bit. Default ``max_speed_m_s`` = 150 (q = 2) keeps the paper's true
     cell path admissible (see :class:`DpTbd`).
     """

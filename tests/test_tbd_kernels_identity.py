@@ -1,4 +1,4 @@
-"""The DP-TBD kernels against their frozen predecessors (methods._tbd_oracle): bit for bit.
+"""The DP-TBD kernels against their frozen predecessors (tests/tbd_kernels_oracle.py): bit for bit.
 
 The kernels of :mod:`methods._tbd_kernels` and :mod:`methods._tbd_alongtrack`
 compute the maxima only, factorise the maximum over d' by heading classes,
@@ -17,7 +17,7 @@ import pytest
 
 import methods._tbd_alongtrack as alongtrack
 import methods._tbd_kernels as kernels
-import methods._tbd_oracle as oracle
+import tbd_kernels_oracle as oracle   # beside this file: the previous kernels, frozen
 from bench.core import Batch
 from bench.params import build_params
 from bench.rng import TrialRNG
