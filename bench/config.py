@@ -29,14 +29,13 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
 import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
-from bench import registry
+from bench import feasibility, registry
 from bench.errors import ConfigError
 from bench.params import as_float, build_params, field_types, is_tuple_field, params_as_dict, show
 from bench.rng import stable_key
@@ -64,15 +63,11 @@ MAX_UNIT_TIMEOUT_S = 7 * 24 * 3600.0
 #: the survival-function inverse, Sidak shares pfa / k down to k = 8 levels) is finite at it,
 #: where a share of a smaller pfa could underflow to 0 (an infinite threshold)
 MIN_PFA = 1e-300
+#: bounds of ``max_unit_memory_gb`` (GB = 2^30 bytes): a megabyte at least, a petabyte at most
+MIN_UNIT_MEMORY_GB, MAX_UNIT_MEMORY_GB = 0.001, 1e6
 #: significant digits of an SNR level in a unit's key (:func:`snr_key`): levels that
 #: agree to this many digits are one level, and a sweep listing two of them is refused
 SNR_KEY_DIGITS = 9
-#: the default ``max_unit_memory_gb`` is this fraction of the machine's memory
-#: (:func:`machine_memory_bytes`); N workers hold up to N units at once
-UNIT_MEMORY_FRACTION = 0.5
-#: bounds of ``max_unit_memory_gb`` (GB = 2^30 bytes): a megabyte at least, a petabyte at most
-MIN_UNIT_MEMORY_GB, MAX_UNIT_MEMORY_GB = 0.001, 1e6
-GIB = 2 ** 30
 
 
 def snr_key(snr_db: float | None) -> str:
@@ -81,29 +76,6 @@ def snr_key(snr_db: float | None) -> str:
     equal, which the sweep's duplicate check uses (:func:`_parse_snr`) and
     :attr:`bench.runner.Unit.key` must use too."""
     return "null" if snr_db is None else f"{snr_db:+.{SNR_KEY_DIGITS}g}"
-
-
-def machine_memory_bytes() -> int:
-    """Physical memory of the machine (or the container's cgroup limit, if lower);
-    8 GiB when neither can be read."""
-    total = None
-    try:
-        total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (AttributeError, OSError, ValueError):
-        pass
-    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
-        try:
-            text = Path(path).read_text(encoding="ascii").strip()
-        except (OSError, UnicodeDecodeError):
-            continue
-        if text.isdigit() and 0 < int(text) < (total or math.inf):
-            total = int(text)
-    return int(total) if total and total > 0 else 8 * GIB
-
-
-def default_unit_memory_gb() -> float:
-    """The default ``max_unit_memory_gb``: :data:`UNIT_MEMORY_FRACTION` of the machine's memory."""
-    return UNIT_MEMORY_FRACTION * machine_memory_bytes() / GIB
 
 
 @dataclass(frozen=True)
@@ -584,9 +556,9 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     idle = [s.label for s in scenarios if not plan.pairs(s)]
     if idle:
         raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0]!r}")
-    _check_snr_levels(plan, scenario_fields)
-    _check_pairs(plan, method_fields)
-    _check_unit_memory(plan, scenario_fields)
+    feasibility.check_snr_levels(plan, scenario_fields)
+    feasibility.check_pairs(plan, method_fields)
+    feasibility.check_unit_memory(plan, scenario_fields)
     if plan.trial_runs > LARGE_SWEEP_TRIAL_RUNS and not allow_large:
         raise ConfigError("trials", f"the sweep asks for {plan.trial_runs:,} trial-runs "
                                     f"(trials x SNR levels x configs); pass --yes to run it anyway")
@@ -605,72 +577,6 @@ def _parse_unit_timeout(value: Any) -> float:
             or not 0 < value <= MAX_UNIT_TIMEOUT_S:
         raise ConfigError("unit_timeout_s", f"expected seconds in (0, {MAX_UNIT_TIMEOUT_S:g}], got {value!r}"[:200])
     return float(value)
-
-
-def _check_snr_levels(plan: Plan, scenario_fields: tuple[str, ...]) -> None:
-    """Every SNR level of every scenario config, by the scenario's
-    :meth:`~bench.core.Scenario.check_snr` (e.g. noise scaled below what its
-    trackers resolve in float64)."""
-    for s, field in zip(plan.scenarios, scenario_fields):
-        scenario = registry.get_scenario(s.name)()
-        where = field.replace(".params", ".snr_db") if field != "scenario_params" else "snr_db"
-        for snr in s.snr_db:
-            problem = scenario.check_snr(s.params, snr)
-            if problem:
-                raise ConfigError(where, f"{snr:g} dB on scenario config {s.label!r}: {problem}"[:400])
-
-
-def _check_pairs(plan: Plan, method_fields: tuple[str, ...]) -> None:
-    """Every (method config, scenario config) pair that will run, checked by the
-    method's :meth:`~bench.core.Method.check_scenario` after grid expansion: a
-    constraint across the two (a window longer than the scene) fails here, in
-    one line naming both configs, rather than on every unit."""
-    for m, field, task in zip(plan.methods, method_fields, plan.method_tasks):
-        method = registry.get_method(m.name)()
-        for s in plan.scenarios:
-            if task in s.tasks:
-                problem = method.check_scenario(m.params, s.params)
-                if problem:
-                    raise ConfigError(f"{field}.params", f"{m.label!r} cannot run on scenario config "
-                                                         f"{s.label!r}: {problem}"[:400])
-
-
-def unit_memory_bytes(plan: Plan, scenario: ScenarioConfig, n: int, calibration: bool) -> tuple[int, str]:
-    """Estimated peak bytes of a unit of ``n`` trials of ``scenario`` (its batch, plus the
-    largest working memory of the method configs that run on it, which run one after
-    the other), and the label of that method config ("" if none declares any)."""
-    batch = registry.get_scenario(scenario.name)().unit_memory_bytes(scenario.params, n) or 0
-    worst, label = 0, ""
-    for m in plan.pairs(scenario):
-        if calibration and not registry.get_task(registry.get_method(m.name).task).calibrated:
-            continue
-        need = registry.get_method(m.name)().unit_memory_bytes(m.params, scenario.params, n) or 0
-        if need > worst:
-            worst, label = need, m.label
-    return int(batch) + int(worst), label
-
-
-def _check_unit_memory(plan: Plan, scenario_fields: tuple[str, ...]) -> None:
-    """Refuse a sweep whose units would need more memory than ``max_unit_memory_gb``
-    (default: :func:`default_unit_memory_gb`), estimated from the array sizes
-    before anything is allocated."""
-    limit_gb = plan.max_unit_memory_gb if plan.max_unit_memory_gb is not None else default_unit_memory_gb()
-    limit = limit_gb * GIB
-    for s, field in zip(plan.scenarios, scenario_fields):
-        calibrated = any(registry.get_task(registry.get_method(m.name).task).calibrated for m in plan.pairs(s))
-        units = [(min(plan.chunk, s.trials), False)] + \
-            ([(min(plan.chunk, plan.calibration.h0_trials), True)] if calibrated else [])
-        for n, calibration in units:
-            need, method = unit_memory_bytes(plan, s, n, calibration)
-            if need > limit:
-                one, _ = unit_memory_bytes(plan, s, 1, calibration)
-                with_method = f" with {method!r}" if method else ""
-                set_by = "the sweep's" if plan.max_unit_memory_gb is not None else \
-                    f"the default ({UNIT_MEMORY_FRACTION:g} of this machine's memory)"
-                raise ConfigError(field, f"a unit of {n} trials of {s.label!r}{with_method} needs about "
-                                         f"{need / GIB:.3g} GB ({one / GIB:.3g} GB per trial), above "
-                                         f"max_unit_memory_gb = {limit_gb:.3g}, {set_by}; make the scene "
-                                         f"smaller, lower 'chunk', or raise max_unit_memory_gb"[:400])
 
 
 def _calibration_trial_runs(plan: Plan) -> int:

@@ -21,9 +21,9 @@ so the cost per frame is that of the maximum over d' of a (D, H, W) volume
 plus a weight table, (2q + 1)^4 additions and maxima per cell, fewer with
 the heading classes: M_k(y, d) = CM_u(y) for every d of heading class u,
 CM_u = max_(u') [max_(m in u') G_k(y, m) + L[u', u]] over *all* classes u'
-(no d' is special here; :func:`methods._tbd_kernels._heading_classes`).
+(no d' is special here; :func:`methods._tbd_mf_kernels._heading_classes`).
 
-Evaluation as in :func:`methods._tbd_kernels._dp_tbd_mf`: max-only, a row
+Evaluation as in :func:`methods._tbd_mf_kernels._dp_tbd_mf`: max-only, a row
 wavefront over the frames with rings of the last 2q + 1 rows, checkpoint
 volumes of frames 1, 5, 9, ... and K - 1, and backtracking that recomputes
 psi_k(x, d) = the first maximising d' (:func:`_predecessor`) from the column
@@ -41,11 +41,13 @@ import numpy as np
 from methods._tbd_kernels import (
     NEG_INF,
     _check_finite,
-    _checkpoint_slots,
-    _common_maxima,
     _fill,
     _first_argmax_2d,
     _fmax,
+)
+from methods._tbd_mf_kernels import (
+    _checkpoint_slots,
+    _common_maxima,
     _heading_classes,
     _mf_start,
 )
@@ -182,7 +184,7 @@ def _column(store, slot, j, yr, yc, zt, a2, a2b1, a2b2, b2, lp, q):  # pragma: n
     """J_j(y, :) (D,) at y = (yr, yc): stored, or recomputed from the last
     checkpoint c < j on the cone of cells it depends on (box radius
     q (j - i) at frame i) with the forward pass's float32 operations; see
-    :func:`methods._tbd_kernels._mf_column`."""
+    :func:`methods._tbd_mf_kernels._mf_column`."""
     D = lp.shape[0]
     H, _, W = store.shape[1:]
     if slot[j] >= 0:
@@ -222,7 +224,7 @@ def _column(store, slot, j, yr, yc, zt, a2, a2b1, a2b2, b2, lp, q):  # pragma: n
 @numba.njit(cache=True)
 def _backtrack(store, slot, zt, a2, a2b1, a2b2, b2, lp, q, vt, track_t):  # pragma: no cover - compiled
     """Score, value map and track of one trial from the stored volumes, as
-    :func:`methods._tbd_kernels._mf_backtrack`, with psi_k from G_k. Returns
+    :func:`methods._tbd_mf_kernels._mf_backtrack`, with psi_k from G_k. Returns
     the score."""
     K = track_t.shape[0]
     H, _, W = store.shape[1:]
@@ -307,7 +309,7 @@ def _dp_tbd_mf_along_track(z, q, lp, lp_first, rho1, beta1, beta2, a0, b0, a1, b
 def dp_tbd_mf_along_track(z, q, lp, lp_first, rho1, beta1, beta2, a0, b0, a1, b1, a2, b2,
                           score, track, value):
     """:func:`_dp_tbd_mf_along_track` with its working memory allocated by
-    NumPy (see :func:`methods._tbd_kernels.dp_tbd_mf`)."""
+    NumPy (see :func:`methods._tbd_mf_kernels.dp_tbd_mf`)."""
     _, K, H, W = z.shape
     D = lp.shape[0]
     S = 2 * q + 1

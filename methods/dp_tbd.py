@@ -11,7 +11,7 @@
 
 Both run on ``tbd-grid`` batches (frames ``z`` (n, K, H, W)) with the grid,
 the frame period and the noise statistics from ``batch.scene``; the compiled
-recursions are in :mod:`methods._tbd_kernels`. Scores are scene statistics:
+recursions are in :mod:`methods._tbd_kernels` and :mod:`methods._tbd_mf_kernels`. Scores are scene statistics:
 there is no analytic threshold for the maximum over a scene, so
 ``nominal_threshold`` is NaN and the harness calibrates on null scenes
 (``empirical`` or ``gumbel``).
@@ -28,7 +28,7 @@ import scipy.special
 from bench.core import TBD, Batch, Method, TBDOutput
 from bench.params import param
 from bench.registry import register_method
-from methods import _tbd_alongtrack, _tbd_kernels
+from methods import _tbd_alongtrack, _tbd_kernels, _tbd_mf_kernels
 from methods._tbd_reference import reference_dp_tbd
 from models.ar_noise import ar_autocovariance, ar_innovation_std, stationary_predictors
 
@@ -482,7 +482,7 @@ class DpTbdMf(Method):
     ratio (rho(1)), frame 0 the 1-D density.
 
     **Cost.** (2q + 1)^4 transitions per cell and frame (625 at q = 2).
-    The kernels (:func:`methods._tbd_kernels.dp_tbd_mf`,
+    The kernels (:func:`methods._tbd_mf_kernels.dp_tbd_mf`,
     :func:`methods._tbd_alongtrack.dp_tbd_mf_along_track`) compute maxima
     only and recompute psi_k on the track; the turn weight depends on d' and
     d only through their headings, which factorises the maximum over d'
@@ -543,7 +543,7 @@ class DpTbdMf(Method):
                 z, q, lp, np.float32(LOG_UNIFORM_ANGLE), np.float32(llr.beta_first), np.float32(llr.beta1),
                 np.float32(llr.beta2), a0, b0, a1, b1, a2, b2, score, track, value)
             return TBDOutput(score=score, track=track, value=value)
-        _tbd_kernels.dp_tbd_mf(z, q, lp, np.float32(LOG_UNIFORM_ANGLE),
+        _tbd_mf_kernels.dp_tbd_mf(z, q, lp, np.float32(LOG_UNIFORM_ANGLE),
                                np.float32(llr.beta_first), np.array([llr.beta1, llr.beta2], np.float32),
                                coef0, const0, coef1, const1, coef2, const2, score, track, value)
         return TBDOutput(score=score, track=track, value=value)

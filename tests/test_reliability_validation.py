@@ -25,16 +25,9 @@ import pytest
 
 from bench import registry, tomlw
 from bench.cli import main
-from bench.config import (
-    MIN_PFA,
-    SNR_KEY_DIGITS,
-    default_unit_memory_gb,
-    parse_sweep,
-    parse_sweep_text,
-    snr_key,
-    unit_memory_bytes,
-)
+from bench.config import MIN_PFA, SNR_KEY_DIGITS, parse_sweep, parse_sweep_text, snr_key
 from bench.errors import ConfigError
+from bench.feasibility import default_unit_memory_gb, unit_memory_bytes
 from bench.params import build_params, field_types
 from bench.rng import TrialRNG
 

@@ -1,6 +1,6 @@
 """The DP-TBD kernels against their frozen predecessors (tests/tbd_kernels_oracle.py): bit for bit.
 
-The kernels of :mod:`methods._tbd_kernels` and :mod:`methods._tbd_alongtrack`
+The kernels of :mod:`methods._tbd_kernels`, :mod:`methods._tbd_mf_kernels` and :mod:`methods._tbd_alongtrack`
 compute the maxima only, factorise the maximum over d' by heading classes,
 run as a row wavefront with checkpoints and recompute the backpointers on the
 track. None of that may change a result: score, track and value map must be
@@ -17,6 +17,7 @@ import pytest
 
 import methods._tbd_alongtrack as alongtrack
 import methods._tbd_kernels as kernels
+import methods._tbd_mf_kernels as mf_kernels
 import tbd_kernels_oracle as oracle   # beside this file: the previous kernels, frozen
 from bench.core import Batch
 from bench.params import build_params
@@ -41,6 +42,7 @@ def run_both(monkeypatch, cls, batch, params):
     new = cls().run(batch, params)
     with monkeypatch.context() as m:
         m.setattr(dp_tbd, "_tbd_kernels", oracle)
+        m.setattr(dp_tbd, "_tbd_mf_kernels", oracle)
         m.setattr(dp_tbd, "_tbd_alongtrack", oracle)
         old = cls().run(batch, params)
     return new, old
@@ -152,14 +154,14 @@ def test_kernels_with_any_turn_weights(q, structured):
     structure; otherwise each displacement is its own class, and the result
     is still the original kernel's."""
     rng = np.random.default_rng(q + 10 * structured)
-    classes = kernels._heading_classes(mf_arguments(rng, q, structured)[0], q)[4].shape[0]
+    classes = mf_kernels._heading_classes(mf_arguments(rng, q, structured)[0], q)[4].shape[0]
     assert (classes < (2 * q + 1) ** 2) == (structured and q > 1)     # q = 1: nine headings
     for shape in [(2, 9, 11, 12), (1, 3, 4, 5)]:
         z = random_frames(rng, *shape, ties=not structured)
         n, K, H, W = shape
         args = mf_arguments(rng, q, structured)
         outs = []
-        for module in (kernels, oracle):
+        for module in (mf_kernels, oracle):
             score, track, value = np.empty(n), np.empty((n, K, 2), np.int64), np.empty((n, H, W), np.float32)
             module.dp_tbd_mf(z, q, *args, score, track, value)
             outs.append((score, track, value))
@@ -179,7 +181,7 @@ def test_kernels_with_any_turn_weights(q, structured):
 def test_heading_classes_of_the_default_window():
     """q = 2: 16 headings (8 with two members, 8 knight moves) and d = 0."""
     lp = dp_tbd.transition_log_weights(2, "von-mises", 5.0).astype(np.float32)
-    cls, members, nmem, neg, L, cand = kernels._heading_classes(lp, 2)
+    cls, members, nmem, neg, L, cand = mf_kernels._heading_classes(lp, 2)
     assert L.shape == (17, 17) and cand.shape == (17, 16)
     assert sorted(nmem) == [1] * 9 + [2] * 8
     disp = dp_tbd.displacements(2)
@@ -208,7 +210,7 @@ def test_signed_zeros():
             # coef = 1, const = 0 for every Lambda plane: the merits are sums of +-0
             mf = (lp, np.float32(0), np.float32(0), zero[:2], one[:1], zero[:1], one[:2], zero[:2], one, zero)
             at = (lp,) + tuple(np.float32(x) for x in (0, 0, 0, 0, 1, 0, 1, 0, 1, 0))
-            calls = [(kernels.dp_tbd, oracle.dp_tbd, ()), (kernels.dp_tbd_mf, oracle.dp_tbd_mf, mf),
+            calls = [(kernels.dp_tbd, oracle.dp_tbd, ()), (mf_kernels.dp_tbd_mf, oracle.dp_tbd_mf, mf),
                      (alongtrack.dp_tbd_mf_along_track, oracle.dp_tbd_mf_along_track, at)]
             for new_fn, old_fn, args in calls:
                 outs = []

@@ -1,0 +1,119 @@
+"""Whether a valid sweep can run: the checks that need the plugins and the machine.
+
+After a sweep is parsed and its grids expanded (:mod:`bench.config`), every
+scenario config's SNR levels are checked by the scenario
+(:meth:`~bench.core.Scenario.check_snr`), every (method config, scenario
+config) pair that will run by the method
+(:meth:`~bench.core.Method.check_scenario`), and every unit's memory is
+estimated from the plugins' declared array sizes
+(``unit_memory_bytes``) against ``max_unit_memory_gb`` — so a sweep that
+would fail, hang or swap on every unit is refused in one line before anything
+is written (docs/architecture.md, 'Run folders and faults').
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from bench import registry
+from bench.errors import ConfigError
+
+if TYPE_CHECKING:
+    from bench.config import Plan, ScenarioConfig
+
+#: the default ``max_unit_memory_gb`` is this fraction of the machine's memory
+#: (:func:`machine_memory_bytes`); N workers hold up to N units at once
+UNIT_MEMORY_FRACTION = 0.5
+GIB = 2 ** 30
+
+
+def machine_memory_bytes() -> int:
+    """Physical memory of the machine (or the container's cgroup limit, if lower);
+    8 GiB when neither can be read."""
+    total = None
+    try:
+        total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, OSError, ValueError):
+        pass
+    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(path).read_text(encoding="ascii").strip()
+        except (OSError, UnicodeDecodeError):
+            continue
+        if text.isdigit() and 0 < int(text) < (total or math.inf):
+            total = int(text)
+    return int(total) if total and total > 0 else 8 * GIB
+
+
+def default_unit_memory_gb() -> float:
+    """The default ``max_unit_memory_gb``: :data:`UNIT_MEMORY_FRACTION` of the machine's memory."""
+    return UNIT_MEMORY_FRACTION * machine_memory_bytes() / GIB
+
+
+def check_snr_levels(plan: Plan, scenario_fields: tuple[str, ...]) -> None:
+    """Every SNR level of every scenario config, by the scenario's
+    :meth:`~bench.core.Scenario.check_snr` (e.g. noise scaled below what its
+    trackers resolve in float64)."""
+    for s, field in zip(plan.scenarios, scenario_fields):
+        scenario = registry.get_scenario(s.name)()
+        where = field.replace(".params", ".snr_db") if field != "scenario_params" else "snr_db"
+        for snr in s.snr_db:
+            problem = scenario.check_snr(s.params, snr)
+            if problem:
+                raise ConfigError(where, f"{snr:g} dB on scenario config {s.label!r}: {problem}"[:400])
+
+
+def check_pairs(plan: Plan, method_fields: tuple[str, ...]) -> None:
+    """Every (method config, scenario config) pair that will run, checked by the
+    method's :meth:`~bench.core.Method.check_scenario` after grid expansion: a
+    constraint across the two (a window longer than the scene) fails here, in
+    one line naming both configs, rather than on every unit."""
+    for m, field, task in zip(plan.methods, method_fields, plan.method_tasks):
+        method = registry.get_method(m.name)()
+        for s in plan.scenarios:
+            if task in s.tasks:
+                problem = method.check_scenario(m.params, s.params)
+                if problem:
+                    raise ConfigError(f"{field}.params", f"{m.label!r} cannot run on scenario config "
+                                                         f"{s.label!r}: {problem}"[:400])
+
+
+def unit_memory_bytes(plan: Plan, scenario: ScenarioConfig, n: int, calibration: bool) -> tuple[int, str]:
+    """Estimated peak bytes of a unit of ``n`` trials of ``scenario`` (its batch, plus the
+    largest working memory of the method configs that run on it, which run one after
+    the other), and the label of that method config ("" if none declares any)."""
+    batch = registry.get_scenario(scenario.name)().unit_memory_bytes(scenario.params, n) or 0
+    worst, label = 0, ""
+    for m in plan.pairs(scenario):
+        if calibration and not registry.get_task(registry.get_method(m.name).task).calibrated:
+            continue
+        need = registry.get_method(m.name)().unit_memory_bytes(m.params, scenario.params, n) or 0
+        if need > worst:
+            worst, label = need, m.label
+    return int(batch) + int(worst), label
+
+
+def check_unit_memory(plan: Plan, scenario_fields: tuple[str, ...]) -> None:
+    """Refuse a sweep whose units would need more memory than ``max_unit_memory_gb``
+    (default: :func:`default_unit_memory_gb`), estimated from the array sizes
+    before anything is allocated."""
+    limit_gb = plan.max_unit_memory_gb if plan.max_unit_memory_gb is not None else default_unit_memory_gb()
+    limit = limit_gb * GIB
+    for s, field in zip(plan.scenarios, scenario_fields):
+        calibrated = any(registry.get_task(registry.get_method(m.name).task).calibrated for m in plan.pairs(s))
+        units = [(min(plan.chunk, s.trials), False)] + \
+            ([(min(plan.chunk, plan.calibration.h0_trials), True)] if calibrated else [])
+        for n, calibration in units:
+            need, method = unit_memory_bytes(plan, s, n, calibration)
+            if need > limit:
+                one, _ = unit_memory_bytes(plan, s, 1, calibration)
+                with_method = f" with {method!r}" if method else ""
+                set_by = "the sweep's" if plan.max_unit_memory_gb is not None else \
+                    f"the default ({UNIT_MEMORY_FRACTION:g} of this machine's memory)"
+                raise ConfigError(field, f"a unit of {n} trials of {s.label!r}{with_method} needs about "
+                                         f"{need / GIB:.3g} GB ({one / GIB:.3g} GB per trial), above "
+                                         f"max_unit_memory_gb = {limit_gb:.3g}, {set_by}; make the scene "
+                                         f"smaller, lower 'chunk', or raise max_unit_memory_gb"[:400])
