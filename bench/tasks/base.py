@@ -142,6 +142,11 @@ class Task:
     summary_columns: ClassVar[tuple[str, ...]] = ()
     #: the few of them worth a glance (the recording's summary table)
     headline_columns: ClassVar[tuple[str, ...]] = ()
+    #: the per-trial column of trials.csv that ranks the task's methods (at a glance,
+    #: paired comparisons, ``bench compare``): a 0/1 indicator (a detection) or an error
+    ranking_metric: ClassVar[str] = ""
+    #: whether a larger ``ranking_metric`` is better (detection) or worse (an error)
+    ranking_higher_is_better: ClassVar[bool] = True
     #: children of a trial root / of a method entity the task logs (reserved names)
     scene_entities: ClassVar[tuple[str, ...]] = ()
     method_entities: ClassVar[tuple[str, ...]] = ()
