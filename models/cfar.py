@@ -1,0 +1,460 @@
+"""CFAR detector maths on range-Doppler power maps: reference windows, the
+CA and OS noise estimates over a whole batch of maps, their closed-form
+false-alarm probabilities, and the nominal significance every CFAR method
+of the ``cell-detection`` task reports (docs/architecture.md, 'Models').
+
+The detectors are the three of the HFSWR detection chain ("目标检测与跟踪方法
+-海洋遥感技术应用", sec. 1 "CFAR检测", in the shared papers as
+hfswr-cfar-mn-jpda-ukf): CFAR "done along range and along Doppler
+separately, then the two results combined, with the result of a peak
+detection" (地波雷达的CFAR检测处理通常在距离向和多普勒向分别进行 ... 再综合距离向、
+多普勒向检测结果,结合峰值检测的结果). Per dimension a cell under test x_D is
+compared with U0 = K mu:
+
+* CA: "mu = the mean of the N reference cells around the cell under test,
+  U0 = K mu" (对被检测单元周围N个参考单元求均值,其结果便为噪声估计μ,检测门限U0=Kμ);
+* OS: "the N (N = 2L) reference cells, L on each side of x_D, are sorted and
+  the k-th smallest x_k is the noise estimate mu; U0 = K mu"
+  (将参考单元中N(N=2L)个信号的值排序,取出其中第k个最小值xk,xk即为噪声估计值μ).
+
+The CA text says the register holds N = 2L + 1 cells and averages "the N
+reference cells"; the register of 2L + 1 includes the cell under test, so
+both detectors here use N = 2L reference cells, L per side, as the OS text
+prints. The document prints no guard cells: ``guard`` cells per side
+between the cell under test and its reference cells are our parameter
+(guard = 0 is the printed structure).
+
+**Windows and map edges.** Along an axis of M cells, the cell i has its
+reference cells at i - g - L .. i - g - 1 and i + g + 1 .. i + g + L; those
+outside the map are dropped (one-sided windows at the edges), so the cell's
+N' = N_left + N_right <= 2L, and its closed form uses that N'. OS keeps its
+quantile at the edges: k' = ceil(k N' / N) (:func:`edge_rank`).
+
+**Nominal significance.** For square-law detected (exponential) noise of
+any level, the false-alarm probability of "x > K mu" is (Rohling's closed
+forms, as issue 13 quotes them)
+
+    CA:  Pfa(K) = (1 + K/N)^(-N)
+    OS:  Pfa(K) = prod_{i=0}^{k-1} (N - i) / (N - i + K),
+
+and each method reports, per cell, S = -log10 Pfa(t) at the observed ratio
+t = x / mu (:func:`ca_significance`, :func:`os_significance`): a monotone
+transform of t, so "S > -log10(pfa)" is exactly "t > K(pfa)" and one
+threshold serves every detector, window and dimension. S is capped at
+:data:`MAX_SIGNIFICANCE` (Pfa = 1e-300, the smallest the calibration takes).
+
+All kernels take a batch of maps with a leading trial axis and run along
+axis 1 of a (P, A, B) array: the range axis of (n, R, D) maps directly, the
+Doppler axis as (n R, D, 1). Single-threaded and free of shared state
+(parallelism comes from the harness's worker processes).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import scipy.ndimage
+import scipy.optimize
+
+#: the cap of the significance -log10 Pfa: Pfa = 1e-300, the smallest the calibration accepts
+MAX_SIGNIFICANCE = 300.0
+_LOG10 = math.log(10.0)
+
+
+# ------------------------------------------------------------------ windows
+
+def window_counts(M: int, L: int, g: int) -> tuple[np.ndarray, np.ndarray]:
+    """(N_left, N_right) per cell of an axis of M cells: reference cells
+    i - g - L .. i - g - 1 and i + g + 1 .. i + g + L inside 0 .. M - 1."""
+    i = np.arange(M)
+    left = np.clip(i - g, 0, L)
+    right = np.clip(M - 1 - i - g, 0, L)
+    return left, right
+
+
+def reference_counts(M: int, L: int, g: int) -> np.ndarray:
+    """N' per cell: the reference cells inside the map (:func:`window_counts`)."""
+    left, right = window_counts(M, L, g)
+    return left + right
+
+
+def edge_rank(k: int, n_full: int, n_cells: np.ndarray | int) -> np.ndarray | int:
+    """k' = ceil(k N' / N): the OS rank of a cell with N' of the N reference
+    cells (the same quantile of its window; k' = k where the window is whole)."""
+    return (k * n_cells + n_full - 1) // n_full
+
+
+def axis_problem(M: int, L: int, g: int, axis_name: str) -> str | None:
+    """Why a window of L reference and g guard cells per side cannot run on an
+    axis of M cells (its middle cell would have no reference cell), or None."""
+    if reference_counts(M, L, g).min() < 1:
+        return (f"{axis_name}: {g} guard cells per side leave no reference cell for some of the "
+                f"{M} cells (the axis needs at least {2 * g + 2} cells)")
+    return None
+
+
+# ------------------------------------------------------------------ closed forms
+
+def ca_pfa(K, N):
+    """CA-CFAR: Pfa = (1 + K/N)^(-N) for N exponential reference cells."""
+    return (1.0 + np.asarray(K, dtype=float) / N) ** (-np.asarray(N, dtype=float))
+
+
+def os_pfa(K, N: int, k: int):
+    """OS-CFAR: Pfa = prod_{i=0}^{k-1} (N - i) / (N - i + K)."""
+    K = np.asarray(K, dtype=float)
+    i = np.arange(k).reshape((k,) + (1,) * K.ndim)
+    return np.prod((N - i) / (N - i + K), axis=0)
+
+
+def ca_threshold_factor(pfa: float, N: int) -> float:
+    """K of CA-CFAR for ``pfa``: K = N (pfa^(-1/N) - 1), the inverse of :func:`ca_pfa`
+    (by expm1, exact down to the smallest pfa)."""
+    return float(N * math.expm1(-math.log(pfa) / N))
+
+
+def os_threshold_factor(pfa: float, N: int, k: int) -> float:
+    """K of OS-CFAR for ``pfa``: the root of sum_i log(1 + K/(N - i)) = -log(pfa)
+    (:func:`os_pfa`), solved for log K between the bounds the smallest and the
+    largest of the k terms give: (N - k + 1) expm1(-log(pfa)/k) <= K <= N expm1(-log(pfa))."""
+    target = -math.log(pfa)
+    terms = N - np.arange(k, dtype=float)
+
+    def excess(log_K: float) -> float:
+        return float(np.log1p(math.exp(log_K) / terms).sum()) - target
+
+    lo = math.log((N - k + 1) * math.expm1(target / k))
+    hi = math.log(N * math.expm1(target))
+    if hi - lo < 1e-12:
+        return float(math.exp(hi))
+    return float(math.exp(scipy.optimize.brentq(excess, lo, hi, xtol=1e-13, rtol=1e-15, maxiter=500)))
+
+
+@numba.njit(cache=True, inline="always")
+def _ca_sig(t: float, N: int) -> float:
+    """-log10 of (1 + t/N)^(-N)."""
+    return N * math.log1p(t / N) / _LOG10
+
+
+@numba.njit(cache=True, inline="always")
+def _os_sig(t: float, N: int, k: int, log_den) -> float:
+    """-log10 of prod_{i<k} (N - i)/(N - i + t) = [sum_i log(N - i + t) - sum_i log(N - i)] / ln 10:
+    the numerator as a running product (folded into a log whenever it grows
+    large: one log per cell in practice), the denominator from the table
+    ``log_den[N, k]`` (:func:`_os_log_denominators`); no division in the loop."""
+    total = 0.0
+    prod = 1.0
+    for i in range(k):
+        prod *= N - i + t
+        if prod > 1e200:
+            total += math.log(prod)
+            prod = 1.0
+    return (total + math.log(prod) - log_den[N, k]) / _LOG10
+
+
+@numba.njit(cache=True)
+def _os_log_denominators(N: int):
+    """log_den[n, k] = sum_{i<k} log(n - i) for 0 <= k <= n <= N."""
+    log_den = np.zeros((N + 1, N + 1))
+    for n in range(1, N + 1):
+        for k in range(1, n + 1):
+            log_den[n, k] = log_den[n, k - 1] + math.log(n - k + 1)
+    return log_den
+
+
+@numba.njit(cache=True, inline="always")
+def _ratio(x: float, mu: float) -> float:
+    """t = x / mu; an empty estimate (mu = 0) makes any power infinitely significant."""
+    if mu > 0.0:
+        return x / mu
+    return math.inf if x > 0.0 else 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _capped(s: float) -> float:
+    return s if s < MAX_SIGNIFICANCE else MAX_SIGNIFICANCE
+
+
+def ca_significance(t, N):
+    """S = -log10 Pfa_CA(t) = N log10(1 + t/N), capped (NumPy form, any shapes)."""
+    N = np.asarray(N, dtype=float)
+    return np.minimum(N * np.log1p(np.asarray(t, dtype=float) / N) / _LOG10, MAX_SIGNIFICANCE)
+
+
+def os_significance(t, N, k):
+    """S = -log10 Pfa_OS(t) = sum_{i<k} log10(1 + t/(N - i)), capped (NumPy
+    form: N, k broadcast with t; the straightforward sum of k logs)."""
+    t = np.asarray(t, dtype=float)
+    N = np.broadcast_to(np.asarray(N, dtype=float), t.shape)
+    k = np.broadcast_to(np.asarray(k), t.shape)
+    total = np.zeros(t.shape)
+    for i in range(int(k.max())):
+        total += np.where(i < k, np.log1p(t / np.maximum(N - i, 1.0)), 0.0)
+    return np.minimum(total / _LOG10, MAX_SIGNIFICANCE)
+
+
+# ------------------------------------------------------------------ CA kernel
+
+@numba.njit(cache=True)
+def _ca_axis1(x, L, g, mu, sig):
+    """CA-CFAR along axis 1 of x (P, A, B) float32: running sums, O(1) per cell.
+
+    The prefix sums c[j] = sum_{a<j} x[a] (float64) give each window sum as
+    two differences: right = c[min(i+g+L+1, A)] - c[min(i+g+1, A)],
+    left = c[max(i-g, 0)] - c[max(i-g-L, 0)]; mu = (left + right) / N'.
+    """
+    P, A, B = x.shape
+    c = np.empty((A + 1, B))
+    for p in range(P):
+        c[0, :] = 0.0
+        for a in range(A):
+            for b in range(B):
+                c[a + 1, b] = c[a, b] + x[p, a, b]
+        for i in range(A):
+            hi, lo = min(i + g + L + 1, A), min(i + g + 1, A)
+            lhi, llo = max(i - g, 0), max(i - g - L, 0)
+            n_ref = (hi - lo) + (lhi - llo)
+            for b in range(B):
+                m = (c[hi, b] - c[lo, b] + c[lhi, b] - c[llo, b]) / n_ref
+                mu[p, i, b] = m
+                sig[p, i, b] = _capped(_ca_sig(_ratio(x[p, i, b], m), n_ref))
+
+
+def _as_lines(maps: np.ndarray, axis: str) -> np.ndarray:
+    """(n, R, D) maps as the (P, A, B) array whose axis 1 is ``axis``."""
+    n, R, D = maps.shape
+    return maps if axis == "range" else maps.reshape(n * R, D, 1)
+
+
+def ca_cfar(maps: np.ndarray, L: int, g: int, axis: str) -> tuple[np.ndarray, np.ndarray]:
+    """CA-CFAR along ``axis`` ("range" or "doppler") of maps (n, R, D):
+    (mu, S) both (n, R, D) float32, mu the mean of the N' reference cells,
+    S the capped significance -log10 Pfa_CA(x / mu; N')."""
+    maps = np.ascontiguousarray(maps, dtype=np.float32)
+    lines = _as_lines(maps, axis)
+    mu, sig = np.empty_like(lines), np.empty_like(lines)
+    _ca_axis1(lines, L, g, mu, sig)
+    return mu.reshape(maps.shape), sig.reshape(maps.shape)
+
+
+# ------------------------------------------------------------------ OS kernel
+
+@numba.njit(cache=True, inline="always")
+def _lower_bound(buf, n, v):
+    """The first position of the sorted buf[:n] whose value is not below v."""
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if buf[mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@numba.njit(cache=True, inline="always")
+def _insert(buf, n, v):
+    """Insert v into the sorted buf[:n] (binary search, then shift)."""
+    at = _lower_bound(buf, n, v)
+    for j in range(n, at, -1):
+        buf[j] = buf[j - 1]
+    buf[at] = v
+
+
+@numba.njit(cache=True, inline="always")
+def _remove(buf, n, v):
+    """Remove one copy of v from the sorted buf[:n] (it is there: the values
+    come from the same line)."""
+    for j in range(_lower_bound(buf, n, v), n - 1):
+        buf[j] = buf[j + 1]
+
+
+@numba.njit(cache=True)
+def _os_axis1(x, L, g, k, mu, sig):
+    """OS-CFAR along axis 1 of x (P, A, B) float32: the reference cells of
+    the cell under test kept sorted as the window slides (moving from cell i
+    to i + 1, the left half loses i - g - L and gains i - g, the right half
+    loses i + g + 1 and gains i + g + L + 1: two binary-search insertions and
+    two removals, O(N) moves at most), so the k'-th smallest, k' = ceil(k N' / 2L),
+    is read off in O(1)."""
+    P, A, B = x.shape
+    N = 2 * L
+    line = np.empty(A, dtype=np.float32)
+    buf = np.empty(N + 1, dtype=np.float32)
+    log_den = _os_log_denominators(N)
+    for p in range(P):
+        for b in range(B):
+            for a in range(A):
+                line[a] = x[p, a, b]
+            n_ref = 0                                   # window of cell 0: right half only
+            for a in range(min(g + 1, A), min(g + L + 1, A)):
+                _insert(buf, n_ref, line[a])
+                n_ref += 1
+            for i in range(A):
+                if i > 0:
+                    out_left, in_left = i - g - L - 1, i - g - 1
+                    out_right, in_right = i + g, i + g + L
+                    if out_left >= 0:
+                        _remove(buf, n_ref, line[out_left])
+                        n_ref -= 1
+                    if in_left >= 0:
+                        _insert(buf, n_ref, line[in_left])
+                        n_ref += 1
+                    if out_right < A:
+                        _remove(buf, n_ref, line[out_right])
+                        n_ref -= 1
+                    if in_right < A:
+                        _insert(buf, n_ref, line[in_right])
+                        n_ref += 1
+                kk = (k * n_ref + N - 1) // N
+                m = buf[kk - 1]
+                mu[p, i, b] = m
+                sig[p, i, b] = _capped(_os_sig(_ratio(line[i], m), n_ref, kk, log_den))
+
+
+def os_cfar(maps: np.ndarray, L: int, g: int, k: int, axis: str) -> tuple[np.ndarray, np.ndarray]:
+    """OS-CFAR along ``axis`` of maps (n, R, D): (mu, S) (n, R, D) float32, mu
+    the k'-th smallest reference cell, S = -log10 Pfa_OS(x / mu; N', k')."""
+    maps = np.ascontiguousarray(maps, dtype=np.float32)
+    lines = _as_lines(maps, axis)
+    mu, sig = np.empty_like(lines), np.empty_like(lines)
+    _os_axis1(lines, L, g, k, mu, sig)
+    return mu.reshape(maps.shape), sig.reshape(maps.shape)
+
+
+# ------------------------------------------------------------------ regression
+
+def legendre_basis(M: int, order: int) -> np.ndarray:
+    """(M, order + 1): Legendre polynomials P_0..P_order at M points evenly
+    spread over [-1, 1] (the polynomial family, well conditioned at high order)."""
+    return np.polynomial.legendre.legvander(np.linspace(-1.0, 1.0, M), order)
+
+
+def regression_fit(lines: np.ndarray, order: int, iterations: int,
+                   exclusion_factor: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares polynomial fit of each line's power spectrum (P, M),
+    the noise estimate of the adaptive regression CFAR: "curve regression
+    fitted to the power spectrum; the fit is the noise estimate"
+    (通过曲线回归分析对功率谱进行曲线拟合,拟合出的结果即为噪声估计).
+
+    Robust iterations (ours; the document prints none): after each fit the
+    cells above ``exclusion_factor`` times the fit are left out and the line
+    refitted, ``iterations`` times (a line keeps its previous cells if fewer
+    than 2 (order + 1) would remain). Returns the fit (P, M), the included
+    cells (P, M) bool and the leverage q_i = phi_i' G^-1 phi_i (P, M) of every
+    cell in the final fit, G = sum over included cells of phi phi' (for an
+    included cell q_i is the hat-matrix diagonal h_ii).
+    """
+    x = np.asarray(lines, dtype=np.float64)
+    Q = order + 1
+    phi = legendre_basis(x.shape[1], order)                            # (M, Q)
+    included = np.ones(x.shape, dtype=bool)
+    for it in range(iterations + 1):
+        weighted = phi.T[None, :, :] * included[:, None, :]             # (P, Q, M)
+        G_inv = np.linalg.inv(weighted @ phi)                           # (P, Q, Q)
+        coef = np.einsum("pqr,prm,pm->pq", G_inv, weighted, x)
+        fit = coef @ phi.T
+        if it == iterations:
+            break
+        keep = x <= exclusion_factor * fit
+        enough = keep.sum(axis=1) >= 2 * Q
+        included = np.where(enough[:, None], keep, included)
+    leverage = np.einsum("mq,pqr,mr->pm", phi, G_inv, phi)
+    return fit, included, leverage
+
+
+def regression_significance(x, fit, included, leverage):
+    """S = -log10 Pfa at t = x / fit under homogeneous exponential noise, by a
+    moment-matched gamma law of the rest of the fit (our derivation).
+
+    The fit at cell i is y_i = sum_j h_ij x_j with sum_j h_ij = 1 (the basis
+    holds the constant) and sum_j h_ij^2 = h_ii (H idempotent). For an
+    included cell, y_i = h_ii x_i + R with E R = sigma^2 (1 - h) and
+    Var R = sigma^4 (h - h^2); R taken as a gamma variable of those moments
+    (shape (1 - h)/h, scale h sigma^2), "x_i > t y_i" is x_i (1 - h t) > t R and
+
+        Pfa(t) = (1 - h t)^((1 - h)/h)     for t < 1/h, 0 beyond,
+
+    exact when the weights are equal (a CA window that includes the cell
+    under test: h = 1/(N + 1) gives (1 - t/(N + 1))^N). For an excluded cell
+    (robust iterations) the fit does not contain x_i: y_i has mean sigma^2 and
+    variance g sigma^4, g = phi_i' G^-1 phi_i, and the same gamma
+    approximation gives Pfa(t) = (1 + g t)^(-1/g) (CA's form with N = 1/g).
+    A non-positive fit (the curve failed there) makes any power significant
+    (the cap). All capped at MAX_SIGNIFICANCE.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    q = np.clip(leverage, 1e-12, 1.0 - 1e-9)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        t = np.where(fit > 0, x / np.where(fit > 0, fit, 1.0), np.inf)
+        inside = -((1.0 - q) / q) * np.log1p(-np.minimum(q * t, 1.0)) / _LOG10
+        outside = np.log1p(q * t) / (q * _LOG10)
+        s = np.where(included, inside, outside)
+    s = np.where(x > 0, s, 0.0)
+    return np.minimum(np.nan_to_num(s, nan=MAX_SIGNIFICANCE, posinf=MAX_SIGNIFICANCE), MAX_SIGNIFICANCE)
+
+
+def regression_threshold_factor(pfa: float, leverage: float) -> float:
+    """K of an included cell of leverage h: the inverse of (1 - h K)^((1 - h)/h),
+    K = (1 - pfa^(h / (1 - h))) / h (:func:`regression_significance`)."""
+    h = leverage
+    return float(-math.expm1(math.log(pfa) * h / (1.0 - h)) / h)
+
+
+def regression_cfar(maps: np.ndarray, order: int, iterations: int, exclusion_factor: float,
+                    axis: str) -> tuple[np.ndarray, np.ndarray]:
+    """Adaptive regression CFAR along ``axis`` of maps (n, R, D): the fitted
+    curve of each line (along Doppler: each range cell's power spectrum) and
+    the significance (:func:`regression_significance`), both (n, R, D) float32."""
+    maps = np.asarray(maps, dtype=np.float64)
+    lines = maps if axis == "doppler" else maps.transpose(0, 2, 1)
+    flat = lines.reshape(-1, lines.shape[-1])
+    fit, included, leverage = regression_fit(flat, order, iterations, exclusion_factor)
+    sig = regression_significance(flat, fit, included, leverage)
+    fit, sig = fit.reshape(lines.shape), sig.reshape(lines.shape)
+    if axis == "range":
+        fit, sig = fit.transpose(0, 2, 1), sig.transpose(0, 2, 1)
+    return np.ascontiguousarray(fit, dtype=np.float32), np.ascontiguousarray(sig, dtype=np.float32)
+
+
+# ------------------------------------------------------------------ combination and peaks
+
+def combine(per_axis: dict, dimension: str) -> tuple[np.ndarray, np.ndarray]:
+    """(significance, noise estimate) of the per-axis results ``{axis: (mu, S)}``
+    as one: "both" (a cell must pass along range and along Doppler: the
+    smaller significance; the larger noise estimate), "either" (the larger
+    significance; the smaller estimate), or the one dimension computed."""
+    if dimension in ("range", "doppler"):
+        mu, sig = per_axis[dimension]
+        return sig, mu
+    (mu_r, sig_r), (mu_d, sig_d) = per_axis["range"], per_axis["doppler"]
+    if dimension == "both":
+        return np.minimum(sig_r, sig_d), np.maximum(mu_r, mu_d)
+    return np.maximum(sig_r, sig_d), np.minimum(mu_r, mu_d)
+
+
+def with_peaks(maps: np.ndarray, sig: np.ndarray, half_range: int, half_doppler: int) -> np.ndarray:
+    """The statistic (n, R, D) float32: the significance where the cell is a
+    local maximum of the power (:func:`local_maxima`), 0 elsewhere."""
+    return np.where(local_maxima(maps, half_range, half_doppler), sig, 0.0).astype(np.float32)
+
+
+def fold(maps: np.ndarray, per_axis: dict, dimension: str, half_range: int,
+         half_doppler: int) -> tuple[np.ndarray, np.ndarray]:
+    """(statistic, noise estimate) (n, R, D) float32 of a CFAR method: its
+    dimensions combined (:func:`combine`), then the peak detection folded in."""
+    sig, mu = combine(per_axis, dimension)
+    return with_peaks(maps, sig, half_range, half_doppler), np.asarray(mu, dtype=np.float32)
+
+
+def local_maxima(maps: np.ndarray, half_range: int, half_doppler: int) -> np.ndarray:
+    """(n, R, D) bool: cells whose power is the largest of the box of
+    +-half_range range and +-half_doppler Doppler cells around them (the box
+    cut at the map's edges; ties keep every tied cell). All True when both
+    half-widths are 0 (no peak detection)."""
+    if half_range == 0 and half_doppler == 0:
+        return np.ones(maps.shape, dtype=bool)
+    box = scipy.ndimage.maximum_filter(maps, size=(1, 2 * half_range + 1, 2 * half_doppler + 1), mode="nearest")
+    return maps >= box
