@@ -189,12 +189,22 @@ def cell_calibration(order_stats: np.ndarray, scores: np.ndarray, used: float,
 def calibrate(scenario: str, method: str, null_values: np.ndarray, nominal: float,
               pfa: float, mode: str, null_peaks: np.ndarray | None = None,
               trial_lengths: np.ndarray | None = None, chance_pd: float = EQUAL_CHANCE_PD,
-              null_cells: np.ndarray | None = None) -> CalibrationResult:
+              null_cells: np.ndarray | None = None, per_cell: bool = False) -> CalibrationResult:
     """Choose the threshold; measure the nominal one's Pfa and, given the null
     trials' window peaks, the chance detection rate at the threshold used (and the
     window threshold whose chance Pd is ``chance_pd``); given the null trials'
     cell order statistics, the per-cell Pfa (:func:`cell_calibration`).
-    Measured Pfa intervals are counted over trials (:func:`exceedance_interval`)."""
+    Measured Pfa intervals are counted over trials (:func:`exceedance_interval`).
+
+    ``per_cell`` (tasks whose Pfa is per cell of a map, e.g. CFAR on
+    range-Doppler maps): the requested Pfa is per cell, so the *empirical*
+    threshold is the one whose pooled per-cell exceedance rate over the null
+    maps is ``pfa`` (:func:`cell_calibration` on ``null_cells``), and the
+    measured Pfa of the nominal and of the used threshold are per-cell rates
+    with intervals counted over maps; ``null_values`` (one value per map, its
+    peak) then only counts the maps."""
+    if per_cell and null_cells is not None and len(null_cells):
+        return _calibrate_per_cell(scenario, method, null_values, nominal, pfa, mode, null_peaks, null_cells)
     values = np.asarray(null_values, dtype=float)
     fit = (np.nan, np.nan)
     if mode == "empirical":
@@ -221,3 +231,26 @@ def calibrate(scenario: str, method: str, null_values: np.ndarray, nominal: floa
                              exceed, *measured, *chance, used_exceed, used_exceed / values.size,
                              *exceedance_interval(values, used, trial_lengths), *fit, window_threshold,
                              *per_cell)
+
+
+def _calibrate_per_cell(scenario: str, method: str, null_values: np.ndarray, nominal: float, pfa: float,
+                        mode: str, null_peaks: np.ndarray | None, null_cells: np.ndarray) -> CalibrationResult:
+    """:func:`calibrate` for a per-cell Pfa: thresholds and measured rates from
+    the null maps' order statistics; the chance Pd is the fraction of null maps
+    whose peak reaches the threshold used."""
+    peaks = np.asarray(null_values, dtype=float)
+    at_pfa = cell_calibration(null_cells, peaks, float(nominal) if np.isfinite(nominal) else 0.0, pfa)
+    used = at_pfa[3] if mode == "empirical" else float(nominal)
+    measured_nominal = at_pfa[:3] if np.isfinite(nominal) else (np.nan, np.nan, np.nan)
+    measured_used = cell_calibration(null_cells, peaks, used, pfa)[:3] if np.isfinite(used) else (np.nan,) * 3
+    chance = (np.nan, np.nan, np.nan)
+    if null_peaks is not None and len(null_peaks) and np.isfinite(used):
+        hits = int(np.count_nonzero(np.asarray(null_peaks) >= used))
+        chance = (hits / len(null_peaks), *binomial_interval(hits, len(null_peaks)))
+    count = lambda t: int(round(float(np.sum(np.add(*cell_exceedances(null_cells, t)) / 2))))  # noqa: E731
+    return CalibrationResult(scenario, method, mode, pfa, float(nominal), float(used), int(peaks.size),
+                             count(nominal) if np.isfinite(nominal) else 0, *measured_nominal, *chance,
+                             count(used) if np.isfinite(used) else 0, *measured_used,
+                             cell_pfa=measured_used[0], cell_pfa_low=measured_used[1],
+                             cell_pfa_high=measured_used[2], cell_threshold=at_pfa[3],
+                             cell_threshold_scene_pfa=at_pfa[4])

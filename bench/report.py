@@ -344,7 +344,8 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
     trials, series = trials_frame(store, record)
     cals = calibrations(store, [s["label"] for s in record["scenarios"]], [m["label"] for m in record["methods"]],
                         sweep["calibration"]["pfa"], sweep["calibration"]["mode"],
-                        sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD))
+                        sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD),
+                        frozenset(label for label, task in task_of.items() if task.pfa_per_cell))
     summary = summary_frame(trials, series, runs, record, cals)
     t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}
     steps = steps_frame(trials, series, record, t_of)

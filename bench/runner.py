@@ -221,10 +221,13 @@ def execute_unit(work: UnitTask) -> UnitResult:
 # ------------------------------------------------------------------ driver side
 
 def calibrations(store: Store, scenarios: list[str], methods: list[str], pfa: float,
-                 mode: str, chance_pd: float = EQUAL_CHANCE_PD) -> list[CalibrationResult]:
+                 mode: str, chance_pd: float = EQUAL_CHANCE_PD,
+                 per_cell: frozenset[str] = frozenset()) -> list[CalibrationResult]:
     """Calibrate every (scenario config, method config) from the stored null values.
 
     A method config whose calibration failed on any unit gets no threshold.
+    ``per_cell``: the method configs whose task counts the Pfa per cell of a map
+    (``Task.pfa_per_cell``; :func:`bench.calibration.calibrate`).
     """
     runs = store.runs()
     failed = runs[(runs.phase == "calibration") & runs.error.notna()]
@@ -236,7 +239,8 @@ def calibrations(store: Store, scenarios: list[str], methods: list[str], pfa: fl
             if (sc, m) in failed_pairs or values.size == 0:
                 continue
             out.append(calibrate(sc, m, values, np.nan if nominal is None else nominal, pfa, mode, peaks,
-                                 store.null_trial_lengths(sc, m), chance_pd, store.null_cells(sc, m)))
+                                 store.null_trial_lengths(sc, m), chance_pd, store.null_cells(sc, m),
+                                 per_cell=m in per_cell))
     return out
 
 
@@ -446,8 +450,11 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
             if not stop():
                 thresholds: dict[str, dict[str, float | None]] = {
                     sc.label: {m.label: None for m in plan.methods} for sc in plan.scenarios}
+                per_cell = frozenset(m.label for m in plan.methods
+                                     if registry.get_task(registry.get_method(m.name).task).pfa_per_cell)
                 for c in calibrations(store, [s.label for s in plan.scenarios], [m.label for m in plan.methods],
-                                      plan.calibration.pfa, plan.calibration.mode, plan.calibration.chance_pd):
+                                      plan.calibration.pfa, plan.calibration.mode, plan.calibration.chance_pd,
+                                      per_cell):
                     thresholds[c.scenario][c.method] = c.used if np.isfinite(c.used) else None
                 tasks = [UnitTask(plan, u, thresholds[u.scenario_label]) for u in eval_units
                          if u.key not in done] + retry_tasks(plan, eval_units, failed, thresholds)

@@ -15,15 +15,16 @@ from collections.abc import Iterable
 
 from bench.metrics import CELL_KEYS
 from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, Views
+from bench.tasks.cells import CellDetectionOutput, CellDetectionTask, MapScene
 from bench.tasks.detection import DetectionScene, DetectionTask
 from bench.tasks.tbd import TBDScene, TBDTask
 from bench.tasks.tracking import TrackingScene, TrackingTask
 
-__all__ = ["BUILTIN_TASKS", "DetectionScene", "OutputError", "RecordedScene", "ReportContext", "TBDScene", "Task",
+__all__ = ["BUILTIN_TASKS", "CellDetectionOutput", "DetectionScene", "MapScene", "OutputError", "RecordedScene", "ReportContext", "TBDScene", "Task",
            "TrackingScene", "Views", "summary_columns"]
 
 #: The built-in tasks, in registry order.
-BUILTIN_TASKS = (DetectionTask, TrackingTask, TBDTask)
+BUILTIN_TASKS = (DetectionTask, TrackingTask, TBDTask, CellDetectionTask)
 
 #: summary.csv's leading columns, in the order its readers have always found
 #: them: a cell's keys and the columns of the file's first version (some

@@ -125,6 +125,9 @@ class Task:
     calibration_modes: ClassVar[tuple[str, ...]] = ("nominal", "empirical", "gumbel")
     #: what the requested Pfa is counted over, e.g. "per step"
     pfa_unit: ClassVar[str] = ""
+    #: whether the requested Pfa is per cell of a value map: calibration then reads the null
+    #: cells' order statistics (``null_cells``), not the pooled ``null_values``
+    pfa_per_cell: ClassVar[bool] = False
     #: whether summary.csv's ``pfa`` is measured on the evaluation trials (else: on the null ones)
     evaluation_pfa: ClassVar[bool] = False
     #: its methods, in the report's prose ("detectors") and in short ("TBD")
