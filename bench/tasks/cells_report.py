@@ -19,7 +19,7 @@ import pandas as pd
 
 from bench.calibration import cell_exceedances
 from bench.markdown import fmt, fmt_crossing, fmt_interval, table
-from bench.metrics import bootstrap_mean_interval, clustered_rate_interval, snr_at_pd
+from bench.metrics import bootstrap_mean_interval, snr_at_pd
 from bench.recording.record import TrialRecord
 from bench.tasks.base import ReportContext
 from bench.tasks.cells_figures import map_detections, pd_panels, roc_panels
@@ -142,10 +142,9 @@ def _roc_curves(ctx: ReportContext, sc: str, configs: list[str], snr: float, gro
     out: dict = {g: {} for g in groups}
     for config in configs:
         null_cells = ctx.store.null_cells(sc, config)
-        key = (sc, config, snr)
         series = next((v for k, v in ctx.series.items() if k[0] == sc and k[1] == config and np.isclose(k[2], snr)),
                       None)
-        if null_cells is None or series is None or key is None:
+        if null_cells is None or series is None:
             continue
         total = null_cells[:, 0, -1].sum()
         pfa = np.array([np.add(*cell_exceedances(null_cells, t)).sum() / 2 / total for t in thresholds])
@@ -243,7 +242,6 @@ def sections(ctx: ReportContext) -> list[str]:
              "power (bench/tasks/cells_metrics.py)."]
     for sc, scene in summary.groupby("scenario", sort=False):
         scene = scene.sort_values(["config", "snr_db"], kind="stable")
-        scene = scene.set_index(scene.index)
         scene_trials = ctx.trials[ctx.trials.scenario == sc]
         snr = reference_snr(scene, ctx.pfa)
         name = "".join(ch if ch.isalnum() else "_" for ch in sc)
