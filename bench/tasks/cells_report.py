@@ -81,21 +81,26 @@ def _pooled_pfa(trials: pd.DataFrame, config: str, events: str, cells: str) -> t
     return ratio_with_interval(g[events], g[cells])
 
 
-def _section_pfa(scene_trials: pd.DataFrame, configs: list[str], sc: str, pfa: float) -> str:
+def _section_pfa(scene_trials: pd.DataFrame, configs: list[str], sc: str, pfa: float, cals: list) -> str:
     regions = [r for r in REGION_NAMES if scene_trials[f"clear_cells_{slug(r)}"].sum() > 0]
+    null = {c.method: c for c in cals if c.scenario == sc}
     rows = []
     for config in configs:
         cells = [_pooled_pfa(scene_trials, config, f"false_alarms_{slug(r)}", f"clear_cells_{slug(r)}")
                  for r in regions]
         whole = _pooled_pfa(scene_trials, config, "false_alarms", "clear_cells")
-        rows.append([f"`{config}`", *(fmt_interval(*c) for c in cells), fmt_interval(*whole),
+        cal = null.get(config)
+        nominal = "–" if cal is None else fmt_interval(cal.nominal_pfa, cal.nominal_pfa_low, cal.nominal_pfa_high)
+        rows.append([f"`{config}`", nominal, *(fmt_interval(*c) for c in cells), fmt_interval(*whole),
                      fmt(whole[0] / pfa)])
+    mode = next(iter(null.values())).mode if null else "nominal"
     return "\n\n".join([
         f"### `{sc}`: measured per-cell Pfa by clutter region",
-        f"False alarms over the cells outside the targets' guard boxes on the evaluation maps, pooled over "
-        f"the SNR levels, with 95% intervals clustered by map; requested Pfa {pfa:g} per cell (the nominal "
-        f"threshold's, or the calibrated one's, see Calibration).",
-        table(["config", *regions, "whole map", "whole map / requested"], rows)])
+        f"Requested Pfa {pfa:g} per cell. *Null maps, nominal K*: the per-cell Pfa of the detector's closed-form "
+        f"threshold on the whole null maps (the calibration's). The other columns: false alarms over the cells "
+        f"outside the targets' guard boxes on the evaluation maps at the threshold used ({mode}), pooled over "
+        f"the SNR levels, per region; 95% intervals clustered by map.",
+        table(["config", "null maps, nominal K", *regions, "whole map", "whole map / requested"], rows)])
 
 
 def _section_loss(scene: pd.DataFrame, sc: str, pfa: float) -> str:
@@ -138,7 +143,6 @@ def _section_masking(scene: pd.DataFrame, sc: str) -> str:
 
 def _roc_curves(ctx: ReportContext, sc: str, configs: list[str], snr: float, groups: list[str]) -> dict:
     """Per group, per config: (per-cell Pfa on the null maps, Pd of the group's targets) over thresholds."""
-    thresholds = np.linspace(0.0, 12.0, 121)
     out: dict = {g: {} for g in groups}
     for config in configs:
         null_cells = ctx.store.null_cells(sc, config)
@@ -146,6 +150,9 @@ def _roc_curves(ctx: ReportContext, sc: str, configs: list[str], snr: float, gro
                       None)
         if null_cells is None or series is None:
             continue
+        # fine steps where nominal significance is usual, then geometric up to the largest value seen
+        top = max(float(null_cells[:, 1].max()), float(np.max(series["target_statistic"], initial=0.0)), 12.0)
+        thresholds = np.concatenate([np.linspace(0.0, 12.0, 121), np.geomspace(12.0, top * 1.01, 80)[1:]])
         total = null_cells[:, 0, -1].sum()
         pfa = np.array([np.add(*cell_exceedances(null_cells, t)).sum() / 2 / total for t in thresholds])
         stat, group = series["target_statistic"], series["target_group"]
@@ -207,7 +214,8 @@ def _section_winners(scene: pd.DataFrame, scene_trials: pd.DataFrame, sc: str, s
         f"### `{sc}`: which detector wins where (at {fmt(snr)} dB)",
         "Per region, the config with the highest Pd, its Pd and its measured per-cell Pfa in that region on "
         "the same maps (95% intervals, clustered by map); a win is *alone* when its Pd interval lies above "
-        "every other config's.",
+        "every other config's. Read the Pd beside the Pfa: at nominal thresholds the detectors do not share a "
+        "per-cell Pfa (the ROC above compares them at equal Pfa).",
         table(["region", "best config", "Pd [95% CI]", "Pfa in the region [95% CI]", "verdict"], rows),
         "Over the whole map (every target), paired over the same maps: the difference in Pd with a bootstrap "
         "interval over maps (an interval above 0: the first config detects more).",
@@ -247,7 +255,7 @@ def sections(ctx: ReportContext) -> list[str]:
         name = "".join(ch if ch.isalnum() else "_" for ch in sc)
         configs = list(dict.fromkeys(scene.config))
         parts += [_section_pd(scene, sc, snr, ctx, ctx.fig_dir / f"cells_pd_{name}.png"),
-                  _section_pfa(scene_trials, configs, sc, ctx.pfa),
+                  _section_pfa(scene_trials, configs, sc, ctx.pfa, ctx.calibrations),
                   _section_loss(scene, sc, ctx.pfa),
                   _section_masking(scene, sc),
                   _section_roc(ctx, scene, sc, snr, ctx.fig_dir / f"cells_roc_{name}.png"),
