@@ -61,6 +61,8 @@ def _interval(row, column: str) -> str:
 
 def _section_pd(scene: pd.DataFrame, sc: str, snr: float, ctx: ReportContext, fig: Path) -> str:
     groups = _present(scene)
+    if not groups:
+        return f"### `{sc}`: no targets\n\nThe maps of this scenario config hold no target: Pfa only."
     swerling = int(scene.swerling.iloc[0])
     pd_panels(scene, groups, [_column(g) for g in groups], ctx.pfa, swerling, fig, f"{ctx.title}: {sc}")
     rows = [[f"`{r.config}`", *(_interval(r._asdict(), _column(g)) for g in groups), _interval(r._asdict(), "pd")]
@@ -105,6 +107,8 @@ def _section_pfa(scene_trials: pd.DataFrame, configs: list[str], sc: str, pfa: f
 
 def _section_loss(scene: pd.DataFrame, sc: str, pfa: float) -> str:
     groups = _present(scene)
+    if not groups:
+        return ""
     swerling = int(scene.swerling.iloc[0])
     ideal = ideal_snr_at_pd(pfa, swerling)
     rows = []
@@ -167,7 +171,7 @@ def _roc_curves(ctx: ReportContext, sc: str, configs: list[str], snr: float, gro
 def _section_roc(ctx: ReportContext, scene: pd.DataFrame, sc: str, snr: float, fig: Path) -> str:
     groups = _present(scene)
     configs = list(dict.fromkeys(scene.config))
-    curves = _roc_curves(ctx, sc, configs, snr, groups)
+    curves = _roc_curves(ctx, sc, configs, snr, groups) if groups else {}
     if not any(curves.values()):
         return ""
     roc_panels(curves, ctx.pfa, fig, f"{ctx.title}: {sc}, ROC at {fmt(snr)} dB")
