@@ -19,7 +19,7 @@ import pandas as pd
 
 from bench.calibration import cell_exceedances
 from bench.markdown import fmt, fmt_crossing, fmt_interval, table
-from bench.metrics import bootstrap_mean_interval, clustered_rate_interval, snr_at_pd
+from bench.metrics import bootstrap_mean_interval, snr_at_pd
 from bench.recording.record import TrialRecord
 from bench.tasks.base import ReportContext
 from bench.tasks.cells_figures import map_detections, pd_panels, roc_panels
@@ -61,6 +61,8 @@ def _interval(row, column: str) -> str:
 
 def _section_pd(scene: pd.DataFrame, sc: str, snr: float, ctx: ReportContext, fig: Path) -> str:
     groups = _present(scene)
+    if not groups:
+        return f"### `{sc}`: no targets\n\nThe maps of this scenario config hold no target: Pfa only."
     swerling = int(scene.swerling.iloc[0])
     pd_panels(scene, groups, [_column(g) for g in groups], ctx.pfa, swerling, fig, f"{ctx.title}: {sc}")
     rows = [[f"`{r.config}`", *(_interval(r._asdict(), _column(g)) for g in groups), _interval(r._asdict(), "pd")]
@@ -81,25 +83,32 @@ def _pooled_pfa(trials: pd.DataFrame, config: str, events: str, cells: str) -> t
     return ratio_with_interval(g[events], g[cells])
 
 
-def _section_pfa(scene_trials: pd.DataFrame, configs: list[str], sc: str, pfa: float) -> str:
+def _section_pfa(scene_trials: pd.DataFrame, configs: list[str], sc: str, pfa: float, cals: list) -> str:
     regions = [r for r in REGION_NAMES if scene_trials[f"clear_cells_{slug(r)}"].sum() > 0]
+    null = {c.method: c for c in cals if c.scenario == sc}
     rows = []
     for config in configs:
         cells = [_pooled_pfa(scene_trials, config, f"false_alarms_{slug(r)}", f"clear_cells_{slug(r)}")
                  for r in regions]
         whole = _pooled_pfa(scene_trials, config, "false_alarms", "clear_cells")
-        rows.append([f"`{config}`", *(fmt_interval(*c) for c in cells), fmt_interval(*whole),
+        cal = null.get(config)
+        nominal = "–" if cal is None else fmt_interval(cal.nominal_pfa, cal.nominal_pfa_low, cal.nominal_pfa_high)
+        rows.append([f"`{config}`", nominal, *(fmt_interval(*c) for c in cells), fmt_interval(*whole),
                      fmt(whole[0] / pfa)])
+    mode = next(iter(null.values())).mode if null else "nominal"
     return "\n\n".join([
         f"### `{sc}`: measured per-cell Pfa by clutter region",
-        f"False alarms over the cells outside the targets' guard boxes on the evaluation maps, pooled over "
-        f"the SNR levels, with 95% intervals clustered by map; requested Pfa {pfa:g} per cell (the nominal "
-        f"threshold's, or the calibrated one's, see Calibration).",
-        table(["config", *regions, "whole map", "whole map / requested"], rows)])
+        f"Requested Pfa {pfa:g} per cell. *Null maps, nominal K*: the per-cell Pfa of the detector's closed-form "
+        f"threshold on the whole null maps (the calibration's). The other columns: false alarms over the cells "
+        f"outside the targets' guard boxes on the evaluation maps at the threshold used ({mode}), pooled over "
+        f"the SNR levels, per region; 95% intervals clustered by map.",
+        table(["config", "null maps, nominal K", *regions, "whole map", "whole map / requested"], rows)])
 
 
 def _section_loss(scene: pd.DataFrame, sc: str, pfa: float) -> str:
     groups = _present(scene)
+    if not groups:
+        return ""
     swerling = int(scene.swerling.iloc[0])
     ideal = ideal_snr_at_pd(pfa, swerling)
     rows = []
@@ -138,15 +147,16 @@ def _section_masking(scene: pd.DataFrame, sc: str) -> str:
 
 def _roc_curves(ctx: ReportContext, sc: str, configs: list[str], snr: float, groups: list[str]) -> dict:
     """Per group, per config: (per-cell Pfa on the null maps, Pd of the group's targets) over thresholds."""
-    thresholds = np.linspace(0.0, 12.0, 121)
     out: dict = {g: {} for g in groups}
     for config in configs:
         null_cells = ctx.store.null_cells(sc, config)
-        key = (sc, config, snr)
         series = next((v for k, v in ctx.series.items() if k[0] == sc and k[1] == config and np.isclose(k[2], snr)),
                       None)
-        if null_cells is None or series is None or key is None:
+        if null_cells is None or series is None:
             continue
+        # fine steps where nominal significance is usual, then geometric up to the largest value seen
+        top = max(float(null_cells[:, 1].max()), float(np.max(series["target_statistic"], initial=0.0)), 12.0)
+        thresholds = np.concatenate([np.linspace(0.0, 12.0, 121), np.geomspace(12.0, top * 1.01, 80)[1:]])
         total = null_cells[:, 0, -1].sum()
         pfa = np.array([np.add(*cell_exceedances(null_cells, t)).sum() / 2 / total for t in thresholds])
         stat, group = series["target_statistic"], series["target_group"]
@@ -161,7 +171,7 @@ def _roc_curves(ctx: ReportContext, sc: str, configs: list[str], snr: float, gro
 def _section_roc(ctx: ReportContext, scene: pd.DataFrame, sc: str, snr: float, fig: Path) -> str:
     groups = _present(scene)
     configs = list(dict.fromkeys(scene.config))
-    curves = _roc_curves(ctx, sc, configs, snr, groups)
+    curves = _roc_curves(ctx, sc, configs, snr, groups) if groups else {}
     if not any(curves.values()):
         return ""
     roc_panels(curves, ctx.pfa, fig, f"{ctx.title}: {sc}, ROC at {fmt(snr)} dB")
@@ -208,20 +218,24 @@ def _section_winners(scene: pd.DataFrame, scene_trials: pd.DataFrame, sc: str, s
         f"### `{sc}`: which detector wins where (at {fmt(snr)} dB)",
         "Per region, the config with the highest Pd, its Pd and its measured per-cell Pfa in that region on "
         "the same maps (95% intervals, clustered by map); a win is *alone* when its Pd interval lies above "
-        "every other config's.",
+        "every other config's. Read the Pd beside the Pfa: at nominal thresholds the detectors do not share a "
+        "per-cell Pfa (the ROC above compares them at equal Pfa).",
         table(["region", "best config", "Pd [95% CI]", "Pfa in the region [95% CI]", "verdict"], rows),
         "Over the whole map (every target), paired over the same maps: the difference in Pd with a bootstrap "
         "interval over maps (an interval above 0: the first config detects more).",
         table(["configs", "Pd difference [95% CI]"], pairs)])
 
 
-def _section_map(ctx: ReportContext, configs: set[str]) -> str:
-    """The HFSWR chapter's Fig. 6.24: one RD map with each detector's detections."""
+def _section_map(ctx: ReportContext, configs: set[str], reference: dict[str, float]) -> str:
+    """The HFSWR chapter's Fig. 6.24: one RD map with each detector's detections:
+    a map with the most clutter regions, at its scenario config's reference SNR
+    (or the nearest level recorded)."""
     records = [TrialRecord.from_bytes(r) if isinstance(r, bytes) else r for r in ctx.records]
     ours = [r for r in records if "rd_map_db" in r.images and set(r.methods) & configs and r.snr_db is not None]
     if not ours:
         return ""
-    rec = max(ours, key=lambda r: (r.snr_db, -r.trial))
+    rec = min(ours, key=lambda r: (-len(np.unique(r.arrays["regions"])) if "regions" in r.arrays else 0,
+                                   abs(r.snr_db - reference.get(r.scenario, r.snr_db)), r.trial))
     fig = map_detections(rec, sorted(set(rec.methods) & configs, key=list(rec.methods).index),
                          ctx.fig_dir / "cells_rd_map_detections.png", f"{ctx.title}: {rec.scenario}")
     return "\n\n".join([
@@ -241,18 +255,18 @@ def sections(ctx: ReportContext) -> list[str]:
              "is a declared cell outside every target's guard box; Pd per clutter region counts isolated "
              "targets, *paired* the targets with a close neighbour; the ideal detector knows each cell's noise "
              "power (bench/tasks/cells_metrics.py)."]
+    reference = {}
     for sc, scene in summary.groupby("scenario", sort=False):
         scene = scene.sort_values(["config", "snr_db"], kind="stable")
-        scene = scene.set_index(scene.index)
         scene_trials = ctx.trials[ctx.trials.scenario == sc]
-        snr = reference_snr(scene, ctx.pfa)
+        snr = reference[sc] = reference_snr(scene, ctx.pfa)
         name = "".join(ch if ch.isalnum() else "_" for ch in sc)
         configs = list(dict.fromkeys(scene.config))
         parts += [_section_pd(scene, sc, snr, ctx, ctx.fig_dir / f"cells_pd_{name}.png"),
-                  _section_pfa(scene_trials, configs, sc, ctx.pfa),
+                  _section_pfa(scene_trials, configs, sc, ctx.pfa, ctx.calibrations),
                   _section_loss(scene, sc, ctx.pfa),
                   _section_masking(scene, sc),
                   _section_roc(ctx, scene, sc, snr, ctx.fig_dir / f"cells_roc_{name}.png"),
                   _section_winners(scene, scene_trials, sc, snr)]
-    parts.append(_section_map(ctx, set(ctx.configs)))
+    parts.append(_section_map(ctx, set(ctx.configs), reference))
     return [p for p in parts if p]

@@ -1,0 +1,130 @@
+"""Scenario rd-map: shapes, exponential noise per region, targets where the truth
+says, the null, common random numbers, validation."""
+
+import numpy as np
+import pytest
+
+from bench.errors import ConfigError
+from bench.params import build_params
+from bench.registry import get_scenario
+from bench.rng import TrialRNG
+from bench.tasks.cells import CELL_DETECTION, REGION_NAMES, MapScene
+from models.rd_map import REGION_LEVEL_DB, background_power
+from scenarios.rd_map import RdMap
+
+SMALL = RdMap.small_params
+
+
+def make(snr_db, n=4, seed=1, **values):
+    params = build_params(RdMap.Params, {**SMALL, **values})
+    rng = TrialRNG(seed=seed, domain=0, scenario_key=0, trials=range(n))
+    return RdMap().generate(params, snr_db, n, rng)
+
+
+def test_registered():
+    assert get_scenario("rd-map") is RdMap and RdMap.tasks == (CELL_DETECTION,)
+
+
+def test_shapes_and_scene():
+    b = make(10.0, n=3)
+    R, D = SMALL["range_cells"], SMALL["doppler_cells"]
+    assert b.z.shape == (3, 1, R, D) and b.z.dtype == np.float32 and b.t.shape == (1,)
+    sc = b.scene
+    assert type(sc) is MapScene and sc.shape == (R, D) and sc.region_names == REGION_NAMES
+    assert sc.region_labels.dtype == np.int8 and sc.noise_power.shape == (3, R, D)
+    present = set(np.unique(sc.region_labels))
+    assert present == {0, 1, 2, 3}                    # every background is on by default
+    T = sc.target_cells.shape[1]
+    # one isolated target a region and one pair
+    assert T == 4 * SMALL["targets_per_region"] + 2 * SMALL["pairs"]
+    assert sc.target_paired.sum(axis=1).tolist() == [2, 2, 2]
+    np.testing.assert_allclose(sc.target_snr_db, 10.0)
+    labels = sc.region_labels[sc.target_cells[0, :, 0], sc.target_cells[0, :, 1]]
+    assert set(labels[~sc.target_paired[0]]) == {0, 1, 2, 3}
+    assert np.all(labels[sc.target_paired[0]] == 0)
+    first, second = sc.target_cells[0][sc.target_paired[0]][:2]
+    np.testing.assert_array_equal(second - first, SMALL.get("pair_offset_cells", (0, 4)))
+    assert sc.swerling == 1 and sc.guard_cells == (1, 1)
+
+
+def test_noise_is_exponential_with_the_scene_power_in_every_region():
+    """Under the null, z / N is Exp(1) in every region: mean 1 and second moment 2,
+    each within 5 standard errors (sd of Exp(1) is 1, of its square sqrt(20))."""
+    b = make(None, n=200, seed=7)
+    u = (b.z[:, 0] / b.scene.noise_power).astype(np.float64)
+    for k, name in enumerate(REGION_NAMES):
+        x = u[:, b.scene.region_labels == k].ravel()
+        assert abs(x.mean() - 1.0) < 5 / np.sqrt(x.size), name
+        assert abs((x ** 2).mean() - 2.0) < 5 * np.sqrt(20.0) / np.sqrt(x.size), name
+
+
+def test_background_power_follows_the_parameters():
+    p = build_params(RdMap.Params, SMALL)
+    parts = background_power((p.range_cells, p.doppler_cells), bragg=(p.bragg_offset_bins, p.bragg_spread_bins,
+                             p.bragg_cnr_db, p.bragg_cnr_far_db, p.bragg_asymmetry_db), interference=None, edge=None)
+    D = p.doppler_cells
+    assert parts.bragg[0, D // 2 + p.bragg_offset_bins] == pytest.approx(10 ** (p.bragg_cnr_db / 10))
+    assert parts.bragg[-1, D // 2 + p.bragg_offset_bins] == pytest.approx(10 ** (p.bragg_cnr_far_db / 10))
+    assert parts.bragg[0, D // 2 - p.bragg_offset_bins] == pytest.approx(
+        10 ** ((p.bragg_cnr_db - p.bragg_asymmetry_db) / 10))
+    b = make(None, n=1)
+    N = b.scene.noise_power[0]
+    assert N[p.edge_range_cell + 2, 1] == pytest.approx(10 ** (p.edge_step_db / 10))   # beyond the edge
+    assert N[p.edge_range_cell - 2, 1] == pytest.approx(1.0)
+    band = slice(p.interference_range_start, p.interference_range_start + p.interference_range_cells)
+    assert N[band, D // 2].min() == pytest.approx(1 + 10 ** (p.interference_inr_db / 10))
+    # regions: a component labels a cell where it is at least REGION_LEVEL_DB over the noise
+    assert np.all(parts.bragg[b.scene.region_labels == 1] >= 10 ** (REGION_LEVEL_DB / 10) - 1e-12)
+
+
+def test_targets_are_where_the_truth_says_and_nothing_else_changes():
+    """Common random numbers: the map at an SNR equals the null map except at the
+    target cells; a 40 dB non-fluctuating target is far above its cell's power."""
+    null, sig = make(None, n=5, seed=3, swerling=0), make(40.0, n=5, seed=3, swerling=0)
+    cells = sig.scene.target_cells
+    changed = np.argwhere(sig.z[:, 0] != null.z[:, 0])
+    expected = {(i, r, d) for i in range(5) for r, d in cells[i]}
+    assert {tuple(x) for x in changed} <= expected
+    ratio = sig.z[np.arange(5)[:, None], 0, cells[..., 0], cells[..., 1]] / \
+        sig.scene.noise_power[np.arange(5)[:, None], cells[..., 0], cells[..., 1]]
+    # |sqrt(S) + w|^2 / N >= (sqrt(1e4) - |w|/sqrt(N))^2 and |w|^2/N is Exp(1) (< 30 here)
+    assert ratio.min() > (100 - np.sqrt(30)) ** 2
+    np.testing.assert_allclose(sig.scene.realised_snr_db, 40.0)
+    assert null.scene.target_cells.shape == (5, 0, 2) and np.all(np.isnan(null.scene.realised_snr_db))
+
+
+def test_swerling1_target_cells_are_exponential_with_mean_signal_plus_noise():
+    """Swerling 1 in complex Gaussian noise: z / N ~ Exp(1 + S); the mean over
+    400 maps x T targets lies within 5 standard errors of 1 + S."""
+    b = make(6.0, n=400, seed=11, swerling=1)
+    cells = b.scene.target_cells
+    rows = np.arange(400)[:, None]
+    ratio = b.z[rows, 0, cells[..., 0], cells[..., 1]] / b.scene.noise_power[rows, cells[..., 0], cells[..., 1]]
+    mean = 1 + 10 ** 0.6
+    assert abs(ratio.mean() - mean) < 5 * mean / np.sqrt(ratio.size)
+
+
+def test_same_trial_same_map_whatever_the_batch():
+    a = make(8.0, n=4, seed=5)
+    params = build_params(RdMap.Params, SMALL)
+    b = RdMap().generate(params, 8.0, 2, TrialRNG(seed=5, domain=0, scenario_key=0, trials=[2, 3]))
+    np.testing.assert_array_equal(a.z[2:], b.z)
+
+
+@pytest.mark.parametrize("values, field", [
+    ({"pair_offset_cells": [0, 0]}, "pair_offset_cells"),
+    ({"targets_per_region": 40}, "targets_per_region"),
+    ({"bragg_offset_bins": 60}, "bragg_offset_bins"),
+    ({"edge_range_cell": 60}, "edge_range_cell"),
+    ({"margin_cells": 24}, "margin_cells"),
+])
+def test_bad_configs_name_the_field(values, field):
+    with pytest.raises(ConfigError) as err:
+        build_params(RdMap.Params, {**SMALL, **values})
+    assert field in str(err.value)
+
+
+def test_backgrounds_can_be_switched_off():
+    b = make(None, n=1, bragg=False, interference=False, clutter_edge=False)
+    assert set(np.unique(b.scene.region_labels)) == {0}
+    np.testing.assert_allclose(b.scene.noise_power, 1.0)
