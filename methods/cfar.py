@@ -152,6 +152,16 @@ def finish(method, maps: np.ndarray, per_axis: dict, dimension: str, params) -> 
                                threshold_factor=partial(method.factor_map, params, shape=maps.shape[1:]))
 
 
+def window_output(method, maps: np.ndarray, detector: str, params) -> CellDetectionOutput:
+    """CA or OS over the active dimensions (:func:`models.cfar.window_cfar`)."""
+    windows = {axis: (getattr(params, f"reference_{axis}"), getattr(params, f"guard_{axis}"),
+                      getattr(params, f"k_{axis}", 0)) for axis in active_axes(params.dimension)}
+    statistic, mu = cfar.window_cfar(maps, detector, windows, params.dimension, params.peak_range,
+                                     params.peak_doppler)
+    return CellDetectionOutput(statistic=statistic, noise_estimate=mu,
+                               threshold_factor=partial(method.factor_map, params, shape=maps.shape[1:]))
+
+
 def factors_combined(per_axis: dict[str, np.ndarray], dimension: str, shape: tuple[int, int]) -> np.ndarray:
     """(R, D) K from per-axis (M,) factors: for "both" the larger of the two
     (with the larger noise estimate, :func:`models.cfar.combine`, the threshold
@@ -229,10 +239,7 @@ class CaCfar(CfarMethod):
         peak_doppler: int = _peak("Doppler")
 
     def run(self, batch: Batch, params) -> CellDetectionOutput:
-        maps = maps_of(batch)
-        per_axis = {axis: cfar.ca_cfar(maps, getattr(params, f"reference_{axis}"), getattr(params, f"guard_{axis}"),
-                                       axis) for axis in active_axes(params.dimension)}
-        return finish(self, maps, per_axis, params.dimension, params)
+        return window_output(self, maps_of(batch), "ca", params)
 
     def reference_run(self, batch: Batch, params) -> CellDetectionOutput:
         return _cfar_reference.ca(maps_of(batch), params)
@@ -278,10 +285,7 @@ class OsCfar(CfarMethod):
             _check_k(self.k_doppler, self.reference_doppler, "k_doppler")
 
     def run(self, batch: Batch, params) -> CellDetectionOutput:
-        maps = maps_of(batch)
-        per_axis = {axis: cfar.os_cfar(maps, getattr(params, f"reference_{axis}"), getattr(params, f"guard_{axis}"),
-                                       getattr(params, f"k_{axis}"), axis) for axis in active_axes(params.dimension)}
-        return finish(self, maps, per_axis, params.dimension, params)
+        return window_output(self, maps_of(batch), "os", params)
 
     def reference_run(self, batch: Batch, params) -> CellDetectionOutput:
         return _cfar_reference.os(maps_of(batch), params)

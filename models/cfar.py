@@ -51,6 +51,7 @@ Doppler axis as (n R, D, 1). Single-threaded and free of shared state
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numba
@@ -195,15 +196,17 @@ def os_significance(t, N, k):
     return np.minimum(total / _LOG10, MAX_SIGNIFICANCE)
 
 
-# ------------------------------------------------------------------ CA kernel
+# ------------------------------------------------------------------ noise estimates
 
 @numba.njit(cache=True)
-def _ca_axis1(x, L, g, mu, sig):
-    """CA-CFAR along axis 1 of x (P, A, B) float32: running sums, O(1) per cell.
+def _ca_mean_axis1(x, L, g, inv_count, mu):
+    """CA-CFAR's mu along axis 1 of x (P, A, B) float32, the B cells of a row
+    at once: running sums, O(1) per cell.
 
     The prefix sums c[j] = sum_{a<j} x[a] (float64) give each window sum as
     two differences: right = c[min(i+g+L+1, A)] - c[min(i+g+1, A)],
-    left = c[max(i-g, 0)] - c[max(i-g-L, 0)]; mu = (left + right) / N'.
+    left = c[max(i-g, 0)] - c[max(i-g-L, 0)]; mu = (left + right) / N'
+    (``inv_count`` = 1 / N' per cell of the axis).
     """
     P, A, B = x.shape
     c = np.empty((A + 1, B))
@@ -215,111 +218,197 @@ def _ca_axis1(x, L, g, mu, sig):
         for i in range(A):
             hi, lo = min(i + g + L + 1, A), min(i + g + 1, A)
             lhi, llo = max(i - g, 0), max(i - g - L, 0)
-            n_ref = (hi - lo) + (lhi - llo)
             for b in range(B):
-                m = (c[hi, b] - c[lo, b] + c[lhi, b] - c[llo, b]) / n_ref
-                mu[p, i, b] = m
-                sig[p, i, b] = _capped(_ca_sig(_ratio(x[p, i, b], m), n_ref))
+                mu[p, i, b] = (c[hi, b] - c[lo, b] + c[lhi, b] - c[llo, b]) * inv_count[i]
 
 
-def _as_lines(maps: np.ndarray, axis: str) -> np.ndarray:
-    """(n, R, D) maps as the (P, A, B) array whose axis 1 is ``axis``."""
-    n, R, D = maps.shape
-    return maps if axis == "range" else maps.reshape(n * R, D, 1)
+def _batcher_network(n: int) -> list[tuple[int, int]]:
+    """Batcher's odd-even merge sorting network on n = 2^m wires: the
+    comparators (i, j), i < j, in order; after them wire w holds the w-th
+    smallest value."""
+    def merge(lo: int, hi: int, r: int):
+        step = 2 * r
+        if step < hi - lo:
+            yield from merge(lo, hi, step)
+            yield from merge(lo + r, hi, step)
+            yield from ((i, i + r) for i in range(lo + r, hi - r, step))
+        else:
+            yield (lo, lo + r)
+
+    def sort(lo: int, hi: int):
+        if hi - lo >= 1:
+            mid = lo + (hi - lo) // 2
+            yield from sort(lo, mid)
+            yield from sort(mid + 1, hi)
+            yield from merge(lo, hi, 1)
+
+    return list(sort(0, n - 1))
 
 
-def ca_cfar(maps: np.ndarray, L: int, g: int, axis: str) -> tuple[np.ndarray, np.ndarray]:
-    """CA-CFAR along ``axis`` ("range" or "doppler") of maps (n, R, D):
-    (mu, S) both (n, R, D) float32, mu the mean of the N' reference cells,
-    S the capped significance -log10 Pfa_CA(x / mu; N')."""
-    maps = np.ascontiguousarray(maps, dtype=np.float32)
-    lines = _as_lines(maps, axis)
-    mu, sig = np.empty_like(lines), np.empty_like(lines)
-    _ca_axis1(lines, L, g, mu, sig)
-    return mu.reshape(maps.shape), sig.reshape(maps.shape)
+#: networks on at most this many wires are pruned per k (beyond, one full sorting network serves every k)
+PRUNED_WIRES = 64
 
 
-# ------------------------------------------------------------------ OS kernel
-
-@numba.njit(cache=True, inline="always")
-def _lower_bound(buf, n, v):
-    """The first position of the sorted buf[:n] whose value is not below v:
-    the count of values below v (a branch-free, vectorised scan; faster than
-    a binary search's mispredicted branches at window sizes of tens of cells)."""
-    count = 0
-    for j in range(n):
-        count += buf[j] < v
-    return count
-
-
-@numba.njit(cache=True, inline="always")
-def _insert(buf, n, v):
-    """Insert v into the sorted buf[:n] (binary search, then shift)."""
-    at = _lower_bound(buf, n, v)
-    for j in range(n, at, -1):
-        buf[j] = buf[j - 1]
-    buf[at] = v
-
-
-@numba.njit(cache=True, inline="always")
-def _remove(buf, n, v):
-    """Remove one copy of v from the sorted buf[:n] (it is there: the values
-    come from the same line)."""
-    for j in range(_lower_bound(buf, n, v), n - 1):
-        buf[j] = buf[j + 1]
+@functools.lru_cache(maxsize=16)
+def selection_networks(N: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Comparator lists that put the k-th smallest of N values on wire k - 1:
+    Batcher's network on the next power of two (the spare wires hold +inf),
+    pruned for each k = 1..N to the comparators wire k - 1 depends on (up to
+    PRUNED_WIRES wires; beyond, the whole network for every k). Returns
+    (comparators (lists, C, 2) int64, counts (lists,), list of each k (N + 1,), wires)."""
+    wires = 1 << max(0, (N - 1).bit_length())
+    network = _batcher_network(wires) if wires > 1 else []
+    if wires > PRUNED_WIRES:
+        lists, of_k = [network], np.zeros(N + 1, dtype=np.int64)
+    else:
+        lists, of_k = [], np.arange(N + 1, dtype=np.int64)
+        for k in range(N + 1):
+            needed, kept = {k - 1}, []
+            for i, j in reversed(network):
+                if i in needed or j in needed:
+                    kept.append((i, j))
+                    needed |= {i, j}
+            lists.append(kept[::-1] if k >= 1 else [])
+    comps = np.zeros((len(lists), max(1, max(len(c) for c in lists)), 2), dtype=np.int64)
+    for index, kept in enumerate(lists):
+        if kept:
+            comps[index, :len(kept)] = kept
+    return comps, np.array([len(c) for c in lists], dtype=np.int64), of_k, wires
 
 
 @numba.njit(cache=True)
-def _os_axis1(x, L, g, k, mu, sig):
-    """OS-CFAR along axis 1 of x (P, A, B) float32: the reference cells of
-    the cell under test kept sorted as the window slides (moving from cell i
-    to i + 1, the left half loses i - g - L and gains i - g, the right half
-    loses i + g + 1 and gains i + g + L + 1: two binary-search insertions and
-    two removals, O(N) moves at most), so the k'-th smallest, k' = ceil(k N' / 2L),
-    is read off in O(1)."""
+def _os_kth_axis1(x, L, g, k, comps, n_comps, of_k, wires, mu):
+    """OS-CFAR's mu along axis 1 of x (P, A, B) float32, B cells at once: for
+    the cells i of a row, their reference rows (the +-L cells beyond the
+    guards, those inside the map) are copied into a (wires, B) buffer padded
+    with +inf, and a selection network (:func:`selection_networks`) of
+    element-wise min/max across the B lanes leaves the k'-th smallest,
+    k' = ceil(k N' / 2L), on wire k' - 1: branch-free and vectorised, O(N log^2 N)
+    comparisons per cell."""
     P, A, B = x.shape
     N = 2 * L
-    line = np.empty(A, dtype=np.float32)
-    buf = np.empty(N + 1, dtype=np.float32)
-    log_den = _os_log_denominators(N)
+    buf = np.empty((wires, B), dtype=np.float32)
     for p in range(P):
-        for b in range(B):
-            for a in range(A):
-                line[a] = x[p, a, b]
-            n_ref = 0                                   # window of cell 0: right half only
-            for a in range(min(g + 1, A), min(g + L + 1, A)):
-                _insert(buf, n_ref, line[a])
+        for i in range(A):
+            n_ref = 0
+            for a in range(max(i - g - L, 0), max(i - g, 0)):
+                buf[n_ref, :] = x[p, a, :]
                 n_ref += 1
-            for i in range(A):
-                if i > 0:
-                    out_left, in_left = i - g - L - 1, i - g - 1
-                    out_right, in_right = i + g, i + g + L
-                    if out_left >= 0:
-                        _remove(buf, n_ref, line[out_left])
-                        n_ref -= 1
-                    if in_left >= 0:
-                        _insert(buf, n_ref, line[in_left])
-                        n_ref += 1
-                    if out_right < A:
-                        _remove(buf, n_ref, line[out_right])
-                        n_ref -= 1
-                    if in_right < A:
-                        _insert(buf, n_ref, line[in_right])
-                        n_ref += 1
-                kk = (k * n_ref + N - 1) // N
-                m = buf[kk - 1]
-                mu[p, i, b] = m
-                sig[p, i, b] = _capped(_os_sig(_ratio(line[i], m), n_ref, kk, log_den))
+            for a in range(min(i + g + 1, A), min(i + g + L + 1, A)):
+                buf[n_ref, :] = x[p, a, :]
+                n_ref += 1
+            for w in range(n_ref, wires):
+                buf[w, :] = np.inf
+            kk = (k * n_ref + N - 1) // N
+            net = of_k[kk]
+            for c in range(n_comps[net]):
+                u, v = comps[net, c, 0], comps[net, c, 1]
+                for b in range(B):
+                    lo = min(buf[u, b], buf[v, b])
+                    buf[v, b] = max(buf[u, b], buf[v, b])
+                    buf[u, b] = lo
+            mu[p, i, :] = buf[kk - 1, :]
+
+
+def window_noise(maps: np.ndarray, detector: str, L: int, g: int, k: int, axis: str) -> np.ndarray:
+    """mu (n, R, D) float32 along ``axis`` ("range" or "doppler") of maps
+    (n, R, D) float32: the mean of the N' reference cells (``detector``
+    "ca") or their k'-th smallest ("os"). Both kernels run along axis 1
+    with the other axis as vector lanes, so along Doppler they run on the
+    transposed maps (a transpose costs less than a scalar pass along each line)."""
+    lines = maps if axis == "range" else np.ascontiguousarray(maps.transpose(0, 2, 1))
+    mu = np.empty_like(lines)
+    if detector == "ca":
+        _ca_mean_axis1(lines, L, g, 1.0 / reference_counts(lines.shape[1], L, g), mu)
+    else:
+        _os_kth_axis1(lines, L, g, k, *selection_networks(2 * L), mu)
+    return mu if axis == "range" else np.ascontiguousarray(mu.transpose(0, 2, 1))
+
+
+# ------------------------------------------------------------------ significance
+
+@numba.njit(cache=True, inline="always")
+def _window_sig(is_os, t, N, k, log_den):
+    return _os_sig(t, N, k, log_den) if is_os else _ca_sig(t, N)
+
+
+@numba.njit(cache=True)
+def _window_significance(x, keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, is_os, log_den, out):
+    """out = the capped significance of the active dimensions combined ("both":
+    the smaller, else the larger), at the cells where ``keep``; 0 elsewhere
+    (so the logs are paid only at the local maxima of the peak detection)."""
+    P, R, D = x.shape
+    for p in range(P):
+        for r in range(R):
+            for d in range(D):
+                if not keep[p, r, d]:
+                    out[p, r, d] = 0.0
+                    continue
+                v = x[p, r, d]
+                s_r = _window_sig(is_os, _ratio(v, mu_r[p, r, d]), n_r[r], k_r[r], log_den) if use_r else 0.0
+                s_d = _window_sig(is_os, _ratio(v, mu_d[p, r, d]), n_d[d], k_d[d], log_den) if use_d else 0.0
+                if use_r and use_d:
+                    s = min(s_r, s_d) if both else max(s_r, s_d)
+                else:
+                    s = s_r if use_r else s_d
+                out[p, r, d] = _capped(s)
+
+
+def window_significance(maps: np.ndarray, detector: str, windows: dict, mus: dict, dimension: str,
+                        keep: np.ndarray | None = None) -> np.ndarray:
+    """S (n, R, D) float32 of CA or OS (``detector``) for the active
+    dimensions combined (``dimension``), from their noise estimates ``mus``
+    ``{axis: mu}`` and windows ``{axis: (L, g, k)}``, at each cell's own N'
+    and k'; 0 where ``keep`` is False (None: every cell)."""
+    n, R, D = maps.shape
+    sizes = {"range": R, "doppler": D}
+    counts, ranks, full = {}, {}, 1
+    for axis, (L, g, k) in windows.items():
+        counts[axis] = reference_counts(sizes[axis], L, g).astype(np.int64)
+        ranks[axis] = (edge_rank(k, 2 * L, counts[axis]) if detector == "os" else counts[axis]).astype(np.int64)
+        full = max(full, 2 * L)
+    some = next(iter(mus.values()))
+    dummy = np.zeros(1, dtype=np.int64)
+    out = np.empty(maps.shape, dtype=np.float32)
+    _window_significance(maps, np.ones(maps.shape, np.bool_) if keep is None else keep,
+                         mus.get("range", some), counts.get("range", dummy), ranks.get("range", dummy),
+                         mus.get("doppler", some), counts.get("doppler", dummy), ranks.get("doppler", dummy),
+                         "range" in mus, "doppler" in mus, dimension == "both", detector == "os",
+                         _os_log_denominators(full), out)
+    return out
+
+
+def ca_cfar(maps: np.ndarray, L: int, g: int, axis: str) -> tuple[np.ndarray, np.ndarray]:
+    """CA-CFAR along ``axis`` of maps (n, R, D): (mu, S) both (n, R, D)
+    float32, mu the mean of the N' reference cells, S the capped significance
+    -log10 Pfa_CA(x / mu; N') of every cell."""
+    maps = np.ascontiguousarray(maps, dtype=np.float32)
+    mu = window_noise(maps, "ca", L, g, 0, axis)
+    return mu, window_significance(maps, "ca", {axis: (L, g, 0)}, {axis: mu}, axis)
 
 
 def os_cfar(maps: np.ndarray, L: int, g: int, k: int, axis: str) -> tuple[np.ndarray, np.ndarray]:
     """OS-CFAR along ``axis`` of maps (n, R, D): (mu, S) (n, R, D) float32, mu
     the k'-th smallest reference cell, S = -log10 Pfa_OS(x / mu; N', k')."""
     maps = np.ascontiguousarray(maps, dtype=np.float32)
-    lines = _as_lines(maps, axis)
-    mu, sig = np.empty_like(lines), np.empty_like(lines)
-    _os_axis1(lines, L, g, k, mu, sig)
-    return mu.reshape(maps.shape), sig.reshape(maps.shape)
+    mu = window_noise(maps, "os", L, g, k, axis)
+    return mu, window_significance(maps, "os", {axis: (L, g, k)}, {axis: mu}, axis)
+
+
+def window_cfar(maps: np.ndarray, detector: str, windows: dict, dimension: str, half_range: int,
+                half_doppler: int) -> tuple[np.ndarray, np.ndarray]:
+    """(statistic, noise estimate) (n, R, D) float32 of CA or OS over the
+    active dimensions ``windows`` ``{axis: (L, g, k)}``, combined
+    (``dimension``, :func:`combine`), with the peak detection folded in; the
+    significance computed at the local maxima only."""
+    maps = np.ascontiguousarray(maps, dtype=np.float32)
+    mus = {axis: window_noise(maps, detector, L, g, k, axis) for axis, (L, g, k) in windows.items()}
+    keep = local_maxima(maps, half_range, half_doppler)
+    statistic = window_significance(maps, detector, windows, mus, dimension, keep)
+    if len(mus) == 1:
+        return statistic, next(iter(mus.values()))
+    pick = np.maximum if dimension == "both" else np.minimum
+    return statistic, pick(mus["range"], mus["doppler"])
 
 
 # ------------------------------------------------------------------ regression
@@ -475,24 +564,27 @@ def fold(maps: np.ndarray, per_axis: dict, dimension: str, half_range: int,
 @numba.njit(cache=True)
 def _local_maxima(x, half_range, half_doppler, keep):
     """keep[p, r, d] = x[p, r, d] >= the box maximum: separable, first along
-    Doppler (per row), then along range over the row maxima; the box cut at
+    Doppler (per row), then along range over the row maxima, each as a running
+    maximum over the box's offsets, vectorised along the row; the box cut at
     the map's edges."""
     P, R, D = x.shape
     row_max = np.empty((R, D), dtype=x.dtype)
+    box_max = np.empty(D, dtype=x.dtype)
     for p in range(P):
         for r in range(R):
-            for d in range(D):
-                m = x[p, r, d]
-                for e in range(max(d - half_doppler, 0), min(d + half_doppler + 1, D)):
-                    m = max(m, x[p, r, e])
-                row_max[r, d] = m
+            row_max[r, :] = x[p, r, :]
+            for e in range(1, half_doppler + 1):
+                for d in range(D - e):
+                    row_max[r, d] = max(row_max[r, d], x[p, r, d + e])
+                for d in range(e, D):
+                    row_max[r, d] = max(row_max[r, d], x[p, r, d - e])
         for r in range(R):
-            lo, hi = max(r - half_range, 0), min(r + half_range + 1, R)
+            box_max[:] = row_max[r, :]
+            for q in range(max(r - half_range, 0), min(r + half_range + 1, R)):
+                for d in range(D):
+                    box_max[d] = max(box_max[d], row_max[q, d])
             for d in range(D):
-                m = row_max[lo, d]
-                for q in range(lo + 1, hi):
-                    m = max(m, row_max[q, d])
-                keep[p, r, d] = x[p, r, d] >= m
+                keep[p, r, d] = x[p, r, d] >= box_max[d]
 
 
 def local_maxima(maps: np.ndarray, half_range: int, half_doppler: int) -> np.ndarray:
