@@ -20,7 +20,12 @@ SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials
                    "divergence_rate", "divergence_low", "divergence_high", "nees_mean",
                    "pd_step", "pd_step_low", "pd_step_high",
                    "pd_equal_chance", "pd_equal_chance_low", "pd_equal_chance_high",
-                   "rmse_all_mean", "rmse_all_low", "rmse_all_high", "snr_offset_unit_innovation_db"]
+                   "rmse_all_mean", "rmse_all_low", "rmse_all_high", "snr_offset_unit_innovation_db",
+                   # cell detection (bench/tasks/cells_metrics.py), appended after the earlier tasks'
+                   "false_alarms_per_map", "false_alarms_per_map_low", "false_alarms_per_map_high",
+                   *(f"{kind}_{region}{end}" for region in ("homogeneous", "bragg", "interference", "clutter_edge")
+                     for kind in ("pd", "pfa") for end in ("", "_low", "_high")),
+                   "pd_paired", "pd_paired_low", "pd_paired_high", "targets_per_map", "swerling"]
 
 TRIAL_COLUMNS = ["scenario", "method", "params", "snr_db", "trial", "seed", "detected", "delay",
                  "false_alarms", "null_steps"]

@@ -49,8 +49,11 @@ def recorded_method(batch, out, i: int, threshold: float) -> MethodTrace:
     stat = np.asarray(out.statistic[i])
     declared = np.argwhere(declared_cells(stat, threshold)) if np.isfinite(threshold) else np.zeros((0, 2), np.int64)
     images = {"statistic": stat.astype(np.float32)}
-    if out.noise_estimate is not None and out.threshold_factor is not None and np.isfinite(threshold):
-        factor = np.asarray(out.threshold_factor(10.0 ** (-threshold)), np.float64)
+    nominal_pfa = 10.0 ** (-threshold) if np.isfinite(threshold) else np.nan
+    # the threshold in force as a nominal Pfa; a calibrated threshold at or below 0 (or above
+    # ~308) has none in (0, 1), where the closed forms for K are defined: no threshold map then
+    if out.noise_estimate is not None and out.threshold_factor is not None and 0.0 < nominal_pfa < 1.0:
+        factor = np.asarray(out.threshold_factor(nominal_pfa), np.float64)
         images["threshold_map_db"] = _db(np.asarray(out.noise_estimate[i], np.float64) * factor)
     return MethodTrace(threshold=threshold, arrays={"detections": declared.astype(np.int32)[None]}, images=images)
 
