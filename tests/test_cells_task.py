@@ -217,3 +217,15 @@ def test_oracle_recording_has_the_maps(oracle_run):
     for child in ("map", "regions", "map/targets", "known-noise/statistic", "known-noise/threshold_map",
                   "known-noise/detections"):
         assert rerun_path(f"{root}/{child}") in paths, child
+
+
+def test_a_threshold_just_above_a_capped_statistic_declares_nothing():
+    """The calibration reads the statistic in float64: a threshold just above a
+    float32 cap (e.g. 300) must not be rounded down onto it."""
+    from bench.tasks.cells_metrics import declared_cells
+
+    stat = np.array([299.0, 300.0, 2.5], np.float32)
+    assert declared_cells(stat, np.nextafter(300.0, np.inf)).tolist() == [False, False, False]
+    assert declared_cells(stat, 300.0).tolist() == [False, True, False]
+    assert declared_cells(stat, 2.5).tolist() == [True, True, True]
+    assert declared_cells(stat.astype(np.float64), np.nextafter(300.0, np.inf)).tolist() == [False] * 3

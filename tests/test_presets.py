@@ -115,3 +115,23 @@ def test_glint_tracking_preset_at_reduced_size(bench_cli, tmp_path):
     assert {"rmse_position", "mean_est_x", "mean_true_x"} <= set(steps.columns)
     report = (out / "report.md").read_text()
     assert "## Tracking: position RMSE" in report and "## Calibration" not in report
+
+
+def test_cfar_preset_smoke(bench_cli, tmp_path):
+    """The CFAR preset's scenario configs, detectors and calibration on small maps, few maps and levels."""
+    from scenarios.rd_map import RdMap
+
+    sweep = _preset("cfar")
+    sweep.update(trials=6, chunk=6, snr_db=[8, 24])
+    for sc in sweep["scenarios"]:
+        sc["params"] = dict(RdMap.small_params) | sc["params"]
+    sweep["calibration"]["h0_trials"] = 20
+    path = tmp_path / "smoke.toml"
+    path.write_text(tomlw.dumps(sweep))
+    bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 1, check=True)
+    summary = pd.read_csv(tmp_path / "out" / "summary.csv")
+    assert set(summary.method) == {"ca-cfar", "os-cfar", "regression-cfar", "region-adaptive"}
+    assert set(summary.scenario) == {"rd-map-mixed", "rd-map-homogeneous"}
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "which detector wins where" in report and "CFAR loss" in report
+    assert (tmp_path / "out" / "figures" / "cells_rd_map_detections.png").exists()

@@ -17,6 +17,7 @@ from bench.recording.layout import TRUTH_COLOR, TrialLayout
 from bench.recording.paths import rerun_path
 from bench.recording.record import MethodTrace, TrialRecord
 from bench.tasks.base import RecordedScene
+from bench.tasks.cells_metrics import declared_cells
 from bench.tasks.tbd import cell_pixels
 
 _MAP_COLORMAP = "viridis"
@@ -46,7 +47,7 @@ def recorded_method(batch, out, i: int, threshold: float) -> MethodTrace:
     cells, (1, M, 2)) and, when it gives its noise estimate and threshold
     factor, its threshold map in dB at the threshold in force."""
     stat = np.asarray(out.statistic[i])
-    declared = np.argwhere(stat >= threshold) if np.isfinite(threshold) else np.zeros((0, 2), np.int64)
+    declared = np.argwhere(declared_cells(stat, threshold)) if np.isfinite(threshold) else np.zeros((0, 2), np.int64)
     images = {"statistic": stat.astype(np.float32)}
     if out.noise_estimate is not None and out.threshold_factor is not None and np.isfinite(threshold):
         factor = np.asarray(out.threshold_factor(10.0 ** (-threshold)), np.float64)

@@ -82,6 +82,21 @@ def target_groups(region_labels: np.ndarray, region_names: tuple[str, ...], targ
     return np.where(target_paired, PAIRED_GROUP, group)
 
 
+def declared_cells(statistic: np.ndarray, threshold: float) -> np.ndarray:
+    """``statistic >= threshold`` as the calibration reads it (in float64: the
+    order statistics are float64), without a float64 copy of the maps: a
+    float32 statistic is compared with the smallest float32 at or above the
+    threshold (NumPy would otherwise round the threshold to float32, and a
+    threshold just above a capped statistic would declare every capped cell)."""
+    statistic = np.asarray(statistic)
+    if statistic.dtype == np.float32 and np.isfinite(threshold):
+        t = np.float32(threshold)
+        if float(t) < threshold:
+            t = np.nextafter(t, np.float32(np.inf))
+        return statistic >= t
+    return statistic >= threshold
+
+
 def cell_trial_metrics(statistic: np.ndarray, threshold: float, *, region_labels: np.ndarray,
                        region_names: tuple[str, ...], target_cells: np.ndarray, target_paired: np.ndarray,
                        target_snr_db: np.ndarray, guard_cells: tuple[int, int],
@@ -93,7 +108,7 @@ def cell_trial_metrics(statistic: np.ndarray, threshold: float, *, region_labels
     ``target_statistic`` and ``target_group`` (n, T) for ROC curves."""
     statistic = np.asarray(statistic)
     n = statistic.shape[0]
-    declared = statistic >= threshold
+    declared = declared_cells(statistic, threshold)
     trial = np.arange(n)[:, None]
     tstat = statistic[trial, target_cells[..., 0], target_cells[..., 1]].astype(np.float64)
     hit = tstat >= threshold

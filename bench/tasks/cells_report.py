@@ -107,7 +107,7 @@ def _section_pfa(scene_trials: pd.DataFrame, configs: list[str], sc: str, pfa: f
 
 def _section_loss(scene: pd.DataFrame, sc: str, pfa: float) -> str:
     groups = _present(scene)
-    if not groups:
+    if not groups or scene.snr_db.nunique() < 2:    # a crossing needs two SNR levels
         return ""
     swerling = int(scene.swerling.iloc[0])
     ideal = ideal_snr_at_pd(pfa, swerling)
