@@ -98,6 +98,7 @@ def regression_axis(maps: np.ndarray, params, axis: str) -> tuple[np.ndarray, np
         G_inv = np.linalg.inv(phi[use].T @ phi[use])
         fit[p], included[p] = line_fit, use
         leverage[p] = np.einsum("mq,qr,mr->m", phi, G_inv, phi)
+    fit, leverage = cfar.censoring_corrected(fit, included, leverage, params.iterations, params.exclusion_factor)
     sig = cfar.regression_significance(flat, fit, included, leverage)
     fit, sig = fit.reshape(lines.shape), sig.reshape(lines.shape)
     if axis == "range":

@@ -312,13 +312,21 @@ class RegressionCfar(CfarMethod):
     basis), optionally refitted without the cells far above it
     (``iterations``, ``exclusion_factor``; :func:`models.cfar.regression_fit`).
 
+    With robust iterations the fit of the retained (censored) cells is
+    divided by their mean fraction beta(c) (:func:`models.cfar.censoring_corrected`),
+    so it estimates the noise level without bias in homogeneous noise.
+
     Nominal significance: derived, not calibrated — a moment-matched gamma
     approximation of the fit under homogeneous exponential noise,
-    Pfa(t) = (1 - h t)^((1 - h)/h) with h the cell's leverage
+    Pfa(t) = (1 - h t)^((1 - h)/h) with h the cell's leverage, or
+    (1 + g t)^(-1/g) for a cell the robust fit left out
     (:func:`models.cfar.regression_significance`); exact for order 0 without
-    robust iterations, approximate otherwise (the measured Pfa says how
-    close). ``threshold_factor`` is K at the mean leverage (order + 1)/M of
-    an M-cell line.
+    robust iterations, approximate otherwise. Measured on 400 x 64 lines of
+    256 homogeneous cells (measured / nominal Pfa at 1e-2, 1e-3, 1e-4):
+    order 4 plain 1.00, 1.04, 1.08; order 4 with 2 robust iterations 1.02,
+    1.26, 1.90 (the deeper the tail, the more the approximation
+    underestimates it). ``threshold_factor`` is K at the mean leverage
+    (order + 1)/M of an M-cell line.
     """
 
     name = "regression-cfar"

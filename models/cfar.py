@@ -112,14 +112,16 @@ def os_pfa(K, N: int, k: int):
 
 def ca_threshold_factor(pfa: float, N: int) -> float:
     """K of CA-CFAR for ``pfa``: K = N (pfa^(-1/N) - 1), the inverse of :func:`ca_pfa`
-    (by expm1, exact down to the smallest pfa)."""
-    return float(N * math.expm1(-math.log(pfa) / N))
+    (by expm1, exact down to the smallest pfa; 0 for pfa >= 1)."""
+    return float(N * math.expm1(-math.log(min(pfa, 1.0)) / N))
 
 
 def os_threshold_factor(pfa: float, N: int, k: int) -> float:
     """K of OS-CFAR for ``pfa``: the root of sum_i log(1 + K/(N - i)) = -log(pfa)
     (:func:`os_pfa`), solved for log K between the bounds the smallest and the
     largest of the k terms give: (N - k + 1) expm1(-log(pfa)/k) <= K <= N expm1(-log(pfa))."""
+    if pfa >= 1.0:                               # every cell passes: no threshold above the noise estimate
+        return 0.0
     target = -math.log(pfa)
     terms = N - np.arange(k, dtype=float)
 
@@ -488,13 +490,13 @@ def regression_threshold_factor(pfa: float, leverage: float) -> float:
     """K of an included cell of leverage h: the inverse of (1 - h K)^((1 - h)/h),
     K = (1 - pfa^(h / (1 - h))) / h (:func:`regression_significance`)."""
     h = leverage
-    return float(-math.expm1(math.log(pfa) * h / (1.0 - h)) / h)
+    return float(-math.expm1(math.log(min(pfa, 1.0)) * h / (1.0 - h)) / h)
 
 
 def ca_factor_along(pfa: float, M: int, L: int, g: int) -> np.ndarray:
     """(M,) K of CA-CFAR per cell of an axis at its own N' (:func:`reference_counts`)."""
     N = reference_counts(M, L, g).astype(float)
-    return N * np.expm1(-math.log(pfa) / N)
+    return N * np.expm1(-math.log(min(pfa, 1.0)) / N)
 
 
 def os_factor_along(pfa: float, M: int, L: int, g: int, k: int) -> np.ndarray:
@@ -513,6 +515,29 @@ def regression_factor_along(pfa: float, M: int, order: int) -> np.ndarray:
     return np.array([regression_threshold_factor(pfa, float(x)) for x in np.clip(h, 1e-12, 1 - 1e-9)])
 
 
+def censored_exponential_moments(c: float) -> tuple[float, float]:
+    """(mean, variance) of an Exp(1) variable given that it is at most c:
+    beta = (1 - (1 + c) e^-c) / (1 - e^-c), E[x^2 | x <= c] = (2 - (c^2 + 2c + 2) e^-c) / (1 - e^-c)."""
+    tail = math.exp(-c)
+    beta = (1.0 - (1.0 + c) * tail) / (1.0 - tail)
+    second = (2.0 - (c * c + 2.0 * c + 2.0) * tail) / (1.0 - tail)
+    return beta, second - beta * beta
+
+
+def censoring_corrected(fit, included, leverage, iterations: int, exclusion_factor: float):
+    """The robust fit unbiased for homogeneous exponential noise (ours): cells
+    above c = ``exclusion_factor`` times the fit are left out, so the fit
+    estimates beta(c) sigma^2, the mean of the censored exponential; the fit
+    is divided by beta, and the leverage of a left-out cell (its fit's
+    variance over sigma^4, :func:`regression_significance`) scaled to the
+    censored cells' variance, v(c) / beta^2 (:func:`censored_exponential_moments`).
+    No change without robust iterations."""
+    if iterations == 0:
+        return fit, leverage
+    beta, var = censored_exponential_moments(exclusion_factor)
+    return fit / beta, np.where(included, leverage, leverage * var / beta ** 2)
+
+
 def regression_cfar(maps: np.ndarray, order: int, iterations: int, exclusion_factor: float,
                     axis: str) -> tuple[np.ndarray, np.ndarray]:
     """Adaptive regression CFAR along ``axis`` of maps (n, R, D): the fitted
@@ -522,6 +547,7 @@ def regression_cfar(maps: np.ndarray, order: int, iterations: int, exclusion_fac
     lines = maps if axis == "doppler" else maps.transpose(0, 2, 1)
     flat = lines.reshape(-1, lines.shape[-1])
     fit, included, leverage = regression_fit(flat, order, iterations, exclusion_factor)
+    fit, leverage = censoring_corrected(fit, included, leverage, iterations, exclusion_factor)
     sig = regression_significance(flat, fit, included, leverage)
     fit, sig = fit.reshape(lines.shape), sig.reshape(lines.shape)
     if axis == "range":
