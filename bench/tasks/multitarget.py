@@ -28,8 +28,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import pandas as pd
+
 from bench.core import Batch, Scene, has_shape, require, require_arrays
-from bench.tasks.base import OutputError, Task
+from bench.recording.blueprint import Views
+from bench.recording.layout import TrialLayout
+from bench.recording.record import MethodTrace, TrialRecord
+from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, time_series
+from bench.tasks.multitarget_metrics import (MEANS, SCENE_COLUMNS, multitarget_steps, multitarget_trial_metrics,
+                                             summarise_multitarget)
 
 __all__ = ["MULTI_TARGET", "STATUS", "MultiTargetOutput", "MultiTargetScene", "MultiTargetTask"]
 
@@ -173,6 +180,14 @@ def _check_unique_ids(ids: np.ndarray) -> None:
         raise OutputError("track_id: an identity occupies two slots at the same scan")
 
 
+def _plots_xy(z: np.ndarray, sensor_xy: np.ndarray) -> np.ndarray:
+    """(..., 2) east/north of plots [range, azimuth, ...] seen from ``sensor_xy``
+    (the inverse of the range and azimuth of the HFSWR measurement; the harness
+    does not import models)."""
+    return np.stack([sensor_xy[0] + z[..., 0] * np.sin(z[..., 1]), sensor_xy[1] + z[..., 0] * np.cos(z[..., 1])],
+                    axis=-1)
+
+
 class MultiTargetTask(Task):
     """Multi-target tracking: tracks in clutter scored with GOSPA, initiation delay, false tracks, identity."""
 
@@ -180,6 +195,78 @@ class MultiTargetTask(Task):
     scene_type = MultiTargetScene
     noun = "multi-target trackers"
     short_noun = "trackers"
+    recording_text = ("the true tracks, every plot (target-originated green, clutter grey) and per tracker its "
+                      "tentative, confirmed and terminated tracks with their 3-sigma gates, scan by scan, "
+                      "and its GOSPA per scan")
+    summary_columns = ("n_trials", "realised_snr_db", *SCENE_COLUMNS,
+                       *(f"{m}_{s}" for m in MEANS for s in ("mean", "low", "high")),
+                       "init_delay_mean", "init_delay_low", "init_delay_high", "initiated_fraction")
+    headline_columns = ("gospa_mean", "gospa_low", "gospa_high", "init_delay_mean", "false_track_rate_mean")
+    ranking_metric = "gospa_m"
+    ranking_higher_is_better = False
+    scene_entities = ("truths", "plots")                 # bench/tasks/multitarget_recording.py draws them
+    method_entities = ("tracks", "gates", "track_lines")
+
+    # -------------------------------------------------------------- worker side
 
     def check_output(self, out, batch: Batch) -> MultiTargetOutput:
         return check_multitarget_output(out, batch)
+
+    def trial_metrics(self, batch: Batch, out: MultiTargetOutput, threshold: float) -> dict[str, np.ndarray]:
+        sc = batch.scene
+        return multitarget_trial_metrics(batch.truth, np.asarray(out.state, float), np.asarray(out.track_id),
+                                         np.asarray(out.status), position_index=sc.position_index,
+                                         cutoff=sc.gospa_cutoff_m, order=sc.gospa_order,
+                                         scan_period_s=sc.scan_period_s) | time_series(batch) | {
+            name: np.full(batch.n, float(value)) for name, value in self.scene_columns(sc).items()}
+
+    @staticmethod
+    def scene_columns(sc: MultiTargetScene) -> dict[str, float]:
+        """What trials.csv and summary.csv repeat of the scene: the axes a sweep varies
+        (Pd, clutter) and the GOSPA settings."""
+        return {"scene_pd": sc.pd, "clutter_per_scan": sc.clutter_per_scan, "gospa_cutoff_m": sc.gospa_cutoff_m,
+                "gospa_order": sc.gospa_order}
+
+    def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:
+        sc = batch.scene
+        pos = list(sc.position_index)[:2]
+        return RecordedScene(arrays={"truths_xy": batch.truth[i][..., pos],
+                                     "plots_xy": _plots_xy(batch.z[i], sc.sensor_xy),
+                                     "plot_origin": sc.plot_origin[i].astype(np.int64)})
+
+    def recorded_method(self, batch: Batch, out: MultiTargetOutput, i: int, threshold: float) -> MethodTrace:
+        sc = batch.scene
+        pos = list(sc.position_index)[:2]
+        one = slice(i, i + 1)
+        status = np.asarray(out.status)
+        m = multitarget_trial_metrics(batch.truth[one], np.asarray(out.state, float)[one],
+                                      np.asarray(out.track_id)[one], status[one], position_index=sc.position_index,
+                                      cutoff=sc.gospa_cutoff_m, order=sc.gospa_order, scan_period_s=sc.scan_period_s)
+        arrays = {"track_xy": np.asarray(out.state, float)[i][..., pos],
+                  "track_id": np.asarray(out.track_id, np.int64)[i], "track_status": status[i].astype(np.int8)}
+        if out.position_covariance is not None:
+            arrays["track_cov"] = np.asarray(out.position_covariance, float)[i]
+        return MethodTrace(threshold=None, arrays=arrays,
+                           traces={"gospa_m": m["gospa"][0], "confirmed_tracks": (status[i] == 2).sum(axis=1)})
+
+    # -------------------------------------------------------------- driver side
+
+    def summarise(self, trials: pd.DataFrame, series: dict) -> pd.DataFrame:
+        return summarise_multitarget(trials, series)
+
+    def steps(self, trials: pd.DataFrame, series: dict[str, np.ndarray]) -> pd.DataFrame:
+        return multitarget_steps(series).assign(n_trials=len(trials))
+
+    def log_trial(self, stream, layout: TrialLayout, rec: TrialRecord) -> None:
+        from bench.tasks import multitarget_recording as draw
+        draw.log_scene(stream, layout, rec)
+        t = np.asarray(rec.t, dtype=np.float64)
+        for m in layout.methods_of(self):
+            draw.log_method(stream, layout, m, rec.methods[m.label], t)
+
+    def views(self, layout: TrialLayout, rec: TrialRecord) -> Views:
+        return Views(has_xy="plots_xy" in rec.arrays or "truths_xy" in rec.arrays)
+
+    def report_sections(self, ctx: ReportContext) -> list[str]:
+        from bench.tasks import multitarget_report
+        return multitarget_report.sections(ctx)
