@@ -86,10 +86,12 @@ N_CFG = 15
 I_CONFIRM_M, I_CONFIRM_N, I_TERM_M, I_TERM_N, I_MAX_CLUSTER, I_FILTER = range(6)
 N_ICFG = 6
 # counters (int64) entries: the trace of a trial
-K_HEADS, K_NEXT_ID, K_PDA_CLUSTERS, K_EXACT_CLUSTERS, K_DROPPED, K_SLOTS, K_LARGEST_CLUSTER, K_BAD_COV = range(8)
-N_COUNTERS = 8
+K_HEADS, K_NEXT_ID, K_PDA_CLUSTERS, K_EXACT_CLUSTERS, K_DROPPED, K_SLOTS, K_LARGEST_CLUSTER, K_BAD_COV, \
+    K_CONFIRMED, K_END_MISSES, K_END_COVARIANCE, K_END_SPEED = range(12)
+N_COUNTERS = 12
 COUNTER_NAMES = ("heads", "tracks_started", "pda_fallback_clusters", "exact_clusters", "dropped_tracks",
-                 "slots_used", "largest_cluster", "nonpositive_covariance")
+                 "slots_used", "largest_cluster", "nonpositive_covariance", "tracks_confirmed",
+                 "ended_by_misses", "ended_by_covariance", "ended_by_speed")
 
 
 class TrackTable(NamedTuple):
@@ -459,15 +461,20 @@ def manage(tab, cfg, icfg):  # pragma: no cover - compiled
             tab.mn_hits[s] += 1 if tab.hit[s] else 0
             if tab.mn_hits[s] >= M and tab.mn_frames[s] == N:
                 tab.status[s] = CONFIRMED
+                tab.counters[K_CONFIRMED] += 1
             elif tab.mn_hits[s] + (N - tab.mn_frames[s]) < M or tab.mn_frames[s] >= N:
                 tab.status[s] = TERMINATED
                 continue
         elif _popcount(tab.miss_history[s] & term_mask) >= icfg[I_TERM_M]:      # rule ①
             tab.status[s] = TERMINATED
+            tab.counters[K_END_MISSES] += 1
             continue
-        speed = math.sqrt(tab.x[s, 1] ** 2 + tab.x[s, 3] ** 2)
-        if position_std(tab.P[s]) > cfg[C_MAX_POS_STD] or speed > cfg[C_MAX_SPEED]:   # rules ②, ③
+        if position_std(tab.P[s]) > cfg[C_MAX_POS_STD]:                           # rule ②
             tab.status[s] = TERMINATED
+            tab.counters[K_END_COVARIANCE] += 1
+        elif math.sqrt(tab.x[s, 1] ** 2 + tab.x[s, 3] ** 2) > cfg[C_MAX_SPEED]:  # rule ③
+            tab.status[s] = TERMINATED
+            tab.counters[K_END_SPEED] += 1
 
 
 @numba.njit(cache=True)
