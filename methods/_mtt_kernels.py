@@ -201,9 +201,7 @@ def ukf_predict(tab, s, F, Q, R, Wm, Wc, zeta, sx, sy):  # pragma: no cover - co
     unscented_mean(chif, Wm, -1, xm)
     Pm = np.empty((n, n))
     unscented_covariance(chif, xm, chif, xm, Wc, -1, Pm)
-    for a in range(n):
-        for b in range(n):
-            Pm[a, b] = 0.5 * (Pm[a, b] + Pm[b, a]) + Q[a, b]
+    Pm = 0.5 * (Pm + Pm.T) + Q
     tab.x[s] = xm
     tab.P[s] = Pm
     if not sigma_points(xm, Pm, zeta, L, chi):          # redrawn around the prediction
