@@ -134,7 +134,7 @@ class GnnEkf(_MultiTargetTracker):
                 slots, plots, d2 = kern.stage_gate(tab, stage, zk, m, free, models.gamma)
                 kern.apply_assignment(tab, slots, plots, gnn_assignment(d2), zk, free)
             kern.manage(tab, cfg, icfg)
-            kern.initiate(tab, zk, m, free, cfg)
+            kern.initiate(tab, zk, m, free, cfg, icfg)
             kern.record(tab, k, buf.state, buf.track_id, buf.status, buf.cov)
 
 
