@@ -60,8 +60,9 @@ class TrackerParams:
                                   "differencing (the chapter's initialisation); two-point+speed-prior: "
                                   "fused with a N(0, v_max^2) prior per axis (ours)",
                                   choices=("two-point", "two-point+speed-prior"))
-    alpha: float = param(0.5, "UKF sigma-point spread alpha (Stone Soup's default)", gt=0.0, le=1.0,
-                         why="the scaled unscented transform's range (0, 1]")
+    alpha: float = param(0.5, "UKF sigma-point spread alpha (Stone Soup's default)", ge=0.01, le=1.0,
+                         why="the scaled unscented transform's range is (0, 1]; below 0.01 the central weight "
+                             "passes -10^4 and the moment sums cancel in float64")
     beta: float = param(2.0, "UKF prior-knowledge weight beta (2: optimal for a Gaussian)", ge=0.0, le=10.0,
                         why="non-negative; larger values only inflate the central covariance weight")
     kappa: float = param(-1.0, "UKF secondary scale kappa (3 - n = -1 for the 4-state CV model, Stone "
