@@ -11,27 +11,33 @@ from __future__ import annotations
 import datetime
 
 import numpy as np
-from stonesoup.base import Property
-from stonesoup.dataassociator.neighbour import GNNWith2DAssignment
-from stonesoup.dataassociator.probability import JPDA
-from stonesoup.deleter.time import UpdateTimeStepsDeleter
-from stonesoup.functions import gm_reduce_single
-from stonesoup.hypothesiser.distance import DistanceHypothesiser
-from stonesoup.hypothesiser.probability import PDAHypothesiser
-from stonesoup.initiator.simple import MultiMeasurementInitiator
-from stonesoup.measures import Mahalanobis
-from stonesoup.models.base import ReversibleModel
-from stonesoup.models.measurement.nonlinear import NonLinearGaussianMeasurement
-from stonesoup.models.transition.linear import LinearGaussianTransitionModel
-from stonesoup.predictor.kalman import UnscentedKalmanPredictor
-from stonesoup.types.array import StateVector, StateVectors
-from stonesoup.types.detection import Detection
-from stonesoup.types.state import GaussianState
-from stonesoup.types.update import GaussianStateUpdate, Update
-from stonesoup.updater.kalman import UnscentedKalmanUpdater
 
-from bench.core import Batch, Method
-from bench.registry import register_method
+from bench.registry import PluginError
+
+try:
+    from stonesoup.base import Property
+    from stonesoup.dataassociator.neighbour import GNNWith2DAssignment
+    from stonesoup.dataassociator.probability import JPDA
+    from stonesoup.deleter.time import UpdateTimeStepsDeleter
+    from stonesoup.functions import gm_reduce_single
+    from stonesoup.hypothesiser.distance import DistanceHypothesiser
+    from stonesoup.hypothesiser.probability import PDAHypothesiser
+    from stonesoup.initiator.simple import MultiMeasurementInitiator
+    from stonesoup.measures import Mahalanobis
+    from stonesoup.models.base import ReversibleModel
+    from stonesoup.models.measurement.nonlinear import NonLinearGaussianMeasurement
+    from stonesoup.models.transition.linear import LinearGaussianTransitionModel
+    from stonesoup.predictor.kalman import UnscentedKalmanPredictor
+    from stonesoup.types.array import StateVector, StateVectors
+    from stonesoup.types.detection import Detection
+    from stonesoup.types.state import GaussianState
+    from stonesoup.types.update import GaussianStateUpdate, Update
+    from stonesoup.updater.kalman import UnscentedKalmanUpdater
+except ImportError as exc:     # the [peers] extra is missing: the method is unavailable, named, with the reason
+    raise PluginError(f'needs the [peers] extra (pip install -e ".[peers]"): {exc}', name="stonesoup-jpda") from exc
+
+from bench.core import Batch, Method  # noqa: E402 - after the guarded imports
+from bench.registry import register_method  # noqa: E402
 from bench.tasks.multitarget import MULTI_TARGET, MultiTargetOutput
 from methods import _mtt_kernels as kern
 from methods._track_management import (

@@ -113,7 +113,7 @@ def test_end_to_end_with_an_optional_unavailable_peer(oracle, tmp_path, monkeypa
         assert heading in report
     assert "`sharp` against `blurred`: lower GOSPA in 2 of 2 cells" in report
     assert "`peer-missing` (peer-missing): ModuleNotFoundError: No module named 'stonesoup'" in report
-    assert (tmp_path / "recording.rrd").stat().st_size > 0
+    _check_recording(tmp_path)
     steps = pd.read_csv(tmp_path / "steps.csv")
     assert {"gospa", "gospa_missed", "gospa_false", "n_truth", "n_tracks"} <= set(steps.columns)
 
@@ -131,3 +131,29 @@ def test_recorded_trial_keeps_plots_truths_and_tracks():
     back = TrialRecord.from_bytes(rec.to_bytes())
     np.testing.assert_array_equal(back.methods["oracle"].arrays["track_status"], trace.arrays["track_status"])
     np.testing.assert_allclose(back.arrays["plots_xy"], scene.arrays["plots_xy"])
+
+
+def _check_recording(folder):
+    """The recorded trial's entities, and per scan as many plots as the scan had (its stored record)."""
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    from bench.recording.paths import entity_root, rerun_path
+    from bench.store import Store
+
+    store = Store(folder / "results.sqlite")
+    rec = next(r for r in map(TrialRecord.from_bytes, store.records()) if "pd=0.9" in r.scenario)
+    store.close()
+    reader = RrdReader(folder / "recording.rrd")
+    paths = set(reader.store().schema().entity_paths())
+    root = rerun_path(entity_root(rec.scenario, rec.snr_db, rec.trial))
+    for child in ("truths/target_0", "truths/target_2", "plots", "sharp/tracks", "sharp/gates", "sharp/track_lines",
+                  "sharp/gospa_m", "blurred/tracks"):
+        assert f"{root}/{child}" in paths, child
+    chunks = reader.stream().filter(content=f"{root}/plots", is_static=False,
+                                    components="Points2D:positions").to_chunks()
+    table = pa.Table.from_batches([c.to_record_batch() for c in chunks])
+    counts = dict(zip(table.column("step").to_pylist(),
+                      (len(v or []) for v in table.column("Points2D:positions").to_pylist())))
+    expected = (rec.arrays["plot_origin"] != -2).sum(axis=1)
+    assert [counts.get(k, 0) for k in range(len(expected))] == expected.tolist()
