@@ -31,7 +31,10 @@ management). One scan k of one trial:
    ends (status 3) when ① M_t of its last N_t frames had no plot (confirmed
    tracks), ② its position uncertainty, the square root of the largest
    eigenvalue of its (x, y) covariance, exceeds a bound, or ③ its speed
-   exceeds an impossible v_max (② and ③ for tentative tracks too).
+   exceeds an impossible v_max: the rules of "一条确认航迹被终结" (a *confirmed*
+   track is terminated); a tentative track answers to M/N alone (its
+   two-point velocity, with a cross-range std of ~40 m/s at 100 km, would
+   often fail rule ③ before its first update).
 5. **Initiate**: every plot left over at scan k − 1 is a track head ("每一个
    未关联的量测都作为新的航迹头"); a plot of scan k left over by steps 3 forms
    an initial track with a head when their distance d satisfies
@@ -44,7 +47,10 @@ management). One scan k of one trial:
    filter ("这两个点可以用来初始化无味卡尔曼滤波器") by two-point differencing
    (Bar-Shalom, Li & Kirubarajan 2001, sec. 5.5.3): position from the second
    plot, velocity (p₂ − p₁)/T, covariance from the plots' Cartesian error
-   covariances R₁, R₂: P_pp = R₂, P_vv = (R₁ + R₂)/T², P_pv = R₂/T. Plots
+   covariances R₁, R₂: P_pp = R₂, P_vv = (R₁ + R₂)/T², P_pv = R₂/T (at
+   100 km with σ_az = 1° the cross-range velocity std is ~40 m/s; our variant
+   ``initial_velocity = "two-point+speed-prior"`` fuses it with N(0, v_max² I),
+   :func:`speed_prior`, the prior Stone Soup's initiator starts from). Plots
    still unused become the heads of scan k + 1; a head that takes no plot is
    dropped ("否则, 该航迹被撤销").
 6. **Record** every occupied slot; a terminated slot is shown once (status 3)
@@ -83,8 +89,8 @@ C_DT, C_LOG_PD, C_LOG_MISS, C_LOG_LAMBDA, C_GAMMA, C_VMIN, C_VMAX, C_INIT_SIGMAS
     C_MAX_SPEED, C_SX, C_SY, C_SIG_R, C_SIG_AZ, C_ZETA = range(15)
 N_CFG = 15
 # icfg (int64) entries
-I_CONFIRM_M, I_CONFIRM_N, I_TERM_M, I_TERM_N, I_MAX_CLUSTER, I_FILTER = range(6)
-N_ICFG = 6
+I_CONFIRM_M, I_CONFIRM_N, I_TERM_M, I_TERM_N, I_MAX_CLUSTER, I_FILTER, I_SPEED_PRIOR = range(7)
+N_ICFG = 7
 # counters (int64) entries: the trace of a trial
 K_HEADS, K_NEXT_ID, K_PDA_CLUSTERS, K_EXACT_CLUSTERS, K_DROPPED, K_SLOTS, K_LARGEST_CLUSTER, K_BAD_COV, \
     K_CONFIRMED, K_END_MISSES, K_END_COVARIANCE, K_END_SPEED = range(12)
@@ -462,8 +468,8 @@ def manage(tab, cfg, icfg):  # pragma: no cover - compiled
                 tab.counters[K_CONFIRMED] += 1
             elif tab.mn_hits[s] + (N - tab.mn_frames[s]) < M or tab.mn_frames[s] >= N:
                 tab.status[s] = TERMINATED
-                continue
-        elif _popcount(tab.miss_history[s] & term_mask) >= icfg[I_TERM_M]:      # rule ①
+            continue                                        # the termination rules are for confirmed tracks
+        if _popcount(tab.miss_history[s] & term_mask) >= icfg[I_TERM_M]:      # rule ①
             tab.status[s] = TERMINATED
             tab.counters[K_END_MISSES] += 1
             continue
@@ -484,7 +490,28 @@ def _free_slot(tab):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def start_track(tab, z1, z2, cfg):  # pragma: no cover - compiled
+def speed_prior(tab, s, vmax):  # pragma: no cover - compiled
+    """Our variant (``initial_velocity = "two-point+speed-prior"``): the
+    two-point state fused with a velocity prior N(0, v_max² I), as a Kalman
+    update with the pseudo-measurement v = 0 (H picks vx, vy; noise v_max² I)."""
+    P = tab.P[s]
+    S = np.empty((2, 2))
+    PHt = np.empty((4, 2))
+    for a in range(4):
+        PHt[a, 0] = P[a, 1]
+        PHt[a, 1] = P[a, 3]
+    S[0, 0], S[0, 1], S[1, 0], S[1, 1] = P[1, 1] + vmax * vmax, P[1, 3], P[3, 1], P[3, 3] + vmax * vmax
+    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+    Sinv = np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
+    K = PHt @ Sinv
+    v = np.array([tab.x[s, 1], tab.x[s, 3]])
+    tab.x[s] = tab.x[s] - K @ v
+    Pn = P - K @ S @ K.T
+    tab.P[s] = 0.5 * (Pn + Pn.T)
+
+
+@numba.njit(cache=True)
+def start_track(tab, z1, z2, cfg, icfg):  # pragma: no cover - compiled
     """A tentative track from two plots (two-point differencing); False if
     the table is full (the track is dropped and counted)."""
     s = _free_slot(tab)
@@ -507,6 +534,8 @@ def start_track(tab, z1, z2, cfg):  # pragma: no cover - compiled
             tab.P[s, pos[a], pos[b] + 1] = R2[a, b] / T
             tab.P[s, pos[a] + 1, pos[b]] = R2[a, b] / T
             tab.P[s, pos[a] + 1, pos[b] + 1] = (R1[a, b] + R2[a, b]) / (T * T)
+    if icfg[I_SPEED_PRIOR]:
+        speed_prior(tab, s, cfg[C_VMAX])
     tab.status[s] = TENTATIVE
     tab.tid[s] = tab.counters[K_NEXT_ID]
     tab.counters[K_NEXT_ID] += 1
@@ -519,7 +548,7 @@ def start_track(tab, z1, z2, cfg):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def initiate(tab, z, n_plots, free, cfg):  # pragma: no cover - compiled
+def initiate(tab, z, n_plots, free, cfg, icfg):  # pragma: no cover - compiled
     """Step 5: heads of the previous scan × free plots of this one, the speed
     gate, greedy pairing by range-rate consistency; leftover plots become the
     next heads."""
@@ -554,7 +583,7 @@ def initiate(tab, z, n_plots, free, cfg):  # pragma: no cover - compiled
             continue
         head_used[h] = True
         free[i] = False
-        start_track(tab, tab.heads[h], z[i], cfg)
+        start_track(tab, tab.heads[h], z[i], cfg, icfg)
     nh = 0
     for i in range(n_plots):
         if free[i]:
@@ -594,5 +623,5 @@ def jpda_trial(z, n_plots, F, Q, R, Wm, Wc, cfg, icfg, tab, out_state, out_id, o
         jpda_stage(tab, CONFIRMED, zk, m, free, cfg, icfg)
         jpda_stage(tab, TENTATIVE, zk, m, free, cfg, icfg)
         manage(tab, cfg, icfg)
-        initiate(tab, zk, m, free, cfg)
+        initiate(tab, zk, m, free, cfg, icfg)
         record(tab, k, out_state, out_id, out_status, out_cov)

@@ -56,8 +56,13 @@ class TrackerParams:
     init_gate_sigmas: float = param(3.0, "initiation gate: noise margin g in v_min T - g sigma_d <= d <= "
                                          "v_max T + g sigma_d (standard deviations)", ge=0.0, le=10.0,
                                     why="0: speed bounds alone; beyond 10 sigma the gate holds the whole scene")
-    alpha: float = param(0.5, "UKF sigma-point spread alpha (Stone Soup's default)", gt=0.0, le=1.0,
-                         why="the scaled unscented transform's range (0, 1]")
+    initial_velocity: str = param("two-point", "two-point: the velocity of the two initial plots by "
+                                  "differencing (the chapter's initialisation); two-point+speed-prior: "
+                                  "fused with a N(0, v_max^2) prior per axis (ours)",
+                                  choices=("two-point", "two-point+speed-prior"))
+    alpha: float = param(0.5, "UKF sigma-point spread alpha (Stone Soup's default)", ge=0.01, le=1.0,
+                         why="the scaled unscented transform's range is (0, 1]; below 0.01 the central weight "
+                             "passes -10^4 and the moment sums cancel in float64")
     beta: float = param(2.0, "UKF prior-knowledge weight beta (2: optimal for a Gaussian)", ge=0.0, le=10.0,
                         why="non-negative; larger values only inflate the central covariance weight")
     kappa: float = param(-1.0, "UKF secondary scale kappa (3 - n = -1 for the 4-state CV model, Stone "
@@ -124,6 +129,7 @@ def tracker_models(scene: MultiTargetScene, params, filter_kind: int) -> Tracker
     icfg[kern.I_TERM_M], icfg[kern.I_TERM_N] = params.terminate_m, params.terminate_n
     icfg[kern.I_MAX_CLUSTER] = params.max_cluster_size
     icfg[kern.I_FILTER] = filter_kind
+    icfg[kern.I_SPEED_PRIOR] = params.initial_velocity == "two-point+speed-prior"
     return TrackerModels(F=cv_transition(T), Q=cv_process_noise(T, scene.accel_std_m_s2), R=np.diag(sig ** 2),
                          Wm=Wm, Wc=Wc, cfg=cfg, icfg=icfg, gamma=gamma)
 

@@ -180,9 +180,11 @@ class StoneSoupJpda(Method):
         term_mask = (1 << params.terminate_n) - 1
         for k in range(K):
             when = start + datetime.timedelta(seconds=k * float(scene.scan_period_s))
-            detections = {Detection(StateVector(p), timestamp=when, measurement_model=measurement)
-                          for p in z[k, :int(n_plots[k])]}
-            hypotheses = jpda.associate(set(tracks), detections, when)
+            ordered = [Detection(StateVector(p), timestamp=when, measurement_model=measurement)
+                       for p in z[k, :int(n_plots[k])]]
+            detections = set(ordered)
+            # lists, not sets: Stone Soup sums the joint events in iteration order (determinism to the last bit)
+            hypotheses = jpda.associate(list(tracks), ordered, when)
             gated = set()
             ended = []
             for track, multi in hypotheses.items():
@@ -195,18 +197,24 @@ class StoneSoupJpda(Method):
                         or kern.position_std(np.asarray(track.covar, float)) > params.max_position_std_m
                         or speed > params.max_speed_m_s):
                     ended.append(track)
-            for track in initiator.initiate(detections - gated, when):
+            for track in sorted(initiator.initiate(detections - gated, when), key=_track_key):
                 tracks[track] = 0
             for track in ended:
                 del tracks[track]
                 slots.record(buf, k, track, kern.TERMINATED)
             for track in tracks:
                 slots.record(buf, k, track, kern.CONFIRMED)
-            for track in initiator.holding_tracks:
+            for track in sorted(initiator.holding_tracks, key=_track_key):
                 if sum(1 for s in track if isinstance(s, Update) and s.hypothesis) >= 2:
                     slots.record(buf, k, track, kern.TENTATIVE)
             slots.release_missing(set(tracks) | set(initiator.holding_tracks))
         return buf, slots.used
+
+
+def _track_key(track):
+    """A deterministic order for Stone Soup's tracks (sets of objects hashed by
+    address): first timestamp, then first state."""
+    return track[0].timestamp, tuple(np.asarray(track[0].state_vector, float).ravel())
 
 
 def _append_mixture(track, multi, when, updater) -> None:

@@ -97,7 +97,7 @@ def test_false_confirmations_follow_the_mn_prediction(M, N, clutter_per_scan):
             for s in tentative:
                 if tab.status[s] != kern.TENTATIVE:
                     outcome[(trial, int(tab.tid[s]))] = tab.status[s] == kern.CONFIRMED
-            kern.initiate(tab, z, m, free, models.cfg)
+            kern.initiate(tab, z, m, free, models.cfg, models.icfg)
             tab.status[tab.status == kern.TERMINATED] = kern.EMPTY
     assert len(outcome) > 300
     p = np.array([pf for track in frames.values() for pf, _ in track])
