@@ -44,7 +44,7 @@ TOP_KEYS = {"name", "description", "scenario", "scenarios", "trials", "seed", "s
             "scenario_params", "methods", "calibration", "record", "provenance", "unit_timeout_s",
             "max_unit_memory_gb"}
 SCENARIO_KEYS = {"name", "params", "label", "snr_db", "trials"}
-METHOD_KEYS = {"name", "params", "label"}
+METHOD_KEYS = {"name", "params", "label", "optional"}
 CALIBRATION_MODES = ("nominal", "empirical", "gumbel")
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}\Z")     # \Z: "$" would let a final newline in
 #: config labels: readable like "cumulant-as-printed" or "glint[epsilon=0.05]", never path-like
@@ -136,6 +136,9 @@ class Plan:
     scenario_axes: tuple[str, ...] = ()
     #: the sweep's ``max_unit_memory_gb`` when it set one (None: the machine's default)
     max_unit_memory_gb: float | None = None
+    #: ``[[methods]]`` entries marked ``optional = true`` whose method is unavailable here
+    #: (a missing extra): (the entry as written, why), skipped; the report lists them
+    skipped_methods: tuple[tuple[dict, str], ...] = ()
 
     def pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
         """The method configs that run on ``scenario`` (those whose task it serves)."""
@@ -161,7 +164,7 @@ class Plan:
         head |= {} if self.unit_timeout_s is None else {"unit_timeout_s": self.unit_timeout_s}
         return head | {
             "methods": [{"name": m.name, "label": m.label, "params": params_as_dict(m.params)}
-                        for m in self.methods],
+                        for m in self.methods] + [entry | {"optional": True} for entry, _ in self.skipped_methods],
             "calibration": {"pfa": self.calibration.pfa, "mode": self.calibration.mode,
                             "h0_trials": self.calibration.h0_trials}
                            # written only when set, so plans without it keep their fingerprints
@@ -379,12 +382,15 @@ def _params_text_of_label(name: str, label: str) -> str:
 
 
 def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]
-                   ) -> tuple[tuple[ComponentConfig, ...], tuple[str, ...]]:
-    """The method configs, and the sweep field (``methods[i]``) each comes from."""
+                   ) -> tuple[tuple[ComponentConfig, ...], tuple[str, ...], tuple[tuple[dict, str], ...]]:
+    """The method configs, the sweep field (``methods[i]``) each comes from, and
+    the ``optional = true`` entries skipped because their method is unavailable
+    here (each with the reason)."""
     if not isinstance(value, list) or not value:
         raise ConfigError("methods", "expected at least one [[methods]] table")
     configs: list[ComponentConfig] = []
     fields: list[str] = []
+    skipped: list[tuple[dict, str]] = []
     seen: dict[str, str] = {}
     for i, entry in enumerate(value):
         field = f"methods[{i}]"
@@ -392,6 +398,13 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]
         _reject_unknown(entry, METHOD_KEYS, field)
         if "name" not in entry or not isinstance(entry["name"], str):
             raise ConfigError(f"{field}.name", "missing method name (a string)")
+        optional = entry.get("optional", False)
+        if not isinstance(optional, bool):
+            raise ConfigError(f"{field}.optional", f"expected true or false, got {optional!r}"[:200])
+        reason = None if entry["name"] in registry.methods() else registry.unavailable_reason(entry["name"])
+        if optional and reason is not None:
+            skipped.append(({k: v for k, v in entry.items() if k != "optional"}, reason))
+            continue
         cls = registry.get_method(entry["name"], f"{field}.name")
         if not any(cls.task in s.tasks for s in scenarios):
             names = ", ".join(sorted({f"{s.name!r} ({'/'.join(s.tasks)})" for s in scenarios}))
@@ -417,9 +430,12 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]
             seen[c.label] = field
         configs.extend(expanded)
         fields.extend([field] * len(expanded))
+    if not configs:
+        raise ConfigError("methods", "every method of the sweep is optional and unavailable here: "
+                                     + "; ".join(f"{e['name']}: {r}" for e, r in skipped))
     if len(configs) > MAX_CONFIGS:
         raise ConfigError("methods", f"{len(configs)} method configs; at most {MAX_CONFIGS}")
-    return tuple(configs), tuple(fields)
+    return tuple(configs), tuple(fields), tuple(skipped)
 
 
 def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, ...], trials: int,
@@ -530,7 +546,7 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     seed = _expect_int(data.get("seed", 0), "seed", 0, 2**63 - 1)
     chunk = _expect_int(data.get("chunk", 50), "chunk", 1, 1_000_000)
     snr_db = _parse_snr(data["snr_db"]) if "snr_db" in data else scenarios[0].snr_db
-    methods, method_fields = _parse_methods(data["methods"], scenarios)
+    methods, method_fields, skipped = _parse_methods(data["methods"], scenarios)
     method_tasks = tuple(registry.get_method(m.name).task for m in methods)
     calibration = _parse_calibration(data.get("calibration", {}))
     for i, (m, task) in enumerate(zip(methods, method_tasks)):
@@ -552,7 +568,8 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
                                                     f"{MAX_UNIT_MEMORY_GB:g}] (GB), got {memory_gb:g}")
     axes = tuple(k for k in data.get("scenario_params", {}) if isinstance(k, str)) if scenario else ()
     plan = Plan(name, description, scenario, scenarios, trials, seed, snr_db, chunk,
-                methods, calibration, record_trials, source, method_tasks, timeline_snr_db, unit_timeout_s, axes, memory_gb)
+                methods, calibration, record_trials, source, method_tasks, timeline_snr_db, unit_timeout_s, axes, memory_gb,
+                skipped)
     idle = [s.label for s in scenarios if not plan.pairs(s)]
     if idle:
         raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0]!r}")

@@ -33,10 +33,10 @@ def _legend_outside(ax) -> None:
 STYLES = ("o-", "s--", "^-.", "D:", "v-", "P--", "X-.", "*:")
 
 
-def _curves(summary: pd.DataFrame):
-    """(colour, marker/line style, label, rows) per config; styles differ so equal curves stay visible."""
+def _curves(summary: pd.DataFrame, x: str = "snr_db"):
+    """(colour, marker/line style, label, rows sorted by ``x``) per config; styles differ so equal curves stay visible."""
     for i, (label, g) in enumerate(summary.groupby("config", sort=False)):
-        yield f"C{i % 10}", STYLES[i % len(STYLES)], label, g.sort_values("snr_db")
+        yield f"C{i % 10}", STYLES[i % len(STYLES)], label, g.sort_values(x)
 
 
 def pd_vs_snr(summary: pd.DataFrame, path: Path, pfa: float, title: str,
@@ -136,16 +136,25 @@ def rmse_per_step(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, 
 def metric_vs_snr(summary: pd.DataFrame, path: Path, title: str, column: str = "rmse_mean",
                   ylabel: str = "time-averaged position RMSE (m)", log: bool = False) -> Path:
     """A summary metric against SNR per config, with its interval band when present."""
+    return metric_vs(summary, "snr_db", path, title, column, ylabel, "SNR (dB)", log=log)
+
+
+def metric_vs(summary: pd.DataFrame, x: str, path: Path, title: str, column: str, ylabel: str, xlabel: str,
+              log: bool = False, logx: bool = False) -> Path:
+    """A summary metric against the summary column ``x`` per config, with its
+    interval band (``*_low``, ``*_high`` beside ``*_mean``) when present."""
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
-    for color, style, label, g in _curves(summary):
+    for color, style, label, g in _curves(summary, x):
         ok = g[column].notna()
-        ax.plot(g.snr_db[ok], g[column][ok], style, color=color, ms=4, lw=1.5, label=label, mfc="none")
+        ax.plot(g[x][ok], g[column][ok], style, color=color, ms=4, lw=1.5, label=label, mfc="none")
         low, high = column.replace("_mean", "_low"), column.replace("_mean", "_high")
         if low in g and high in g:
-            ax.fill_between(g.snr_db[ok], g[low][ok], g[high][ok], color=color, alpha=0.18, lw=0)
+            ax.fill_between(g[x][ok], g[low][ok], g[high][ok], color=color, alpha=0.18, lw=0)
     if log:
         ax.set_yscale("log")
-    ax.set(xlabel="SNR (dB)", ylabel=ylabel, title=title)
+    if logx:
+        ax.set_xscale("log")
+    ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
     ax.grid(alpha=0.3, which="both")
     _legend_outside(ax)
     return _save(fig, path)

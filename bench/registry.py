@@ -268,13 +268,20 @@ def unavailable() -> list[Unavailable]:
     return list(_UNAVAILABLE)
 
 
+def unavailable_reason(name: str) -> str | None:
+    """Why the plugin ``name`` (or the module of that name) could not be
+    registered, in one line; None when it is not among the unavailable ones."""
+    hint = next((u for u in unavailable()
+                 if name in (u.name, re.split(r"[.:]", u.source)[-1].replace("_", "-"))), None)
+    return None if hint is None else hint.error
+
+
 def _lookup(table: dict, name: str, kind: str, field: str):
     if name in table:
         return table[name]
-    hint = next((u for u in unavailable()
-                 if name in (u.name, re.split(r"[.:]", u.source)[-1].replace("_", "-"))), None)
-    if hint is not None:
-        raise ConfigError(field, f"{kind} {name!r} is unavailable: {hint.error}")
+    reason = unavailable_reason(name)
+    if reason is not None:
+        raise ConfigError(field, f"{kind} {name!r} is unavailable: {reason}")
     known = ", ".join(table) or "none"
     raise ConfigError(field, f"unknown {kind} {name!r} (known: {known})")
 

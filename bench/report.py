@@ -184,7 +184,17 @@ def _section_plan(record: dict, store: Store, tasks: list) -> str:
         "task (common random numbers); trial *i* sees the same noise at every SNR level. The resolved "
         "sweep is `plan.toml` next to this report.",
         _table(["config", "method", "task", "resolved parameters"], methods),
+        *_skipped_text(record.get("skipped", [])),
     ])
+
+
+def _skipped_text(skipped: list) -> list[str]:
+    """The optional method configs the sweep names that could not run here, and why."""
+    if not skipped:
+        return []
+    lines = [f"- `{s['label']}` ({s['name']}): {escape_controls(s['reason'])}" for s in skipped]
+    return ["**Not run** (marked `optional` in the sweep, unavailable in this environment; their rows are "
+            "absent from every table):\n\n" + "\n".join(lines)]
 
 
 def _calibration_text(calibrated: list) -> str:

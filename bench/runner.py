@@ -146,13 +146,19 @@ def _measurements_xy(batch, i: int):
     return batch.z[i][:, :2] if batch.z.ndim == 3 and batch.z.shape[-1] >= 2 else None
 
 
+def _truth_xy(batch, i: int, pos: list[int]):
+    """Trial ``i``'s true position (K, 2) for a single-target truth (n, K, d);
+    None for a set of targets (n, K, T, d), which its task draws itself."""
+    return batch.truth[i][:, pos[:2]] if batch.truth.ndim == 3 else None
+
+
 def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict, tasks) -> bytes:
     """Trial ``i`` as the record the driver draws: the harness's truth and
     measurements, what each of ``tasks`` keeps of the scene, the methods' traces."""
     sc = plan.scenarios[unit.scenario_index]
     pos = list(batch.scene.position_index)
     scene = RecordedScene.union(task.recorded_scene(batch, i) for task in tasks)
-    rec = TrialRecord(sc.label, unit.snr_db, int(batch.trials[i]), batch.t, truth_xy=batch.truth[i][:, pos[:2]],
+    rec = TrialRecord(sc.label, unit.snr_db, int(batch.trials[i]), batch.t, truth_xy=_truth_xy(batch, i, pos),
                       measurements_xy=_measurements_xy(batch, i), methods=traces, arrays=scene.arrays,
                       images=scene.images, info=scene.info)
     return rec.to_bytes()
@@ -489,6 +495,8 @@ def plan_record(plan: Plan, command: str) -> dict:
                      "task": registry.get_method(m.name).task} for m in plan.methods],
         "scenarios": [{"label": s.label, "name": s.name, "params": s.params_text, "tasks": list(s.tasks),
                        "snr_db": list(s.snr_db), "trials": s.trials} for s in plan.scenarios],
+        "skipped": [{"label": entry.get("label", entry["name"]), "name": entry["name"], "reason": reason}
+                    for entry, reason in plan.skipped_methods],
     }
 
 

@@ -135,3 +135,22 @@ def test_cfar_preset_smoke(bench_cli, tmp_path):
     report = (tmp_path / "out" / "report.md").read_text()
     assert "which detector wins where" in report and "CFAR loss" in report
     assert (tmp_path / "out" / "figures" / "cells_rd_map_detections.png").exists()
+
+
+def test_multi_target_preset_smoke(bench_cli, tmp_path):
+    """The multi-target preset's scenario configs and trackers, few trials and short runs; the
+    Stone Soup peer runs when the [peers] extra is installed and is listed as not run otherwise."""
+    sweep = _preset("multi-target")
+    sweep.update(trials=2, chunk=2)
+    for sc in sweep["scenarios"]:
+        sc["params"] |= {"scans": 12, "targets": 3}
+    path = tmp_path / "smoke.toml"
+    path.write_text(tomlw.dumps(sweep))
+    bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 1, check=True)
+    summary = pd.read_csv(tmp_path / "out" / "summary.csv")
+    report = (tmp_path / "out" / "report.md").read_text()
+    peers = "stonesoup-jpda" in registry.methods()
+    assert set(summary.method) == {"jpda-ukf", "gnn-ekf"} | ({"stonesoup-jpda"} if peers else set())
+    assert summary.scenario.nunique() == 5 and summary.gospa_mean.notna().all()
+    assert "## Multi-target tracking: paired comparison" in report
+    assert ("`stonesoup-jpda` (stonesoup-jpda): needs the [peers] extra" in report) != peers

@@ -1,5 +1,5 @@
-"""The tasks of the harness: what maneuver detection, tracking and
-track-before-detect each mean to it (docs/architecture.md, 'Tasks').
+"""The tasks of the harness: what maneuver detection, tracking,
+track-before-detect and multi-target tracking each mean to it (docs/architecture.md, 'Tasks').
 
 Each task is a :class:`~bench.tasks.base.Task` in its own module, with its
 metrics (``*_metrics.py``) and report sections (``*_report.py``, imported only
@@ -17,14 +17,15 @@ from bench.metrics import CELL_KEYS
 from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, Views
 from bench.tasks.cells import CellDetectionOutput, CellDetectionTask, MapScene
 from bench.tasks.detection import DetectionScene, DetectionTask
+from bench.tasks.multitarget import MultiTargetScene, MultiTargetTask
 from bench.tasks.tbd import TBDScene, TBDTask
 from bench.tasks.tracking import TrackingScene, TrackingTask
 
-__all__ = ["BUILTIN_TASKS", "CellDetectionOutput", "DetectionScene", "MapScene", "OutputError", "RecordedScene", "ReportContext", "TBDScene", "Task",
-           "TrackingScene", "Views", "summary_columns"]
+__all__ = ["BUILTIN_TASKS", "CellDetectionOutput", "DetectionScene", "MapScene", "MultiTargetScene", "OutputError",
+           "RecordedScene", "ReportContext", "TBDScene", "Task", "TrackingScene", "Views", "summary_columns"]
 
 #: The built-in tasks, in registry order.
-BUILTIN_TASKS = (DetectionTask, TrackingTask, TBDTask, CellDetectionTask)
+BUILTIN_TASKS = (DetectionTask, TrackingTask, TBDTask, CellDetectionTask, MultiTargetTask)
 
 #: summary.csv's leading columns, in the order its readers have always found
 #: them: a cell's keys and the columns of the file's first version (some

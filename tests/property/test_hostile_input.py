@@ -577,7 +577,7 @@ def test_the_console_script_rejects_hostile_files_the_same_way(tmp_path):
 #: seconds a case at a bound may take (the longest, a 10 000-step scene, takes about 6 s)
 CASE_BUDGET_S = 30.0
 #: the cheapest method of each task, run on the scenario cases
-CHEAP_METHOD = {"maneuver-detection": "innovation", "tracking": "ekf", "tbd": "dp-tbd"}
+CHEAP_METHOD = {"maneuver-detection": "innovation", "tracking": "ekf", "tbd": "dp-tbd", "multi-target": "gnn-ekf"}
 HUGE_INTS = (10 ** 400, -10 ** 400)
 
 

@@ -1,0 +1,261 @@
+"""Method ``stonesoup-jpda``: Stone Soup's JPDA with its UKF, as a peer of ``jpda-ukf``.
+
+Needs the ``[peers]`` extra (``pip install -e ".[peers]"``, Stone Soup ≥ 1.4).
+Stone Soup is imported when this module is, so without it ``bench list``
+shows the method as unavailable with the import error (bench/registry.py;
+docs/architecture.md, 'Plugins').
+"""
+
+from __future__ import annotations
+
+import datetime
+
+import numpy as np
+
+from bench.registry import PluginError
+
+try:
+    from stonesoup.base import Property
+    from stonesoup.dataassociator.neighbour import GNNWith2DAssignment
+    from stonesoup.dataassociator.probability import JPDA
+    from stonesoup.deleter.time import UpdateTimeStepsDeleter
+    from stonesoup.functions import gm_reduce_single
+    from stonesoup.hypothesiser.distance import DistanceHypothesiser
+    from stonesoup.hypothesiser.probability import PDAHypothesiser
+    from stonesoup.initiator.simple import MultiMeasurementInitiator
+    from stonesoup.measures import Mahalanobis
+    from stonesoup.models.base import ReversibleModel
+    from stonesoup.models.measurement.nonlinear import NonLinearGaussianMeasurement
+    from stonesoup.models.transition.linear import LinearGaussianTransitionModel
+    from stonesoup.predictor.kalman import UnscentedKalmanPredictor
+    from stonesoup.types.array import StateVector, StateVectors
+    from stonesoup.types.detection import Detection
+    from stonesoup.types.state import GaussianState
+    from stonesoup.types.update import GaussianStateUpdate, Update
+    from stonesoup.updater.kalman import UnscentedKalmanUpdater
+except ImportError as exc:     # the [peers] extra is missing: the method is unavailable, named, with the reason
+    raise PluginError(f'needs the [peers] extra (pip install -e ".[peers]"): {exc}', name="stonesoup-jpda") from exc
+
+from bench.core import Batch, Method  # noqa: E402 - after the guarded imports
+from bench.registry import register_method  # noqa: E402
+from bench.tasks.multitarget import MULTI_TARGET, MultiTargetOutput
+from methods import _mtt_kernels as kern
+from methods._track_management import (
+    LAMBDA_FLOOR,
+    TrackerParams,
+    TrialBuffers,
+    assemble,
+    scene_of,
+    tracker_models,
+)
+from models.hfswr import measure, plot_to_cartesian
+
+
+class HFSWRTransition(LinearGaussianTransitionModel):
+    """The CV model of :mod:`models.hfswr` (F, discrete white-noise Q) for Stone Soup."""
+
+    F: np.ndarray = Property(doc="(4, 4) transition over one scan")
+    Q: np.ndarray = Property(doc="(4, 4) process noise over one scan")
+
+    @property
+    def ndim_state(self):
+        return 4
+
+    def matrix(self, **kwargs):
+        return self.F
+
+    def covar(self, **kwargs):
+        return self.Q
+
+
+class HFSWRMeasurement(NonLinearGaussianMeasurement, ReversibleModel):
+    """Range, azimuth (clockwise from north) and radial velocity of
+    :func:`models.hfswr.measure` for Stone Soup. The azimuth is a plain float,
+    not a Stone Soup ``Bearing``: the scenario's region stays within ±90°, away
+    from the ±π cut. ``inverse_function`` gives the position of the plot and
+    its radial velocity along the line of sight (Stone Soup's initiator adds
+    the prior's velocity uncertainty)."""
+
+    sensor_xy: np.ndarray = Property(doc="(2,) sensor position (m)")
+
+    @property
+    def ndim_meas(self):
+        return 3
+
+    def function(self, state, noise=False, **kwargs):
+        x = np.asarray(state.state_vector, dtype=float)            # (4, N)
+        z = measure(x.T, self.sensor_xy).T
+        if isinstance(noise, bool) and noise:
+            z = z + self.rvs(num_samples=x.shape[1], **kwargs)
+        elif not isinstance(noise, bool):
+            z = z + noise
+        return StateVectors(z) if z.shape[1] > 1 else StateVector(z[:, 0])
+
+    def inverse_function(self, detection, **kwargs):
+        r, az, vr = np.asarray(detection.state_vector, float)[:, 0]
+        px, py = plot_to_cartesian(np.array([r, az]), self.sensor_xy)
+        return StateVector([px, vr * np.sin(az), py, vr * np.cos(az)])
+
+
+@register_method
+class StoneSoupJpda(Method):
+    """Stone Soup's JPDA with UnscentedKalmanUpdater and MultiMeasurementInitiator (peer of jpda-ukf; extra [peers]).
+
+    The same models and parameters as ``jpda-ukf`` (:mod:`methods.multitarget`):
+    the CV transition and discrete white-noise Q of :mod:`models.hfswr`
+    (:class:`HFSWRTransition`), the range / azimuth / radial velocity
+    measurement with R = diag(σ²) (:class:`HFSWRMeasurement`),
+    ``UnscentedKalmanPredictor`` / ``UnscentedKalmanUpdater`` with the same
+    α, β, κ, ``PDAHypothesiser`` (clutter density λ, P_D, gate probability
+    P_G) under ``JPDA`` (which enumerates the joint events of *all* tracks of
+    a scan at once: no clustering, so its cost grows exponentially with the
+    number of tracks), the JPDA mixture reduced by ``gm_reduce_single`` (eqs.
+    6.73–6.74).
+
+    **Initiation**: Stone Soup's closest to M/N is ``MultiMeasurementInitiator``:
+    every plot no confirmed track's gate holds starts a holding track
+    (position from the plot, velocity from the plot's radial velocity along the
+    line of sight plus a prior std of v_max per axis); holding tracks are
+    associated by ``GNNWith2DAssignment`` on the Mahalanobis distance (gate
+    √γ) and updated by the UKF; a holding track with M + 2 plots (the two
+    initial plots and M more) is confirmed; one without a plot for N − M + 1
+    consecutive scans (``UpdateTimeStepsDeleter``) is dropped. So it is
+    "M + 2 plots before N − M + 1 consecutive misses", not "M of the N frames
+    after the second plot": close, not identical (no N-frame deadline, no
+    speed gate on the second plot beyond the prior's v_max).
+    **Termination**: the same three rules as ``jpda-ukf`` (M_t of the last
+    N_t scans without a plot in the gate, the position std bound, the speed
+    bound), evaluated here on Stone Soup's tracks (Stone Soup has no
+    "M of N" deleter). Outputs: confirmed tracks (2), terminated at their last
+    scan (3), holding tracks with at least two plots as tentative (1).
+    Per trial and scan in Python objects: slow by nature, the baseline of
+    ``bench perf`` for ``jpda-ukf``.
+    """
+
+    name = "stonesoup-jpda"
+    task = MULTI_TARGET
+    Params = TrackerParams
+
+    def check_scenario(self, params, scenario_params) -> str | None:
+        from methods.multitarget import JpdaUkf
+
+        return JpdaUkf().check_scenario(params, scenario_params)
+
+    def run(self, batch: Batch, params) -> MultiTargetOutput:
+        scene = scene_of(batch)
+        n, K = batch.z.shape[:2]
+        trials, slots = [], []
+        for i in range(n):
+            buf, used = self._trial(batch.z[i], scene.n_plots[i], scene, params, K)
+            trials.append(buf)
+            slots.append(used)
+        return assemble(trials, slots)
+
+    def _components(self, scene, params):
+        models = tracker_models(scene, params, kern.UKF)
+        transition = HFSWRTransition(F=models.F, Q=models.Q)
+        measurement = HFSWRMeasurement(ndim_state=4, mapping=(0, 2), noise_covar=models.R,
+                                       sensor_xy=np.asarray(scene.sensor_xy, float))
+        ukf = dict(alpha=params.alpha, beta=params.beta, kappa=params.kappa)
+        predictor = UnscentedKalmanPredictor(transition, **ukf)
+        updater = UnscentedKalmanUpdater(measurement, **ukf)
+        jpda = JPDA(PDAHypothesiser(predictor, updater, clutter_spatial_density=max(scene.clutter_density,
+                                                                                     LAMBDA_FLOOR),
+                                    prob_detect=scene.pd, prob_gate=params.gate_probability))
+        vmax = float(scene.speed_bounds_m_s[1])
+        initiator = MultiMeasurementInitiator(
+            prior_state=GaussianState(StateVector([0.0, 0.0, 0.0, 0.0]), np.diag([0.0, vmax ** 2, 0.0, vmax ** 2])),
+            deleter=UpdateTimeStepsDeleter(time_steps_since_update=params.confirm_n - params.confirm_m + 1),
+            data_associator=GNNWith2DAssignment(DistanceHypothesiser(
+                predictor, updater, Mahalanobis(), missed_distance=float(np.sqrt(models.gamma)))),
+            updater=updater, measurement_model=measurement, min_points=params.confirm_m + 2)
+        return measurement, updater, jpda, initiator
+
+    def _trial(self, z, n_plots, scene, params, K):
+        measurement, updater, jpda, initiator = self._components(scene, params)
+        start = datetime.datetime(2000, 1, 1)
+        buf = TrialBuffers.empty(K, params.max_tracks)
+        tracks: dict = {}                 # Stone Soup track -> its miss history (bit 0 = this scan)
+        slots = _Slots(params.max_tracks)
+        term_mask = (1 << params.terminate_n) - 1
+        for k in range(K):
+            when = start + datetime.timedelta(seconds=k * float(scene.scan_period_s))
+            ordered = [Detection(StateVector(p), timestamp=when, measurement_model=measurement)
+                       for p in z[k, :int(n_plots[k])]]
+            detections = set(ordered)
+            # lists, not sets: Stone Soup sums the joint events in iteration order (determinism to the last bit)
+            hypotheses = jpda.associate(list(tracks), ordered, when)
+            gated = set()
+            ended = []
+            for track, multi in hypotheses.items():
+                hit = any(h for h in multi)
+                gated |= {h.measurement for h in multi if h}
+                _append_mixture(track, multi, when, updater)
+                tracks[track] = ((tracks[track] << 1) | (0 if hit else 1)) & term_mask
+                speed = float(np.hypot(track.state_vector[1, 0], track.state_vector[3, 0]))
+                if (bin(tracks[track]).count("1") >= params.terminate_m
+                        or kern.position_std(np.asarray(track.covar, float)) > params.max_position_std_m
+                        or speed > params.max_speed_m_s):
+                    ended.append(track)
+            for track in sorted(initiator.initiate(detections - gated, when), key=_track_key):
+                tracks[track] = 0
+            for track in ended:
+                del tracks[track]
+                slots.record(buf, k, track, kern.TERMINATED)
+            for track in tracks:
+                slots.record(buf, k, track, kern.CONFIRMED)
+            for track in sorted(initiator.holding_tracks, key=_track_key):
+                if sum(1 for s in track if isinstance(s, Update) and s.hypothesis) >= 2:
+                    slots.record(buf, k, track, kern.TENTATIVE)
+            slots.release_missing(set(tracks) | set(initiator.holding_tracks))
+        return buf, slots.used
+
+
+def _track_key(track):
+    """A deterministic order for Stone Soup's tracks (sets of objects hashed by
+    address): first timestamp, then first state."""
+    return track[0].timestamp, tuple(np.asarray(track[0].state_vector, float).ravel())
+
+
+def _append_mixture(track, multi, when, updater) -> None:
+    """The JPDA update of Stone Soup's tutorial: each hypothesis' posterior
+    (the prediction for the missed detection) weighted by its probability,
+    reduced to one Gaussian."""
+    states, weights = [], []
+    for h in multi:
+        states.append(updater.update(h) if h else h.prediction)
+        weights.append(float(h.probability))
+    means = StateVectors([s.state_vector for s in states])
+    covars = np.stack([s.covar for s in states], axis=2)
+    mean, covar = gm_reduce_single(means, covars, np.asarray(weights))
+    track.append(GaussianStateUpdate(mean, covar, multi, when))
+
+
+class _Slots:
+    """Output slots for Stone Soup's tracks: identities in first-seen order, the lowest free slot."""
+
+    def __init__(self, capacity: int):
+        self.capacity = capacity
+        self.slot_of: dict = {}
+        self.id_of: dict = {}
+        self.used = 0
+
+    def record(self, buf: TrialBuffers, k: int, track, status: int) -> None:
+        if track not in self.slot_of:
+            taken = set(self.slot_of.values())
+            free = next((s for s in range(self.capacity) if s not in taken), None)
+            if free is None:
+                return
+            self.slot_of[track] = free
+            self.id_of.setdefault(track, len(self.id_of))
+            self.used = max(self.used, free + 1)
+        s = self.slot_of[track]
+        sv, P = np.asarray(track.state_vector, float)[:, 0], np.asarray(track.covar, float)
+        buf.state[k, s] = sv
+        buf.track_id[k, s] = self.id_of[track]
+        buf.status[k, s] = status
+        buf.cov[k, s] = P[np.ix_((0, 2), (0, 2))]
+
+    def release_missing(self, alive: set) -> None:
+        for track in [t for t in self.slot_of if t not in alive]:
+            del self.slot_of[track]
