@@ -25,7 +25,13 @@ SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials
                    "false_alarms_per_map", "false_alarms_per_map_low", "false_alarms_per_map_high",
                    *(f"{kind}_{region}{end}" for region in ("homogeneous", "bragg", "interference", "clutter_edge")
                      for kind in ("pd", "pfa") for end in ("", "_low", "_high")),
-                   "pd_paired", "pd_paired_low", "pd_paired_high", "targets_per_map", "swerling"]
+                   "pd_paired", "pd_paired_low", "pd_paired_high", "targets_per_map", "swerling",
+                   # multi-target tracking (bench/tasks/multitarget_metrics.py)
+                   "scene_pd", "clutter_per_scan", "gospa_cutoff_m", "gospa_order",
+                   *(f"{m}_{end}" for m in ("gospa", "gospa_loc", "gospa_missed", "gospa_false", "ospa",
+                                            "false_track_rate", "track_breaks", "id_switches", "purity", "init_delay")
+                     for end in ("mean", "low", "high")),
+                   "initiated_fraction"]
 
 TRIAL_COLUMNS = ["scenario", "method", "params", "snr_db", "trial", "seed", "detected", "delay",
                  "false_alarms", "null_steps"]
