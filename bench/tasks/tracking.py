@@ -169,11 +169,8 @@ class TrackingTask(Task):
         return scene(None if flags is None else np.asarray(flags[i]).reshape(batch.steps, -1).any(axis=1))
 
     def recorded_method(self, batch: Batch, out: TrackingOutput, i: int, threshold: float) -> MethodTrace:
-        pos = list(batch.scene.position_index)
         err = out.estimate[i] - batch.truth[i]
-        drawn = (out.estimate[i][:, pos[:2]] if len(pos) >= 2       # a range alone: drawn against time
-                 else np.stack([np.asarray(batch.t, float), out.estimate[i][:, pos[0]]], axis=-1))
-        return method_trace(drawn,
+        return method_trace(batch.scene.drawn_xy(out.estimate[i], batch.t),
                             {f"error_{label}": err[:, j] for j, label in enumerate(self.labels(batch))})
 
     # -------------------------------------------------------------- driver side
