@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
-import scipy.special
 
 from bench.core import Batch, TrackingOutput
 from bench.errors import ConfigError
@@ -27,14 +27,35 @@ class IMMResult:
     mu: np.ndarray
 
 
+@numba.njit(cache=True)
 def _moments(weights: np.ndarray, X: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and covariance of a Gaussian mixture: weights (..., r) over r components
-    X (r, ..., d), P (r, ..., d, d): x = sum w_j x_j, P = sum w_j (P_j + (x_j - x)(x_j - x)')."""
-    w = np.moveaxis(weights, -1, 0)
-    x = np.einsum("r...,r...i->...i", w, X)
-    dX = X - x
-    P_mix = np.einsum("r...,r...ij->...ij", w, P + dX[..., :, None] * dX[..., None, :])
-    return x, 0.5 * (P_mix + np.swapaxes(P_mix, -1, -2))
+    """Mean and covariance of a Gaussian mixture per trial: weights (n, r) over r components
+    X (r, n, d), P (r, n, d, d): x = sum w_j x_j, P = sum w_j (P_j + (x_j - x)(x_j - x)')
+    (compiled: NumPy would make a call per small matrix)."""
+    r, n, d = X.shape
+    x, P_mix = np.zeros((n, d)), np.zeros((n, d, d))
+    for i in range(n):
+        for j in range(r):
+            for a in range(d):
+                x[i, a] += weights[i, j] * X[j, i, a]
+        for j in range(r):
+            w = weights[i, j]
+            for a in range(d):
+                da = X[j, i, a] - x[i, a]
+                for b in range(a, d):
+                    value = w * (0.5 * (P[j, i, a, b] + P[j, i, b, a]) + da * (X[j, i, b] - x[i, b]))
+                    P_mix[i, a, b] += value
+                    if b != a:
+                        P_mix[i, b, a] += value
+    return x, P_mix
+
+
+def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
+    """log sum exp(a) along ``axis`` (scipy's, without its overhead on small axes)."""
+    top = np.max(a, axis=axis, keepdims=True)
+    top = np.where(np.isfinite(top), top, 0.0)
+    with np.errstate(divide="ignore"):
+        return np.squeeze(top, axis) + np.log(np.sum(np.exp(a - top), axis=axis))
 
 
 def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: np.ndarray, z: np.ndarray,
@@ -59,8 +80,6 @@ def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: n
     n, K, _ = z.shape
     r, d = len(models), models[0].dim_x
     H, R = models[0].H, models[0].R
-    F = np.stack([m.F for m in models])[:, None]                # (r, 1, d, d)
-    Q = np.stack([m.Q for m in models])[:, None]
     M = np.asarray(transition, float)
     X = np.broadcast_to(np.asarray(x0, float), (r, n, d)).copy()
     P = np.broadcast_to(np.asarray(P0, float), (r, n, d, d)).copy()
@@ -71,17 +90,17 @@ def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: n
     for k in range(K):
         upd = update_batched(X, P, z[None, :, k], H, R)         # leading axes (r, n)
         log_mu = log_cbar + upd.log_likelihood.T                # (n, r)
-        mu = np.exp(log_mu - scipy.special.logsumexp(log_mu, axis=1, keepdims=True))
+        mu = np.exp(log_mu - _logsumexp(log_mu, axis=1)[:, None])
         xs[:, k], Ps[:, k] = _moments(mu, upd.x, upd.P)
         mus[:, k] = mu
         with np.errstate(divide="ignore"):
             log_joint = np.log(mu)[:, :, None] + log_M          # (n, i, j): log M_ij mu_i
-        log_cbar = scipy.special.logsumexp(log_joint, axis=1)   # (n, j)
+        log_cbar = _logsumexp(log_joint, axis=1)                # (n, j)
         omega = np.exp(log_joint - log_cbar[:, None, :])         # (n, i, j)
-        mixed = [_moments(omega[:, :, j], upd.x, upd.P) for j in range(r)]
-        X = np.stack([m[0] for m in mixed])
-        P = np.stack([m[1] for m in mixed])
-        X, P = predict_batched(X, P, F, Q)
+        mixed = [_moments(np.ascontiguousarray(omega[:, :, j]), upd.x, upd.P) for j in range(r)]
+        predicted = [predict_batched(x_j, P_j, mode.F, mode.Q) for (x_j, P_j), mode in zip(mixed, models)]
+        X = np.stack([x_j for x_j, _ in predicted])
+        P = np.stack([P_j for _, P_j in predicted])
     return IMMResult(x=xs, P=Ps, mu=mus)
 
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.linalg
 
@@ -266,19 +267,150 @@ def filterpy_innovations(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarr
 # Q or the state per trial, so their covariances carry the trial axis. The same equations
 # as above, one step at a time, batched over any leading axes (trials, modes).
 
-def _t(A: np.ndarray) -> np.ndarray:
-    return np.swapaxes(A, -1, -2)
+def inverse_logdet(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(S^-1, log det S) of symmetric positive-definite matrices (..., m, m): one and
+    two measured components (ranges, planar positions) in closed form, else
+    ``numpy.linalg``."""
+    m = S.shape[-1]
+    if m == 1:
+        return 1.0 / S, np.log(S[..., 0, 0])
+    if m == 2:
+        a, b, c, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
+        det = a * d - b * c
+        inv = np.stack([np.stack([d, -b], axis=-1), np.stack([-c, a], axis=-1)], axis=-2) / det[..., None, None]
+        return inv, np.log(det)
+    return np.linalg.inv(S), np.linalg.slogdet(S)[1]
+
+
+# Kernels: one trial at a time in compiled loops. NumPy's stacked matmul and linalg make a
+# call per small matrix, and a single BLAS product over the stack (vec(F P F') =
+# (F kron F) vec P) is fast alone but multi-threaded, hundreds of times slower on a
+# loaded machine; compiled loops over d <= 6 states stay fast and single-threaded.
+
+@numba.njit(cache=True, inline="always")
+def _product_into(A, B, out):
+    """out = A @ B for small matrices."""
+    for a in range(A.shape[0]):
+        for b in range(B.shape[1]):
+            acc = 0.0
+            for c in range(A.shape[1]):
+                acc += A[a, c] * B[c, b]
+            out[a, b] = acc
+
+
+@numba.njit(cache=True)
+def _predict_kernel(x, P, F, Q, u):
+    """x (n, d), P (n, d, d), F (d, d), Q (n, d, d) (any strides), u (n, d)."""
+    n, d = x.shape
+    x_out, P_out = np.empty((n, d)), np.empty((n, d, d))
+    FP = np.empty((d, d))
+    for i in range(n):
+        for a in range(d):
+            acc = u[i, a]
+            for b in range(d):
+                acc += F[a, b] * x[i, b]
+            x_out[i, a] = acc
+        _product_into(F, P[i], FP)
+        for a in range(d):
+            for b in range(a, d):
+                acc = 0.0
+                for c in range(d):
+                    acc += FP[a, c] * F[b, c]
+                value = acc + 0.5 * (Q[i, a, b] + Q[i, b, a])        # symmetric by construction
+                P_out[i, a, b] = value
+                P_out[i, b, a] = value
+    return x_out, P_out
+
+
+@numba.njit(cache=True)
+def _update_kernel(x, P, z, H, R):
+    """x (n, d), P (n, d, d), z (n, m), H (m, d), R (m, m): the Joseph-form update;
+    returns x, P, nu, S, NIS, log-likelihood."""
+    n, d = x.shape
+    m = z.shape[1]
+    x_out, P_out = np.empty((n, d)), np.empty((n, d, d))
+    nu_out, S_out = np.empty((n, m)), np.empty((n, m, m))
+    nis_out, loglik_out = np.empty(n), np.empty(n)
+    PHt, gain, A, AP = np.empty((d, m)), np.empty((d, m)), np.empty((d, d)), np.empty((d, d))
+    S, S_inv = np.empty((m, m)), np.empty((m, m))
+    log_2pi = np.log(2.0 * np.pi)
+    for i in range(n):
+        for a in range(d):
+            for j in range(m):
+                acc = 0.0
+                for b in range(d):
+                    acc += P[i, a, b] * H[j, b]
+                PHt[a, j] = acc
+        for j in range(m):
+            for l in range(m):
+                acc = 0.5 * (R[j, l] + R[l, j])
+                for a in range(d):
+                    acc += 0.5 * (H[j, a] * PHt[a, l] + H[l, a] * PHt[a, j])
+                S[j, l] = acc
+        if m == 1:
+            S_inv[0, 0] = 1.0 / S[0, 0]
+            logdet = np.log(S[0, 0])
+        elif m == 2:
+            det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+            S_inv[0, 0], S_inv[1, 1] = S[1, 1] / det, S[0, 0] / det
+            S_inv[0, 1], S_inv[1, 0] = -S[0, 1] / det, -S[1, 0] / det
+            logdet = np.log(det)
+        else:
+            S_inv[:, :] = np.linalg.inv(S)
+            logdet = np.log(np.linalg.det(S))
+        for j in range(m):
+            acc = z[i, j]
+            for a in range(d):
+                acc -= H[j, a] * x[i, a]
+            nu_out[i, j] = acc
+        nis = 0.0
+        for j in range(m):
+            for l in range(m):
+                nis += nu_out[i, j] * S_inv[j, l] * nu_out[i, l]
+        _product_into(PHt, S_inv, gain)
+        for a in range(d):
+            acc = x[i, a]
+            for j in range(m):
+                acc += gain[a, j] * nu_out[i, j]
+            x_out[i, a] = acc
+        for a in range(d):                                          # A = I - K H
+            for b in range(d):
+                acc = 1.0 if a == b else 0.0
+                for j in range(m):
+                    acc -= gain[a, j] * H[j, b]
+                A[a, b] = acc
+        _product_into(A, P[i], AP)
+        for a in range(d):                                          # A P A' + K R K', symmetric
+            for b in range(a, d):
+                acc = 0.0
+                for c in range(d):
+                    acc += AP[a, c] * A[b, c]
+                for j in range(m):
+                    for l in range(m):
+                        acc += gain[a, j] * R[j, l] * gain[b, l]
+                P_out[i, a, b] = acc
+                P_out[i, b, a] = acc
+        S_out[i, :, :] = S
+        nis_out[i] = nis
+        loglik_out[i] = -0.5 * (nis + logdet + m * log_2pi)
+    return x_out, P_out, nu_out, S_out, nis_out, loglik_out
+
+
+def _stacked(a: np.ndarray, tail: int) -> np.ndarray:
+    """``a`` with its leading axes flattened into one (the kernels' trial axis)."""
+    return np.ascontiguousarray(a, dtype=float).reshape(-1, *a.shape[a.ndim - tail:])
 
 
 def predict_batched(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray, u: np.ndarray | None = None):
     """x_k+1|k = F x_k|k (+ u), P_k+1|k = F P_k|k F' + Q, over leading axes: x (..., d),
-    P (..., d, d); F and Q (d, d) or per trial (..., d, d); u (..., d) an additive input
-    (e.g. B u) or None."""
-    x_next = np.einsum("...ij,...j->...i", F, x)
-    if u is not None:
-        x_next = x_next + u
-    P_next = F @ P @ _t(F) + Q
-    return x_next, 0.5 * (P_next + _t(P_next))
+    P (..., d, d); F (d, d) shared; Q (d, d) or per trial (..., d, d); u (..., d) an
+    additive input (e.g. B u) or None."""
+    lead, d = x.shape[:-1], x.shape[-1]
+    xs, Ps = _stacked(x, 1), _stacked(P, 2)
+    Qs = np.broadcast_to(Q, (*lead, d, d)).reshape(-1, d, d) if Q.ndim > 2 else np.broadcast_to(Q, (len(xs), d, d))
+    us = np.zeros_like(xs) if u is None else _stacked(np.broadcast_to(u, x.shape), 1)
+    x_next, P_next = _predict_kernel(xs, Ps, np.ascontiguousarray(F, dtype=float), Qs, us)
+    return x_next.reshape(x.shape), P_next.reshape(P.shape)
 
 
 @dataclass(frozen=True)
@@ -298,19 +430,13 @@ class BatchedUpdate:
 def update_batched(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray) -> BatchedUpdate:
     """The measurement update of the module docstring (Joseph form, FilterPy's
     ``KalmanFilter.update``) over leading axes: x (..., d), P (..., d, d), z (..., m)."""
-    nu = z - x @ H.T
-    PHt = P @ H.T                                              # (..., d, m)
-    S = H @ PHt + R
-    S = 0.5 * (S + _t(S))
-    gain = _t(np.linalg.solve(S, _t(PHt)))                     # P H' S^-1 (S symmetric)
-    x_new = x + np.einsum("...ij,...j->...i", gain, nu)
-    I_KH = np.eye(x.shape[-1]) - gain @ H
-    P_new = I_KH @ P @ _t(I_KH) + gain @ R @ _t(gain)
-    P_new = 0.5 * (P_new + _t(P_new))
-    S_inv_nu = np.linalg.solve(S, nu[..., None])[..., 0]
-    nis = np.einsum("...i,...i->...", nu, S_inv_nu)
-    _, logdet = np.linalg.slogdet(S)
-    log_likelihood = -0.5 * (nis + logdet + nu.shape[-1] * np.log(2.0 * np.pi))
+    lead, m = x.shape[:-1], z.shape[-1]
+    z = np.broadcast_to(z, (*lead, m))
+    x_new, P_new, nu, S, nis, log_likelihood = _update_kernel(
+        _stacked(x, 1), _stacked(P, 2), _stacked(z, 1), np.ascontiguousarray(H, dtype=float),
+        np.ascontiguousarray(R, dtype=float))
+    x_new, P_new, nu = x_new.reshape(x.shape), P_new.reshape(P.shape), nu.reshape(z.shape)
+    S, nis, log_likelihood = S.reshape(*lead, m, m), nis.reshape(lead), log_likelihood.reshape(lead)
     return BatchedUpdate(x=x_new, P=P_new, nu=nu, S=S, nis=nis, log_likelihood=log_likelihood)
 
 

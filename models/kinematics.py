@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.linalg
@@ -112,7 +113,7 @@ def current_statistical_variance(a_bar: np.ndarray, a_max: float, a_max_neg: flo
     accelerations either way). ``a_bar`` beyond the bounds would give a variance that
     grows again (or vanishes at the bound), so it is clipped into [-a_max_neg, a_max]
     and the variance held at ``floor`` at least."""
-    a = np.clip(a_bar, -a_max_neg, a_max)
+    a = np.minimum(np.maximum(a_bar, -a_max_neg), a_max)
     room = np.where(a >= 0.0, a_max - a, a_max_neg + a)
     return np.maximum((4.0 - math.pi) / math.pi * room ** 2, floor)
 
@@ -164,12 +165,12 @@ class KinematicModel:
         d = 3 * self.dims
         require_arrays(self, {"x0": (d,), "P0": (d, d)})
 
-    @property
+    @cached_property
     def H(self) -> np.ndarray:
         """(dims, 3 dims) position measurement matrix."""
         return position_measurement(self.dims)
 
-    @property
+    @cached_property
     def R(self) -> np.ndarray:
         """(dims, dims) measurement-noise covariance."""
         return self.noise_std_m ** 2 * np.eye(self.dims)
