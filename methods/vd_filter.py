@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy import stats
 
@@ -13,7 +14,7 @@ from bench.core import Batch, TrackingOutput
 from bench.params import param
 from bench.registry import register_method
 from methods._kinematic_base import SIGMA_WHY, KinematicTracker, ca_noise_param, cv_ca_modes, cv_noise_param, output
-from models.kalman import LinearGaussianModel, inverse_logdet, predict_batched, update_batched
+from models.kalman import LinearGaussianModel, inverse_logdet, predict_one, small_inverse_into, update_one, update_scratch
 from models.kinematics import KinematicModel
 
 LEVEL_WHY = "a test level: a probability away from 0 and 1"
@@ -71,6 +72,93 @@ def _acceleration_nis(x: np.ndarray, P: np.ndarray, acc: np.ndarray) -> np.ndarr
     return np.einsum("...i,...i->...", a, (P_aa_inv @ a[..., None])[..., 0])
 
 
+@numba.njit(cache=True)
+def _restart_into(x, P, acc, accel_var):
+    """:func:`_restart_state` in place (one trial)."""
+    for a in acc:
+        x[a] = 0.0
+        P[a, :] = 0.0
+        P[:, a] = 0.0
+        P[a, a] = accel_var
+
+
+@numba.njit(cache=True)
+def _acceleration_nis_one(x, P, acc, P_aa, P_aa_inv):
+    """a' P_aa^-1 a of one trial's acceleration estimate."""
+    for j in range(len(acc)):
+        for l in range(len(acc)):
+            P_aa[j, l] = P[acc[j], acc[l]]
+    small_inverse_into(P_aa, P_aa_inv)
+    q = 0.0
+    for j in range(len(acc)):
+        for l in range(len(acc)):
+            q += x[acc[j]] * P_aa_inv[j, l] * x[acc[l]]
+    return q
+
+
+@numba.njit(cache=True)
+def _vd_kernel(z, x0, P0, F_cv, Q_cv, F_ca, Q_ca, H, R, rho, detect_threshold, window, back_threshold, accel_var):
+    """The rule of :class:`VariableDimension`, trial by trial and step by step in compiled
+    loops (the switching and the restarts differ per trial). Returns x_k|k (n, K, d),
+    P_k|k (n, K, d, d), the mode, switch and fading-NIS traces (n, K)."""
+    n, K, m = z.shape
+    d = x0.shape[0]
+    acc = np.arange(2, d, 3)
+    xs, Ps = np.empty((n, K, d)), np.empty((n, K, d, d))
+    mode_tr, switch, fading = np.zeros((n, K)), np.zeros((n, K)), np.full((n, K), np.nan)
+    x, P, x_new, P_new = np.empty(d), np.empty((d, d)), np.empty(d), np.empty((d, d))
+    nu, S, FP, zero_u = np.empty(m), np.empty((m, m)), np.empty((d, d)), np.zeros(d)
+    P_aa, P_aa_inv, q = np.empty((len(acc), len(acc))), np.empty((len(acc), len(acc))), np.zeros(K)
+    scratch = update_scratch(d, m)
+    for i in range(n):
+        x[:], P[:, :] = x0, P0
+        in_ca, eps_bar, ca_steps = False, 0.0, 0
+        for k in range(K):
+            nis, _ = update_one(x, P, z[i, k], H, R, x_new, P_new, nu, S, scratch)
+            x[:], P[:, :] = x_new, P_new
+            detected = False
+            if not in_ca:
+                eps_bar = rho * eps_bar + nis
+                if eps_bar > detect_threshold:              # restart in CA at k - s and re-filter
+                    start = k - window
+                    if start >= 0:
+                        x[:], P[:, :] = xs[i, start], Ps[i, start]
+                        _restart_into(x, P, acc, accel_var)
+                        predict_one(x, P, F_ca, Q_ca, zero_u, x_new, P_new, FP)
+                        x[:], P[:, :] = x_new, P_new
+                    else:
+                        x[:], P[:, :] = x0, P0
+                        _restart_into(x, P, acc, accel_var)
+                    for j in range(max(start + 1, 0), k + 1):
+                        update_one(x, P, z[i, j], H, R, x_new, P_new, nu, S, scratch)
+                        x[:], P[:, :] = x_new, P_new
+                        if j < k:
+                            predict_one(x, P, F_ca, Q_ca, zero_u, x_new, P_new, FP)
+                            x[:], P[:, :] = x_new, P_new
+                    in_ca, detected, ca_steps = True, True, 0
+                    switch[i, k] = 1.0
+            if in_ca:
+                q[k] = _acceleration_nis_one(x, P, acc, P_aa, P_aa_inv)
+                if not detected:
+                    ca_steps += 1
+                if ca_steps >= window and q[k - window + 1:k + 1].sum() < back_threshold:
+                    for a in acc:                           # back to CV: the acceleration leaves
+                        x[a] = 0.0
+                        P[a, :] = 0.0
+                        P[:, a] = 0.0
+                    in_ca, eps_bar = False, 0.0
+            xs[i, k], Ps[i, k] = x, P
+            mode_tr[i, k] = 1.0 if in_ca else 0.0
+            if not in_ca:
+                fading[i, k] = eps_bar
+            if in_ca:
+                predict_one(x, P, F_ca, Q_ca, zero_u, x_new, P_new, FP)
+            else:
+                predict_one(x, P, F_cv, Q_cv, zero_u, x_new, P_new, FP)
+            x[:], P[:, :] = x_new, P_new
+    return xs, Ps, mode_tr, switch, fading
+
+
 @register_method
 class VariableDimension(KinematicTracker):
     """Variable-dimension filter (Bar-Shalom & Birmiwal): CV, CA on a chi-square maneuver detection, back to CV when the acceleration is insignificant.
@@ -81,8 +169,9 @@ class VariableDimension(KinematicTracker):
     threshold). State [p, v, a] per axis; in the quiet mode the CV model
     (DWNA, sigma_a, acceleration 0 and outside the model,
     :func:`models.kinematics.embed_cv`), in the maneuver mode the CA model
-    (DWPA, sigma_j). The rule, batched over trials (each trial switches on
-    its own):
+    (DWPA, sigma_j). The rule (each trial switches and restarts on its own,
+    so the filter runs as one compiled loop over trials and steps,
+    :func:`_vd_kernel`, on the per-trial steps of :mod:`models.kalman`):
 
     * **Detection** (CV mode): the fading-memory NIS
       eps_bar_k = rho eps_bar_{k-1} + eps_k (eps_k = nu' S^-1 nu of the CV
@@ -136,71 +225,15 @@ class VariableDimension(KinematicTracker):
 
     def track(self, batch: Batch, model: KinematicModel, params) -> TrackingOutput:
         cv_m, ca_m = self.modes(model, params)
-        rules = VDRules.of(params, model.dims)
-        z = batch.z
-        n, K, _ = z.shape
-        d, acc, s = cv_m.dim_x, np.arange(2, cv_m.dim_x, 3), rules.window
-        xs, Ps = np.empty((n, K, d)), np.empty((n, K, d, d))
-        mode_tr, switch, fading_tr, q_hist = np.zeros((n, K)), np.zeros((n, K)), np.full((n, K), np.nan), \
-            np.zeros((n, K))
-        x = np.broadcast_to(model.x0, (n, d)).copy()
-        P = np.broadcast_to(model.P0, (n, d, d)).copy()
-        mode, eps_bar, ca_steps = np.zeros(n, bool), np.zeros(n), np.zeros(n, int)
-        for k in range(K):
-            upd = update_batched(x, P, z[:, k], model.H, model.R)
-            x, P = upd.x, upd.P
-            eps_bar = np.where(mode, 0.0, rules.rho * eps_bar + upd.nis)
-            detect = ~mode & (eps_bar > rules.detect_threshold)
-            if detect.any():
-                idx = np.flatnonzero(detect)
-                x[idx], P[idx] = self._refilter(idx, k, xs, Ps, z, model, ca_m, rules, acc)
-                mode[idx], ca_steps[idx], switch[idx, k] = True, 0, 1.0
-            q_hist[mode, k] = _acceleration_nis(x[mode], P[mode], acc)     # CV trials: no acceleration
-            ca_steps = np.where(mode & ~detect, ca_steps + 1, ca_steps)
-            back = mode & (ca_steps >= s) & (q_hist[:, max(k - s + 1, 0):k + 1].sum(axis=1) < rules.back_threshold)
-            if back.any():
-                x[back], P[back] = _drop_acceleration(x[back], P[back], acc)
-                mode[back], eps_bar[back] = False, 0.0
-            xs[:, k], Ps[:, k] = x, P
-            mode_tr[:, k] = mode
-            fading_tr[:, k] = np.where(mode, np.nan, eps_bar)
-            x, P = self._predict(x, P, mode, cv_m, ca_m)
-        return self._output(xs, Ps, mode_tr, switch, fading_tr, acc, params)
-
-    @staticmethod
-    def _predict(x, P, mode, cv_m, ca_m):
-        """Each trial's prediction by its mode's model (both computed with a shared F,
-        which is faster than per-trial matrices, then selected)."""
-        x_cv, P_cv = predict_batched(x, P, cv_m.F, cv_m.Q)
-        if not mode.any():
-            return x_cv, P_cv
-        x_ca, P_ca = predict_batched(x, P, ca_m.F, ca_m.Q)
-        return np.where(mode[:, None], x_ca, x_cv), np.where(mode[:, None, None], P_ca, P_cv)
-
-    @staticmethod
-    def _refilter(idx, k, xs, Ps, z, model, ca_m, rules, acc):
-        """The CA restart of trials ``idx`` detected at step k: from the estimate at
-        k - s (or the prior), re-filter the window's measurements up to z_k."""
-        start = k - rules.window
-        if start >= 0:
-            x, P = _restart_state(xs[idx, start], Ps[idx, start], acc, rules.accel_init_var)
-            first = start + 1
-            x, P = predict_batched(x, P, ca_m.F, ca_m.Q)
-        else:
-            x, P = _restart_state(np.broadcast_to(model.x0, (len(idx), len(model.x0))),
-                                  np.broadcast_to(model.P0, (len(idx), *model.P0.shape)), acc, rules.accel_init_var)
-            first = 0
-        for j in range(first, k + 1):
-            upd = update_batched(x, P, z[idx, j], model.H, model.R)
-            x, P = upd.x, upd.P
-            if j < k:
-                x, P = predict_batched(x, P, ca_m.F, ca_m.Q)
-        return x, P
+        r = VDRules.of(params, model.dims)
+        xs, Ps, mode, switch, fading = _vd_kernel(
+            np.ascontiguousarray(batch.z, dtype=float), model.x0, model.P0, cv_m.F, cv_m.Q, ca_m.F, ca_m.Q,
+            model.H, model.R, r.rho, r.detect_threshold, r.window, r.back_threshold, r.accel_init_var)
+        return self._output(xs, Ps, mode, switch, fading, np.arange(2, cv_m.dim_x, 3), params)
 
     @staticmethod
     def _output(xs, Ps, mode_tr, switch, fading_tr, acc, params) -> TrackingOutput:
         quiet = mode_tr == 0                                     # CV mode: report a = 0 with var sigma_a^2
-        Ps = Ps.copy()
         Ps[..., acc, acc] = np.where(quiet[..., None], params.accel_noise_m_s2 ** 2, Ps[..., acc, acc])
         out = output(xs, Ps, mode_tr, switch)
         out.traces["fading_nis"] = fading_tr

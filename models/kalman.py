@@ -299,26 +299,111 @@ def _product_into(A, B, out):
 
 
 @numba.njit(cache=True)
+def small_inverse_into(S, S_inv):
+    """S_inv = S^-1 of a small symmetric positive-definite matrix (closed form for one
+    and two rows); returns log det S."""
+    m = S.shape[0]
+    if m == 1:
+        S_inv[0, 0] = 1.0 / S[0, 0]
+        return np.log(S[0, 0])
+    if m == 2:
+        det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+        S_inv[0, 0], S_inv[1, 1] = S[1, 1] / det, S[0, 0] / det
+        S_inv[0, 1], S_inv[1, 0] = -S[0, 1] / det, -S[1, 0] / det
+        return np.log(det)
+    S_inv[:, :] = np.linalg.inv(S)
+    return np.log(np.linalg.det(S))
+
+
+@numba.njit(cache=True)
+def predict_one(x, P, F, Q, u, x_out, P_out, FP):
+    """One trial's prediction into x_out (d,), P_out (d, d): F x + u, F P F' + Q
+    (symmetric by construction); FP (d, d) scratch."""
+    d = x.shape[0]
+    for a in range(d):
+        acc = u[a]
+        for b in range(d):
+            acc += F[a, b] * x[b]
+        x_out[a] = acc
+    _product_into(F, P, FP)
+    for a in range(d):
+        for b in range(a, d):
+            acc = 0.0
+            for c in range(d):
+                acc += FP[a, c] * F[b, c]
+            value = acc + 0.5 * (Q[a, b] + Q[b, a])
+            P_out[a, b] = value
+            P_out[b, a] = value
+
+
+@numba.njit(cache=True)
+def update_one(x, P, z, H, R, x_out, P_out, nu, S, scratch):
+    """One trial's Joseph-form update into x_out, P_out, nu (m,), S (m, m); ``scratch``
+    from :func:`update_scratch`. Returns (NIS, log N(nu; 0, S))."""
+    d, m = x.shape[0], z.shape[0]
+    PHt, gain, A, AP, S_inv = scratch
+    for a in range(d):
+        for j in range(m):
+            acc = 0.0
+            for b in range(d):
+                acc += P[a, b] * H[j, b]
+            PHt[a, j] = acc
+    for j in range(m):
+        for l in range(m):
+            acc = 0.5 * (R[j, l] + R[l, j])
+            for a in range(d):
+                acc += 0.5 * (H[j, a] * PHt[a, l] + H[l, a] * PHt[a, j])
+            S[j, l] = acc
+    logdet = small_inverse_into(S, S_inv)
+    for j in range(m):
+        acc = z[j]
+        for a in range(d):
+            acc -= H[j, a] * x[a]
+        nu[j] = acc
+    nis = 0.0
+    for j in range(m):
+        for l in range(m):
+            nis += nu[j] * S_inv[j, l] * nu[l]
+    _product_into(PHt, S_inv, gain)
+    for a in range(d):
+        acc = x[a]
+        for j in range(m):
+            acc += gain[a, j] * nu[j]
+        x_out[a] = acc
+    for a in range(d):                                              # A = I - K H
+        for b in range(d):
+            acc = 1.0 if a == b else 0.0
+            for j in range(m):
+                acc -= gain[a, j] * H[j, b]
+            A[a, b] = acc
+    _product_into(A, P, AP)
+    for a in range(d):                                              # A P A' + K R K', symmetric
+        for b in range(a, d):
+            acc = 0.0
+            for c in range(d):
+                acc += AP[a, c] * A[b, c]
+            for j in range(m):
+                for l in range(m):
+                    acc += gain[a, j] * R[j, l] * gain[b, l]
+            P_out[a, b] = acc
+            P_out[b, a] = acc
+    return nis, -0.5 * (nis + logdet + m * np.log(2.0 * np.pi))
+
+
+@numba.njit(cache=True)
+def update_scratch(d, m):
+    """Scratch arrays of :func:`update_one`: P H', gain, I - K H, (I - K H) P, S^-1."""
+    return np.empty((d, m)), np.empty((d, m)), np.empty((d, d)), np.empty((d, d)), np.empty((m, m))
+
+
+@numba.njit(cache=True)
 def _predict_kernel(x, P, F, Q, u):
     """x (n, d), P (n, d, d), F (d, d), Q (n, d, d) (any strides), u (n, d)."""
     n, d = x.shape
     x_out, P_out = np.empty((n, d)), np.empty((n, d, d))
     FP = np.empty((d, d))
     for i in range(n):
-        for a in range(d):
-            acc = u[i, a]
-            for b in range(d):
-                acc += F[a, b] * x[i, b]
-            x_out[i, a] = acc
-        _product_into(F, P[i], FP)
-        for a in range(d):
-            for b in range(a, d):
-                acc = 0.0
-                for c in range(d):
-                    acc += FP[a, c] * F[b, c]
-                value = acc + 0.5 * (Q[i, a, b] + Q[i, b, a])        # symmetric by construction
-                P_out[i, a, b] = value
-                P_out[i, b, a] = value
+        predict_one(x[i], P[i], F, Q[i], u[i], x_out[i], P_out[i], FP)
     return x_out, P_out
 
 
@@ -331,68 +416,10 @@ def _update_kernel(x, P, z, H, R):
     x_out, P_out = np.empty((n, d)), np.empty((n, d, d))
     nu_out, S_out = np.empty((n, m)), np.empty((n, m, m))
     nis_out, loglik_out = np.empty(n), np.empty(n)
-    PHt, gain, A, AP = np.empty((d, m)), np.empty((d, m)), np.empty((d, d)), np.empty((d, d))
-    S, S_inv = np.empty((m, m)), np.empty((m, m))
-    log_2pi = np.log(2.0 * np.pi)
+    scratch = update_scratch(d, m)
     for i in range(n):
-        for a in range(d):
-            for j in range(m):
-                acc = 0.0
-                for b in range(d):
-                    acc += P[i, a, b] * H[j, b]
-                PHt[a, j] = acc
-        for j in range(m):
-            for l in range(m):
-                acc = 0.5 * (R[j, l] + R[l, j])
-                for a in range(d):
-                    acc += 0.5 * (H[j, a] * PHt[a, l] + H[l, a] * PHt[a, j])
-                S[j, l] = acc
-        if m == 1:
-            S_inv[0, 0] = 1.0 / S[0, 0]
-            logdet = np.log(S[0, 0])
-        elif m == 2:
-            det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
-            S_inv[0, 0], S_inv[1, 1] = S[1, 1] / det, S[0, 0] / det
-            S_inv[0, 1], S_inv[1, 0] = -S[0, 1] / det, -S[1, 0] / det
-            logdet = np.log(det)
-        else:
-            S_inv[:, :] = np.linalg.inv(S)
-            logdet = np.log(np.linalg.det(S))
-        for j in range(m):
-            acc = z[i, j]
-            for a in range(d):
-                acc -= H[j, a] * x[i, a]
-            nu_out[i, j] = acc
-        nis = 0.0
-        for j in range(m):
-            for l in range(m):
-                nis += nu_out[i, j] * S_inv[j, l] * nu_out[i, l]
-        _product_into(PHt, S_inv, gain)
-        for a in range(d):
-            acc = x[i, a]
-            for j in range(m):
-                acc += gain[a, j] * nu_out[i, j]
-            x_out[i, a] = acc
-        for a in range(d):                                          # A = I - K H
-            for b in range(d):
-                acc = 1.0 if a == b else 0.0
-                for j in range(m):
-                    acc -= gain[a, j] * H[j, b]
-                A[a, b] = acc
-        _product_into(A, P[i], AP)
-        for a in range(d):                                          # A P A' + K R K', symmetric
-            for b in range(a, d):
-                acc = 0.0
-                for c in range(d):
-                    acc += AP[a, c] * A[b, c]
-                for j in range(m):
-                    for l in range(m):
-                        acc += gain[a, j] * R[j, l] * gain[b, l]
-                P_out[i, a, b] = acc
-                P_out[i, b, a] = acc
-        S_out[i, :, :] = S
-        nis_out[i] = nis
-        loglik_out[i] = -0.5 * (nis + logdet + m * log_2pi)
+        nis_out[i], loglik_out[i] = update_one(x[i], P[i], z[i], H, R, x_out[i], P_out[i], nu_out[i], S_out[i],
+                                               scratch)
     return x_out, P_out, nu_out, S_out, nis_out, loglik_out
 
 
