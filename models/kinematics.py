@@ -81,10 +81,14 @@ def ca(dt: float, sigma_j: float) -> tuple[np.ndarray, np.ndarray]:
 
 def singer(dt: float, alpha: float, sigma_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Per-axis (F, Q) of the Singer model with maneuver time constant 1/alpha (s)
-    and acceleration std sigma_m (m/s^2), by Van Loan's method: with
+    and acceleration std sigma_m (m/s^2). For alpha T <= 1 by Van Loan's method: with
     A = [[0, 1, 0], [0, 0, 1], [0, 0, -alpha]], L = [0, 0, 1]', q = 2 alpha sigma_m^2,
     expm([[-A, L q L'], [0, A']] T) = [[., M12], [0, M22]] gives F = M22',
-    Q = F M12 (exact, without the cancellations of the closed form at small alpha T)."""
+    Q = F M12 (exact, without the cancellations of the closed form at small alpha T);
+    beyond, where the block expm(-A T) grows as e^{alpha T}, by Singer's closed form
+    (:func:`_singer_closed_form`)."""
+    if alpha * dt > 1.0:
+        return _singer_closed_form(dt, alpha, sigma_m)
     A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -alpha]])
     LqL = np.zeros((3, 3))
     LqL[2, 2] = 2.0 * alpha * sigma_m ** 2
@@ -94,6 +98,31 @@ def singer(dt: float, alpha: float, sigma_m: float) -> tuple[np.ndarray, np.ndar
     F = E[3:, 3:].T
     Q = F @ E[:3, 3:]
     return F, 0.5 * (Q + Q.T)
+
+
+def _singer_transition(dt: float, alpha: float) -> np.ndarray:
+    """The Singer F = [[1, T, (alpha T - 1 + e^{-alpha T})/alpha^2], [0, 1, (1 - e^{-alpha T})/alpha],
+    [0, 0, e^{-alpha T}]]."""
+    e = math.exp(-alpha * dt)
+    return np.array([[1.0, dt, (alpha * dt - 1.0 + e) / alpha ** 2], [0.0, 1.0, (1.0 - e) / alpha], [0.0, 0.0, e]])
+
+
+def _singer_closed_form(dt: float, alpha: float, sigma_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Singer's (F, Q), Q = 2 alpha sigma_m^2 [q_ij] (Singer 1970; Bar-Shalom et al. 2001,
+    sec. 8.2.3), with a = alpha, E1 = e^{-aT}, E2 = e^{-2aT}:
+    q11 = (1 - E2 + 2aT + 2a^3T^3/3 - 2a^2T^2 - 4aT E1)/(2a^5),
+    q12 = (E2 + 1 - 2E1 + 2aT E1 - 2aT + a^2T^2)/(2a^4), q13 = (1 - E2 - 2aT E1)/(2a^3),
+    q22 = (4E1 - 3 - E2 + 2aT)/(2a^3), q23 = (E2 + 1 - 2E1)/(2a^2), q33 = (1 - E2)/(2a)."""
+    a = alpha
+    aT, E1, E2 = alpha * dt, math.exp(-alpha * dt), math.exp(-2.0 * alpha * dt)
+    q11 = (1 - E2 + 2 * aT + 2 * aT ** 3 / 3 - 2 * aT ** 2 - 4 * aT * E1) / (2 * a ** 5)
+    q12 = (E2 + 1 - 2 * E1 + 2 * aT * E1 - 2 * aT + aT ** 2) / (2 * a ** 4)
+    q13 = (1 - E2 - 2 * aT * E1) / (2 * a ** 3)
+    q22 = (4 * E1 - 3 - E2 + 2 * aT) / (2 * a ** 3)
+    q23 = (E2 + 1 - 2 * E1) / (2 * a ** 2)
+    q33 = (1 - E2) / (2 * a)
+    Q = 2 * a * sigma_m ** 2 * np.array([[q11, q12, q13], [q12, q22, q23], [q13, q23, q33]])
+    return _singer_transition(dt, alpha), Q
 
 
 def current_statistical_input(dt: float, alpha: float) -> np.ndarray:

@@ -171,6 +171,17 @@ def test_singer_closed_form_and_limits():
     np.testing.assert_allclose(Q0, cwpa, rtol=1e-5)
 
 
+@pytest.mark.parametrize("alpha_dt", [0.2, 0.999, 1.001, 5.0])
+def test_singer_van_loan_and_closed_form_agree(alpha_dt):
+    """Van Loan (used up to alpha T = 1) and Singer's closed form (beyond) are the same Q."""
+    from models.kinematics import _singer_closed_form
+    dt = 0.5
+    F, Q = singer(dt, alpha_dt / dt, 3.0)
+    F2, Q2 = _singer_closed_form(dt, alpha_dt / dt, 3.0)
+    np.testing.assert_allclose(F, F2, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(Q, Q2, rtol=1e-9, atol=1e-12 * np.abs(Q).max())
+
+
 def test_current_statistical_prediction_is_the_ca_prediction():
     """F(alpha) x + U a = the CA transition of x when the current mean is the state's acceleration."""
     dt, alpha = 0.5, 0.4
