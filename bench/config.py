@@ -139,10 +139,15 @@ class Plan:
     #: ``[[methods]]`` entries marked ``optional = true`` whose method is unavailable here
     #: (a missing extra): (the entry as written, why), skipped; the report lists them
     skipped_methods: tuple[tuple[dict, str], ...] = ()
+    #: the scenarios each method config is limited to (``Method.scenarios``; empty: all of its task)
+    method_scenarios: tuple[tuple[str, ...], ...] = ()
 
     def pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
-        """The method configs that run on ``scenario`` (those whose task it serves)."""
-        return [m for m, task in zip(self.methods, self.method_tasks) if task in scenario.tasks]
+        """The method configs that run on ``scenario``: those whose task it serves, limited
+        to the scenarios a method names (``Method.scenarios``)."""
+        limits = self.method_scenarios or ((),) * len(self.methods)
+        return [m for m, task, names in zip(self.methods, self.method_tasks, limits)
+                if task in scenario.tasks and (not names or scenario.name in names)]
 
     @property
     def trial_runs(self) -> int:
@@ -406,7 +411,7 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]
             skipped.append(({k: v for k, v in entry.items() if k != "optional"}, reason))
             continue
         cls = registry.get_method(entry["name"], f"{field}.name")
-        if not any(cls.task in s.tasks for s in scenarios):
+        if not any(cls.serves(s.name, s.tasks) for s in scenarios):
             names = ", ".join(sorted({f"{s.name!r} ({'/'.join(s.tasks)})" for s in scenarios}))
             raise ConfigError(f"{field}.name", f"method {cls.name!r} ({cls.task}) cannot run on "
                                                f"any scenario of the sweep: {names}")
@@ -569,7 +574,7 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     axes = tuple(k for k in data.get("scenario_params", {}) if isinstance(k, str)) if scenario else ()
     plan = Plan(name, description, scenario, scenarios, trials, seed, snr_db, chunk,
                 methods, calibration, record_trials, source, method_tasks, timeline_snr_db, unit_timeout_s, axes, memory_gb,
-                skipped)
+                skipped, tuple(registry.get_method(m.name).scenarios for m in methods))
     idle = [s.label for s in scenarios if not plan.pairs(s)]
     if idle:
         raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0]!r}")
@@ -598,8 +603,8 @@ def _parse_unit_timeout(value: Any) -> float:
 
 def _calibration_trial_runs(plan: Plan) -> int:
     """h0_trials x (scenario config, method config) pairs whose threshold is calibrated."""
-    pairs = sum(1 for s in plan.scenarios for m, task in zip(plan.methods, plan.method_tasks)
-                if task in s.tasks and registry.get_task(task).calibrated)
+    pairs = sum(1 for s in plan.scenarios for m in plan.pairs(s)
+                if registry.get_task(registry.get_method(m.name).task).calibrated)
     return plan.calibration.h0_trials * pairs
 
 

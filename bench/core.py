@@ -101,6 +101,7 @@ class Scene:
     #: (n,) SNR each trial realised (dB; NaN where undefined, e.g. under the null); None: not measured
     realised_snr_db: np.ndarray | None = None
     #: indices of the position components of the state; the first two are drawn in the plane
+    #: (a single one, a range, is drawn against time)
     position_index: tuple[int, ...] = (0, 1)
     #: (n, K, 2) measurements in the plane (m), for recordings; None: the first two components of ``z``
     measurements_xy: np.ndarray | None = None
@@ -109,10 +110,19 @@ class Scene:
         require(self, "snr_definition", isinstance(self.snr_definition, str), "a str")
         require(self, "realised_snr_db", self.realised_snr_db is None
                 or has_shape(self.realised_snr_db, (None,), "fiu"), "None or an (n,) float array")
-        require(self, "position_index", isinstance(self.position_index, tuple) and len(self.position_index) >= 2
-                and all(_is_index(j) for j in self.position_index), "a tuple of at least two state indices >= 0")
+        require(self, "position_index", isinstance(self.position_index, tuple) and len(self.position_index) >= 1
+                and all(_is_index(j) for j in self.position_index), "a tuple of at least one state index >= 0")
         require(self, "measurements_xy", self.measurements_xy is None
                 or has_shape(self.measurements_xy, (None, None, 2), "fiu"), "None or an (n, K, 2) float array")
+
+    def drawn_xy(self, states: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """(K, 2) what recordings draw in the plane of one trial's states (K, d): the
+        first two position components, or with a single one (a range) the time (s)
+        against it."""
+        pos = list(self.position_index)
+        if len(pos) >= 2:
+            return states[:, pos[:2]]
+        return np.stack([np.asarray(t, float), states[:, pos[0]]], axis=-1)
 
     def check(self, batch: Batch) -> None:
         """SceneError unless the scene fits ``batch`` (its trials, steps and
@@ -294,6 +304,9 @@ class Method(Component):
 
     #: the task this method performs (one of :data:`TASKS`)
     task: ClassVar[str] = ""
+    #: the scenarios it runs on, by name, when it reads a scene model only they provide
+    #: (e.g. a glint model); empty: every scenario of its task
+    scenarios: ClassVar[tuple[str, ...]] = ()
     #: ``bench perf``: what :meth:`reference_run` is (one phrase); None: no reference implementation
     reference_name: ClassVar[str | None] = None
     #: ``bench perf``: trials the (slow) reference runs on, at most the method's; None: as many
@@ -322,6 +335,13 @@ class Method(Component):
         """State transitions a DP method evaluates per trial of ``batch``;
         None (the default): not a DP method, nothing to count."""
         return None
+
+    @classmethod
+    def serves(cls, scenario_name: str, scenario_tasks) -> bool:
+        """Whether it runs on the scenario of that name and tasks: its task is one of
+        them and, if it names its :attr:`scenarios`, the scenario is one of those. A
+        sweep pairs each method config with the scenario configs it serves."""
+        return cls.task in scenario_tasks and (not cls.scenarios or scenario_name in cls.scenarios)
 
     def check_scenario(self, params, scenario_params) -> str | None:
         """Why this config cannot run on a scenario config with ``scenario_params``

@@ -146,19 +146,19 @@ def _measurements_xy(batch, i: int):
     return batch.z[i][:, :2] if batch.z.ndim == 3 and batch.z.shape[-1] >= 2 else None
 
 
-def _truth_xy(batch, i: int, pos: list[int]):
-    """Trial ``i``'s true position (K, 2) for a single-target truth (n, K, d);
-    None for a set of targets (n, K, T, d), which its task draws itself."""
-    return batch.truth[i][:, pos[:2]] if batch.truth.ndim == 3 else None
+def _truth_xy(batch, i: int):
+    """Trial ``i``'s truth as drawn in the plane (K, 2) for a single-target truth (n, K, d)
+    (:meth:`bench.core.Scene.drawn_xy`); None for a set of targets (n, K, T, d), which its
+    task draws itself."""
+    return batch.scene.drawn_xy(batch.truth[i], batch.t) if batch.truth.ndim == 3 else None
 
 
 def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict, tasks) -> bytes:
     """Trial ``i`` as the record the driver draws: the harness's truth and
     measurements, what each of ``tasks`` keeps of the scene, the methods' traces."""
     sc = plan.scenarios[unit.scenario_index]
-    pos = list(batch.scene.position_index)
     scene = RecordedScene.union(task.recorded_scene(batch, i) for task in tasks)
-    rec = TrialRecord(sc.label, unit.snr_db, int(batch.trials[i]), batch.t, truth_xy=_truth_xy(batch, i, pos),
+    rec = TrialRecord(sc.label, unit.snr_db, int(batch.trials[i]), batch.t, truth_xy=_truth_xy(batch, i),
                       measurements_xy=_measurements_xy(batch, i), methods=traces, arrays=scene.arrays,
                       images=scene.images, info=scene.info)
     return rec.to_bytes()

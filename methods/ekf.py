@@ -131,6 +131,7 @@ class EKF(Method):
 
     name = "ekf"
     task = TRACKING
+    scenarios = ("glint",)
     reference_name = "per-trial filterpy ExtendedKalmanFilter loop"
     reference_trials = 10
 

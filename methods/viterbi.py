@@ -392,6 +392,7 @@ class Viterbi(Method):
 
     name = "viterbi"
     task = TRACKING
+    scenarios = ("glint",)
 
     @dataclass(frozen=True)
     class Params:

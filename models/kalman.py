@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.linalg
 
@@ -231,22 +232,247 @@ def reference_innovations(filt: LinearGaussianFilter, z: np.ndarray) -> Innovati
     return _sequence(*filterpy_innovations(filt.model, z, filt.x0, filt.P0))
 
 
-def filterpy_innovations(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
-    """The reference: innovations by a per-trial, per-step filterpy ``KalmanFilter``
-    loop, same conventions as :func:`kalman_filter` (update, then predict).
-    Used by ``bench perf`` as the baseline and by the tests as the oracle
-    (through :func:`reference_innovations`)."""
+def _filterpy_steps(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
+    """Per trial i and step k, a filterpy ``KalmanFilter`` just updated with
+    ``z[i, k]`` (it predicts the next step when the caller has read it): yields
+    ``(i, k, kf)``. The per-trial loop the references share."""
     from filterpy.kalman import KalmanFilter
 
     n, steps, m = z.shape
     x0 = np.broadcast_to(np.asarray(x0, float), (n, model.dim_x))
-    nu, S = np.empty_like(z, dtype=float), np.empty((steps, m, m))
     for i in range(n):
         kf = KalmanFilter(dim_x=model.dim_x, dim_z=m)
         kf.F, kf.H, kf.Q, kf.R = model.F, model.H, model.Q, model.R
         kf.x, kf.P = x0[i].copy(), np.array(P0, float)
         for k in range(steps):
             kf.update(z[i, k])
-            nu[i, k], S[k] = kf.y, kf.S
+            yield i, k, kf
             kf.predict()
+
+
+def filterpy_innovations(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
+    """The reference: innovations by a per-trial, per-step filterpy ``KalmanFilter``
+    loop, same conventions as :func:`kalman_filter` (update, then predict).
+    Used by ``bench perf`` as the baseline and by the tests as the oracle
+    (through :func:`reference_innovations`)."""
+    steps, m = z.shape[1:]
+    nu, S = np.empty_like(z, dtype=float), np.empty((steps, m, m))
+    for i, k, kf in _filterpy_steps(model, z, x0, P0):
+        nu[i, k], S[k] = kf.y, kf.S
     return nu, S
+
+
+# ---------------------------------------------------------------- per-trial covariances
+# Adaptive and switching filters (variable dimension, current statistical, IMM) change F,
+# Q or the state per trial, so their covariances carry the trial axis. The same equations
+# as above, one step at a time, batched over any leading axes (trials, modes).
+
+def inverse_logdet(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(S^-1, log det S) of symmetric positive-definite matrices (..., m, m): one and
+    two measured components (ranges, planar positions) in closed form, else
+    ``numpy.linalg``."""
+    m = S.shape[-1]
+    if m == 1:
+        return 1.0 / S, np.log(S[..., 0, 0])
+    if m == 2:
+        a, b, c, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
+        det = a * d - b * c
+        inv = np.stack([np.stack([d, -b], axis=-1), np.stack([-c, a], axis=-1)], axis=-2) / det[..., None, None]
+        return inv, np.log(det)
+    return np.linalg.inv(S), np.linalg.slogdet(S)[1]
+
+
+# Kernels: one trial at a time in compiled loops. NumPy's stacked matmul and linalg make a
+# call per small matrix, and a single BLAS product over the stack (vec(F P F') =
+# (F kron F) vec P) is fast alone but multi-threaded, hundreds of times slower on a
+# loaded machine; compiled loops over d <= 6 states stay fast and single-threaded.
+
+@numba.njit(cache=True, inline="always")
+def _product_into(A, B, out):
+    """out = A @ B for small matrices."""
+    for a in range(A.shape[0]):
+        for b in range(B.shape[1]):
+            acc = 0.0
+            for c in range(A.shape[1]):
+                acc += A[a, c] * B[c, b]
+            out[a, b] = acc
+
+
+@numba.njit(cache=True)
+def small_inverse_into(S, S_inv):
+    """S_inv = S^-1 of a small symmetric positive-definite matrix (closed form for one
+    and two rows); returns log det S."""
+    m = S.shape[0]
+    if m == 1:
+        S_inv[0, 0] = 1.0 / S[0, 0]
+        return np.log(S[0, 0])
+    if m == 2:
+        det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+        S_inv[0, 0], S_inv[1, 1] = S[1, 1] / det, S[0, 0] / det
+        S_inv[0, 1], S_inv[1, 0] = -S[0, 1] / det, -S[1, 0] / det
+        return np.log(det)
+    S_inv[:, :] = np.linalg.inv(S)
+    return np.log(np.linalg.det(S))
+
+
+@numba.njit(cache=True)
+def predict_one(x, P, F, Q, u, x_out, P_out, FP):
+    """One trial's prediction into x_out (d,), P_out (d, d): F x + u, F P F' + Q
+    (symmetric by construction); FP (d, d) scratch."""
+    d = x.shape[0]
+    for a in range(d):
+        acc = u[a]
+        for b in range(d):
+            acc += F[a, b] * x[b]
+        x_out[a] = acc
+    _product_into(F, P, FP)
+    for a in range(d):
+        for b in range(a, d):
+            acc = 0.0
+            for c in range(d):
+                acc += FP[a, c] * F[b, c]
+            value = acc + 0.5 * (Q[a, b] + Q[b, a])
+            P_out[a, b] = value
+            P_out[b, a] = value
+
+
+@numba.njit(cache=True)
+def update_one(x, P, z, H, R, x_out, P_out, nu, S, scratch):
+    """One trial's Joseph-form update into x_out, P_out, nu (m,), S (m, m); ``scratch``
+    from :func:`update_scratch`. Returns (NIS, log N(nu; 0, S))."""
+    d, m = x.shape[0], z.shape[0]
+    PHt, gain, A, AP, S_inv = scratch
+    for a in range(d):
+        for j in range(m):
+            acc = 0.0
+            for b in range(d):
+                acc += P[a, b] * H[j, b]
+            PHt[a, j] = acc
+    for j in range(m):
+        for l in range(m):
+            acc = 0.5 * (R[j, l] + R[l, j])
+            for a in range(d):
+                acc += 0.5 * (H[j, a] * PHt[a, l] + H[l, a] * PHt[a, j])
+            S[j, l] = acc
+    logdet = small_inverse_into(S, S_inv)
+    for j in range(m):
+        acc = z[j]
+        for a in range(d):
+            acc -= H[j, a] * x[a]
+        nu[j] = acc
+    nis = 0.0
+    for j in range(m):
+        for l in range(m):
+            nis += nu[j] * S_inv[j, l] * nu[l]
+    _product_into(PHt, S_inv, gain)
+    for a in range(d):
+        acc = x[a]
+        for j in range(m):
+            acc += gain[a, j] * nu[j]
+        x_out[a] = acc
+    for a in range(d):                                              # A = I - K H
+        for b in range(d):
+            acc = 1.0 if a == b else 0.0
+            for j in range(m):
+                acc -= gain[a, j] * H[j, b]
+            A[a, b] = acc
+    _product_into(A, P, AP)
+    for a in range(d):                                              # A P A' + K R K', symmetric
+        for b in range(a, d):
+            acc = 0.0
+            for c in range(d):
+                acc += AP[a, c] * A[b, c]
+            for j in range(m):
+                for l in range(m):
+                    acc += gain[a, j] * R[j, l] * gain[b, l]
+            P_out[a, b] = acc
+            P_out[b, a] = acc
+    return nis, -0.5 * (nis + logdet + m * np.log(2.0 * np.pi))
+
+
+@numba.njit(cache=True)
+def update_scratch(d, m):
+    """Scratch arrays of :func:`update_one`: P H', gain, I - K H, (I - K H) P, S^-1."""
+    return np.empty((d, m)), np.empty((d, m)), np.empty((d, d)), np.empty((d, d)), np.empty((m, m))
+
+
+@numba.njit(cache=True)
+def _predict_kernel(x, P, F, Q, u):
+    """x (n, d), P (n, d, d), F (d, d), Q (n, d, d) (any strides), u (n, d)."""
+    n, d = x.shape
+    x_out, P_out = np.empty((n, d)), np.empty((n, d, d))
+    FP = np.empty((d, d))
+    for i in range(n):
+        predict_one(x[i], P[i], F, Q[i], u[i], x_out[i], P_out[i], FP)
+    return x_out, P_out
+
+
+@numba.njit(cache=True)
+def _update_kernel(x, P, z, H, R):
+    """x (n, d), P (n, d, d), z (n, m), H (m, d), R (m, m): the Joseph-form update;
+    returns x, P, nu, S, NIS, log-likelihood."""
+    n, d = x.shape
+    m = z.shape[1]
+    x_out, P_out = np.empty((n, d)), np.empty((n, d, d))
+    nu_out, S_out = np.empty((n, m)), np.empty((n, m, m))
+    nis_out, loglik_out = np.empty(n), np.empty(n)
+    scratch = update_scratch(d, m)
+    for i in range(n):
+        nis_out[i], loglik_out[i] = update_one(x[i], P[i], z[i], H, R, x_out[i], P_out[i], nu_out[i], S_out[i],
+                                               scratch)
+    return x_out, P_out, nu_out, S_out, nis_out, loglik_out
+
+
+def _stacked(a: np.ndarray, tail: int) -> np.ndarray:
+    """``a`` with its leading axes flattened into one (the kernels' trial axis)."""
+    return np.ascontiguousarray(a, dtype=float).reshape(-1, *a.shape[a.ndim - tail:])
+
+
+def predict_batched(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray, u: np.ndarray | None = None):
+    """x_k+1|k = F x_k|k (+ u), P_k+1|k = F P_k|k F' + Q, over leading axes: x (..., d),
+    P (..., d, d); F (d, d) shared; Q (d, d) or per trial (..., d, d); u (..., d) an
+    additive input (e.g. B u) or None."""
+    lead, d = x.shape[:-1], x.shape[-1]
+    xs, Ps = _stacked(x, 1), _stacked(P, 2)
+    Qs = np.broadcast_to(Q, (*lead, d, d)).reshape(-1, d, d) if Q.ndim > 2 else np.broadcast_to(Q, (len(xs), d, d))
+    us = np.zeros_like(xs) if u is None else _stacked(np.broadcast_to(u, x.shape), 1)
+    x_next, P_next = _predict_kernel(xs, Ps, np.ascontiguousarray(F, dtype=float), Qs, us)
+    return x_next.reshape(x.shape), P_next.reshape(P.shape)
+
+
+@dataclass(frozen=True)
+class BatchedUpdate:
+    """Output of :func:`update_batched`: the updated state and covariance, the
+    innovation nu (..., m), its covariance S (..., m, m), the NIS nu' S^-1 nu (...)
+    and log N(nu; 0, S) (...), the mode likelihood of an IMM."""
+
+    x: np.ndarray
+    P: np.ndarray
+    nu: np.ndarray
+    S: np.ndarray
+    nis: np.ndarray
+    log_likelihood: np.ndarray
+
+
+def update_batched(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray) -> BatchedUpdate:
+    """The measurement update of the module docstring (Joseph form, FilterPy's
+    ``KalmanFilter.update``) over leading axes: x (..., d), P (..., d, d), z (..., m)."""
+    lead, m = x.shape[:-1], z.shape[-1]
+    z = np.broadcast_to(z, (*lead, m))
+    x_new, P_new, nu, S, nis, log_likelihood = _update_kernel(
+        _stacked(x, 1), _stacked(P, 2), _stacked(z, 1), np.ascontiguousarray(H, dtype=float),
+        np.ascontiguousarray(R, dtype=float))
+    x_new, P_new, nu = x_new.reshape(x.shape), P_new.reshape(P.shape), nu.reshape(z.shape)
+    S, nis, log_likelihood = S.reshape(*lead, m, m), nis.reshape(lead), log_likelihood.reshape(lead)
+    return BatchedUpdate(x=x_new, P=P_new, nu=nu, S=S, nis=nis, log_likelihood=log_likelihood)
+
+
+def filterpy_track(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
+    """The reference of a time-invariant tracker: per-trial, per-step filterpy
+    ``KalmanFilter`` (update, then predict, as :func:`kalman_filter`); returns the
+    updated states (n, K, d) and covariances (n, K, d, d)."""
+    n, steps = z.shape[:2]
+    xs, Ps = np.empty((n, steps, model.dim_x)), np.empty((n, steps, model.dim_x, model.dim_x))
+    for i, k, kf in _filterpy_steps(model, z, x0, P0):
+        xs[i, k], Ps[i, k] = kf.x, kf.P
+    return xs, Ps

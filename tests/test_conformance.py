@@ -12,8 +12,10 @@ from bench.params import build_params
 from bench.rng import TrialRNG
 from bench.registry import get_task
 
+
+
 PAIRS = [(s, m) for s, scls in registry.scenarios().items() for m, mcls in registry.methods().items()
-         if mcls.task in scls.tasks]
+         if mcls.serves(s, scls.tasks)]
 
 
 def test_every_method_has_a_scenario_and_nothing_is_unavailable():
