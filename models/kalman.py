@@ -250,3 +250,34 @@ def filterpy_innovations(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarr
             nu[i, k], S[k] = kf.y, kf.S
             kf.predict()
     return nu, S
+
+
+# ------------------------------------------------ per-trial covariances (adaptive filters)
+#
+# An adaptive filter (model switching, an online Q) gives every trial its own
+# F, Q and so its own P: the covariance recursion carries the trial axis. The
+# two steps below are the recursion of the module docstring, batched over
+# trials (leading axis n), with a scalar position measurement z = H x + v,
+# H = e_0' (the first state component), the case of the AR-model tracker.
+
+
+def update_first_component(x: np.ndarray, P: np.ndarray, z: np.ndarray, R: float):
+    """Kalman update of ``n`` trials with the scalar measurement of state component 0.
+
+    x (n, d), P (n, d, d), z (n,), R the measurement-noise variance. With
+    H = e_0': nu = z - x_0, S = P_00 + R, K = P e_0 / S, x+ = x + K nu,
+    P+ = (I - K H) P (I - K H)' + K R K' (Joseph form). Returns
+    ``(x+, P+, nu, S)``.
+    """
+    nu = z - x[:, 0]
+    S = P[:, 0, 0] + R
+    gain = P[:, :, 0] / S[:, None]                               # (n, d)
+    I_KH = np.broadcast_to(np.eye(x.shape[1]), P.shape).copy()
+    I_KH[:, :, 0] -= gain
+    P_post = I_KH @ P @ I_KH.transpose(0, 2, 1) + R * gain[:, :, None] * gain[:, None, :]
+    return x + gain * nu[:, None], 0.5 * (P_post + P_post.transpose(0, 2, 1)), nu, S
+
+
+def predict_per_trial(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray):
+    """x_k+1|k = F x_k|k, P_k+1|k = F P F' + Q, with per-trial F (n, d, d) and Q (n, d, d)."""
+    return np.einsum("nij,nj->ni", F, x), F @ P @ F.transpose(0, 2, 1) + Q
