@@ -101,6 +101,7 @@ class Scene:
     #: (n,) SNR each trial realised (dB; NaN where undefined, e.g. under the null); None: not measured
     realised_snr_db: np.ndarray | None = None
     #: indices of the position components of the state; the first two are drawn in the plane
+    #: (a single one, a range, is drawn against time)
     position_index: tuple[int, ...] = (0, 1)
     #: (n, K, 2) measurements in the plane (m), for recordings; None: the first two components of ``z``
     measurements_xy: np.ndarray | None = None
@@ -109,8 +110,8 @@ class Scene:
         require(self, "snr_definition", isinstance(self.snr_definition, str), "a str")
         require(self, "realised_snr_db", self.realised_snr_db is None
                 or has_shape(self.realised_snr_db, (None,), "fiu"), "None or an (n,) float array")
-        require(self, "position_index", isinstance(self.position_index, tuple) and len(self.position_index) >= 2
-                and all(_is_index(j) for j in self.position_index), "a tuple of at least two state indices >= 0")
+        require(self, "position_index", isinstance(self.position_index, tuple) and len(self.position_index) >= 1
+                and all(_is_index(j) for j in self.position_index), "a tuple of at least one state index >= 0")
         require(self, "measurements_xy", self.measurements_xy is None
                 or has_shape(self.measurements_xy, (None, None, 2), "fiu"), "None or an (n, K, 2) float array")
 

@@ -7,12 +7,14 @@ glint paper (Viterbi vs EKF under glint noise) compares its trackers.
 
 A recorded trial keeps, per tracker, the position estimate (drawn as a track
 under ``.../{method}/estimate``, north up) and its error per state component
-(traces ``error_<component>``); of the scene, the steps whose measurement had
+(traces ``error_<component>``; a scene with a single position component, a
+range, draws it against time, x = t in s); of the scene, the steps whose measurement had
 a glint outlier (:attr:`TrackingScene.outlier_flags`), drawn in red under
 ``.../measurements/glint``.
 
 Its scenarios put a :class:`TrackingScene` on the batch: the state labels,
-the divergence bound, the outlier flags and the model the trackers run on
+the divergence bound, the outlier flags, the true maneuvers (mask and onset
+steps, where the scenario has them) and the model the trackers run on
 (docs/architecture.md, 'Scenes').
 """
 
@@ -26,7 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.core import TRACKING, Batch, Scene, TrackingOutput, require
+from bench.core import TRACKING, Batch, Scene, TrackingOutput, has_shape, require
 from bench.recording.blueprint import Views
 from bench.recording.draw import log_static_points, log_track, north_up
 from bench.recording.layout import TrialLayout
@@ -66,6 +68,12 @@ class TrackingScene(Scene):
     derived_components: Callable[[np.ndarray], dict[str, np.ndarray]] | None = None
     #: (n, K, m) bool: which measured components are outliers (glint); drawn in recordings
     outlier_flags: np.ndarray | None = None
+    #: (n, K) bool: the steps inside a true maneuver (for RMSE split into quiet and
+    #: maneuvering steps); None: the scenario defines no maneuvers
+    maneuver_mask: np.ndarray | None = None
+    #: (n, O) int: the step of each true maneuver onset per trial (O may be 0: none), for
+    #: switch delays and false switches; None: the scenario defines no maneuvers
+    maneuver_onset_steps: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -78,6 +86,13 @@ class TrackingScene(Scene):
         flags = self.outlier_flags
         require(self, "outlier_flags", flags is None or (isinstance(flags, np.ndarray) and flags.dtype == bool
                                                          and flags.ndim == 3), "None or an (n, K, m) bool array")
+        mask = self.maneuver_mask
+        require(self, "maneuver_mask", mask is None or (isinstance(mask, np.ndarray) and mask.dtype == bool
+                                                        and mask.ndim == 2), "None or an (n, K) bool array")
+        onsets = self.maneuver_onset_steps
+        require(self, "maneuver_onset_steps", onsets is None or (has_shape(onsets, (None, None), "iu")
+                                                                 and bool((onsets >= 0).all())),
+                "None or an (n, O) array of step indices >= 0")
 
     def check(self, batch: Batch) -> None:
         super().check(batch)
@@ -88,6 +103,11 @@ class TrackingScene(Scene):
                 f"{m} labels")
         require(self, "outlier_flags", self.outlier_flags is None or self.outlier_flags.shape == (n, K, m),
                 f"shape ({n}, {K}, {m})")
+        require(self, "maneuver_mask", self.maneuver_mask is None or self.maneuver_mask.shape == (n, K),
+                f"shape ({n}, {K})")
+        onsets = self.maneuver_onset_steps
+        require(self, "maneuver_onset_steps", onsets is None or (onsets.shape[0] == n and bool((onsets < K).all())),
+                f"{n} rows of steps < {K}")
 
 
 def method_trace(estimate_xy, traces: dict | None = None) -> MethodTrace:
@@ -164,16 +184,16 @@ class TrackingTask(Task):
                                       labels=self.labels(batch), covariance=out.covariance,
                                       divergence_bound_m=float(sc.divergence_bound_m),
                                       derived=sc.derived_components)
-        mask = getattr(sc, "maneuver_mask", None)
+        mask = sc.maneuver_mask
         if mask is not None:
             pos_sq = metrics["sq_err_position"]
-            metrics |= maneuver_trial_metrics(pos_sq, mask, getattr(sc, "maneuver_onset_steps", None), out.traces)
+            metrics |= maneuver_trial_metrics(pos_sq, mask, sc.maneuver_onset_steps, out.traces)
         return metrics | time_series(batch)
 
     def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:
         flags = batch.scene.outlier_flags
         rec = scene(None if flags is None else np.asarray(flags[i]).reshape(batch.steps, -1).any(axis=1))
-        mask = getattr(batch.scene, "maneuver_mask", None)
+        mask = batch.scene.maneuver_mask
         if mask is not None:            # a maneuvering scene: the truth over time and its maneuver
             rec.arrays["maneuvering"] = np.asarray(mask[i], dtype=bool)
             rec.arrays |= {f"truth_{label}": np.asarray(batch.truth[i, :, j], float)
@@ -185,12 +205,12 @@ class TrackingTask(Task):
         err = out.estimate[i] - batch.truth[i]
         labels = self.labels(batch)
         traces = {f"error_{label}": err[:, j] for j, label in enumerate(labels)}
-        if getattr(batch.scene, "maneuver_mask", None) is not None:
+        if batch.scene.maneuver_mask is not None:
             traces |= {f"estimate_{label}": out.estimate[i, :, j] for j, label in enumerate(labels)}
             traces |= {name: np.asarray(out.traces[name][i], float) for name in SWITCH_TRACES if name in out.traces}
-        xy = out.estimate[i][:, pos[:2]] if len(pos) >= 2 else \
-            np.column_stack([np.asarray(batch.t, float), out.estimate[i][:, pos[0]]])    # range against time
-        return method_trace(xy, traces)
+        drawn = (out.estimate[i][:, pos[:2]] if len(pos) >= 2       # a range alone: drawn against time
+                 else np.stack([np.asarray(batch.t, float), out.estimate[i][:, pos[0]]], axis=-1))
+        return method_trace(drawn, traces)
 
     # -------------------------------------------------------------- driver side
 
