@@ -152,7 +152,9 @@ def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict, tasks) ->
     sc = plan.scenarios[unit.scenario_index]
     pos = list(batch.scene.position_index)
     scene = RecordedScene.union(task.recorded_scene(batch, i) for task in tasks)
-    rec = TrialRecord(sc.label, unit.snr_db, int(batch.trials[i]), batch.t, truth_xy=batch.truth[i][:, pos[:2]],
+    truth_xy = (batch.truth[i][:, pos[:2]] if len(pos) >= 2       # a range alone: drawn against time
+                else np.stack([np.asarray(batch.t, float), batch.truth[i][:, pos[0]]], axis=-1))
+    rec = TrialRecord(sc.label, unit.snr_db, int(batch.trials[i]), batch.t, truth_xy=truth_xy,
                       measurements_xy=_measurements_xy(batch, i), methods=traces, arrays=scene.arrays,
                       images=scene.images, info=scene.info)
     return rec.to_bytes()

@@ -12,7 +12,7 @@ from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
 from models.kalman import predict_per_trial, update_first_component
-from models.kinematics import KinematicModel, kinematic_model_of
+from models.kinematics import KinematicModel, kinematic_model_of, kinematic_scene_problem
 
 #: the largest state dimension M (lagged positions) and polynomial order N
 MAX_STATE_DIM = 12
@@ -21,6 +21,10 @@ MAX_ORDER = 6
 #: polynomial prior, Q = 0); a'(P + eps tr(P)/M I)a picks the smallest-norm
 #: coefficients among the equally good ones
 COEFFICIENT_RIDGE = 1e-9
+#: the reported covariance is D (P + eps R I) D': with Q_k = 0 the lagged positions' P
+#: tends to a singular matrix (the model knows the motion is a polynomial), which makes
+#: D P D' singular to rounding and the NEES 0/0; eps R I is far below any error that matters
+OUTPUT_COVARIANCE_FLOOR = 1e-9
 
 
 # ----------------------------------------------------------------- the AR model
@@ -346,6 +350,9 @@ class ARAdaptive(Method):
         return _assemble(batch, model, params, _filter_axes(batch, model, params, reference_filter))
 
     def check_scenario(self, params, scenario_params) -> str | None:
+        problem = kinematic_scene_problem(scenario_params)
+        if problem:
+            return problem
         steps = getattr(scenario_params, "steps", None)
         if steps is not None and steps <= params.state_dim:
             return f"state_dim = {params.state_dim} lagged positions need more than {params.state_dim} steps, " \
@@ -369,8 +376,9 @@ def _assemble(batch: Batch, model: KinematicModel, params, axes: list[ARFilterRe
     Dm = kinematic_map(params.state_dim, model.dt_s)
     estimate = np.concatenate([res.x_post @ Dm.T for res in axes], axis=-1)
     covariance = np.zeros((n, K, 3 * D, 3 * D))
+    floor = OUTPUT_COVARIANCE_FLOOR * model.noise_std_m ** 2 * np.eye(params.state_dim)
     for j, res in enumerate(axes):
-        covariance[:, :, 3 * j:3 * j + 3, 3 * j:3 * j + 3] = Dm @ res.P_post @ Dm.T
+        covariance[:, :, 3 * j:3 * j + 3, 3 * j:3 * j + 3] = Dm @ (res.P_post + floor) @ Dm.T
     traces = {"mode": np.any([res.high for res in axes], axis=0).astype(float),
               "switch": np.any([res.switch for res in axes], axis=0).astype(float),
               "q_k": np.mean([res.q for res in axes], axis=0),
