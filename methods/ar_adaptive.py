@@ -11,7 +11,7 @@ from bench.core import TRACKING, Batch, Method, TrackingOutput
 from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
-from models.kalman import predict_per_trial, update_first_component
+from models.kalman import predict_batched, update_batched
 from models.kinematics import KinematicModel, kinematic_model_of, kinematic_scene_problem
 
 #: the largest state dimension M (lagged positions) and polynomial order N
@@ -137,6 +137,7 @@ def ar_adaptive_filter(z: np.ndarray, dt: float, R: float, x0: np.ndarray, P0: n
     P = np.broadcast_to(L @ P0 @ L.T, (B, M, M)).copy()
     e0e0 = np.zeros((M, M))
     e0e0[0, 0] = 1.0
+    H, R_mat = e0e0[:1], np.array([[R]])
     chi1 = float(scipy.stats.chi2.isf(params.alpha, 1))
     chiW = float(scipy.stats.chi2.isf(params.alpha, W))
     acc_row = kinematic_map(M, dt)[2]
@@ -157,8 +158,8 @@ def ar_adaptive_filter(z: np.ndarray, dt: float, R: float, x0: np.ndarray, P0: n
             Q = q[:, None, None] * e0e0
             F_low, F_high = (companion(_coefficients(params, N, P, a_fixed)) for N in
                              (params.order_low, params.order_high))
-            x_low, P_low = predict_per_trial(x, P, np.broadcast_to(F_low, P.shape), Q)
-            x_high, P_high = predict_per_trial(x, P, np.broadcast_to(F_high, P.shape), Q)
+            x_low, P_low = predict_batched(x, P, F_low, Q)
+            x_high, P_high = predict_batched(x, P, F_high, Q)
             nis_low = (z[:, k] - x_low[:, 0]) ** 2 / (P_low[:, 0, 0] + R)
             tested = np.full(B, k >= M) if params.switching == "per-step" else (~in_high & (k >= M))
             switch = tested & (nis_low > chi1)
@@ -166,7 +167,8 @@ def ar_adaptive_filter(z: np.ndarray, dt: float, R: float, x0: np.ndarray, P0: n
             out.nis[tested, k] = nis_low[tested]
             xp = np.where(high[:, None], x_high, x_low)
             Pp = np.where(high[:, None, None], P_high, P_low)
-        x, P, nu, S = update_first_component(xp, Pp, z[:, k], R)
+        upd = update_batched(xp, Pp, z[:, k, None], H, R_mat)
+        x, P, nu, S = upd.x, upd.P, upd.nu[:, 0], upd.S[:, 0, 0]
         if k >= M:                                      # the lags before step 0 are all measured
             excess[:, k % W] = nu ** 2 - S + q          # nu^2 - (H F P F' H' + R)
             if k >= M + W - 1:
@@ -228,8 +230,8 @@ class ARAdaptive(Method):
 
     (the new position is the AR prediction Σ a_i x_k+1−i plus noise; the
     other components are shifts, without noise). Filtered by the one batched
-    Kalman filter's per-trial steps (:func:`models.kalman.predict_per_trial`,
-    :func:`models.kalman.update_first_component`). Velocity and
+    Kalman filter's per-trial steps (:func:`models.kalman.predict_batched`,
+    :func:`models.kalman.update_batched`). Velocity and
     acceleration are not states ("不需要估计目标的速度和加速度", no velocity or
     acceleration estimated); the scenario's [p, v, a] is read off X by
     :func:`kinematic_map` (filtered position; derivatives of the

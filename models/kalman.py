@@ -231,53 +231,95 @@ def reference_innovations(filt: LinearGaussianFilter, z: np.ndarray) -> Innovati
     return _sequence(*filterpy_innovations(filt.model, z, filt.x0, filt.P0))
 
 
-def filterpy_innovations(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
-    """The reference: innovations by a per-trial, per-step filterpy ``KalmanFilter``
-    loop, same conventions as :func:`kalman_filter` (update, then predict).
-    Used by ``bench perf`` as the baseline and by the tests as the oracle
-    (through :func:`reference_innovations`)."""
+def _filterpy_steps(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
+    """Per trial i and step k, a filterpy ``KalmanFilter`` just updated with
+    ``z[i, k]`` (it predicts the next step when the caller has read it): yields
+    ``(i, k, kf)``. The per-trial loop the references share."""
     from filterpy.kalman import KalmanFilter
 
     n, steps, m = z.shape
     x0 = np.broadcast_to(np.asarray(x0, float), (n, model.dim_x))
-    nu, S = np.empty_like(z, dtype=float), np.empty((steps, m, m))
     for i in range(n):
         kf = KalmanFilter(dim_x=model.dim_x, dim_z=m)
         kf.F, kf.H, kf.Q, kf.R = model.F, model.H, model.Q, model.R
         kf.x, kf.P = x0[i].copy(), np.array(P0, float)
         for k in range(steps):
             kf.update(z[i, k])
-            nu[i, k], S[k] = kf.y, kf.S
+            yield i, k, kf
             kf.predict()
+
+
+def filterpy_innovations(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
+    """The reference: innovations by a per-trial, per-step filterpy ``KalmanFilter``
+    loop, same conventions as :func:`kalman_filter` (update, then predict).
+    Used by ``bench perf`` as the baseline and by the tests as the oracle
+    (through :func:`reference_innovations`)."""
+    steps, m = z.shape[1:]
+    nu, S = np.empty_like(z, dtype=float), np.empty((steps, m, m))
+    for i, k, kf in _filterpy_steps(model, z, x0, P0):
+        nu[i, k], S[k] = kf.y, kf.S
     return nu, S
 
 
-# ------------------------------------------------ per-trial covariances (adaptive filters)
-#
-# An adaptive filter (model switching, an online Q) gives every trial its own
-# F, Q and so its own P: the covariance recursion carries the trial axis. The
-# two steps below are the recursion of the module docstring, batched over
-# trials (leading axis n), with a scalar position measurement z = H x + v,
-# H = e_0' (the first state component), the case of the AR-model tracker.
+# ---------------------------------------------------------------- per-trial covariances
+# Adaptive and switching filters (variable dimension, current statistical, IMM) change F,
+# Q or the state per trial, so their covariances carry the trial axis. The same equations
+# as above, one step at a time, batched over any leading axes (trials, modes).
+
+def _t(A: np.ndarray) -> np.ndarray:
+    return np.swapaxes(A, -1, -2)
 
 
-def update_first_component(x: np.ndarray, P: np.ndarray, z: np.ndarray, R: float):
-    """Kalman update of ``n`` trials with the scalar measurement of state component 0.
-
-    x (n, d), P (n, d, d), z (n,), R the measurement-noise variance. With
-    H = e_0': nu = z - x_0, S = P_00 + R, K = P e_0 / S, x+ = x + K nu,
-    P+ = (I - K H) P (I - K H)' + K R K' (Joseph form). Returns
-    ``(x+, P+, nu, S)``.
-    """
-    nu = z - x[:, 0]
-    S = P[:, 0, 0] + R
-    gain = P[:, :, 0] / S[:, None]                               # (n, d)
-    I_KH = np.broadcast_to(np.eye(x.shape[1]), P.shape).copy()
-    I_KH[:, :, 0] -= gain
-    P_post = I_KH @ P @ I_KH.transpose(0, 2, 1) + R * gain[:, :, None] * gain[:, None, :]
-    return x + gain * nu[:, None], 0.5 * (P_post + P_post.transpose(0, 2, 1)), nu, S
+def predict_batched(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray, u: np.ndarray | None = None):
+    """x_k+1|k = F x_k|k (+ u), P_k+1|k = F P_k|k F' + Q, over leading axes: x (..., d),
+    P (..., d, d); F and Q (d, d) or per trial (..., d, d); u (..., d) an additive input
+    (e.g. B u) or None."""
+    x_next = np.einsum("...ij,...j->...i", F, x)
+    if u is not None:
+        x_next = x_next + u
+    P_next = F @ P @ _t(F) + Q
+    return x_next, 0.5 * (P_next + _t(P_next))
 
 
-def predict_per_trial(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray):
-    """x_k+1|k = F x_k|k, P_k+1|k = F P F' + Q, with per-trial F (n, d, d) and Q (n, d, d)."""
-    return np.einsum("nij,nj->ni", F, x), F @ P @ F.transpose(0, 2, 1) + Q
+@dataclass(frozen=True)
+class BatchedUpdate:
+    """Output of :func:`update_batched`: the updated state and covariance, the
+    innovation nu (..., m), its covariance S (..., m, m), the NIS nu' S^-1 nu (...)
+    and log N(nu; 0, S) (...), the mode likelihood of an IMM."""
+
+    x: np.ndarray
+    P: np.ndarray
+    nu: np.ndarray
+    S: np.ndarray
+    nis: np.ndarray
+    log_likelihood: np.ndarray
+
+
+def update_batched(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray) -> BatchedUpdate:
+    """The measurement update of the module docstring (Joseph form, FilterPy's
+    ``KalmanFilter.update``) over leading axes: x (..., d), P (..., d, d), z (..., m)."""
+    nu = z - x @ H.T
+    PHt = P @ H.T                                              # (..., d, m)
+    S = H @ PHt + R
+    S = 0.5 * (S + _t(S))
+    gain = _t(np.linalg.solve(S, _t(PHt)))                     # P H' S^-1 (S symmetric)
+    x_new = x + np.einsum("...ij,...j->...i", gain, nu)
+    I_KH = np.eye(x.shape[-1]) - gain @ H
+    P_new = I_KH @ P @ _t(I_KH) + gain @ R @ _t(gain)
+    P_new = 0.5 * (P_new + _t(P_new))
+    S_inv_nu = np.linalg.solve(S, nu[..., None])[..., 0]
+    nis = np.einsum("...i,...i->...", nu, S_inv_nu)
+    _, logdet = np.linalg.slogdet(S)
+    log_likelihood = -0.5 * (nis + logdet + nu.shape[-1] * np.log(2.0 * np.pi))
+    return BatchedUpdate(x=x_new, P=P_new, nu=nu, S=S, nis=nis, log_likelihood=log_likelihood)
+
+
+def filterpy_track(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
+    """The reference of a time-invariant tracker: per-trial, per-step filterpy
+    ``KalmanFilter`` (update, then predict, as :func:`kalman_filter`); returns the
+    updated states (n, K, d) and covariances (n, K, d, d)."""
+    n, steps = z.shape[:2]
+    xs, Ps = np.empty((n, steps, model.dim_x)), np.empty((n, steps, model.dim_x, model.dim_x))
+    for i, k, kf in _filterpy_steps(model, z, x0, P0):
+        xs[i, k], Ps[i, k] = kf.x, kf.P
+    return xs, Ps
