@@ -158,7 +158,8 @@ class TrackingTask(Task):
                        "rmse_quiet", "rmse_quiet_low", "rmse_quiet_high", "rmse_maneuver", "rmse_maneuver_low",
                        "rmse_maneuver_high", "switch_pd", "switch_pd_low", "switch_pd_high", "switch_delay_mean",
                        "switch_delay_low", "switch_delay_high", "false_switch_rate", "false_switch_low",
-                       "false_switch_high", "q_quiet_mean", "q_maneuver_mean")
+                       "false_switch_high", "q_quiet_mean", "q_maneuver_mean", "q_maneuver_low",
+                       "q_maneuver_high")
     headline_columns = ("rmse_mean", "rmse_low", "rmse_high", "divergence_rate", "nees_mean")
     method_entities = ("estimate",)
 

@@ -184,6 +184,7 @@ def summarise_maneuvers(g: pd.DataFrame, cell_series: dict) -> dict:
         row["q_quiet_mean"] = float(np.nanmean(g["q_quiet_mean"])) if g["q_quiet_mean"].notna().any() else np.nan
         row["q_maneuver_mean"] = float(np.nanmean(g["q_maneuver_mean"])) \
             if g["q_maneuver_mean"].notna().any() else np.nan
+        row["q_maneuver_low"], row["q_maneuver_high"] = bootstrap_mean_interval(g["q_maneuver_mean"].to_numpy(float))
     return row
 
 
