@@ -136,10 +136,15 @@ class Plan:
     scenario_axes: tuple[str, ...] = ()
     #: the sweep's ``max_unit_memory_gb`` when it set one (None: the machine's default)
     max_unit_memory_gb: float | None = None
+    #: the scenarios each method config is limited to (``Method.scenarios``; empty: all of its task)
+    method_scenarios: tuple[tuple[str, ...], ...] = ()
 
     def pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
-        """The method configs that run on ``scenario`` (those whose task it serves)."""
-        return [m for m, task in zip(self.methods, self.method_tasks) if task in scenario.tasks]
+        """The method configs that run on ``scenario``: those whose task it serves, limited
+        to the scenarios a method names (``Method.scenarios``)."""
+        limits = self.method_scenarios or ((),) * len(self.methods)
+        return [m for m, task, names in zip(self.methods, self.method_tasks, limits)
+                if task in scenario.tasks and (not names or scenario.name in names)]
 
     @property
     def trial_runs(self) -> int:
@@ -393,7 +398,7 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]
         if "name" not in entry or not isinstance(entry["name"], str):
             raise ConfigError(f"{field}.name", "missing method name (a string)")
         cls = registry.get_method(entry["name"], f"{field}.name")
-        if not any(cls.task in s.tasks for s in scenarios):
+        if not any(cls.serves(s.name, s.tasks) for s in scenarios):
             names = ", ".join(sorted({f"{s.name!r} ({'/'.join(s.tasks)})" for s in scenarios}))
             raise ConfigError(f"{field}.name", f"method {cls.name!r} ({cls.task}) cannot run on "
                                                f"any scenario of the sweep: {names}")
@@ -552,7 +557,8 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
                                                     f"{MAX_UNIT_MEMORY_GB:g}] (GB), got {memory_gb:g}")
     axes = tuple(k for k in data.get("scenario_params", {}) if isinstance(k, str)) if scenario else ()
     plan = Plan(name, description, scenario, scenarios, trials, seed, snr_db, chunk,
-                methods, calibration, record_trials, source, method_tasks, timeline_snr_db, unit_timeout_s, axes, memory_gb)
+                methods, calibration, record_trials, source, method_tasks, timeline_snr_db, unit_timeout_s, axes, memory_gb,
+                tuple(registry.get_method(m.name).scenarios for m in methods))
     idle = [s.label for s in scenarios if not plan.pairs(s)]
     if idle:
         raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0]!r}")
@@ -581,8 +587,8 @@ def _parse_unit_timeout(value: Any) -> float:
 
 def _calibration_trial_runs(plan: Plan) -> int:
     """h0_trials x (scenario config, method config) pairs whose threshold is calibrated."""
-    pairs = sum(1 for s in plan.scenarios for m, task in zip(plan.methods, plan.method_tasks)
-                if task in s.tasks and registry.get_task(task).calibrated)
+    pairs = sum(1 for s in plan.scenarios for m in plan.pairs(s)
+                if registry.get_task(registry.get_method(m.name).task).calibrated)
     return plan.calibration.h0_trials * pairs
 
 

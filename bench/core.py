@@ -115,6 +115,15 @@ class Scene:
         require(self, "measurements_xy", self.measurements_xy is None
                 or has_shape(self.measurements_xy, (None, None, 2), "fiu"), "None or an (n, K, 2) float array")
 
+    def drawn_xy(self, states: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """(K, 2) what recordings draw in the plane of one trial's states (K, d): the
+        first two position components, or with a single one (a range) the time (s)
+        against it."""
+        pos = list(self.position_index)
+        if len(pos) >= 2:
+            return states[:, pos[:2]]
+        return np.stack([np.asarray(t, float), states[:, pos[0]]], axis=-1)
+
     def check(self, batch: Batch) -> None:
         """SceneError unless the scene fits ``batch`` (its trials, steps and
         state size). Subclasses extend it, calling ``super().check(batch)``."""
@@ -295,6 +304,9 @@ class Method(Component):
 
     #: the task this method performs (one of :data:`TASKS`)
     task: ClassVar[str] = ""
+    #: the scenarios it runs on, by name, when it reads a scene model only they provide
+    #: (e.g. a glint model); empty: every scenario of its task
+    scenarios: ClassVar[tuple[str, ...]] = ()
     #: ``bench perf``: what :meth:`reference_run` is (one phrase); None: no reference implementation
     reference_name: ClassVar[str | None] = None
     #: ``bench perf``: trials the (slow) reference runs on, at most the method's; None: as many
@@ -323,6 +335,13 @@ class Method(Component):
         """State transitions a DP method evaluates per trial of ``batch``;
         None (the default): not a DP method, nothing to count."""
         return None
+
+    @classmethod
+    def serves(cls, scenario_name: str, scenario_tasks) -> bool:
+        """Whether it runs on the scenario of that name and tasks: its task is one of
+        them and, if it names its :attr:`scenarios`, the scenario is one of those. A
+        sweep pairs each method config with the scenario configs it serves."""
+        return cls.task in scenario_tasks and (not cls.scenarios or scenario_name in cls.scenarios)
 
     def check_scenario(self, params, scenario_params) -> str | None:
         """Why this config cannot run on a scenario config with ``scenario_params``

@@ -71,10 +71,10 @@ def check_pairs(plan: Plan, method_fields: tuple[str, ...]) -> None:
     method's :meth:`~bench.core.Method.check_scenario` after grid expansion: a
     constraint across the two (a window longer than the scene) fails here, in
     one line naming both configs, rather than on every unit."""
-    for m, field, task in zip(plan.methods, method_fields, plan.method_tasks):
+    for m, field in zip(plan.methods, method_fields):
         method = registry.get_method(m.name)()
         for s in plan.scenarios:
-            if task in s.tasks:
+            if any(p is m for p in plan.pairs(s)):
                 problem = method.check_scenario(m.params, s.params)
                 if problem:
                     raise ConfigError(f"{field}.params", f"{m.label!r} cannot run on scenario config "

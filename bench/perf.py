@@ -162,7 +162,7 @@ def check_sizes(methods: list[str] | None, sizes: list[str] | None) -> None:
         return
     names: set[str] = set()
     for name, cls in registry.methods().items():
-        scenario = next((s for s in registry.scenarios().values() if cls.task in s.tasks), None)
+        scenario = next((s for s in registry.scenarios().values() if cls.serves(s.name, s.tasks)), None)
         if scenario is not None and (not methods or name in methods):
             names |= set(scenario.perf_sizes)
     known = sorted(names)
@@ -178,7 +178,7 @@ def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> li
     for name, cls in registry.methods().items():
         if methods and name not in methods:
             continue
-        scenario = next((s for s in registry.scenarios().values() if cls.task in s.tasks), None)
+        scenario = next((s for s in registry.scenarios().values() if cls.serves(s.name, s.tasks)), None)
         if scenario is None:
             continue
         for size, (params, trials) in scenario.perf_sizes.items():

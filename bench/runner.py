@@ -150,11 +150,9 @@ def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict, tasks) ->
     """Trial ``i`` as the record the driver draws: the harness's truth and
     measurements, what each of ``tasks`` keeps of the scene, the methods' traces."""
     sc = plan.scenarios[unit.scenario_index]
-    pos = list(batch.scene.position_index)
     scene = RecordedScene.union(task.recorded_scene(batch, i) for task in tasks)
-    truth_xy = (batch.truth[i][:, pos[:2]] if len(pos) >= 2       # a range alone: drawn against time
-                else np.stack([np.asarray(batch.t, float), batch.truth[i][:, pos[0]]], axis=-1))
-    rec = TrialRecord(sc.label, unit.snr_db, int(batch.trials[i]), batch.t, truth_xy=truth_xy,
+    rec = TrialRecord(sc.label, unit.snr_db, int(batch.trials[i]), batch.t,
+                      truth_xy=batch.scene.drawn_xy(batch.truth[i], batch.t),
                       measurements_xy=_measurements_xy(batch, i), methods=traces, arrays=scene.arrays,
                       images=scene.images, info=scene.info)
     return rec.to_bytes()

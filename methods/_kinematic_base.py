@@ -24,8 +24,9 @@ import numpy as np
 
 from bench.core import TRACKING, Batch, Method, TrackingOutput
 from models.kalman import LinearGaussianModel
-from models.kinematics import (KinematicModel, ca, cv, cv_components, kinematic_model_of,
-                               kinematic_scene_problem, per_axis, position_measurement)
+from bench.params import param
+from models.kinematics import (KinematicModel, ca, cv, cv_components, embed_cv, kinematic_model_of, per_axis,
+                               position_measurement)
 
 SIGMA_WHY = "from a millimetre per second squared to 100 g"
 
@@ -34,12 +35,10 @@ class KinematicTracker(Method):
     """Base of the trackers of kinematic scenes (``maneuvering-1d``)."""
 
     task = TRACKING
+    scenarios = ("maneuvering-1d",)
     reference_trials: ClassVar[int | None] = 20
     #: the issue's goal: 50 times the per-trial filterpy loop
     perf_targets: ClassVar[dict] = {"*": {"speedup": 50.0}}
-
-    def check_scenario(self, params, scenario_params) -> str | None:
-        return kinematic_scene_problem(scenario_params)
 
     def run(self, batch: Batch, params) -> TrackingOutput:
         return self.track(batch, kinematic_model_of(batch.scene), params)
@@ -70,6 +69,24 @@ def cv_model(model: KinematicModel, sigma_a: float) -> LinearGaussianModel:
 def ca_model(model: KinematicModel, sigma_j: float) -> LinearGaussianModel:
     """The CA (DWPA) filter model on [p, v, a] per axis."""
     return linear_model(model, *ca(model.dt_s, sigma_j))
+
+
+def cv_ca_modes(model: KinematicModel, sigma_a: float, sigma_j: float) -> list[LinearGaussianModel]:
+    """The CV mode (its acceleration outside the model: row and column zero,
+    :func:`models.kinematics.embed_cv`) and the CA mode on [p, v, a] per axis: the two
+    models a switching tracker (IMM, variable dimension) runs in one state space."""
+    return [linear_model(model, *embed_cv(*cv(model.dt_s, sigma_a))), ca_model(model, sigma_j)]
+
+
+def cv_noise_param(default: float):
+    """The ``accel_noise_m_s2`` parameter of a tracker's CV model."""
+    return param(default, "CV model: std sigma_a of the white acceleration (m/s^2)", ge=1e-3, le=1e3, why=SIGMA_WHY)
+
+
+def ca_noise_param(default: float):
+    """The ``accel_increment_m_s2`` parameter of a tracker's CA model."""
+    return param(default, "CA model: std sigma_j of the acceleration increment over one step (m/s^2)",
+                 ge=1e-3, le=1e3, why=SIGMA_WHY)
 
 
 def cv_prior(model: KinematicModel) -> tuple[np.ndarray, np.ndarray]:

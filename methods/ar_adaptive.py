@@ -12,7 +12,7 @@ from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
 from models.kalman import predict_batched, update_batched
-from models.kinematics import KinematicModel, kinematic_model_of, kinematic_scene_problem
+from models.kinematics import KinematicModel, kinematic_model_of
 
 #: the largest state dimension M (lagged positions) and polynomial order N
 MAX_STATE_DIM = 12
@@ -306,6 +306,7 @@ class ARAdaptive(Method):
 
     name = "ar-adaptive"
     task = TRACKING
+    scenarios = ("maneuvering-1d",)
     reference_name = "per-trial filterpy KalmanFilter loop with the same switching and Q_k"
     reference_trials = 20
     perf_targets = {"*": {"speedup": 50.0}}
@@ -352,9 +353,6 @@ class ARAdaptive(Method):
         return _assemble(batch, model, params, _filter_axes(batch, model, params, reference_filter))
 
     def check_scenario(self, params, scenario_params) -> str | None:
-        problem = kinematic_scene_problem(scenario_params)
-        if problem:
-            return problem
         steps = getattr(scenario_params, "steps", None)
         if steps is not None and steps <= params.state_dim:
             return f"state_dim = {params.state_dim} lagged positions need more than {params.state_dim} steps, " \

@@ -9,7 +9,7 @@ import numpy as np
 from bench.core import TRACKING, Batch, Method, TrackingOutput
 from bench.params import param
 from bench.registry import register_method
-from models.glint import GlintModel, glint_scene_problem, glint_model_of
+from models.glint import GlintModel, glint_model_of
 from models.spherical import measure, measurement_jacobian, measurement_residual
 
 
@@ -131,6 +131,7 @@ class EKF(Method):
 
     name = "ekf"
     task = TRACKING
+    scenarios = ("glint",)
     reference_name = "per-trial filterpy ExtendedKalmanFilter loop"
     reference_trials = 10
 
@@ -139,9 +140,6 @@ class EKF(Method):
         noise_variance: str = param(
             "core", "measurement-noise variance the filter assumes: 'core' = the Gaussian core's "
             "sigma^2, 'mixture' = the glint noise's total variance", choices=("core", "mixture"))
-
-    def check_scenario(self, params, scenario_params) -> str | None:
-        return glint_scene_problem(scenario_params)
 
     def run(self, batch: Batch, params) -> TrackingOutput:
         model = glint_model_of(batch.scene)

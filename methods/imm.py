@@ -12,9 +12,9 @@ from bench.core import Batch, TrackingOutput
 from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
-from methods._kinematic_base import SIGMA_WHY, KinematicTracker, linear_model, output
+from methods._kinematic_base import KinematicTracker, ca_noise_param, cv_ca_modes, cv_noise_param, output
 from models.kalman import LinearGaussianModel, predict_batched, update_batched
-from models.kinematics import KinematicModel, ca, cv, embed_cv
+from models.kinematics import KinematicModel
 
 
 @dataclass(frozen=True)
@@ -126,10 +126,8 @@ class IMMCVCA(KinematicTracker):
 
     @dataclass(frozen=True)
     class Params:
-        accel_noise_m_s2: float = param(1.0, "CV mode: std sigma_a of the white acceleration (m/s^2)",
-                                        ge=1e-3, le=1e3, why=SIGMA_WHY)
-        accel_increment_m_s2: float = param(3.0, "CA mode: std sigma_j of the acceleration increment over "
-                                            "one step (m/s^2)", ge=1e-3, le=1e3, why=SIGMA_WHY)
+        accel_noise_m_s2: float = cv_noise_param(1.0)
+        accel_increment_m_s2: float = ca_noise_param(3.0)
         transition: tuple[float, ...] = param(
             (0.95, 0.05, 0.05, 0.95), "mode transition matrix, row by row: P(CV->CV), P(CV->CA), "
             "P(CA->CV), P(CA->CA); each row sums to 1", ge=0.0, le=1.0, min_len=4, max_len=4,
@@ -150,8 +148,7 @@ class IMMCVCA(KinematicTracker):
     @staticmethod
     def modes(model: KinematicModel, params) -> list[LinearGaussianModel]:
         """The CV and the CA mode on [p, v, a] per axis."""
-        return [linear_model(model, *embed_cv(*cv(model.dt_s, params.accel_noise_m_s2))),
-                linear_model(model, *ca(model.dt_s, params.accel_increment_m_s2))]
+        return cv_ca_modes(model, params.accel_noise_m_s2, params.accel_increment_m_s2)
 
     def _run(self, imm, batch: Batch, model: KinematicModel, params) -> TrackingOutput:
         res = imm(self.modes(model, params), np.reshape(params.transition, (2, 2)),

@@ -11,7 +11,8 @@ import numpy as np
 from bench.core import Batch, TrackingOutput
 from bench.params import param
 from bench.registry import register_method
-from methods._kinematic_base import SIGMA_WHY, KinematicTracker, ca_model, cv_model, cv_prior, linear_model, output, pad_cv
+from methods._kinematic_base import (SIGMA_WHY, KinematicTracker, ca_model, ca_noise_param, cv_model, cv_noise_param,
+                                    cv_prior, linear_model, output, pad_cv)
 from models.kalman import LinearGaussianModel, filterpy_track, kalman_filter
 from models.kinematics import KinematicModel, singer
 
@@ -60,8 +61,7 @@ class ConstantVelocityKF(_LinearTracker):
 
     @dataclass(frozen=True)
     class Params:
-        accel_noise_m_s2: float = param(1.0, "std sigma_a of the white acceleration the filter assumes (m/s^2)",
-                                        ge=1e-3, le=1e3, why=SIGMA_WHY)
+        accel_noise_m_s2: float = cv_noise_param(1.0)
 
     def filter_model(self, model, params):
         return cv_model(model, params.accel_noise_m_s2)
@@ -88,8 +88,7 @@ class ConstantAccelerationKF(_LinearTracker):
 
     @dataclass(frozen=True)
     class Params:
-        accel_increment_m_s2: float = param(1.0, "std sigma_j of the acceleration increment over one step "
-                                            "(m/s^2)", ge=1e-3, le=1e3, why=SIGMA_WHY)
+        accel_increment_m_s2: float = ca_noise_param(1.0)
 
     def filter_model(self, model, params):
         return ca_model(model, params.accel_increment_m_s2)

@@ -13,7 +13,7 @@ from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
 from methods._viterbi_paper1d import paper_1d_track
-from models.glint import GlintModel, glint_scene_problem, glint_logpdf, glint_model_of
+from models.glint import GlintModel, glint_logpdf, glint_model_of
 from models.kalman import LinearGaussianModel, covariance_sequence
 from models.spherical import measure, measurement_residual
 
@@ -392,6 +392,7 @@ class Viterbi(Method):
 
     name = "viterbi"
     task = TRACKING
+    scenarios = ("glint",)
 
     @dataclass(frozen=True)
     class Params:
@@ -477,9 +478,6 @@ class Viterbi(Method):
             nodes = params.position_levels * params.velocity_levels
             return int(n * nodes * (32 * (block + 1) + 8 * params.disturbance_levels))
         return int(n * paper_1d_window(params, scenario_params, steps) * 16 * (block + 6))
-
-    def check_scenario(self, params, scenario_params) -> str | None:
-        return glint_scene_problem(scenario_params)
 
     def run(self, batch: Batch, params) -> TrackingOutput:
         track = paper_1d_track if params.trellis == "paper-1d" else viterbi_track

@@ -238,15 +238,6 @@ class GlintModel:
         return len(self.measurement_labels)
 
 
-def glint_scene_problem(scenario_params) -> str | None:
-    """Why a tracker of glint scenes (its scene's model a :class:`GlintModel`) cannot run
-    on a scenario config with ``scenario_params`` (read by name: a method does not import
-    scenarios), or None: the config must describe glint noise (``glint_model``, ``sensor``)."""
-    if hasattr(scenario_params, "glint_model") and hasattr(scenario_params, "sensor"):
-        return None
-    return "it tracks glint scenes (spherical measurements under glint noise, scenario glint); this scenario has none"
-
-
 def glint_model_of(scene) -> GlintModel:
     """The :class:`GlintModel` a tracking scene carries (its ``model``);
     TypeError naming the field when it holds something else."""

@@ -175,16 +175,6 @@ class KinematicModel:
         return self.noise_std_m ** 2 * np.eye(self.dims)
 
 
-def kinematic_scene_problem(scenario_params) -> str | None:
-    """Why a tracker of kinematic scenes (its scene's model a :class:`KinematicModel`)
-    cannot run on a scenario config with ``scenario_params`` (read by name: a method does
-    not import scenarios), or None: the config must have ``dims`` and ``noise_std_m``."""
-    if hasattr(scenario_params, "dims") and hasattr(scenario_params, "noise_std_m"):
-        return None
-    return ("it tracks kinematic scenes (position measurements of a maneuvering target, scenario "
-            "maneuvering-1d); this scenario is not one")
-
-
 def kinematic_model_of(scene) -> KinematicModel:
     """The scene's :class:`KinematicModel`, or a TypeError naming what it holds
     (the trackers of this module's models run on kinematic scenes only)."""

@@ -14,15 +14,8 @@ from bench.registry import get_task
 
 
 
-def _compatible(scls, mcls) -> bool:
-    """The method serves one of the scenario's tasks and accepts its small config
-    (``Method.check_scenario``: e.g. a glint tracker on a kinematic scene is refused)."""
-    return mcls.task in scls.tasks and mcls().check_scenario(
-        mcls.Params(), build_params(scls.Params, scls.small_params)) is None
-
-
 PAIRS = [(s, m) for s, scls in registry.scenarios().items() for m, mcls in registry.methods().items()
-         if _compatible(scls, mcls)]
+         if mcls.serves(s, scls.tasks)]
 
 
 def test_every_method_has_a_scenario_and_nothing_is_unavailable():

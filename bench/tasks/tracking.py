@@ -202,16 +202,13 @@ class TrackingTask(Task):
         return rec
 
     def recorded_method(self, batch: Batch, out: TrackingOutput, i: int, threshold: float) -> MethodTrace:
-        pos = list(batch.scene.position_index)
         err = out.estimate[i] - batch.truth[i]
         labels = self.labels(batch)
         traces = {f"error_{label}": err[:, j] for j, label in enumerate(labels)}
         if batch.scene.maneuver_mask is not None:
             traces |= {f"estimate_{label}": out.estimate[i, :, j] for j, label in enumerate(labels)}
             traces |= {name: np.asarray(out.traces[name][i], float) for name in SWITCH_TRACES if name in out.traces}
-        drawn = (out.estimate[i][:, pos[:2]] if len(pos) >= 2       # a range alone: drawn against time
-                 else np.stack([np.asarray(batch.t, float), out.estimate[i][:, pos[0]]], axis=-1))
-        return method_trace(drawn, traces)
+        return method_trace(batch.scene.drawn_xy(out.estimate[i], batch.t), traces)
 
     # -------------------------------------------------------------- driver side
 
