@@ -156,7 +156,8 @@ class TrackingTask(Task):
                        # scenes with a maneuver mask (empty otherwise): the quiet / maneuvering split and,
                        # for trackers with a ``switch`` trace, the switches against the true onsets
                        "rmse_quiet", "rmse_quiet_low", "rmse_quiet_high", "rmse_maneuver", "rmse_maneuver_low",
-                       "rmse_maneuver_high", "switch_pd", "switch_pd_low", "switch_pd_high", "switch_delay_mean",
+                       "rmse_maneuver_high", "rmse_onset", "rmse_onset_low", "rmse_onset_high", "switch_pd",
+                       "switch_pd_low", "switch_pd_high", "switch_delay_mean",
                        "switch_delay_low", "switch_delay_high", "false_switch_rate", "false_switch_low",
                        "false_switch_high", "q_quiet_mean", "q_maneuver_mean", "q_maneuver_low",
                        "q_maneuver_high")

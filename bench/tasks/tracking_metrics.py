@@ -93,6 +93,9 @@ def tracking_steps(series: dict, labels) -> pd.DataFrame:
 
 #: the traces of a switching tracker kept as series (per-step means in steps.csv)
 SWITCH_TRACES = ("mode", "switch", "q_k")
+#: steps from the true onset over which ``rmse_onset_m`` is taken: the detection delay
+#: of a chi-square switch plus the transient of the model change (a re-initialisation)
+ONSET_WINDOW_STEPS = 10
 
 
 def segment_rms(sq: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -107,8 +110,10 @@ def maneuver_trial_metrics(pos_sq: np.ndarray, mask: np.ndarray, onsets: np.ndar
     """Per-trial metrics against the true maneuvers.
 
     ``rmse_quiet_m`` / ``rmse_maneuver_m``: the trial's position RMS error over
-    its quiet / maneuvering steps (``mask`` (n, K) bool); series
-    ``maneuvering`` (the mask, for the per-step split). With a ``switch``
+    its quiet / maneuvering steps (``mask`` (n, K) bool); ``rmse_onset_m``: over
+    the first :data:`ONSET_WINDOW_STEPS` steps from the first onset, where a
+    switching tracker detects and changes its model (NaN without an onset); series
+    ``maneuvering`` and ``onset_window`` (the masks, for the per-step splits). With a ``switch``
     trace: ``switch_detected`` (a switch at or after the first onset, before
     the maneuver's last step; NaN without an onset), ``switch_delay_steps``
     (its step minus the onset), ``false_switches`` (switches before the first
@@ -122,6 +127,9 @@ def maneuver_trial_metrics(pos_sq: np.ndarray, mask: np.ndarray, onsets: np.ndar
     steps = np.arange(K)
     first = np.full(n, K) if onsets is None or onsets.shape[1] == 0 else np.asarray(onsets)[:, 0]
     before = steps[None, :] < first[:, None]
+    onset_window = ~before & (steps[None, :] < first[:, None] + ONSET_WINDOW_STEPS)
+    out["rmse_onset_m"] = segment_rms(pos_sq, onset_window)
+    out["onset_window"] = onset_window.astype(float)
     if "switch" in traces:
         switch = np.asarray(traces["switch"]) > 0.5
         last = np.where(mask.any(axis=1), K - 1 - np.argmax(mask[:, ::-1], axis=1), -1)
@@ -158,14 +166,15 @@ def segment_time_averaged_rmse(stacked: np.ndarray) -> float:
 
 
 def summarise_maneuvers(g: pd.DataFrame, cell_series: dict) -> dict:
-    """A cell's quiet / maneuvering split (time-averaged RMSE, bootstrap intervals over trials),
+    """A cell's quiet / maneuvering / onset-window split (time-averaged RMSE, bootstrap intervals over trials),
     switch detection (Wilson), delay (bootstrap) and false-switch rate per quiet step
     (ratio-estimator interval over trials); empty without a maneuver mask."""
     if "maneuvering" not in cell_series:
         return {}
     sq, mask = cell_series["sq_err_position"], cell_series["maneuvering"]
     row = {}
-    for name, seg in (("rmse_quiet", 1.0 - mask), ("rmse_maneuver", mask)):
+    segments = (("rmse_quiet", 1.0 - mask), ("rmse_maneuver", mask), ("rmse_onset", cell_series["onset_window"]))
+    for name, seg in segments:
         stacked = np.stack([sq, seg], axis=-1)
         row[name] = segment_time_averaged_rmse(stacked)
         row[f"{name}_low"], row[f"{name}_high"] = bootstrap_statistic_interval(
