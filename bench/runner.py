@@ -482,6 +482,7 @@ def plan_record(plan: Plan, command: str) -> dict:
                      "task": registry.get_method(m.name).task} for m in plan.methods],
         "scenarios": [{"label": s.label, "name": s.name, "params": s.params_text, "tasks": list(s.tasks),
                        "snr_db": list(s.snr_db), "trials": s.trials} for s in plan.scenarios],
+        "skipped": [{"scenario": sc, "method": m, "reason": why} for sc, m, why in plan.skipped],
     }
 
 
