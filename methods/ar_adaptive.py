@@ -51,7 +51,7 @@ def ar_coefficients(M: int, N: int, P: np.ndarray | None = None) -> np.ndarray:
     e0[0] = 1.0
     if P is None:
         return V @ np.linalg.solve(V.T @ V, e0)
-    ridge = COEFFICIENT_RIDGE * np.trace(P, axis1=1, axis2=2) / M
+    ridge = COEFFICIENT_RIDGE * np.einsum("nii->n", P) / M
     Pr = P + ridge[:, None, None] * np.eye(M)
     PiV = np.linalg.solve(Pr, np.broadcast_to(V, (len(P), M, N + 1)))          # (n, M, N+1)
     lam = np.linalg.solve(V.T @ PiV, np.broadcast_to(e0[:, None], (len(P), N + 1, 1)))
@@ -156,17 +156,16 @@ def ar_adaptive_filter(z: np.ndarray, dt: float, R: float, x0: np.ndarray, P0: n
             xp, Pp, high, switch = x, P, np.zeros(B, bool), np.zeros(B, bool)
         else:
             Q = q[:, None, None] * e0e0
-            F_low, F_high = (companion(_coefficients(params, N, P, a_fixed)) for N in
-                             (params.order_low, params.order_high))
-            x_low, P_low = predict_batched(x, P, F_low, Q)
-            x_high, P_high = predict_batched(x, P, F_high, Q)
-            nis_low = (z[:, k] - x_low[:, 0]) ** 2 / (P_low[:, 0, 0] + R)
+            xp, Pp = predict_batched(x, P, companion(_coefficients(params, params.order_low, P, a_fixed)), Q)
+            nis_low = (z[:, k] - xp[:, 0]) ** 2 / (Pp[:, 0, 0] + R)
             tested = np.full(B, k >= M) if params.switching == "per-step" else (~in_high & (k >= M))
             switch = tested & (nis_low > chi1)
             high = (switch | in_high) if params.switching == "latched" else switch
             out.nis[tested, k] = nis_low[tested]
-            xp = np.where(high[:, None], x_high, x_low)
-            Pp = np.where(high[:, None, None], P_high, P_low)
+            rows = np.flatnonzero(high)             # the high order only where a trial uses it (most steps: none)
+            if rows.size:
+                F_high = companion(_coefficients(params, params.order_high, P[rows], a_fixed))
+                xp[rows], Pp[rows] = predict_batched(x[rows], P[rows], F_high, Q[rows])
         upd = update_batched(xp, Pp, z[:, k, None], H, R_mat)
         x, P, nu, S = upd.x, upd.P, upd.nu[:, 0], upd.S[:, 0, 0]
         if k >= M:                                      # the lags before step 0 are all measured

@@ -302,14 +302,19 @@ def update_batched(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R
     PHt = P @ H.T                                              # (..., d, m)
     S = H @ PHt + R
     S = 0.5 * (S + _t(S))
-    gain = _t(np.linalg.solve(S, _t(PHt)))                     # P H' S^-1 (S symmetric)
+    if S.shape[-1] == 1:                                       # a scalar measurement: S^-1 is a division
+        gain = PHt / S
+        S_inv_nu = nu / S[..., 0]
+        logdet = np.log(S[..., 0, 0])
+    else:
+        gain = _t(np.linalg.solve(S, _t(PHt)))                 # P H' S^-1 (S symmetric)
+        S_inv_nu = np.linalg.solve(S, nu[..., None])[..., 0]
+        _, logdet = np.linalg.slogdet(S)
     x_new = x + np.einsum("...ij,...j->...i", gain, nu)
     I_KH = np.eye(x.shape[-1]) - gain @ H
     P_new = I_KH @ P @ _t(I_KH) + gain @ R @ _t(gain)
     P_new = 0.5 * (P_new + _t(P_new))
-    S_inv_nu = np.linalg.solve(S, nu[..., None])[..., 0]
     nis = np.einsum("...i,...i->...", nu, S_inv_nu)
-    _, logdet = np.linalg.slogdet(S)
     log_likelihood = -0.5 * (nis + logdet + nu.shape[-1] * np.log(2.0 * np.pi))
     return BatchedUpdate(x=x_new, P=P_new, nu=nu, S=S, nis=nis, log_likelihood=log_likelihood)
 
