@@ -202,6 +202,11 @@ def cmd_run(args) -> int:
     from bench import runfolder
     _check_executor(args)
     plan = _load_plan(args)
+    if plan.skipped and not args.quiet:
+        print(f"skipping {len(plan.skipped)} (scenario config, method config) pairs the method refuses:",
+              file=sys.stderr)
+        for scenario, method, reason in plan.skipped:
+            print(f"  {method} on {scenario}: {reason}", file=sys.stderr)
     out_dir = Path(args.out) if args.out else Path("reports") / plan.name
     command = _command_line(args)
     created = not os.path.lexists(out_dir)

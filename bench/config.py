@@ -30,6 +30,7 @@ from __future__ import annotations
 import itertools
 import math
 import re
+import dataclasses
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -141,13 +142,26 @@ class Plan:
     skipped_methods: tuple[tuple[dict, str], ...] = ()
     #: the scenarios each method config is limited to (``Method.scenarios``; empty: all of its task)
     method_scenarios: tuple[tuple[str, ...], ...] = ()
+    #: (scenario config label, method config label, the method's reason) of the pairs its
+    #: ``check_scenario`` refuses while the method config runs on another scenario config
+    #: of the sweep: skipped, no units, no rows (:func:`bench.feasibility.check_pairs`)
+    skipped: tuple[tuple[str, str, str], ...] = ()
 
     def pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
         """The method configs that run on ``scenario``: those whose task it serves, limited
-        to the scenarios a method names (``Method.scenarios``)."""
+        to the scenarios a method names (``Method.scenarios``), less the skipped pairs."""
+        return [m for m in self.candidate_pairs(scenario) if (scenario.label, m.label) not in self._skipped_keys]
+
+    def candidate_pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
+        """The method configs whose task and scenario names fit ``scenario`` (before
+        their ``check_scenario``)."""
         limits = self.method_scenarios or ((),) * len(self.methods)
         return [m for m, task, names in zip(self.methods, self.method_tasks, limits)
                 if task in scenario.tasks and (not names or scenario.name in names)]
+
+    @property
+    def _skipped_keys(self) -> frozenset[tuple[str, str]]:
+        return frozenset((scenario, method) for scenario, method, _ in self.skipped)
 
     @property
     def trial_runs(self) -> int:
@@ -575,11 +589,11 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     plan = Plan(name, description, scenario, scenarios, trials, seed, snr_db, chunk,
                 methods, calibration, record_trials, source, method_tasks, timeline_snr_db, unit_timeout_s, axes, memory_gb,
                 skipped, tuple(registry.get_method(m.name).scenarios for m in methods))
+    feasibility.check_snr_levels(plan, scenario_fields)
+    plan = dataclasses.replace(plan, skipped=feasibility.check_pairs(plan, method_fields))
     idle = [s.label for s in scenarios if not plan.pairs(s)]
     if idle:
         raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0]!r}")
-    feasibility.check_snr_levels(plan, scenario_fields)
-    feasibility.check_pairs(plan, method_fields)
     feasibility.check_unit_memory(plan, scenario_fields)
     if plan.trial_runs > LARGE_SWEEP_TRIAL_RUNS and not allow_large:
         raise ConfigError("trials", f"the sweep asks for {plan.trial_runs:,} trial-runs "

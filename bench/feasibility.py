@@ -3,9 +3,9 @@
 After a sweep is parsed and its grids expanded (:mod:`bench.config`), every
 scenario config's SNR levels are checked by the scenario
 (:meth:`~bench.core.Scenario.check_snr`), every (method config, scenario
-config) pair that will run by the method
-(:meth:`~bench.core.Method.check_scenario`), and every unit's memory is
-estimated from the plugins' declared array sizes
+config) pair by the method (:meth:`~bench.core.Method.check_scenario`: a
+pair it refuses is skipped, a method config it refuses everywhere is an
+error), and every unit's memory is estimated from the plugins' declared array sizes
 (``unit_memory_bytes``) against ``max_unit_memory_gb`` — so a sweep that
 would fail, hang or swap on every unit is refused in one line before anything
 is written (docs/architecture.md, 'Run folders and faults').
@@ -66,19 +66,25 @@ def check_snr_levels(plan: Plan, scenario_fields: tuple[str, ...]) -> None:
                 raise ConfigError(where, f"{snr:g} dB on scenario config {s.label!r}: {problem}"[:400])
 
 
-def check_pairs(plan: Plan, method_fields: tuple[str, ...]) -> None:
-    """Every (method config, scenario config) pair that will run, checked by the
-    method's :meth:`~bench.core.Method.check_scenario` after grid expansion: a
-    constraint across the two (a window longer than the scene) fails here, in
-    one line naming both configs, rather than on every unit."""
+def check_pairs(plan: Plan, method_fields: tuple[str, ...]) -> tuple[tuple[str, str, str], ...]:
+    """Every (method config, scenario config) pair the sweep names, checked by the
+    method's :meth:`~bench.core.Method.check_scenario` after grid expansion. A pair
+    it refuses (a window longer than the scene, a tracker of another kind of
+    scene) is skipped when the method config runs on some other scenario config
+    of the sweep; returns the skipped pairs as (scenario label, method label,
+    reason). A method config that runs on none is refused, in one line naming it
+    and its first refused scenario config, rather than failing on every unit."""
+    skipped = []
     for m, field in zip(plan.methods, method_fields):
         method = registry.get_method(m.name)()
-        for s in plan.scenarios:
-            if any(p is m for p in plan.pairs(s)):
-                problem = method.check_scenario(m.params, s.params)
-                if problem:
-                    raise ConfigError(f"{field}.params", f"{m.label!r} cannot run on scenario config "
-                                                         f"{s.label!r}: {problem}"[:400])
+        candidates = [s for s in plan.scenarios if any(p is m for p in plan.candidate_pairs(s))]
+        refused = [(s, problem) for s in candidates if (problem := method.check_scenario(m.params, s.params))]
+        if refused and len(refused) == len(candidates):
+            s, problem = refused[0]
+            raise ConfigError(f"{field}.params", f"{m.label!r} cannot run on scenario config "
+                                                 f"{s.label!r}: {problem}"[:400])
+        skipped += [(s.label, m.label, problem) for s, problem in refused]
+    return tuple(skipped)
 
 
 def unit_memory_bytes(plan: Plan, scenario: ScenarioConfig, n: int, calibration: bool) -> tuple[int, str]:

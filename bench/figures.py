@@ -170,7 +170,9 @@ def grouped_bars(values: pd.DataFrame, low: pd.DataFrame, high: pd.DataFrame, pa
     for j, name in enumerate(series):
         v = values[name].to_numpy(float)
         err = np.vstack([v - low[name].to_numpy(float), high[name].to_numpy(float) - v])
-        ax.bar(x + (j - (len(series) - 1) / 2) * width, v, width, yerr=np.nan_to_num(err), capsize=3,
+        # a percentile-bootstrap interval of a nonlinear statistic (a time-averaged RMSE) may
+        # exclude the estimate over few trials: the whisker then stops at the bar
+        ax.bar(x + (j - (len(series) - 1) / 2) * width, v, width, yerr=np.clip(np.nan_to_num(err), 0, None), capsize=3,
                color=f"C{j % 10}", label=name)
     ax.set_xticks(x, groups, fontsize=8, rotation=15)
     if log:

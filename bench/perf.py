@@ -153,6 +153,22 @@ def _in_fresh_process(job: Job | SceneJob) -> dict:
         return pool.submit(measure_scene if isinstance(job, SceneJob) else measure, job).result()
 
 
+def perf_sizes_of(method_cls) -> tuple[type | None, dict]:
+    """The scenario a method is timed on and its perf sizes the method accepts: the first
+    registered scenario it serves (``Method.serves``) with a size whose resolved params
+    its default config's ``check_scenario`` accepts, and those sizes; (None, {}) if none."""
+    method = method_cls()
+    params = build_params(method_cls.Params, {})
+    for scenario in registry.scenarios().values():
+        if not method_cls.serves(scenario.name, scenario.tasks):
+            continue
+        accepted = {size: entry for size, entry in scenario.perf_sizes.items()
+                    if method.check_scenario(params, build_params(scenario.Params, entry[0])) is None}
+        if accepted:
+            return scenario, accepted
+    return None, {}
+
+
 def check_sizes(methods: list[str] | None, sizes: list[str] | None) -> None:
     """Raise ConfigError('--sizes', ...) naming an unknown size and the known ones (the
     sizes of the scenarios the chosen methods run on), before anything is measured
@@ -162,9 +178,8 @@ def check_sizes(methods: list[str] | None, sizes: list[str] | None) -> None:
         return
     names: set[str] = set()
     for name, cls in registry.methods().items():
-        scenario = next((s for s in registry.scenarios().values() if cls.serves(s.name, s.tasks)), None)
-        if scenario is not None and (not methods or name in methods):
-            names |= set(scenario.perf_sizes)
+        if not methods or name in methods:
+            names |= set(perf_sizes_of(cls)[1])
     known = sorted(names)
     for size in sizes:
         if size not in known:
@@ -178,10 +193,8 @@ def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> li
     for name, cls in registry.methods().items():
         if methods and name not in methods:
             continue
-        scenario = next((s for s in registry.scenarios().values() if cls.serves(s.name, s.tasks)), None)
-        if scenario is None:
-            continue
-        for size, (params, trials) in scenario.perf_sizes.items():
+        scenario, perf_sizes = perf_sizes_of(cls)
+        for size, (params, trials) in perf_sizes.items():
             if sizes and size not in sizes:
                 continue
             ref_trials = trials if cls.reference_trials is None else max(1, min(trials, cls.reference_trials))

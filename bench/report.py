@@ -184,11 +184,20 @@ def _section_plan(record: dict, store: Store, tasks: list) -> str:
         "task (common random numbers); trial *i* sees the same noise at every SNR level. The resolved "
         "sweep is `plan.toml` next to this report.",
         _table(["config", "method", "task", "resolved parameters"], methods),
-        *_skipped_text(record.get("skipped", [])),
-    ])
+    ] + _unavailable_text(record.get("unavailable", [])) + _skipped_pairs_text(record.get("skipped_pairs", [])))
 
 
-def _skipped_text(skipped: list) -> list[str]:
+def _skipped_pairs_text(skipped: list[dict]) -> list[str]:
+    """The (scenario config, method config) pairs the methods refused (skipped: no units, no rows)."""
+    if not skipped:
+        return []
+    return ["Pairs skipped because the method cannot run on that scenario config (its own reason); "
+            "each of these method configs runs on the sweep's other scenario configs:",
+            _table(["scenario config", "method config", "reason"],
+                   [[f"`{p['scenario']}`", f"`{p['method']}`", p["reason"]] for p in skipped])]
+
+
+def _unavailable_text(skipped: list) -> list[str]:
     """The optional method configs the sweep names that could not run here, and why."""
     if not skipped:
         return []

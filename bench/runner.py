@@ -495,8 +495,9 @@ def plan_record(plan: Plan, command: str) -> dict:
                      "task": registry.get_method(m.name).task} for m in plan.methods],
         "scenarios": [{"label": s.label, "name": s.name, "params": s.params_text, "tasks": list(s.tasks),
                        "snr_db": list(s.snr_db), "trials": s.trials} for s in plan.scenarios],
-        "skipped": [{"label": entry.get("label", entry["name"]), "name": entry["name"], "reason": reason}
+        "unavailable": [{"label": entry.get("label", entry["name"]), "name": entry["name"], "reason": reason}
                     for entry, reason in plan.skipped_methods],
+        "skipped_pairs": [{"scenario": sc, "method": m, "reason": why} for sc, m, why in plan.skipped],
     }
 
 

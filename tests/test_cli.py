@@ -20,6 +20,12 @@ SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials
                    "divergence_rate", "divergence_low", "divergence_high", "nees_mean",
                    "pd_step", "pd_step_low", "pd_step_high",
                    "pd_equal_chance", "pd_equal_chance_low", "pd_equal_chance_high",
+                   # tracking scenes with a maneuver mask (empty for the others)
+                   "rmse_quiet", "rmse_quiet_low", "rmse_quiet_high", "rmse_maneuver", "rmse_maneuver_low",
+                   "rmse_maneuver_high", "rmse_onset", "rmse_onset_low", "rmse_onset_high", "switch_pd",
+                   "switch_pd_low", "switch_pd_high", "switch_delay_mean", "switch_delay_low", "switch_delay_high",
+                   "false_switch_rate", "false_switch_low", "false_switch_high", "q_quiet_mean", "q_maneuver_mean",
+                   "q_maneuver_low", "q_maneuver_high",
                    "rmse_all_mean", "rmse_all_low", "rmse_all_high", "snr_offset_unit_innovation_db",
                    # cell detection (bench/tasks/cells_metrics.py), appended after the earlier tasks'
                    "false_alarms_per_map", "false_alarms_per_map_low", "false_alarms_per_map_high",

@@ -154,3 +154,24 @@ def test_multi_target_preset_smoke(bench_cli, tmp_path):
     assert summary.scenario.nunique() == 5 and summary.gospa_mean.notna().all()
     assert "## Multi-target tracking: paired comparison" in report
     assert ("`stonesoup-jpda` (stonesoup-jpda): needs the [peers] extra" in report) != peers
+
+
+def test_ar_tracking_preset_at_reduced_size(bench_cli, tmp_path):
+    """The ar-tracking preset through the CLI at reduced trials: every tracker on every
+    maneuvering config, the quiet / maneuver / onset split and the paired table."""
+    sweep = _preset("ar-tracking")
+    sweep.update(trials=6, chunk=6)
+    for entry in sweep["scenarios"]:
+        entry.pop("trials", None)
+    path = tmp_path / "ar.toml"
+    path.write_text(tomlw.dumps(sweep))
+    bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 2, check=True)
+    out = tmp_path / "out"
+    summary = pd.read_csv(out / "summary.csv")
+    assert summary.config.nunique() == len(sweep["methods"]) and {"ar-adaptive", "vd-filter"} <= set(summary.config)
+    maneuvering = summary[summary.scenario != "no-maneuver"]
+    assert maneuvering.rmse_onset.notna().all() and summary[summary.scenario == "no-maneuver"].rmse_onset.isna().all()
+    assert (maneuvering.rmse_onset_low <= maneuvering.rmse_onset_high).all()
+    report = (out / "report.md").read_text()
+    assert "### Paired differences against the first method config" in report
+    assert "| `default` | 0 | `vd-filter` |" in report

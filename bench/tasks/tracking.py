@@ -34,7 +34,8 @@ from bench.recording.draw import log_static_points, log_track, north_up
 from bench.recording.layout import TrialLayout
 from bench.recording.record import MethodTrace, TrialRecord, check_shape
 from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, time_series
-from bench.tasks.tracking_metrics import summarise_tracking, tracking_steps, tracking_trial_metrics
+from bench.tasks.tracking_metrics import (SWITCH_TRACES, maneuver_trial_metrics, summarise_tracking,
+                                          tracking_steps, tracking_trial_metrics)
 
 __all__ = ["TrackingScene", "TrackingTask", "method_trace", "scene"]
 
@@ -127,6 +128,21 @@ def scene(measurement_flags=None) -> RecordedScene:
     return RecordedScene(arrays={"measurement_flags": flags})
 
 
+def _log_maneuver(stream, layout: TrialLayout, t: np.ndarray, rec: TrialRecord) -> None:
+    """A maneuvering scene's truth per component over time (``truth/<component>``) and
+    the true maneuver (``truth/maneuvering``, 1 inside it; its first step the onset)."""
+    import rerun as rr
+
+    from bench.recording.draw import log_series
+
+    every = np.arange(t.shape[0])
+    for name, values in rec.arrays.items():
+        if name.startswith("truth_") or name == "maneuvering":
+            label = name[len("truth_"):] if name.startswith("truth_") else name
+            log_series(stream, layout.path(f"truth/{label}"), t, every, np.asarray(values, float),
+                       rr.SeriesLines(names=f"truth {label}", colors=[(235, 235, 235)], widths=[1.5]))
+
+
 class TrackingTask(Task):
     """Tracking: state estimates scored against the truth (RMSE, divergence, NEES)."""
 
@@ -136,7 +152,15 @@ class TrackingTask(Task):
     recording_text = ("per tracker the estimated trajectory and its error per state component, with "
                       "glint-corrupted measurements marked")
     summary_columns = ("n_trials", "rmse_mean", "rmse_low", "rmse_high", "realised_snr_db", "divergence_rate",
-                       "divergence_low", "divergence_high", "nees_mean")
+                       "divergence_low", "divergence_high", "nees_mean",
+                       # scenes with a maneuver mask (empty otherwise): the quiet / maneuvering split and,
+                       # for trackers with a ``switch`` trace, the switches against the true onsets
+                       "rmse_quiet", "rmse_quiet_low", "rmse_quiet_high", "rmse_maneuver", "rmse_maneuver_low",
+                       "rmse_maneuver_high", "rmse_onset", "rmse_onset_low", "rmse_onset_high", "switch_pd",
+                       "switch_pd_low", "switch_pd_high", "switch_delay_mean",
+                       "switch_delay_low", "switch_delay_high", "false_switch_rate", "false_switch_low",
+                       "false_switch_high", "q_quiet_mean", "q_maneuver_mean", "q_maneuver_low",
+                       "q_maneuver_high")
     headline_columns = ("rmse_mean", "rmse_low", "rmse_high", "divergence_rate", "nees_mean")
     method_entities = ("estimate",)
 
@@ -158,20 +182,34 @@ class TrackingTask(Task):
 
     def trial_metrics(self, batch: Batch, out: TrackingOutput, threshold: float) -> dict[str, np.ndarray]:
         sc = batch.scene
-        return tracking_trial_metrics(out.estimate, batch.truth, position_index=sc.position_index,
+        metrics = tracking_trial_metrics(out.estimate, batch.truth, position_index=sc.position_index,
                                       labels=self.labels(batch), covariance=out.covariance,
                                       divergence_bound_m=float(sc.divergence_bound_m),
-                                      derived=sc.derived_components) \
-            | time_series(batch)
+                                      derived=sc.derived_components)
+        mask = sc.maneuver_mask
+        if mask is not None:
+            pos_sq = metrics["sq_err_position"]
+            metrics |= maneuver_trial_metrics(pos_sq, mask, sc.maneuver_onset_steps, out.traces)
+        return metrics | time_series(batch)
 
     def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:
         flags = batch.scene.outlier_flags
-        return scene(None if flags is None else np.asarray(flags[i]).reshape(batch.steps, -1).any(axis=1))
+        rec = scene(None if flags is None else np.asarray(flags[i]).reshape(batch.steps, -1).any(axis=1))
+        mask = batch.scene.maneuver_mask
+        if mask is not None:            # a maneuvering scene: the truth over time and its maneuver
+            rec.arrays["maneuvering"] = np.asarray(mask[i], dtype=bool)
+            rec.arrays |= {f"truth_{label}": np.asarray(batch.truth[i, :, j], float)
+                           for j, label in enumerate(self.labels(batch))}
+        return rec
 
     def recorded_method(self, batch: Batch, out: TrackingOutput, i: int, threshold: float) -> MethodTrace:
         err = out.estimate[i] - batch.truth[i]
-        return method_trace(batch.scene.drawn_xy(out.estimate[i], batch.t),
-                            {f"error_{label}": err[:, j] for j, label in enumerate(self.labels(batch))})
+        labels = self.labels(batch)
+        traces = {f"error_{label}": err[:, j] for j, label in enumerate(labels)}
+        if batch.scene.maneuver_mask is not None:
+            traces |= {f"estimate_{label}": out.estimate[i, :, j] for j, label in enumerate(labels)}
+            traces |= {name: np.asarray(out.traces[name][i], float) for name in SWITCH_TRACES if name in out.traces}
+        return method_trace(batch.scene.drawn_xy(out.estimate[i], batch.t), traces)
 
     # -------------------------------------------------------------- driver side
 
@@ -194,6 +232,7 @@ class TrackingTask(Task):
             estimate = rec.methods[m.label].arrays.get("estimate_xy")
             if estimate is not None:
                 log_track(stream, m.path("estimate"), t, north_up(estimate), m.color)
+        _log_maneuver(stream, layout, t, rec)
 
     def views(self, layout: TrialLayout, rec: TrialRecord) -> Views:
         return Views(has_xy=any("estimate_xy" in rec.methods[m.label].arrays for m in layout.methods_of(self)))

@@ -13,8 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from bench.metrics import (binomial_interval, bootstrap_statistic_interval, by_cell, mean_realised_snr,
-                           per_step_rmse, series_key, time_averaged_rmse)
+from bench.metrics import (binomial_interval, bootstrap_mean_interval, bootstrap_statistic_interval, by_cell,
+                           clustered_rate_interval, mean_realised_snr, per_step_rmse, series_key,
+                           time_averaged_rmse)
 
 
 def tracking_trial_metrics(estimate: np.ndarray, truth: np.ndarray, *, position_index, labels,
@@ -66,7 +67,7 @@ def summarise_tracking(trials: pd.DataFrame, series: dict) -> pd.DataFrame:
                      "rmse_low": lo, "rmse_high": hi, "divergence_rate": div / n,
                      "divergence_low": d_lo, "divergence_high": d_hi,
                      "nees_mean": float(np.nanmean(g["nees_mean"])) if g["nees_mean"].notna().any() else np.nan,
-                     "realised_snr_db": mean_realised_snr(g)})
+                     "realised_snr_db": mean_realised_snr(g)} | summarise_maneuvers(g, series[series_key(keys)]))
     return pd.DataFrame(rows)
 
 
@@ -79,4 +80,130 @@ def tracking_steps(series: dict, labels) -> pd.DataFrame:
         cols[f"mean_true_{label}"] = series[f"true_{label}"].mean(axis=0)
     if "nees" in series:
         cols["nees"] = series["nees"].mean(axis=0)
-    return pd.DataFrame(cols)
+    return pd.DataFrame(cols | maneuver_steps(series))
+
+
+# ------------------------------------------------ maneuvering targets (scenes with a maneuver mask)
+#
+# A scenario that marks its maneuvers (TrackingScene.maneuver_mask, maneuver_onset_steps)
+# gets the position RMSE split into quiet and maneuvering steps; a tracker that reports
+# its model switches (traces ``switch`` and ``mode``: 1.0 where a chi-square test chose
+# the maneuver model, where it is in use) gets its switch times scored against the true
+# onsets. Scenes without the fields (glint) get none of these columns.
+
+#: the traces of a switching tracker kept as series (per-step means in steps.csv)
+SWITCH_TRACES = ("mode", "switch", "q_k")
+#: steps from the true onset over which ``rmse_onset_m`` is taken: the detection delay
+#: of a chi-square switch plus the transient of the model change (a re-initialisation)
+ONSET_WINDOW_STEPS = 10
+
+
+def segment_rms(sq: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Per trial, the root mean of ``sq`` (n, K) over the steps where ``mask`` (n, K); NaN without any."""
+    count = mask.sum(axis=1)
+    total = np.where(mask, sq, 0.0).sum(axis=1)
+    return np.sqrt(np.divide(total, count, out=np.full(len(sq), np.nan), where=count > 0))
+
+
+def maneuver_trial_metrics(pos_sq: np.ndarray, mask: np.ndarray, onsets: np.ndarray | None,
+                           traces: dict) -> dict[str, np.ndarray]:
+    """Per-trial metrics against the true maneuvers.
+
+    ``rmse_quiet_m`` / ``rmse_maneuver_m``: the trial's position RMS error over
+    its quiet / maneuvering steps (``mask`` (n, K) bool); ``rmse_onset_m``: over
+    the first :data:`ONSET_WINDOW_STEPS` steps from the first onset, where a
+    switching tracker detects and changes its model (NaN without an onset); series
+    ``maneuvering`` and ``onset_window`` (the masks, for the per-step splits). With a ``switch``
+    trace: ``switch_detected`` (a switch at or after the first onset, before
+    the maneuver's last step; NaN without an onset), ``switch_delay_steps``
+    (its step minus the onset), ``false_switches`` (switches before the first
+    onset, or anywhere without one) over ``quiet_steps`` (those steps). With
+    a ``q_k`` trace: its mean over quiet and maneuvering steps.
+    """
+    mask = np.asarray(mask, bool)
+    n, K = mask.shape
+    out = {"rmse_quiet_m": segment_rms(pos_sq, ~mask), "rmse_maneuver_m": segment_rms(pos_sq, mask),
+           "maneuvering": mask.astype(float)}
+    steps = np.arange(K)
+    first = np.full(n, K) if onsets is None or onsets.shape[1] == 0 else np.asarray(onsets)[:, 0]
+    before = steps[None, :] < first[:, None]
+    onset_window = ~before & (steps[None, :] < first[:, None] + ONSET_WINDOW_STEPS)
+    out["rmse_onset_m"] = segment_rms(pos_sq, onset_window)
+    out["onset_window"] = onset_window.astype(float)
+    if "switch" in traces:
+        switch = np.asarray(traces["switch"]) > 0.5
+        last = np.where(mask.any(axis=1), K - 1 - np.argmax(mask[:, ::-1], axis=1), -1)
+        window = (steps[None, :] >= first[:, None]) & (steps[None, :] <= last[:, None])
+        hit = (switch & window).any(axis=1)
+        has_onset = first < K
+        out["switch_detected"] = np.where(has_onset, hit.astype(float), np.nan)
+        out["switch_delay_steps"] = np.where(hit, np.argmax(switch & window, axis=1) - first, np.nan)
+        out["false_switches"] = (switch & before).sum(axis=1).astype(float)
+        out["quiet_steps"] = before.sum(axis=1).astype(float)
+    for name in SWITCH_TRACES:
+        if name in traces:
+            out[name] = np.asarray(traces[name], float)
+    if "q_k" in traces:
+        q = np.asarray(traces["q_k"], float)
+        out["q_quiet_mean"] = _segment_mean(q, ~mask)
+        out["q_maneuver_mean"] = _segment_mean(q, mask)
+    return out
+
+
+def _segment_mean(x: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    count = mask.sum(axis=1)
+    return np.divide(np.where(mask, x, 0.0).sum(axis=1), count, out=np.full(len(x), np.nan), where=count > 0)
+
+
+def segment_time_averaged_rmse(stacked: np.ndarray) -> float:
+    """Time-averaged RMSE over a segment: ``stacked`` (n, K, 2) holds squared
+    errors and a 0/1 segment mask; per step, the RMSE over the trials in the
+    segment at that step, averaged over the steps where any trial is."""
+    sq, mask = stacked[..., 0], stacked[..., 1] > 0.5
+    count = mask.sum(axis=0)
+    per_step = np.sqrt(np.where(mask, sq, 0.0).sum(axis=0)[count > 0] / count[count > 0])
+    return float(per_step.mean()) if per_step.size else float("nan")
+
+
+def summarise_maneuvers(g: pd.DataFrame, cell_series: dict) -> dict:
+    """A cell's quiet / maneuvering / onset-window split (time-averaged RMSE, bootstrap intervals over trials),
+    switch detection (Wilson), delay (bootstrap) and false-switch rate per quiet step
+    (ratio-estimator interval over trials); empty without a maneuver mask."""
+    if "maneuvering" not in cell_series:
+        return {}
+    sq, mask = cell_series["sq_err_position"], cell_series["maneuvering"]
+    row = {}
+    segments = (("rmse_quiet", 1.0 - mask), ("rmse_maneuver", mask), ("rmse_onset", cell_series["onset_window"]))
+    for name, seg in segments:
+        stacked = np.stack([sq, seg], axis=-1)
+        row[name] = segment_time_averaged_rmse(stacked)
+        row[f"{name}_low"], row[f"{name}_high"] = bootstrap_statistic_interval(
+            stacked, segment_time_averaged_rmse, resamples=500) if np.any(seg) else (np.nan, np.nan)
+    if "switch_detected" in g:
+        det = g["switch_detected"].dropna()
+        row["switch_pd"] = float(det.mean()) if len(det) else np.nan
+        row["switch_pd_low"], row["switch_pd_high"] = binomial_interval(int(det.sum()), len(det))
+        delay = g["switch_delay_steps"].to_numpy(float)
+        row["switch_delay_mean"] = float(np.nanmean(delay)) if np.isfinite(delay).any() else np.nan
+        row["switch_delay_low"], row["switch_delay_high"] = bootstrap_mean_interval(delay)
+        fs, qs = g["false_switches"].to_numpy(float), g["quiet_steps"].to_numpy(float)
+        row["false_switch_rate"] = float(fs.sum() / qs.sum()) if qs.sum() > 0 else np.nan
+        row["false_switch_low"], row["false_switch_high"] = clustered_rate_interval(fs, qs)
+    if "q_maneuver_mean" in g:
+        row["q_quiet_mean"] = float(np.nanmean(g["q_quiet_mean"])) if g["q_quiet_mean"].notna().any() else np.nan
+        row["q_maneuver_mean"] = float(np.nanmean(g["q_maneuver_mean"])) \
+            if g["q_maneuver_mean"].notna().any() else np.nan
+        row["q_maneuver_low"], row["q_maneuver_high"] = bootstrap_mean_interval(g["q_maneuver_mean"].to_numpy(float))
+    return row
+
+
+def maneuver_steps(series: dict) -> dict[str, np.ndarray]:
+    """Per-step columns of a maneuvering cell: the fraction of trials maneuvering, and the
+    mean of each switching trace (fraction in the maneuver model, switch rate, mean Q_k)."""
+    cols = {}
+    if "maneuvering" in series:
+        cols["maneuver_fraction"] = series["maneuvering"].mean(axis=0)
+    for name in SWITCH_TRACES:
+        if name in series:
+            cols[f"{name}_mean"] = series[name].mean(axis=0)
+    return cols

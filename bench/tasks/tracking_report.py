@@ -16,8 +16,10 @@ import pandas as pd
 
 from bench import figures
 from bench.markdown import fmt, fmt_interval, table
+from bench.metrics import bootstrap_mean_interval
 from bench.recording.paths import entity_name as slug
 from bench.tasks.base import ReportContext
+from bench.tasks.tracking_metrics import ONSET_WINDOW_STEPS
 
 
 def _reference_snr(g: pd.DataFrame) -> float:
@@ -102,9 +104,92 @@ def _per_step(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: 
     return parts
 
 
+def _maneuvers(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
+    """Scenes with a maneuver mask: the quiet / maneuvering split, the switches against
+    the true onsets, and the RMSE of each component over time."""
+    if "rmse_quiet" not in summary or summary.rmse_quiet.isna().all():
+        return []
+    parts = ["## Tracking: quiet and maneuvering segments",
+             "*Quiet* / *maneuver* RMSE: time-averaged position RMSE over the steps outside / inside the true "
+             f"maneuver, *onset window* over the first {ONSET_WINDOW_STEPS} steps from its onset "
+             "(95% bootstrap interval over trials). For trackers that report their model switches: "
+             "*switch Pd*, the fraction of trials with a chi-square switch between the onset and the end of "
+             "the maneuver (Wilson); *delay*, steps from the onset to that switch (bootstrap); *false "
+             "switches*, switches before the onset per step before the onset (ratio-estimator interval over "
+             "trials); *Q quiet / maneuver*, the mean estimated state-noise scale (m²) of adaptive trackers."]
+    rows = []
+    for r in summary[summary.rmse_quiet.notna()].itertuples():
+        rows.append([f"`{r.scenario}`", fmt(r.snr_db), f"`{r.config}`",
+                     fmt_interval(r.rmse_quiet, r.rmse_quiet_low, r.rmse_quiet_high),
+                     fmt_interval(r.rmse_maneuver, r.rmse_maneuver_low, r.rmse_maneuver_high),
+                     fmt_interval(r.rmse_onset, r.rmse_onset_low, r.rmse_onset_high)
+                     if pd.notna(r.rmse_onset) else "–", fmt(r.nees_mean),
+                     fmt_interval(r.switch_pd, r.switch_pd_low, r.switch_pd_high) if pd.notna(r.switch_pd) else "–",
+                     fmt_interval(r.switch_delay_mean, r.switch_delay_low, r.switch_delay_high)
+                     if pd.notna(r.switch_delay_mean) else "–",
+                     fmt_interval(r.false_switch_rate, r.false_switch_low, r.false_switch_high)
+                     if pd.notna(r.false_switch_rate) else "–",
+                     f"{fmt(r.q_quiet_mean)} / {fmt_interval(r.q_maneuver_mean, r.q_maneuver_low, r.q_maneuver_high)}"
+                     if pd.notna(r.q_maneuver_mean) else "–"])
+    parts.append(table(["scenario config", "SNR (dB)", "config", "quiet RMSE (m)", "maneuver RMSE (m)",
+                        "onset-window RMSE (m)", "mean NEES",
+                        "switch Pd", "delay (steps)", "false switches / step", "Q quiet / maneuver"], rows))
+    for scenario, g in summary[summary.rmse_quiet.notna()].groupby("scenario", sort=False):
+        snr = _reference_snr(g)
+        at = steps[(steps.scenario == scenario) & (steps.snr_db == snr)]
+        comps = [c[len("rmse_"):] for c in at.columns if c.startswith("rmse_") and c != "rmse_position"
+                 and at[c].notna().any()][:2]
+        for comp in comps:
+            curves = {c: (s.t.to_numpy(), s[f"rmse_{comp}"].to_numpy()) for c, s in at.groupby("config", sort=False)}
+            name = f"tracking_rmse_{slug(comp)}_{slug(scenario)}.png"
+            figures.rmse_per_step(curves, fig_dir / name, f"{title}: {scenario} at {fmt(snr)} dB, RMSE of {comp}",
+                                  xlabel="time (s)", ylabel=f"RMSE of {comp}")
+            parts.append(f"![RMSE of {comp} over time on {scenario}](figures/{name})")
+        break                                   # the first maneuvering scenario config: the papers' figures
+    return parts
+
+
+PAIRED_METRICS = (("rmse_maneuver_m", "maneuver"), ("rmse_onset_m", "onset window"))
+
+
+def _paired(summary: pd.DataFrame, trials: pd.DataFrame) -> list[str]:
+    """Every method config against the sweep's first, paired over the same trials (common
+    random numbers): the mean per-trial difference of the maneuver and onset-window RMSE,
+    at each maneuvering scenario config's reference SNR."""
+    if "rmse_onset_m" not in trials or trials.rmse_onset_m.isna().all():
+        return []
+    configs = list(dict.fromkeys(summary.config))
+    first, rows = configs[0], []
+    for scenario, g in trials[trials.rmse_onset_m.notna()].groupby("scenario", sort=False):
+        snr = _reference_snr(g)
+        at = g[g.snr_db == snr]
+        wide = {name: at.pivot_table(index="trial", columns="config", values=name) for name, _ in PAIRED_METRICS}
+        if first not in wide["rmse_onset_m"]:
+            continue
+        for config in configs[1:]:
+            if config not in wide["rmse_onset_m"]:
+                continue
+            cells = []
+            for name, _ in PAIRED_METRICS:
+                d = (wide[name][config] - wide[name][first]).to_numpy(float)
+                cells.append(fmt_interval(float(np.nanmean(d)), *bootstrap_mean_interval(d)))
+            rows.append([f"`{scenario}`", fmt(snr), f"`{config}`"] + cells)
+    if not rows:
+        return []
+    return ["### Paired differences against the first method config",
+            f"Per trial, a config's position RMSE minus `{first}`'s on the same trial, averaged over trials "
+            "(95% bootstrap interval over trials; positive: the first config is better), over the true "
+            f"maneuver and over the first {ONSET_WINDOW_STEPS} steps from its onset (the *onset window*, where "
+            "a switching tracker detects the maneuver and changes its model). Per-trial RMS, so the means "
+            "differ slightly from the time-averaged RMSE above.",
+            table(["scenario config", "SNR (dB)", "config"] + [f"Δ {label} RMSE (m)" for _, label in PAIRED_METRICS],
+                  rows)]
+
+
 def sections(ctx: ReportContext) -> list[str]:
     summary = ctx.summary
     if summary.empty:
         return []
     return _overview(summary, ctx.fig_dir, ctx.title) + _versus_snr(summary, ctx.fig_dir, ctx.title) + \
-        _per_step(summary, ctx.steps, ctx.fig_dir, ctx.title)
+        _per_step(summary, ctx.steps, ctx.fig_dir, ctx.title) + \
+        _maneuvers(summary, ctx.steps, ctx.fig_dir, ctx.title) + _paired(summary, ctx.trials)
