@@ -118,6 +118,10 @@ class TrackingTask(Task):
     summary_columns = ("n_trials", "rmse_mean", "rmse_low", "rmse_high", "realised_snr_db", "divergence_rate",
                        "divergence_low", "divergence_high", "nees_mean")
     headline_columns = ("rmse_mean", "rmse_low", "rmse_high", "divergence_rate", "nees_mean")
+    ranking_metric = "rmse"
+    ranking_higher_is_better = False
+    ranking_label = "mean per-trial position RMSE (m)"
+    curve_column = "rmse_mean"
     method_entities = ("estimate",)
 
     # -------------------------------------------------------------- worker side

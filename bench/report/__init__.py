@@ -22,8 +22,12 @@ from bench import figures, registry, runfolder
 from bench.calibration import EQUAL_CHANCE_PD
 from bench.errors import ConfigError
 from bench.markdown import fmt as _fmt
+from bench.markdown import fmt_db
 from bench.markdown import table as _table
 from bench.provenance import provenance
+from bench.report.glance import comparisons_frame, glance
+from bench.report.html import interactive_figures, markdown_to_html
+from bench.report.render import comparisons_markdown, glance_markdown, render
 from bench.recording import TrialRecord, write_recording
 from bench.runner import calibrations
 from bench.store import Store
@@ -151,8 +155,8 @@ def steps_frame(trials: pd.DataFrame, series: dict, record: dict, t_of: dict) ->
 
 def _snr_text(snr: list) -> str:
     if len(snr) > 2:
-        return f"{_fmt(snr[0])} to {_fmt(snr[-1])} dB ({len(snr)} levels)"
-    return ", ".join(f"{_fmt(x)} dB" for x in snr)
+        return f"{fmt_db(snr[0])} to {fmt_db(snr[-1])} dB ({len(snr)} levels)"
+    return ", ".join(f"{fmt_db(x)} dB" for x in snr)
 
 
 def _tasks_present(task_of: dict) -> list:
@@ -161,29 +165,58 @@ def _tasks_present(task_of: dict) -> list:
     return [t for t in registry.tasks().values() if t in present]
 
 
+def _same(a, b) -> bool:
+    norm = (lambda v: list(v) if isinstance(v, (list, tuple)) else v)
+    return norm(a) == norm(b)
+
+
+def non_default(cls, params: dict) -> dict:
+    """The entries of the resolved ``params`` that differ from the plugin's
+    declared defaults (``cls.Params``); every entry when they cannot be built."""
+    from bench.params import build_params, params_as_dict
+    try:
+        defaults = params_as_dict(build_params(cls.Params, {}))
+    except Exception:      # a Params without defaults for everything: show all
+        return dict(params)
+    return {k: v for k, v in params.items() if k not in defaults or not _same(v, defaults[k])}
+
+
+def _params_text(params: dict) -> str:
+    return ", ".join(f"{k}={v}" for k, v in params.items()).replace("|", "\\|") or "defaults"
+
+
 def _section_plan(record: dict, store: Store, tasks: list) -> str:
     sweep = record["sweep"]
     cal = sweep["calibration"]
     units = ", ".join(f"{t.pfa_unit} for {t.short_noun}" for t in tasks if t.calibrated)
-    rows = [["seed", sweep["seed"]], ["trials per unit (chunk)", sweep["chunk"]],
-            ["calibration", f"{cal['mode']}, requested Pfa {cal['pfa']:g}{f' ({units})' if units else ''}, "
-                            f"{cal['h0_trials']} null trials per scenario config"]]
-    scenarios = [[f"`{sc['label']}`", sc["name"], ", ".join(sc.get("tasks", [])), sc["params"] or "defaults",
+    calibrated = {t.name for t in tasks if t.calibrated}
+    null_for = [f"`{sc['label']}`" for sc in record["scenarios"] if calibrated & set(sc.get("tasks", []))]
+    rows = [["seed", sweep["seed"]], ["trials per unit (chunk)", sweep["chunk"]]]
+    if null_for:
+        rows.append(["calibration", f"{cal['mode']}, requested Pfa {cal['pfa']:g}{f' ({units})' if units else ''}, "
+                                    f"{cal['h0_trials']} null trials per scenario config of a calibrated task "
+                                    f"({', '.join(null_for)})"])
+    resolved = {sc.get("label", sc["name"]): sc.get("params", {}) for sc in sweep.get("scenarios", [])}
+    scenarios = [[f"`{sc['label']}`", sc["name"], ", ".join(sc.get("tasks", [])),
+                  _params_text(non_default(registry.get_scenario(sc["name"]), resolved.get(sc["label"], {}))),
                   _snr_text(sc.get("snr_db", sweep.get("snr_db", []))), sc.get("trials", sweep.get("trials"))]
                  for sc in record["scenarios"]]
     methods = [[f"`{m['label']}`", m["name"], m["task"],
-                ", ".join(f"{k}={v}" for k, v in sweep["methods"][i]["params"].items())]
+                _params_text(non_default(registry.get_method(m["name"]), sweep["methods"][i]["params"]))]
                for i, m in enumerate(record["methods"])]
     definition = store.meta("snr_definition") or "see the scenario's documentation"
     return "\n\n".join([
         "## What was run",
-        _table(["scenario config", "scenario", "tasks", "parameters set", "SNR", "trials per level"], scenarios),
+        "Parameters are those that differ from the plugin's defaults (`bench list -v` has every default; "
+        "`plan.toml` every resolved value).",
+        _table(["scenario config", "scenario", "tasks", "parameters (not default)", "SNR", "trials per level"],
+               scenarios),
         _table(["", ""], rows),
         f"**SNR definition.** {definition}",
         "Every method config runs on the same generated trials of each scenario config that serves its "
         "task (common random numbers); trial *i* sees the same noise at every SNR level. The resolved "
         "sweep is `plan.toml` next to this report.",
-        _table(["config", "method", "task", "resolved parameters"], methods),
+        _table(["config", "method", "task", "parameters (not default)"], methods),
     ])
 
 
@@ -254,7 +287,7 @@ def _section_failures(runs: pd.DataFrame) -> str:
     bad = runs[runs.error.notna()]
     if bad.empty:
         return "## Failures\n\nNone: every method config ran on every unit."
-    rows = [[f"`{r.method}`", r.phase, "null" if pd.isna(r.snr_db) else _fmt(r.snr_db), f"`{r.unit}`",
+    rows = [[f"`{r.method}`", r.phase, "null" if pd.isna(r.snr_db) else fmt_db(r.snr_db), f"`{r.unit}`",
              str(r.error).replace("|", "\\|")[:300]] for r in bad.head(50).itertuples()]
     more = f"\n\n… and {len(bad) - 50} more (see `results.sqlite`, table `runs`)." if len(bad) > 50 else ""
     return "## Failures\n\n" + _table(["config", "phase", "SNR (dB)", "unit", "error"], rows) + more
@@ -323,7 +356,7 @@ def _task_contexts(present: list, task_of: dict, summary, trials, steps, series,
             calibrations=[c for c in cals if c.method in configs], records=records, store=store,
             fig_dir=out_dir / "figures", title=sweep["name"], pfa=sweep["calibration"]["pfa"],
             chance_pd=sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD),
-            timeline_snr_db=sweep["record"].get("timeline_snr_db"), configs=configs)))
+            timeline_snr_db=sweep["record"].get("timeline_snr_db"), configs=configs, task=task)))
     return out
 
 
@@ -358,12 +391,13 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
     title = sweep["name"]
     contexts = _task_contexts(present, task_of, summary, trials, steps, series, cals, records, store, out_dir, sweep)
     done, total = len(units), int(store.meta("units_total") or len(units))
-    parts = [f"# {title}", sweep.get("description") or "",
-             f"Reproduce with `{record.get('command', '')}`." +
-             ("" if done >= total else f" **Incomplete run: {done} of {total} units stored.**"),
-             preset_notes(record.get("source", "")),   # the paper-vs-ours table leads a preset's report
+    chance = {(c.scenario, c.method): c.chance_pd for c in cals}
+    comparisons = comparisons_frame(trials, task_of)
+    _write_csv(comparisons, out_dir / "comparisons.csv")
+    parts = [preset_notes(record.get("source", "")),   # the paper-vs-ours table leads a preset's sections
              _section_plan(record, store, present), _section_calibration(cals, summary, task_of)]
     parts += [s for task, ctx in contexts for s in task.report_sections(ctx)]
+    parts.append(comparisons_markdown(comparisons, task_of))
     parts += [s for task, ctx in contexts for s in task.trial_sections(ctx)]
     parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
     if recording and records:
@@ -371,6 +405,13 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
                         tasks=task_of, recording_id=f"{title}-{store.meta('fingerprint')}")
         parts.append(_section_recording(sweep["record"]["trials"], out_dir, present))
     parts.append(_section_provenance(record, store, provenance()))
+    page = {"title": title, "description": sweep.get("description") or "", "command": record.get("command", ""),
+            "incomplete": None if done >= total else {"done": done, "total": total},
+            "glance": glance_markdown(glance(trials, task_of, comparisons, chance)),
+            "parts": [p for p in parts if p]}
     report = out_dir / "report.md"
-    _write_text(report, escape_controls("\n\n".join(p for p in parts if p) + "\n"))
+    _write_text(report, escape_controls(render("report.md.j2", html=False, **page) + "\n"))
+    html = markdown_to_html(escape_controls(render("report.md.j2", html=True, **page)), title, out_dir,
+                            interactive_figures(summary, task_of))
+    _write_text(out_dir / "report.html", escape_controls(html))
     return report
