@@ -36,6 +36,7 @@ from bench import registry
 from bench.cli import EXIT_REGRESSION
 from bench.errors import ConfigError
 from bench.markdown import fmt, fmt_db, table
+from bench.report.glance import metric_values
 from bench.metrics import CONFIDENCE, mcnemar_exact, paired_difference, unpaired_difference
 
 COLUMNS = ["scenario", "task", "config", "metric", "snr_db", "paired", "n_a", "n_b", "mean_a", "mean_b",
@@ -77,8 +78,7 @@ def load_run(path: str | Path) -> Run:
 
 
 def _numeric(s: pd.Series) -> np.ndarray:
-    return pd.to_numeric(s.map(lambda v: float(v) if isinstance(v, (bool, np.bool_)) else v),
-                         errors="coerce").to_numpy(float)
+    return metric_values(s).to_numpy(float)
 
 
 def _shares_trials(a: pd.DataFrame, b: pd.DataFrame) -> bool:

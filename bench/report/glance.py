@@ -37,14 +37,14 @@ COMPARISON_COLUMNS = ["scenario", "task", "metric", "snr_db", "config_a", "confi
 ALL_LEVELS = np.nan
 
 
-def _values(trials: pd.DataFrame, metric: str) -> pd.Series:
-    return pd.to_numeric(trials[metric].map(lambda v: float(v) if isinstance(v, (bool, np.bool_)) else v),
-                         errors="coerce")
+def metric_values(column: pd.Series) -> pd.Series:
+    """A trials.csv metric column as floats (a 0/1 indicator stored as bool: 0.0/1.0; missing: NaN)."""
+    return pd.to_numeric(column.map(lambda v: float(v) if isinstance(v, (bool, np.bool_)) else v), errors="coerce")
 
 
 def _pairs_frame(g: pd.DataFrame, metric: str, a: str, b: str) -> pd.DataFrame:
     """One row per trial both configs ran, with ``a``, ``b`` and ``snr_db``."""
-    wide = g.assign(_v=_values(g, metric)).pivot_table(index=["snr_db", "trial"], columns="config", values="_v",
+    wide = g.assign(_v=metric_values(g[metric])).pivot_table(index=["snr_db", "trial"], columns="config", values="_v",
                                                         aggfunc="first", dropna=False)
     return wide[[a, b]].rename(columns={a: "a", b: "b"}).reset_index()
 
@@ -95,7 +95,7 @@ def glance(trials: pd.DataFrame, task_of: dict, comparisons: pd.DataFrame, chanc
     the winner, its margin over the runner-up and whether it is a tie."""
     out = []
     for scenario, task, g in _groups(trials, task_of):
-        values = g.assign(_v=_values(g, task.ranking_metric))
+        values = g.assign(_v=metric_values(g[task.ranking_metric]))
         ranking = []
         for config, c in values.groupby("config", sort=False):
             mean, low, high = bootstrap_mean_ci(c._v, c.snr_db)

@@ -60,7 +60,7 @@ def interactive_figures(summary: pd.DataFrame, task_of: dict) -> str:
                     hovertemplate=f"{config}<br>SNR %{{x:.1f}} dB<br>{col} %{{y:.3g}}<extra></extra>"))
             fig.update_layout(title=f"{task.noun}: {col} against SNR on {scenario}", xaxis_title="SNR (dB)",
                               yaxis_title=col, template="plotly_white", height=420,
-                              yaxis_type="log" if col.startswith("rmse") else "linear",
+                              yaxis_type="linear" if task.ranking_binary else "log",   # a probability; an error
                               legend=dict(orientation="h", y=-0.2))
             figures.append(fig)
     if not figures:
