@@ -12,7 +12,6 @@ renamed, so no reader ever sees a half-written output.
 
 from __future__ import annotations
 
-import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +26,7 @@ from bench.markdown import table as _table
 from bench.provenance import provenance
 from bench.report.glance import comparisons_frame, glance
 from bench.report.html import interactive_figures, markdown_to_html
-from bench.report.render import comparisons_markdown, glance_markdown, render
+from bench.report.render import comparisons_markdown, glance_markdown, render, section_macro
 from bench.recording import TrialRecord, write_recording
 from bench.runner import calibrations
 from bench.store import Store
@@ -185,6 +184,11 @@ def _params_text(params: dict) -> str:
     return ", ".join(f"{k}={v}" for k, v in params.items()).replace("|", "\\|") or "defaults"
 
 
+def _section(name: str, *args) -> str:
+    """The harness section ``name``: a macro of ``sections.md.j2``."""
+    return section_macro(name)(*args).strip("\n")
+
+
 def _section_plan(record: dict, store: Store, tasks: list) -> str:
     sweep = record["sweep"]
     cal = sweep["calibration"]
@@ -204,35 +208,12 @@ def _section_plan(record: dict, store: Store, tasks: list) -> str:
     methods = [[f"`{m['label']}`", m["name"], m["task"],
                 _params_text(non_default(registry.get_method(m["name"]), sweep["methods"][i]["params"]))]
                for i, m in enumerate(record["methods"])]
-    definition = store.meta("snr_definition") or "see the scenario's documentation"
-    return "\n\n".join([
-        "## What was run",
-        "Parameters are those that differ from the plugin's defaults (`bench list -v` has every default; "
-        "`plan.toml` every resolved value).",
+    return _section(
+        "plan",
         _table(["scenario config", "scenario", "tasks", "parameters (not default)", "SNR", "trials per level"],
                scenarios),
-        _table(["", ""], rows),
-        f"**SNR definition.** {definition}",
-        "Every method config runs on the same generated trials of each scenario config that serves its "
-        "task (common random numbers); trial *i* sees the same noise at every SNR level. The resolved "
-        "sweep is `plan.toml` next to this report.",
-        _table(["config", "method", "task", "parameters (not default)"], methods),
-    ])
-
-
-def _calibration_text(calibrated: list) -> str:
-    """What the calibration table shows, for the tasks calibrated in the sweep."""
-    units = ", ".join(f"{t.pfa_unit} for {t.noun}" for t in calibrated)
-    samples = "; ".join(f"{t.short_noun}: {t.null_sample}" for t in calibrated)
-    return " ".join([
-        f"Thresholds are applied by the harness, so every method is compared at the same false-alarm "
-        f"rate: {units}. *Measured Pfa of nominal* is the fraction of null-hypothesis values (separate "
-        f"calibration trials; {samples}) at or above the method's own analytic threshold "
-        "(– where the method has none), with its 95% interval; *empirical* thresholds are the "
-        "(1 − Pfa) quantile of the same values, *gumbel* ones the quantile of a Gumbel law fitted to them. "
-        "*Measured Pfa of the threshold used* is on the same null values (by construction at most the "
-        "requested Pfa for *empirical*; an honest check of the tail fit for *gumbel*).",
-        *(t.calibration_text for t in calibrated if t.calibration_text)])
+        _table(["", ""], rows), store.meta("snr_definition") or "see the scenario's documentation",
+        _table(["config", "method", "task", "parameters (not default)"], methods))
 
 
 def _section_calibration(cals, summary: pd.DataFrame, task_of: dict) -> str:
@@ -255,18 +236,13 @@ def _section_calibration(cals, summary: pd.DataFrame, task_of: dict) -> str:
     empty = {"–", "– [–, –]"}
     keep = [j for j in range(len(header)) if any(r[j] not in empty for r in rows)]
     present = _tasks_present({c.method: task_of[c.method] for c in cals})
-    return "\n\n".join([
-        "## Calibration",
-        _calibration_text(present),
-        _table([header[j] for j in keep], [[r[j] for j in keep] for r in rows]),
-        "\n\n".join(t.calibration_note for t in present if t.calibration_note),
-    ])
+    return _section("calibration", present, _table([header[j] for j in keep], [[r[j] for j in keep] for r in rows]))
 
 
 def _section_runtime(runs: pd.DataFrame, units: pd.DataFrame, fig_dir: Path, record: dict) -> str:
     ev = runs[runs.error.isna()]
     if ev.empty:
-        return "## Runtime\n\nNo successful runs."
+        return _section("runtime", "", "")
     per = ev.groupby("method").agg(seconds=("seconds", "sum"), n=("n", "sum")).reset_index()
     per["seconds_per_trial"] = per.seconds / per.n
     order = {m["label"]: i for i, m in enumerate(record["methods"])}
@@ -275,22 +251,17 @@ def _section_runtime(runs: pd.DataFrame, units: pd.DataFrame, fig_dir: Path, rec
     gen = units.generate_seconds.sum() / units.n.sum()
     rows = [[f"`{r.config}`", f"{r.seconds_per_trial * 1e3:.3g}", f"{r.n:,}", f"{r.seconds:.3g}"]
             for r in per.itertuples()]
-    return "\n\n".join([
-        "## Runtime",
-        "![runtime](figures/runtime.png)",
-        _table(["config", "ms per trial", "trials run", "total seconds"], rows),
-        f"Scenario generation: {gen * 1e3:.3g} ms per trial. Times are per unit, on one core each.",
-    ])
+    return _section("runtime", _table(["config", "ms per trial", "trials run", "total seconds"], rows),
+                    f"{gen * 1e3:.3g}")
 
 
 def _section_failures(runs: pd.DataFrame) -> str:
     bad = runs[runs.error.notna()]
     if bad.empty:
-        return "## Failures\n\nNone: every method config ran on every unit."
+        return _section("failures", "", 0)
     rows = [[f"`{r.method}`", r.phase, "null" if pd.isna(r.snr_db) else fmt_db(r.snr_db), f"`{r.unit}`",
              str(r.error).replace("|", "\\|")[:300]] for r in bad.head(50).itertuples()]
-    more = f"\n\n… and {len(bad) - 50} more (see `results.sqlite`, table `runs`)." if len(bad) > 50 else ""
-    return "## Failures\n\n" + _table(["config", "phase", "SNR (dB)", "unit", "error"], rows) + more
+    return _section("failures", _table(["config", "phase", "SNR (dB)", "unit", "error"], rows), max(0, len(bad) - 50))
 
 
 def _section_provenance(record: dict, store: Store, prov: dict) -> str:
@@ -301,19 +272,13 @@ def _section_provenance(record: dict, store: Store, prov: dict) -> str:
         rows.append(["wall time of the units in the last `bench run` (before report and recording)",
                      f"{float(wall):.1f} s"])
     rows += [[k, v] for k, v in prov.items()]
-    return "## Provenance\n\n" + _table(["", ""], rows)
+    return _section("provenance", _table(["", ""], rows))
 
 
 def _section_recording(n: int, out_dir: Path, tasks: list) -> str:
     """What ``recording.rrd`` holds: the harness's part, then each task's
     (``Task.recording_text``)."""
-    body = ("`recording.rrd` holds the first {n} trial(s) of every SNR level of each scenario config, on the "
-            "timelines `step` and `time`: the true and measured positions (2D, y negated so north is up); " +
-            "; ".join(t.recording_text for t in tasks if t.recording_text) +
-            ". Pd and RMSE against SNR per config are under `/summary`. Open it with `bench view {out}` or "
-            "`rerun {out}/recording.rrd`.")
-    text = textwrap.fill(body, width=100)
-    return "## Recording\n\n" + text.replace("{n}", str(n)).replace("{out}", str(out_dir))
+    return _section("recording", n, str(out_dir), [t.recording_text for t in tasks if t.recording_text])
 
 
 def preset_notes(source: str) -> str:

@@ -35,6 +35,11 @@ def render(name: str, **values) -> str:
     return text.strip("\n")
 
 
+def section_macro(name: str):
+    """The macro ``name`` of ``sections.md.j2`` (the harness's own sections), as a function."""
+    return getattr(environment().get_template("sections.md.j2").module, name)
+
+
 def _interval(mid, low, high, signed: bool = False) -> str:
     f = (lambda x: ("+" if signed and np.isfinite(x) and x > 0 else "") + fmt(x))
     return f"{f(mid)} [{f(low)}, {f(high)}]"
