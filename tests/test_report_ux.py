@@ -301,3 +301,29 @@ def test_vectorised_bootstrap_equals_the_resample_loop():
     idx = np.random.default_rng(BOOTSTRAP_SEED).integers(0, 37, size=(300, 37))
     loop = np.array([time_averaged_rmse(sq[i]) for i in idx])
     assert (low, high) == (float(np.quantile(loop, 0.025)), float(np.quantile(loop, 0.975)))
+
+
+def test_single_scenario_grids_list_each_configs_own_parameters():
+    """``scenario = ...`` with a grid axis in [scenario_params]: plan.toml merges the axis
+    back into one list, and each scenario config must still show its own value."""
+    from bench.config import parse_sweep
+    from bench.report import _params_text, _resolved_scenario_params
+    sweep = tomllib.loads(textwrap.dedent("""
+        name = "grid"
+        scenario = "cv-turn-cv"
+        trials = 4
+        seed = 1
+        snr_db = [0]
+        [scenario_params]
+        turn_rate_deg_s = [2.0, 4.5]
+        detect_window_steps = 30
+        [[methods]]
+        name = "innovation"
+    """))
+    plan = parse_sweep(sweep)
+    resolved = _resolved_scenario_params(plan.to_dict())
+    texts = {label: _params_text(non_default(registry.get_scenario("cv-turn-cv"), p)) for label, p in resolved.items()}
+    assert len(texts) == 2
+    assert {("turn_rate_deg_s=2.0" in t, "turn_rate_deg_s=4.5" in t) for t in texts.values()} == {(True, False),
+                                                                                                  (False, True)}
+    assert all("detect_window_steps=30" in t for t in texts.values())

@@ -1,12 +1,17 @@
 """Outputs of a run, all rebuilt from ``results.sqlite`` (``bench report DIR``).
 
 Writes ``trials.csv``, ``summary.csv``, ``calibration.csv``, ``steps.csv``
-(per-step tables of the tasks that have them), ``report.md``,
-``figures/*.png`` and ``recording.rrd`` (docs/architecture.md, 'Outputs of a
-run'). The report is the sweep's plan and calibration, then each task's own
-sections (:meth:`bench.tasks.base.Task.report_sections`: the calibrated
-tasks first, next to their calibration), then runtime, failures, the
-recording and provenance. Every file is written to a temporary name and
+(per-step tables of the tasks that have them), ``comparisons.csv`` (paired
+comparisons, :mod:`bench.report.glance`), ``report.md``, ``report.html``
+(:mod:`bench.report.html`), ``figures/*.png`` and ``recording.rrd``
+(docs/architecture.md, 'Outputs of a run' and 'Report'). The report is the
+title, *Results at a glance*, the preset's notes, the sweep's plan (every
+parameter that differs from its default) and calibration, then each task's own
+sections (:meth:`bench.tasks.base.Task.report_sections`: the calibrated tasks
+first, next to their calibration), the paired comparisons, single-trial
+sections, runtime, failures, the recording and provenance; the page and the
+harness's sections are Jinja2 templates (``bench/templates``,
+:mod:`bench.report.render`). Every file is written to a temporary name and
 renamed, so no reader ever sees a half-written output.
 """
 
@@ -189,6 +194,15 @@ def _section(name: str, *args) -> str:
     return section_macro(name)(*args).strip("\n")
 
 
+def _resolved_scenario_params(sweep: dict) -> dict[str, dict]:
+    """Scenario config label -> its resolved parameters, from the stored sweep resolved
+    again (a single-scenario sweep keeps its grid axes merged in ``scenario_params``)."""
+    from bench.config import parse_sweep
+    from bench.params import params_as_dict
+    plan = parse_sweep(sweep, allow_large=True)
+    return {sc.label: params_as_dict(sc.params) for sc in plan.scenarios}
+
+
 def _section_plan(record: dict, store: Store, tasks: list) -> str:
     sweep = record["sweep"]
     cal = sweep["calibration"]
@@ -200,7 +214,7 @@ def _section_plan(record: dict, store: Store, tasks: list) -> str:
         rows.append(["calibration", f"{cal['mode']}, requested Pfa {cal['pfa']:g}{f' ({units})' if units else ''}, "
                                     f"{cal['h0_trials']} null trials per scenario config of a calibrated task "
                                     f"({', '.join(null_for)})"])
-    resolved = {sc.get("label", sc["name"]): sc.get("params", {}) for sc in sweep.get("scenarios", [])}
+    resolved = _resolved_scenario_params(sweep)
     scenarios = [[f"`{sc['label']}`", sc["name"], ", ".join(sc.get("tasks", [])),
                   _params_text(non_default(registry.get_scenario(sc["name"]), resolved.get(sc["label"], {}))),
                   _snr_text(sc.get("snr_db", sweep.get("snr_db", []))), sc.get("trials", sweep.get("trials"))]

@@ -201,8 +201,6 @@ def _section_snr_reference(summary: pd.DataFrame) -> str:
         "noise). Our SNR levels on that axis:",
         table(["scenario", "stationary variance at σ_w = 1", "offset (dB)", "our SNR levels (dB)",
                "the same on the unit-innovation axis (dB)"], rows),
-        "Per-cell Pfa is not reported: the calibration stores one score per null scene (its largest merit), "
-        "not the null scenes' merit maps, so only the per-scene Pfa is measured.",
     ])
 
 
