@@ -54,6 +54,19 @@ def crossing_text(c) -> tuple[str, str]:
     return fmt_db(c.mid), f"[{low}, {high}]"
 
 
+def crossing_difference(a, b) -> str:
+    """b − a in dB between two :class:`bench.metrics.Crossing`: a number between two
+    fits, a range where one is only known to lie between two levels, "–" where either
+    lies outside the swept range."""
+    def bounds(c):
+        return (c.mid, c.mid) if c.kind == "fit" else (c.low, c.high) if c.kind == "between" else None
+    x, y = bounds(a), bounds(b)
+    if x is None or y is None:
+        return "–"
+    low, high = y[0] - x[1], y[1] - x[0]
+    return f"{low:+.1f}" if low == high else f"between {low:+.1f} and {high:+.1f}"
+
+
 def table(header: list[str], rows: list[list]) -> str:
     """A GitHub-flavoured Markdown table (``tabulate``), cells as given: no
     number parsing, so "1e-05" or "0.010" stay as the caller formatted them."""

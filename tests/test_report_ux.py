@@ -327,3 +327,13 @@ def test_single_scenario_grids_list_each_configs_own_parameters():
     assert {("turn_rate_deg_s=2.0" in t, "turn_rate_deg_s=4.5" in t) for t in texts.values()} == {(True, False),
                                                                                                   (False, True)}
     assert all("detect_window_steps=30" in t for t in texts.values())
+
+
+def test_differences_of_crossings_keep_their_resolution():
+    from bench.markdown import crossing_difference
+    from bench.metrics import Crossing
+    fit_a, fit_b = Crossing("fit", -6.0, -6.6, -5.5), Crossing("fit", -4.0, -5.0, -3.0)
+    between = Crossing("between", np.nan, 6.0, 12.0)
+    assert crossing_difference(fit_a, fit_b) == "+2.0"
+    assert crossing_difference(fit_a, between) == "between +12.0 and +18.0"
+    assert crossing_difference(fit_a, Crossing("above", np.nan, 12.0, np.inf)) == "–"

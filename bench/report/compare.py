@@ -138,7 +138,8 @@ def compare_runs(a: Run, b: Run) -> pd.DataFrame:
 
 
 def summary_changes(a: Run, b: Run) -> pd.DataFrame:
-    """The tasks' headline summary columns of the matched cells, side by side (A, B, B − A)."""
+    """The tasks' headline summary columns of the matched cells (their interval bounds
+    left out), side by side: A, B, B − A."""
     if a.summary.empty or b.summary.empty:
         return pd.DataFrame()
     keys = ["scenario", "config", "snr_db"]
@@ -147,7 +148,7 @@ def summary_changes(a: Run, b: Run) -> pd.DataFrame:
     for r in m.itertuples(index=False):
         r = r._asdict()
         task = a.task_of.get(r["config"])
-        for col in (task.headline_columns if task else ()):
+        for col in (c for c in (task.headline_columns if task else ()) if not c.endswith(("_low", "_high"))):
             va, vb = r.get(f"{col}_a"), r.get(f"{col}_b")
             if va is None or vb is None or (pd.isna(va) and pd.isna(vb)):
                 continue

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from bench import figures
-from bench.markdown import crossing_text, fmt, fmt_db, snr50, table
+from bench.markdown import crossing_difference, crossing_text, fmt, fmt_db, snr50, table
 from bench.store import Store
 from bench.tasks.base import ReportContext
 from bench.tasks.detection_metrics import roc_curve
@@ -64,9 +64,9 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
 def _section_ranking(summary: pd.DataFrame, floors: dict[str, float]) -> str:
     """Method families ordered by the lowest SNR at which any of their configs reaches Pd = 0.5."""
     best = snr50(summary, floors=floors).sort_values("order", kind="stable").drop_duplicates("method")
-    lead = best.order.iloc[0]
+    lead = best.crossing.iloc[0]
     rows = [[f"{rank}", f"`{b.method}`", f"`{b.config}`", *crossing_text(b.crossing),
-              f"{b.order - lead:+.1f}" if np.isfinite(b.order) and np.isfinite(lead) else "–",
+              crossing_difference(lead, b.crossing),
               fmt(floors.get(b.config))]
             for rank, b in enumerate(best.itertuples(), start=1)]
     return "\n\n".join([

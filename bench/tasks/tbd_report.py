@@ -18,7 +18,7 @@ import pandas as pd
 
 from bench import figures
 from bench.calibration import gumbel_fit
-from bench.markdown import crossing_text, fmt, fmt_db, fmt_interval, snr50, table
+from bench.markdown import crossing_difference, crossing_text, fmt, fmt_db, fmt_interval, snr50, table
 from bench.tasks.base import ReportContext
 
 
@@ -52,11 +52,10 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
     crossings = snr50(summary)
     rows = []
     for _sc, scene in crossings.groupby("scenario", sort=False):   # gains within a scenario config
-        lead = scene.mid.iloc[0]
+        lead = scene.crossing.iloc[0]
         for i, c in enumerate(scene.itertuples()):
-            gain = lead - c.mid if np.isfinite(c.mid) and np.isfinite(lead) else np.nan
             rows.append([f"`{c.config}`", f"`{c.scenario}`", *crossing_text(c.crossing),
-                         "–" if i == 0 else (f"{gain:+.1f}" if np.isfinite(gain) else "–")])
+                         "–" if i == 0 else crossing_difference(c.crossing, lead)])
     detail = _per_scenario_tables(summary, lambda r: fmt(r.pd), "Pd against SNR (dB)")
     return "\n\n".join([
         "## Track-before-detect: detection probability",
