@@ -28,6 +28,7 @@ EXIT_BAD_INPUT = 2
 EXIT_ENVIRONMENT = 3
 EXIT_IN_USE = 4
 EXIT_INTERRUPTED = 130
+EXIT_REGRESSION = 5     # bench compare --fail-on-regression: a metric got significantly worse
 
 EXIT_CODES = f"""exit codes:
   0    done
@@ -40,6 +41,7 @@ EXIT_CODES = f"""exit codes:
        file-size limit, I/O error; nothing is half-written, and the same command
        resumes once the cause is fixed
   {EXIT_IN_USE}    the run folder is in use by another bench run or report
+  {EXIT_REGRESSION}    bench compare --fail-on-regression: a method config got significantly worse
   {EXIT_INTERRUPTED}  interrupted (Ctrl-C); the same command resumes
 """
 
@@ -95,6 +97,13 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="rebuild CSV, figures, report.md and recording from results.sqlite")
     rep.add_argument("dir")
     rep.add_argument("--no-record", action="store_true", help="do not rewrite recording.rrd")
+    cmp = sub.add_parser("compare", help="differences between two run folders, with intervals "
+                                         "(paired when they share trials)")
+    cmp.add_argument("run_a", metavar="RUN_A", help="run folder A (e.g. before a change)")
+    cmp.add_argument("run_b", metavar="RUN_B", help="run folder B (e.g. after it)")
+    cmp.add_argument("--out", help="also write compare.csv, compare_summary.csv and compare.md into this folder")
+    cmp.add_argument("--fail-on-regression", action="store_true",
+                     help=f"exit {EXIT_REGRESSION} when a method config got significantly worse (for CI)")
     view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
     view.add_argument("dir")
     perf = sub.add_parser("perf", help="measure every method's speed and memory against its reference, "
@@ -281,6 +290,11 @@ def cmd_view(args) -> int:
     return subprocess.call(cmd)
 
 
+def cmd_compare(args) -> int:
+    from bench.report.compare import run_compare
+    return run_compare(args.run_a, args.run_b, args.out, args.fail_on_regression)
+
+
 def cmd_perf(args) -> int:
     from bench.perf import check_sizes, prepare_out, run_perf
     known = set(registry.methods())
@@ -302,7 +316,8 @@ def one_line(text: str, limit: int = 400) -> str:
     return safe if len(safe) <= limit else safe[:limit - 3] + "..."
 
 
-COMMANDS = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "view": cmd_view, "perf": cmd_perf}
+COMMANDS = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "view": cmd_view, "perf": cmd_perf,
+            "compare": cmd_compare}
 
 
 def _error(text: str) -> None:

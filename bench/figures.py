@@ -82,7 +82,7 @@ def roc(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, snr_db: fl
     ax.axvline(pfa, color="0.5", lw=0.8, ls=":")
     ax.set_xscale("log")
     ax.set(xlabel="per-step $P_{FA}$ (null trials)", ylabel="$P_D$", ylim=(-0.02, 1.02),
-           title=f"{title}: ROC at {snr_db:g} dB (dotted: requested $P_{{FA}}$)")
+           title=f"{title}: ROC at {snr_db:.1f} dB (dotted: requested $P_{{FA}}$)")
     ax.grid(alpha=0.3, which="both")
     _legend_outside(ax)
     return _save(fig, path)

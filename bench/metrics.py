@@ -10,7 +10,11 @@ definitions are in docs/architecture.md, 'Metrics'.
 * means and other statistics over trials: percentile bootstrap with a fixed
   seed (reproducible);
 * RMSE per step across trials and its time average (the papers' "average RMSE");
-* the SNR at which a Pd curve reaches 0.5, with an interval from its bands.
+* the SNR at which a Pd curve reaches 0.5: a probit fit to the binomial counts
+  with a profile-likelihood interval (:func:`fit_crossing`), or the adjacent
+  levels it jumps between;
+* paired differences between method configs on the same trials (paired
+  bootstrap, McNemar's exact test) and unpaired ones between runs.
 
 A *cell* is one (scenario config, method config, SNR) of a sweep: summaries
 have one row per cell (:func:`by_cell`).
@@ -18,9 +22,11 @@ have one row per cell (:func:`by_cell`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pandas as pd
-from scipy import stats
+from scipy import optimize, special, stats
 
 CONFIDENCE = 0.95
 BOOTSTRAP_RESAMPLES = 2000
@@ -136,26 +142,39 @@ def bootstrap_mean_interval(values: np.ndarray, level: float = CONFIDENCE,
     return _bootstrap_interval(values.size, lambda idx: values[idx].mean(axis=1), level, resamples)
 
 
+#: Elements of resampled data held at once by :func:`bootstrap_statistic_interval` (memory bound).
+_BOOTSTRAP_BLOCK = 20_000_000
+
+
 def bootstrap_statistic_interval(samples: np.ndarray, statistic, level: float = CONFIDENCE,
                                  resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float]:
-    """Percentile bootstrap interval of ``statistic(samples[idx])``, resampling
-    trials (the first axis), with a fixed seed."""
+    """Percentile bootstrap interval of ``statistic``, resampling trials (the
+    first axis), with a fixed seed. Vectorised: ``statistic`` takes a stack of
+    resampled data sets, (r, n, ...), and returns one value per data set (r,);
+    the resamples are evaluated in blocks of at most ``_BOOTSTRAP_BLOCK`` elements."""
     samples = np.asarray(samples, float)
     if len(samples) < 2:
-        value = statistic(samples) if len(samples) else np.nan
+        value = statistic(samples[None])[0] if len(samples) else np.nan
         return (float(value), float(value))
-    return _bootstrap_interval(len(samples), lambda idx: np.array([statistic(samples[i]) for i in idx]),
-                               level, resamples)
+    block = max(1, _BOOTSTRAP_BLOCK // max(1, samples.size))
+
+    def estimate(idx):
+        return np.concatenate([statistic(samples[idx[i:i + block]]) for i in range(0, len(idx), block)])
+    return _bootstrap_interval(len(samples), estimate, level, resamples)
 
 
 def per_step_rmse(sq_err: np.ndarray) -> np.ndarray:
-    """RMSE per step across trials, from squared errors (n, K)."""
-    return np.sqrt(np.mean(sq_err, axis=0)) if len(sq_err) else np.full(sq_err.shape[1:], np.nan)
+    """RMSE per step across trials, from squared errors (..., n, K)."""
+    return np.sqrt(np.mean(sq_err, axis=-2)) if sq_err.shape[-2] else np.full(sq_err.shape[-1:], np.nan)
 
 
-def time_averaged_rmse(sq_err: np.ndarray) -> float:
-    """Mean over steps of the per-step RMSE across trials (the papers' "average RMSE")."""
-    return float(np.mean(per_step_rmse(sq_err))) if len(sq_err) else float("nan")
+def time_averaged_rmse(sq_err: np.ndarray):
+    """Mean over steps of the per-step RMSE across trials (the papers' "average RMSE"),
+    of squared errors (n, K); of a stack (r, n, K), one per data set (r,)."""
+    if not sq_err.shape[-2]:
+        return float("nan")
+    value = np.mean(per_step_rmse(sq_err), axis=-1)
+    return float(value) if np.ndim(value) == 0 else value
 
 
 def crossing(x: np.ndarray, y: np.ndarray, level: float = 0.5) -> float:
@@ -184,3 +203,178 @@ def snr_at_pd(snr_db, pd, pd_low, pd_high, level: float = 0.5) -> tuple[float, f
     last (upper bound). See :func:`crossing` for NaN and ``-inf``.
     """
     return crossing(snr_db, pd, level), crossing(snr_db, pd_high, level), crossing(snr_db, pd_low, level)
+
+
+# ------------------------------------------------------------------ paired and unpaired differences
+
+def _stratified_means(values: np.ndarray, strata: np.ndarray, resamples: int, rng) -> np.ndarray:
+    """(resamples,) bootstrap replicates of the mean over strata of each
+    stratum's mean, resampling within each stratum (an SNR level's trials)."""
+    levels = np.unique(strata)
+    out = np.zeros(resamples)
+    for level in levels:
+        v = values[strata == level]
+        out += v[rng.integers(0, v.size, size=(resamples, v.size))].mean(axis=1)
+    return out / levels.size
+
+
+def stratified_mean(values, strata) -> float:
+    """The mean over strata (SNR levels) of each stratum's mean: every level weighs the same."""
+    values, strata = np.asarray(values, float), np.asarray(strata)
+    return float(np.mean([values[strata == s].mean() for s in np.unique(strata)])) if values.size else np.nan
+
+
+def _finite_pairs(*arrays):
+    keep = np.ones(len(arrays[0]), bool)
+    for a in arrays:
+        if a.dtype.kind == "f":
+            keep &= np.isfinite(a)
+    return [a[keep] for a in arrays]
+
+
+def bootstrap_mean_ci(values, strata, level: float = CONFIDENCE,
+                      resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float, float]:
+    """(mean, low, high): :func:`stratified_mean` of ``values`` and its percentile
+    bootstrap interval, resampling trials within each stratum (fixed seed; NaN values dropped)."""
+    values, strata = _finite_pairs(np.asarray(values, float), np.asarray(strata))
+    if values.size == 0:
+        return (np.nan, np.nan, np.nan)
+    reps = _stratified_means(values, strata, resamples, np.random.default_rng(BOOTSTRAP_SEED))
+    alpha = (1 - level) / 2
+    return stratified_mean(values, strata), float(np.quantile(reps, alpha)), float(np.quantile(reps, 1 - alpha))
+
+
+def paired_difference(a, b, strata, level: float = CONFIDENCE,
+                      resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float, float]:
+    """(mean, low, high) of ``b - a`` over pairs (the same trial seen by two
+    method configs, or by two runs that share their trials): the paired
+    bootstrap resamples the pairs, within each stratum (SNR level), so the noise
+    common to both cancels. Pairs with a NaN are dropped."""
+    a, b, strata = _finite_pairs(np.asarray(a, float), np.asarray(b, float), np.asarray(strata))
+    return bootstrap_mean_ci(b - a, strata, level, resamples)
+
+
+def unpaired_difference(a, a_strata, b, b_strata, level: float = CONFIDENCE,
+                        resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float, float]:
+    """(mean, low, high) of mean(b) - mean(a) for independent samples (two runs
+    that do not share trials): each resampled on its own, within strata."""
+    a, a_strata = _finite_pairs(np.asarray(a, float), np.asarray(a_strata))
+    b, b_strata = _finite_pairs(np.asarray(b, float), np.asarray(b_strata))
+    if a.size == 0 or b.size == 0:
+        return (np.nan, np.nan, np.nan)
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    reps = _stratified_means(b, b_strata, resamples, rng) - _stratified_means(a, a_strata, resamples, rng)
+    alpha = (1 - level) / 2
+    return (stratified_mean(b, b_strata) - stratified_mean(a, a_strata), float(np.quantile(reps, alpha)),
+            float(np.quantile(reps, 1 - alpha)))
+
+
+def mcnemar_exact(a, b) -> tuple[int, int, float]:
+    """McNemar's exact test of paired 0/1 outcomes: (pairs with a = 1, b = 0;
+    pairs with a = 0, b = 1; two-sided p-value, the binomial test of the
+    discordant pairs at 1/2). 1 when no pair is discordant."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    keep = np.isfinite(a) & np.isfinite(b)
+    a, b = a[keep] > 0.5, b[keep] > 0.5
+    only_a, only_b = int(np.count_nonzero(a & ~b)), int(np.count_nonzero(b & ~a))
+    if only_a + only_b == 0:
+        return only_a, only_b, 1.0
+    return only_a, only_b, float(stats.binomtest(only_b, only_a + only_b, 0.5).pvalue)
+
+
+# ------------------------------------------------------------------ SNR at which Pd reaches 0.5
+
+#: A crossing is *resolved* by the SNR levels unless it falls between two adjacent
+#: levels whose Pd (above the floor, as a fraction of what is left) is at most the
+#: first and at least the second of these: then the data say only "between them".
+UNRESOLVED_BAND = (0.1, 0.9)
+_CHI2_1 = float(stats.chi2.isf(1 - CONFIDENCE, 1))
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """Where a Pd curve reaches a level. ``kind``: "fit" (``mid`` in [``low``,
+    ``high``], the probit fit's profile-likelihood interval; an end may be
+    ±inf: beyond the swept range), "between" (``low`` and ``high`` are the
+    adjacent levels that jump across it), "below" / "above" (the swept range
+    starts above / ends below the level)."""
+
+    kind: str
+    mid: float
+    low: float
+    high: float
+
+    @property
+    def order(self) -> float:
+        """A sort key: lower SNR first ("between": its midpoint), "above" last."""
+        if self.kind == "between":
+            return (self.low + self.high) / 2
+        return {"below": -np.inf, "above": np.inf}.get(self.kind, self.mid)
+
+
+def _probit_deviance(snr, k, n, floor, z, s50, slope):
+    p = floor + (1 - floor) * special.ndtr(z + slope * (snr - s50))
+    p = np.clip(p, 1e-12, 1 - 1e-12)
+    return -2 * float(np.sum(k * np.log(p) + (n - k) * np.log1p(-p)))
+
+
+def _profile(snr, k, n, floor, z, s50) -> float:
+    """The deviance at crossing ``s50``, minimised over the slope (log scale, per dB)."""
+    res = optimize.minimize_scalar(lambda ls: _probit_deviance(snr, k, n, floor, z, s50, np.exp(ls)),
+                                   bounds=(np.log(1e-3), np.log(1e2)), method="bounded", options={"xatol": 1e-4})
+    return float(res.fun)
+
+
+def _profile_end(excess, mid: float, step: float, limit: float) -> float:
+    """Where ``excess`` (profile deviance above the cut-off) turns positive going from
+    ``mid`` towards ``limit`` in steps of ``step``; ±inf if it never does before ``limit``."""
+    inner = mid
+    while (limit - inner) * np.sign(step) > 0:
+        outer = inner + step
+        if excess(outer) > 0:
+            return float(optimize.brentq(excess, inner, outer, xtol=1e-3))
+        inner = outer
+    return float(np.sign(step) * np.inf)
+
+
+def fit_crossing(snr_db, successes, trials, floor: float = 0.0, level: float = 0.5) -> Crossing:
+    """The SNR at which Pd reaches ``level``, from binomial counts per SNR level.
+
+    Model (probit with a floor): Pd(s) = c + (1 − c) Φ(z + b (s − s50)), with
+    c the floor (a detector's chance Pd; 0 where there is none, taken as known),
+    z = Φ⁻¹((level − c)/(1 − c)) so that Pd(s50) = level, and slope b > 0.
+    s50 is the maximum-likelihood estimate; its 95% interval is the profile
+    likelihood's: the s50 whose deviance, minimised over b, is within
+    χ²₁(0.95) = 3.84 of the minimum (an end that leaves the swept range by more
+    than the range's width is open: ±inf). Where the levels do not resolve the
+    crossing (:data:`UNRESOLVED_BAND`), or it lies outside the swept range, no
+    fit is made (see :class:`Crossing`).
+    """
+    snr = np.asarray(snr_db, float)
+    k, n = np.asarray(successes, float), np.asarray(trials, float)
+    order = np.argsort(snr)
+    snr, k, n = snr[order], k[order], n[order]
+    pd_ = k / np.maximum(n, 1)
+    above = np.flatnonzero(pd_ >= level)
+    if above.size == 0:
+        return Crossing("above", np.nan, float(snr[-1]), np.inf)
+    if above[0] == 0 or floor >= level:
+        return Crossing("below", np.nan, -np.inf, float(snr[0]))
+    i = above[0]
+    q = (pd_ - floor) / (1 - floor)
+    if q[i - 1] <= UNRESOLVED_BAND[0] and q[i] >= UNRESOLVED_BAND[1]:
+        return Crossing("between", np.nan, float(snr[i - 1]), float(snr[i]))
+    z = float(special.ndtri((level - floor) / (1 - floor)))
+    span = float(snr[-1] - snr[0]) or 1.0
+    start = crossing(snr, pd_, level)
+    res = optimize.minimize_scalar(lambda s: _profile(snr, k, n, floor, z, s),
+                                   bounds=(snr[i - 1] - span / 4, snr[i] + span / 4), method="bounded",
+                                   options={"xatol": 1e-4})
+    mid = float(res.x) if res.fun <= _profile(snr, k, n, floor, z, start) else start
+    dmin = _profile(snr, k, n, floor, z, mid)
+
+    def excess(s):
+        return _profile(snr, k, n, floor, z, s) - dmin - _CHI2_1
+    step = span / 40
+    return Crossing("fit", mid, _profile_end(excess, mid, -step, snr[0] - span),
+                    _profile_end(excess, mid, step, snr[-1] + span))

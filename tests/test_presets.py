@@ -48,7 +48,7 @@ def test_maneuver_detection_preset_smoke(bench_cli, tmp_path):
     section = report.split("## Pd under three definitions", 1)[1].split("\n## ", 1)[0]
     assert all(f"`{c}`" in section for c in summary.config.unique())
     assert summary.pd_step.notna().all() and summary.pd_equal_chance.notna().all()
-    assert "at 5 dB" in report.split("## One trial over time", 1)[1]      # the paper's Fig. 2 level
+    assert "at 5.0 dB" in report.split("## One trial over time", 1)[1]    # the paper's Fig. 2 level (dB to 0.1)
 
 
 def test_tbd_small_preset_runs_through_the_cli(bench_cli, tmp_path):

@@ -96,6 +96,7 @@ class ReportContext:
     chance_pd: float                 # [calibration] chance_pd
     timeline_snr_db: float | None    # [record] timeline_snr_db
     configs: frozenset[str]          # the task's method config labels
+    task: Any = None                 # the Task the context is for (its attributes: has_roc, ...)
 
 
 def check_finite(name: str, a: np.ndarray, shape: tuple) -> None:
@@ -150,6 +151,15 @@ class Task:
     ranking_metric: ClassVar[str] = ""
     #: whether a larger ``ranking_metric`` is better (detection) or worse (an error)
     ranking_higher_is_better: ClassVar[bool] = True
+    #: how the report names the mean of ``ranking_metric`` over trials, with its unit ("Pd", "RMSE (m)")
+    ranking_label: ClassVar[str] = ""
+    #: whether ``ranking_metric`` is a 0/1 indicator (paired comparisons add McNemar's exact test)
+    ranking_binary: ClassVar[bool] = False
+    #: the summary.csv column (with ``_low``/``_high``) drawn against SNR in report.html's
+    #: interactive figure and crossed at 0.5 for "SNR at Pd = 0.5"; "": none
+    curve_column: ClassVar[str] = ""
+    #: whether the task's report draws a ROC (Pd against per-step Pfa from the stored statistics)
+    has_roc: ClassVar[bool] = False
     #: children of a trial root / of a method entity the task logs (reserved names)
     scene_entities: ClassVar[tuple[str, ...]] = ()
     method_entities: ClassVar[tuple[str, ...]] = ()

@@ -133,6 +133,12 @@ class DetectionTask(Task):
                        "pd_step", "pd_step_low", "pd_step_high",
                        "pd_equal_chance", "pd_equal_chance_low", "pd_equal_chance_high")
     headline_columns = ("pd", "pd_low", "pd_high", "pfa", "pfa_low", "pfa_high", "delay_mean")
+    ranking_metric = "detected"
+    ranking_higher_is_better = True
+    ranking_label = "Pd"
+    ranking_binary = True
+    curve_column = "pd"
+    has_roc = True
     method_entities = ("statistic", "threshold", "alarms")
 
     # -------------------------------------------------------------- worker side

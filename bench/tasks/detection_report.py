@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from bench import figures
-from bench.markdown import fmt, fmt_crossing, snr50, table
+from bench.markdown import crossing_difference, crossing_text, fmt, fmt_db, snr50, table
 from bench.store import Store
 from bench.tasks.base import ReportContext
 from bench.tasks.detection_metrics import roc_curve
@@ -27,32 +27,31 @@ def sections(ctx: ReportContext) -> list[str]:
     if summary.empty:
         return []
     chance = {c.method: c.chance_pd for c in ctx.calibrations}
-    return [_section_detection(summary, ctx.fig_dir, ctx.title, ctx.pfa, chance), _section_ranking(summary),
-            _section_pd_definitions(summary, ctx.chance_pd),
-            _section_roc(ctx.store, ctx.trials, summary, ctx.fig_dir, ctx.title, ctx.pfa)]
+    floors = {k: v for k, v in chance.items() if np.isfinite(v)}
+    return [_section_detection(summary, ctx.fig_dir, ctx.title, ctx.pfa, chance, floors),
+            _section_ranking(summary, floors), _section_pd_definitions(summary, ctx.chance_pd, floors),
+            _section_roc(ctx.store, ctx.trials, summary, ctx.fig_dir, ctx.title, ctx.pfa)
+            if getattr(ctx.task, "has_roc", False) else ""]
 
 
 def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: float,
-                       chance: dict[str, float]) -> str:
+                       chance: dict[str, float], floors: dict[str, float]) -> str:
     if summary.empty:
         return "## Detection\n\nNo results."
     figures.pd_vs_snr(summary, fig_dir / "pd_vs_snr.png", pfa, title, chance)
     figures.delay_vs_snr(summary, fig_dir / "delay_vs_snr.png", title)
-    snr = summary.snr_db
     rows = []
-    for c in snr50(summary).itertuples():
+    for c in snr50(summary, floors=floors).itertuples():
         last = summary[summary.config == c.config].sort_values("snr_db").iloc[-1]
-        rows.append([f"`{c.config}`", fmt_crossing(c.mid, snr), f"[{fmt_crossing(c.low, snr)}, "
-                     f"{fmt_crossing(c.high, snr)}]", f"{fmt(last.pd)} at {fmt(last.snr_db)} dB",
+        rows.append([f"`{c.config}`", *crossing_text(c.crossing), f"{fmt(last.pd)} at {fmt_db(last.snr_db)} dB",
                      fmt(last.delay_mean)])
     detail = summary.pivot_table(index="snr_db", columns="config", values="pd", sort=False)
-    detail_rows = [[fmt(s)] + [fmt(v) for v in r] for s, r in zip(detail.index, detail.to_numpy())]
+    detail_rows = [[fmt_db(s)] + [fmt(v) for v in r] for s, r in zip(detail.index, detail.to_numpy())]
     return "\n\n".join([
         "## Detection probability",
         "![Pd vs SNR](figures/pd_vs_snr.png)",
-        "SNR at which Pd = 0.5, interpolated linearly between levels; the interval is where the 95% "
-        "Pd band crosses 0.5. `< x` / `> x`: the crossing lies outside the swept range.",
-        table(["config", "SNR at Pd = 0.5 (dB)", "interval (dB)", "Pd at the highest SNR",
+        SNR50_TEXT,
+        table(["config", "SNR at Pd = 0.5 (dB)", "95% interval (dB)", "Pd at the highest SNR",
                 "mean delay there (steps)"], rows),
         "<details><summary>Pd per SNR level</summary>\n\n" +
         table(["SNR (dB)"] + [f"`{c}`" for c in detail.columns], detail_rows) + "\n\n</details>",
@@ -62,34 +61,44 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
     ])
 
 
-def _section_ranking(summary: pd.DataFrame) -> str:
+def _section_ranking(summary: pd.DataFrame, floors: dict[str, float]) -> str:
     """Method families ordered by the lowest SNR at which any of their configs reaches Pd = 0.5."""
-    best = snr50(summary).sort_values("order", kind="stable").drop_duplicates("method")
-    lead = best.order.iloc[0]
-    rows = [[f"{rank}", f"`{b.method}`", f"`{b.config}`", fmt_crossing(b.mid, summary.snr_db),
-              f"{b.order - lead:+.2g}" if np.isfinite(b.order) and np.isfinite(lead) else "–"]
+    best = snr50(summary, floors=floors).sort_values("order", kind="stable").drop_duplicates("method")
+    lead = best.crossing.iloc[0]
+    rows = [[f"{rank}", f"`{b.method}`", f"`{b.config}`", *crossing_text(b.crossing),
+              crossing_difference(lead, b.crossing),
+              fmt(floors.get(b.config))]
             for rank, b in enumerate(best.itertuples(), start=1)]
     return "\n\n".join([
         "## Ranking of methods",
         "Each method at its best config in this sweep, by the SNR at which Pd reaches 0.5 "
         "(all at the same calibrated per-step Pfa).",
-        table(["rank", "method", "best config", "SNR at Pd = 0.5 (dB)", "dB behind the first"], rows),
+        table(["rank", "method", "best config", "SNR at Pd = 0.5 (dB)", "95% interval (dB)", "dB behind the first",
+               "chance Pd"], rows),
     ])
 
+
+SNR50_TEXT = (
+    "SNR at which Pd = 0.5: a probit fit to the detections of every level, Pd(s) = c + (1 − c) Φ(b (s − s50) + z), "
+    "with c the config's chance Pd (the floor; taken as known) and z placing Pd = 0.5 at s50; the 95% interval is "
+    "the profile likelihood's. Where Pd jumps across 0.5 between two adjacent levels (from ≤ 10% to ≥ 90% of the "
+    "way from the floor to 1) the levels do not resolve it: *between a and b*. `< x` / `> x`: the crossing lies "
+    "outside the swept range.")
 
 PD_DEFINITIONS = (("pd", "any alarm in the window"), ("pd_step", "per-step average"),
                   ("pd_equal_chance", "equal chance Pd"))
 
 
-def _section_pd_definitions(summary: pd.DataFrame, chance_pd: float) -> str:
+def _section_pd_definitions(summary: pd.DataFrame, chance_pd: float, floors: dict[str, float]) -> str:
     """SNR at Pd = 0.5 and the rank of every config under each Pd definition."""
     if summary.empty or summary.pd_step.isna().all():
         return ""
     cells, ranks = {}, {}
     for column, _ in PD_DEFINITIONS:
-        s = snr50(summary, column)
+        s = snr50(summary, column, floors={c: chance_pd for c in floors} if column == "pd_equal_chance"
+                  else floors if column == "pd" else None)
         ranks[column] = dict(zip(s.config, s.order.rank(method="min")))
-        cells[column] = {b.config: fmt_crossing(b.mid, summary.snr_db) for b in s.itertuples()}
+        cells[column] = {b.config: crossing_text(b.crossing)[0] for b in s.itertuples()}
     configs = list(dict.fromkeys(summary.config))
     rows = [[f"`{c}`"] + [f"{cells[col][c]} (#{int(ranks[col][c])})" for col, _ in PD_DEFINITIONS]
             for c in configs]
@@ -126,7 +135,8 @@ def _section_roc(store: Store, trials: pd.DataFrame, summary: pd.DataFrame, fig_
     figures.roc(curves, fig_dir / "roc.png", snr, pfa, title)
     return "\n\n".join([
         "## ROC",
-        f"Pd against per-step Pfa at {fmt(snr)} dB, the level where the configs' mean Pd is closest to "
+        f"Pd against per-step Pfa at {fmt_db(snr)} dB, of the {len(curves)} config(s) of the tasks that draw a ROC "
+        f"({', '.join(f'`{c}`' for c in curves)}), the level where the configs' mean Pd is closest to "
         "0.5, computed from the stored statistics without re-running: Pfa from the calibration null "
         "values, Pd from each trial's peak statistic in the detection window.",
         "![ROC](figures/roc.png)",
@@ -147,8 +157,8 @@ def timeline(ctx: ReportContext) -> list[str]:
         top = min(records, key=lambda r: (abs(r.snr_db - snr_db) if r.snr_db is not None else np.inf, r.trial))
     series = {label: (tr.arrays["statistic"], tr.threshold, tr.arrays["alarms"]) for label, tr in top.methods.items()}
     figures.trial_timeline(top.t, series, ctx.fig_dir / "trial_timeline.png",
-                           f"{ctx.title}: trial {top.trial} at {fmt(top.snr_db)} dB")
+                           f"{ctx.title}: trial {top.trial} at {fmt_db(top.snr_db)} dB")
     return ["## One trial over time",
             f"Statistic, threshold in force and alarms of each method on trial {top.trial} at "
-            f"{fmt(top.snr_db)} dB (symmetric-log scale).",
+            f"{fmt_db(top.snr_db)} dB (symmetric-log scale).",
             "![one trial](figures/trial_timeline.png)"]

@@ -263,6 +263,11 @@ class TBDTask(Task):
     headline_columns = ("pd", "pd_low", "pd_high", "pfa", "pfa_low", "pfa_high", "rmse_mean", "rmse_low",
                         "rmse_high")
     scene_entities = ("frames",)
+    ranking_metric = "detected"
+    ranking_higher_is_better = True
+    ranking_label = "Pd (track detection)"
+    ranking_binary = True
+    curve_column = "pd"
     method_entities = ("score", "threshold", "value")
 
     # -------------------------------------------------------------- worker side

@@ -18,7 +18,7 @@ import pandas as pd
 
 from bench import figures
 from bench.calibration import gumbel_fit
-from bench.markdown import fmt, fmt_crossing, fmt_interval, snr50, table
+from bench.markdown import crossing_difference, crossing_text, fmt, fmt_db, fmt_interval, snr50, table
 from bench.tasks.base import ReportContext
 
 
@@ -41,7 +41,7 @@ def _per_scenario_tables(summary: pd.DataFrame, cell, caption: str) -> list[str]
         wide = scene.assign(_cell=[cell(r) for r in scene.itertuples()])
         wide = wide.pivot_table(index="config", columns="snr_db", values="_cell", aggfunc="first", sort=False)
         wide = wide[sorted(wide.columns)]
-        out.append(f"{caption}, `{sc}`:\n\n" + table(["config"] + [fmt(s) for s in wide.columns],
+        out.append(f"{caption}, `{sc}`:\n\n" + table(["config"] + [fmt_db(s) for s in wide.columns],
                                                     [[f"`{c}`"] + list(r) for c, r in zip(wide.index,
                                                                                           wide.to_numpy())]))
     return out
@@ -52,12 +52,10 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
     crossings = snr50(summary)
     rows = []
     for _sc, scene in crossings.groupby("scenario", sort=False):   # gains within a scenario config
-        lead = scene.mid.iloc[0]
+        lead = scene.crossing.iloc[0]
         for i, c in enumerate(scene.itertuples()):
-            gain = lead - c.mid if np.isfinite(c.mid) and np.isfinite(lead) else np.nan
-            rows.append([f"`{c.config}`", f"`{c.scenario}`", fmt_crossing(c.mid, summary.snr_db),
-                         f"[{fmt_crossing(c.low, summary.snr_db)}, {fmt_crossing(c.high, summary.snr_db)}]",
-                         "–" if i == 0 else (f"{gain:+.2f}" if np.isfinite(gain) else "–")])
+            rows.append([f"`{c.config}`", f"`{c.scenario}`", *crossing_text(c.crossing),
+                         "–" if i == 0 else crossing_difference(c.crossing, lead)])
     detail = _per_scenario_tables(summary, lambda r: fmt(r.pd), "Pd against SNR (dB)")
     return "\n\n".join([
         "## Track-before-detect: detection probability",
@@ -65,7 +63,10 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
         "per-scene Pfa **and** the backtracked track lies on the true target cells (within the scenario's "
         "tolerance) in at least two frames.",
         "![TBD Pd vs SNR](figures/tbd_pd_vs_snr.png)",
-        table(["config", "scenario", "SNR at Pd = 0.5 (dB)", "interval (dB)",
+        "SNR at Pd = 0.5: a probit fit to the track detections of every level (no floor), its 95% interval the "
+        "profile likelihood's; *between a and b* where Pd jumps across 0.5 between adjacent levels (from ≤ 0.1 "
+        "to ≥ 0.9), which the levels cannot resolve.",
+        table(["config", "scenario", "SNR at Pd = 0.5 (dB)", "95% interval (dB)",
                f"gain over the scenario's first config, `{crossings.config.iloc[0]}` (dB)"], rows),
         "<details><summary>Pd per SNR level</summary>\n\n" + "\n\n".join(detail) + "\n\n</details>",
     ])
@@ -119,8 +120,8 @@ def _section_rmse(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, tit
              "RMSE (the papers' figure of merit), with a 95% bootstrap interval over trials."]
     if curves:
         figures.rmse_per_step(curves, fig_dir / "tbd_rmse_per_frame.png",
-                              f"{title}: per-frame RMSE of detected tracks at {fmt(level)} dB")
-        parts += [f"Per-frame RMSE at {fmt(level)} dB, the lowest SNR where every config has Pd ≥ 0.5 "
+                              f"{title}: per-frame RMSE of detected tracks at {fmt_db(level)} dB")
+        parts += [f"Per-frame RMSE at {fmt_db(level)} dB, the lowest SNR where every config has Pd ≥ 0.5 "
                   "(all levels are in `steps.csv`):", "![RMSE per frame](figures/tbd_rmse_per_frame.png)"]
     detail = _per_scenario_tables(summary, lambda r: fmt_interval(r.rmse_mean, r.rmse_low, r.rmse_high) +
                                   f" ({fmt(r.pd * r.n_trials)} det.)", "Average RMSE (m) against SNR (dB)")
@@ -145,7 +146,7 @@ def _reductions(summary: pd.DataFrame) -> list[str]:
             red = 100.0 * (1.0 - g[g.config == cfg].set_index("snr_db").rmse_all_mean / ref).dropna()
             if red.empty:
                 continue
-            per = ", ".join(f"{fmt(snr)} dB: {v:+.1f} %" for snr, v in red.items())
+            per = ", ".join(f"{fmt_db(snr)} dB: {v:+.1f} %" for snr, v in red.items())
             lines.append(f"- `{cfg}` vs `{base_cfg}` (`{scenario}`): {per}; mean over SNR {red.mean():+.1f} %")
     return lines
 
@@ -169,7 +170,7 @@ def _section_rmse_all(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path,
                   for (sc, cfg), g in at.groupby(["scenario", "config"], sort=False)}
         if curves:
             figures.rmse_per_step(curves, fig_dir / "tbd_rmse_all_per_frame.png",
-                                  f"{title}: per-frame RMSE over all runs at {fmt(level)} dB")
+                                  f"{title}: per-frame RMSE over all runs at {fmt_db(level)} dB")
             parts.append("![RMSE per frame, all runs](figures/tbd_rmse_all_per_frame.png)")
     parts += _per_scenario_tables(summary, lambda r: fmt_interval(r.rmse_all_mean, r.rmse_all_low, r.rmse_all_high),
                                   "Average RMSE (m) over all runs against SNR (dB) [95% CI]")
@@ -188,8 +189,8 @@ def _section_snr_reference(summary: pd.DataFrame) -> str:
     for sc, g in summary.groupby("scenario", sort=False):
         off = float(g.snr_offset_unit_innovation_db.iloc[0])
         snrs = sorted(g.snr_db.unique())
-        rows.append([f"`{sc}`", f"{10 ** (off / 10):.2f}", f"{off:+.2f}", ", ".join(fmt(s) for s in snrs),
-                     ", ".join(fmt(s + off) for s in snrs)])
+        rows.append([f"`{sc}`", f"{10 ** (off / 10):.2f}", f"{off:+.1f}", ", ".join(fmt_db(s) for s in snrs),
+                     ", ".join(fmt_db(s + off) for s in snrs)])
     return "\n\n".join([
         "## Track-before-detect: SNR reference",
         "Our SNR is s² over the *stationary* variance of the per-cell noise (scaled to 1). An AR model "
@@ -199,8 +200,6 @@ def _section_snr_reference(summary: pd.DataFrame) -> str:
         "noise). Our SNR levels on that axis:",
         table(["scenario", "stationary variance at σ_w = 1", "offset (dB)", "our SNR levels (dB)",
                "the same on the unit-innovation axis (dB)"], rows),
-        "Per-cell Pfa is not reported: the calibration stores one score per null scene (its largest merit), "
-        "not the null scenes' merit maps, so only the per-scene Pfa is measured.",
     ])
 
 

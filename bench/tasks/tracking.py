@@ -162,6 +162,10 @@ class TrackingTask(Task):
                        "false_switch_high", "q_quiet_mean", "q_maneuver_mean", "q_maneuver_low",
                        "q_maneuver_high")
     headline_columns = ("rmse_mean", "rmse_low", "rmse_high", "divergence_rate", "nees_mean")
+    ranking_metric = "rmse"
+    ranking_higher_is_better = False
+    ranking_label = "mean per-trial position RMSE (m)"
+    curve_column = "rmse_mean"
     method_entities = ("estimate",)
 
     # -------------------------------------------------------------- worker side

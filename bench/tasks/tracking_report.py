@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from bench import figures
-from bench.markdown import fmt, fmt_interval, table
+from bench.markdown import fmt, fmt_db, fmt_interval, table
 from bench.metrics import bootstrap_mean_interval
 from bench.recording.paths import entity_name as slug
 from bench.tasks.base import ReportContext
@@ -34,7 +34,7 @@ def _overview(summary: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
     for scenario, g in summary.groupby("scenario", sort=False):
         ref[scenario] = snr = _reference_snr(g)
         at = g[g.snr_db == snr].set_index("config")
-        rows.append([f"`{scenario}`", fmt(snr)] +
+        rows.append([f"`{scenario}`", fmt_db(snr)] +
                     [fmt_interval(at.rmse_mean.get(c), at.rmse_low.get(c), at.rmse_high.get(c))
                      if c in at.index else "–" for c in configs])
     parts = ["## Tracking: position RMSE",
@@ -49,7 +49,7 @@ def _overview(summary: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
         figures.grouped_bars(values, low, high, fig_dir / "tracking_rmse_by_scenario.png",
                              f"{title}: time-averaged position RMSE (95% CI)", "RMSE (m)", log=True)
         parts.append("![RMSE by scenario config](figures/tracking_rmse_by_scenario.png)")
-    health = [[f"`{r.scenario}`", fmt(r.snr_db), f"`{r.config}`",
+    health = [[f"`{r.scenario}`", fmt_db(r.snr_db), f"`{r.config}`",
                fmt_interval(r.divergence_rate, r.divergence_low, r.divergence_high), fmt(r.nees_mean)]
               for r in summary.itertuples()]
     parts.append("<details><summary>Divergence rate and NEES per cell</summary>\n\n"
@@ -81,7 +81,7 @@ def _per_step(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: 
             continue
         curves = {c: (s.t.to_numpy(), s.rmse_position.to_numpy()) for c, s in at.groupby("config", sort=False)}
         name = f"tracking_rmse_per_step_{slug(scenario)}.png"
-        figures.rmse_per_step(curves, fig_dir / name, f"{title}: {scenario} at {fmt(snr)} dB", xlabel="time (s)")
+        figures.rmse_per_step(curves, fig_dir / name, f"{title}: {scenario} at {fmt_db(snr)} dB", xlabel="time (s)")
         parts.append(f"![per-step RMSE on {scenario}](figures/{name})")
     first = summary.scenario.iloc[0]
     snr = _reference_snr(summary[summary.scenario == first])
@@ -93,7 +93,7 @@ def _per_step(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: 
                          {c: s[f"mean_est_{comp}"].to_numpy() for c, s in at.groupby("config", sort=False)})
                   for comp in components}
         figures.mean_estimates(one.t.to_numpy(), panels, fig_dir / "tracking_mean_estimate.png",
-                               f"{title}: mean estimates on {first} at {fmt(snr)} dB ({int(one.n_trials.iloc[0])} trials)")
+                               f"{title}: mean estimates on {first} at {fmt_db(snr)} dB ({int(one.n_trials.iloc[0])} trials)")
         parts.append(f"Mean estimate of every component across trials against the truth, per step, on `{first}` "
                      "(state components, and the components the scenario derives from the state, e.g. range, "
                      "bearing and elevation):\n\n![mean estimates](figures/tracking_mean_estimate.png)")

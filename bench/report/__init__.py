@@ -1,18 +1,22 @@
 """Outputs of a run, all rebuilt from ``results.sqlite`` (``bench report DIR``).
 
 Writes ``trials.csv``, ``summary.csv``, ``calibration.csv``, ``steps.csv``
-(per-step tables of the tasks that have them), ``report.md``,
-``figures/*.png`` and ``recording.rrd`` (docs/architecture.md, 'Outputs of a
-run'). The report is the sweep's plan and calibration, then each task's own
-sections (:meth:`bench.tasks.base.Task.report_sections`: the calibrated
-tasks first, next to their calibration), then runtime, failures, the
-recording and provenance. Every file is written to a temporary name and
+(per-step tables of the tasks that have them), ``comparisons.csv`` (paired
+comparisons, :mod:`bench.report.glance`), ``report.md``, ``report.html``
+(:mod:`bench.report.html`), ``figures/*.png`` and ``recording.rrd``
+(docs/architecture.md, 'Outputs of a run' and 'Report'). The report is the
+title, *Results at a glance*, the preset's notes, the sweep's plan (every
+parameter that differs from its default) and calibration, then each task's own
+sections (:meth:`bench.tasks.base.Task.report_sections`: the calibrated tasks
+first, next to their calibration), the paired comparisons, single-trial
+sections, runtime, failures, the recording and provenance; the page and the
+harness's sections are Jinja2 templates (``bench/templates``,
+:mod:`bench.report.render`). Every file is written to a temporary name and
 renamed, so no reader ever sees a half-written output.
 """
 
 from __future__ import annotations
 
-import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +26,12 @@ from bench import figures, registry, runfolder
 from bench.calibration import EQUAL_CHANCE_PD
 from bench.errors import ConfigError
 from bench.markdown import fmt as _fmt
+from bench.markdown import fmt_db
 from bench.markdown import table as _table
 from bench.provenance import provenance
+from bench.report.glance import comparisons_frame, glance
+from bench.report.html import interactive_figures, markdown_to_html
+from bench.report.render import comparisons_markdown, glance_markdown, render, section_macro
 from bench.recording import TrialRecord, write_recording
 from bench.runner import calibrations
 from bench.store import Store
@@ -151,8 +159,8 @@ def steps_frame(trials: pd.DataFrame, series: dict, record: dict, t_of: dict) ->
 
 def _snr_text(snr: list) -> str:
     if len(snr) > 2:
-        return f"{_fmt(snr[0])} to {_fmt(snr[-1])} dB ({len(snr)} levels)"
-    return ", ".join(f"{_fmt(x)} dB" for x in snr)
+        return f"{fmt_db(snr[0])} to {fmt_db(snr[-1])} dB ({len(snr)} levels)"
+    return ", ".join(f"{fmt_db(x)} dB" for x in snr)
 
 
 def _tasks_present(task_of: dict) -> list:
@@ -161,30 +169,66 @@ def _tasks_present(task_of: dict) -> list:
     return [t for t in registry.tasks().values() if t in present]
 
 
+def _same(a, b) -> bool:
+    norm = (lambda v: list(v) if isinstance(v, (list, tuple)) else v)
+    return norm(a) == norm(b)
+
+
+def non_default(cls, params: dict) -> dict:
+    """The entries of the resolved ``params`` that differ from the plugin's
+    declared defaults (``cls.Params``); every entry when they cannot be built."""
+    from bench.params import build_params, params_as_dict
+    try:
+        defaults = params_as_dict(build_params(cls.Params, {}))
+    except Exception:      # a Params without defaults for everything: show all
+        return dict(params)
+    return {k: v for k, v in params.items() if k not in defaults or not _same(v, defaults[k])}
+
+
+def _params_text(params: dict) -> str:
+    return ", ".join(f"{k}={v}" for k, v in params.items()).replace("|", "\\|") or "defaults"
+
+
+def _section(name: str, *args) -> str:
+    """The harness section ``name``: a macro of ``sections.md.j2``."""
+    return section_macro(name)(*args).strip("\n")
+
+
+def _resolved_scenario_params(sweep: dict) -> dict[str, dict]:
+    """Scenario config label -> its resolved parameters, from the stored sweep resolved
+    again (a single-scenario sweep keeps its grid axes merged in ``scenario_params``)."""
+    from bench.config import parse_sweep
+    from bench.params import params_as_dict
+    plan = parse_sweep(sweep, allow_large=True)
+    return {sc.label: params_as_dict(sc.params) for sc in plan.scenarios}
+
+
 def _section_plan(record: dict, store: Store, tasks: list) -> str:
     sweep = record["sweep"]
     cal = sweep["calibration"]
     units = ", ".join(f"{t.pfa_unit} for {t.short_noun}" for t in tasks if t.calibrated)
-    rows = [["seed", sweep["seed"]], ["trials per unit (chunk)", sweep["chunk"]],
-            ["calibration", f"{cal['mode']}, requested Pfa {cal['pfa']:g}{f' ({units})' if units else ''}, "
-                            f"{cal['h0_trials']} null trials per scenario config"]]
-    scenarios = [[f"`{sc['label']}`", sc["name"], ", ".join(sc.get("tasks", [])), sc["params"] or "defaults",
+    calibrated = {t.name for t in tasks if t.calibrated}
+    null_for = [f"`{sc['label']}`" for sc in record["scenarios"] if calibrated & set(sc.get("tasks", []))]
+    rows = [["seed", sweep["seed"]], ["trials per unit (chunk)", sweep["chunk"]]]
+    if null_for:
+        rows.append(["calibration", f"{cal['mode']}, requested Pfa {cal['pfa']:g}{f' ({units})' if units else ''}, "
+                                    f"{cal['h0_trials']} null trials per scenario config of a calibrated task "
+                                    f"({', '.join(null_for)})"])
+    resolved = _resolved_scenario_params(sweep)
+    scenarios = [[f"`{sc['label']}`", sc["name"], ", ".join(sc.get("tasks", [])),
+                  _params_text(non_default(registry.get_scenario(sc["name"]), resolved.get(sc["label"], {}))),
                   _snr_text(sc.get("snr_db", sweep.get("snr_db", []))), sc.get("trials", sweep.get("trials"))]
                  for sc in record["scenarios"]]
     methods = [[f"`{m['label']}`", m["name"], m["task"],
-                ", ".join(f"{k}={v}" for k, v in sweep["methods"][i]["params"].items())]
+                _params_text(non_default(registry.get_method(m["name"]), sweep["methods"][i]["params"]))]
                for i, m in enumerate(record["methods"])]
-    definition = store.meta("snr_definition") or "see the scenario's documentation"
-    return "\n\n".join([
-        "## What was run",
-        _table(["scenario config", "scenario", "tasks", "parameters set", "SNR", "trials per level"], scenarios),
-        _table(["", ""], rows),
-        f"**SNR definition.** {definition}",
-        "Every method config runs on the same generated trials of each scenario config that serves its "
-        "task (common random numbers); trial *i* sees the same noise at every SNR level. The resolved "
-        "sweep is `plan.toml` next to this report.",
-        _table(["config", "method", "task", "resolved parameters"], methods),
-    ] + _unavailable_text(record.get("unavailable", [])) + _skipped_pairs_text(record.get("skipped_pairs", [])))
+    return _section(
+        "plan",
+        _table(["scenario config", "scenario", "tasks", "parameters (not default)", "SNR", "trials per level"],
+               scenarios),
+        _table(["", ""], rows), store.meta("snr_definition") or "see the scenario's documentation",
+        _table(["config", "method", "task", "parameters (not default)"], methods),
+        _unavailable_text(record.get("unavailable", [])) + _skipped_pairs_text(record.get("skipped_pairs", [])))
 
 
 def _skipped_pairs_text(skipped: list[dict]) -> list[str]:
@@ -204,21 +248,6 @@ def _unavailable_text(skipped: list) -> list[str]:
     lines = [f"- `{s['label']}` ({s['name']}): {escape_controls(s['reason'])}" for s in skipped]
     return ["**Not run** (marked `optional` in the sweep, unavailable in this environment; their rows are "
             "absent from every table):\n\n" + "\n".join(lines)]
-
-
-def _calibration_text(calibrated: list) -> str:
-    """What the calibration table shows, for the tasks calibrated in the sweep."""
-    units = ", ".join(f"{t.pfa_unit} for {t.noun}" for t in calibrated)
-    samples = "; ".join(f"{t.short_noun}: {t.null_sample}" for t in calibrated)
-    return " ".join([
-        f"Thresholds are applied by the harness, so every method is compared at the same false-alarm "
-        f"rate: {units}. *Measured Pfa of nominal* is the fraction of null-hypothesis values (separate "
-        f"calibration trials; {samples}) at or above the method's own analytic threshold "
-        "(– where the method has none), with its 95% interval; *empirical* thresholds are the "
-        "(1 − Pfa) quantile of the same values, *gumbel* ones the quantile of a Gumbel law fitted to them. "
-        "*Measured Pfa of the threshold used* is on the same null values (by construction at most the "
-        "requested Pfa for *empirical*; an honest check of the tail fit for *gumbel*).",
-        *(t.calibration_text for t in calibrated if t.calibration_text)])
 
 
 def _section_calibration(cals, summary: pd.DataFrame, task_of: dict) -> str:
@@ -241,18 +270,13 @@ def _section_calibration(cals, summary: pd.DataFrame, task_of: dict) -> str:
     empty = {"–", "– [–, –]"}
     keep = [j for j in range(len(header)) if any(r[j] not in empty for r in rows)]
     present = _tasks_present({c.method: task_of[c.method] for c in cals})
-    return "\n\n".join([
-        "## Calibration",
-        _calibration_text(present),
-        _table([header[j] for j in keep], [[r[j] for j in keep] for r in rows]),
-        "\n\n".join(t.calibration_note for t in present if t.calibration_note),
-    ])
+    return _section("calibration", present, _table([header[j] for j in keep], [[r[j] for j in keep] for r in rows]))
 
 
 def _section_runtime(runs: pd.DataFrame, units: pd.DataFrame, fig_dir: Path, record: dict) -> str:
     ev = runs[runs.error.isna()]
     if ev.empty:
-        return "## Runtime\n\nNo successful runs."
+        return _section("runtime", "", "")
     per = ev.groupby("method").agg(seconds=("seconds", "sum"), n=("n", "sum")).reset_index()
     per["seconds_per_trial"] = per.seconds / per.n
     order = {m["label"]: i for i, m in enumerate(record["methods"])}
@@ -261,22 +285,17 @@ def _section_runtime(runs: pd.DataFrame, units: pd.DataFrame, fig_dir: Path, rec
     gen = units.generate_seconds.sum() / units.n.sum()
     rows = [[f"`{r.config}`", f"{r.seconds_per_trial * 1e3:.3g}", f"{r.n:,}", f"{r.seconds:.3g}"]
             for r in per.itertuples()]
-    return "\n\n".join([
-        "## Runtime",
-        "![runtime](figures/runtime.png)",
-        _table(["config", "ms per trial", "trials run", "total seconds"], rows),
-        f"Scenario generation: {gen * 1e3:.3g} ms per trial. Times are per unit, on one core each.",
-    ])
+    return _section("runtime", _table(["config", "ms per trial", "trials run", "total seconds"], rows),
+                    f"{gen * 1e3:.3g}")
 
 
 def _section_failures(runs: pd.DataFrame) -> str:
     bad = runs[runs.error.notna()]
     if bad.empty:
-        return "## Failures\n\nNone: every method config ran on every unit."
-    rows = [[f"`{r.method}`", r.phase, "null" if pd.isna(r.snr_db) else _fmt(r.snr_db), f"`{r.unit}`",
+        return _section("failures", "", 0)
+    rows = [[f"`{r.method}`", r.phase, "null" if pd.isna(r.snr_db) else fmt_db(r.snr_db), f"`{r.unit}`",
              str(r.error).replace("|", "\\|")[:300]] for r in bad.head(50).itertuples()]
-    more = f"\n\n… and {len(bad) - 50} more (see `results.sqlite`, table `runs`)." if len(bad) > 50 else ""
-    return "## Failures\n\n" + _table(["config", "phase", "SNR (dB)", "unit", "error"], rows) + more
+    return _section("failures", _table(["config", "phase", "SNR (dB)", "unit", "error"], rows), max(0, len(bad) - 50))
 
 
 def _section_provenance(record: dict, store: Store, prov: dict) -> str:
@@ -287,19 +306,13 @@ def _section_provenance(record: dict, store: Store, prov: dict) -> str:
         rows.append(["wall time of the units in the last `bench run` (before report and recording)",
                      f"{float(wall):.1f} s"])
     rows += [[k, v] for k, v in prov.items()]
-    return "## Provenance\n\n" + _table(["", ""], rows)
+    return _section("provenance", _table(["", ""], rows))
 
 
 def _section_recording(n: int, out_dir: Path, tasks: list) -> str:
     """What ``recording.rrd`` holds: the harness's part, then each task's
     (``Task.recording_text``)."""
-    body = ("`recording.rrd` holds the first {n} trial(s) of every SNR level of each scenario config, on the "
-            "timelines `step` and `time`: the true and measured positions (2D, y negated so north is up); " +
-            "; ".join(t.recording_text for t in tasks if t.recording_text) +
-            ". Pd and RMSE against SNR per config are under `/summary`. Open it with `bench view {out}` or "
-            "`rerun {out}/recording.rrd`.")
-    text = textwrap.fill(body, width=100)
-    return "## Recording\n\n" + text.replace("{n}", str(n)).replace("{out}", str(out_dir))
+    return _section("recording", n, str(out_dir), [t.recording_text for t in tasks if t.recording_text])
 
 
 def preset_notes(source: str) -> str:
@@ -342,7 +355,7 @@ def _task_contexts(present: list, task_of: dict, summary, trials, steps, series,
             calibrations=[c for c in cals if c.method in configs], records=records, store=store,
             fig_dir=out_dir / "figures", title=sweep["name"], pfa=sweep["calibration"]["pfa"],
             chance_pd=sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD),
-            timeline_snr_db=sweep["record"].get("timeline_snr_db"), configs=configs)))
+            timeline_snr_db=sweep["record"].get("timeline_snr_db"), configs=configs, task=task)))
     return out
 
 
@@ -378,12 +391,13 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
     title = sweep["name"]
     contexts = _task_contexts(present, task_of, summary, trials, steps, series, cals, records, store, out_dir, sweep)
     done, total = len(units), int(store.meta("units_total") or len(units))
-    parts = [f"# {title}", sweep.get("description") or "",
-             f"Reproduce with `{record.get('command', '')}`." +
-             ("" if done >= total else f" **Incomplete run: {done} of {total} units stored.**"),
-             preset_notes(record.get("source", "")),   # the paper-vs-ours table leads a preset's report
+    chance = {(c.scenario, c.method): c.chance_pd for c in cals}
+    comparisons = comparisons_frame(trials, task_of)
+    _write_csv(comparisons, out_dir / "comparisons.csv")
+    parts = [preset_notes(record.get("source", "")),   # the paper-vs-ours table leads a preset's sections
              _section_plan(record, store, present), _section_calibration(cals, summary, task_of)]
     parts += [s for task, ctx in contexts for s in task.report_sections(ctx)]
+    parts.append(comparisons_markdown(comparisons, task_of))
     parts += [s for task, ctx in contexts for s in task.trial_sections(ctx)]
     parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
     if recording and records:
@@ -391,6 +405,13 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
                         tasks=task_of, recording_id=f"{title}-{store.meta('fingerprint')}")
         parts.append(_section_recording(sweep["record"]["trials"], out_dir, present))
     parts.append(_section_provenance(record, store, provenance()))
+    page = {"title": title, "description": sweep.get("description") or "", "command": record.get("command", ""),
+            "incomplete": None if done >= total else {"done": done, "total": total},
+            "glance": glance_markdown(glance(trials, task_of, comparisons, chance)),
+            "parts": [p for p in parts if p]}
     report = out_dir / "report.md"
-    _write_text(report, escape_controls("\n\n".join(p for p in parts if p) + "\n"))
+    _write_text(report, escape_controls(render("report.md.j2", html=False, **page) + "\n"))
+    html = markdown_to_html(escape_controls(render("report.md.j2", html=True, **page)), title, out_dir,
+                            interactive_figures(summary, task_of))
+    _write_text(out_dir / "report.html", escape_controls(html))
     return report

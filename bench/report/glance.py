@@ -1,0 +1,119 @@
+"""Results at a glance and paired comparisons (docs/architecture.md, 'Report').
+
+Both are driven by what a task declares (:class:`bench.tasks.base.Task`):
+``ranking_metric`` (a per-trial column of trials.csv), ``ranking_higher_is_better``,
+``ranking_label`` and ``ranking_binary``. Nothing here names a task.
+
+*Paired comparisons* (``comparisons.csv``): every method config of a scenario
+config sees the same trials (common random numbers), so for each pair of
+configs (a, b) the per-trial difference b − a of the ranking metric cancels
+the noise they share. Per SNR level and over all levels (each level weighing
+the same), the mean difference has a 95% paired-bootstrap interval (trials
+resampled within each level, :func:`bench.metrics.paired_difference`); for a
+0/1 metric McNemar's exact test of the discordant pairs is added. A pair is
+*significant* when its interval excludes 0 and, for a 0/1 metric, McNemar's
+test rejects at 5% too (the percentile bootstrap is anti-conservative with few
+discordant pairs; the exact test is not).
+
+*At a glance*: per (task, scenario config) the configs ranked by the ranking
+metric averaged over the SNR levels (each level weighing the same), with
+bootstrap intervals; the winner's margin over the runner-up is their paired
+comparison over all levels, "tie" when it is not significant.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pandas as pd
+
+from bench.metrics import CONFIDENCE, bootstrap_mean_ci, mcnemar_exact, paired_difference
+
+COMPARISON_COLUMNS = ["scenario", "task", "metric", "snr_db", "config_a", "config_b", "n_pairs", "mean_a", "mean_b",
+                      "difference", "difference_low", "difference_high", "only_a", "only_b", "mcnemar_p",
+                      "significant", "better"]
+#: ``snr_db`` of the comparison over every level of a scenario config (blank in the CSV)
+ALL_LEVELS = np.nan
+
+
+def metric_values(column: pd.Series) -> pd.Series:
+    """A trials.csv metric column as floats (a 0/1 indicator stored as bool: 0.0/1.0; missing: NaN)."""
+    return pd.to_numeric(column.map(lambda v: float(v) if isinstance(v, (bool, np.bool_)) else v), errors="coerce")
+
+
+def _pairs_frame(g: pd.DataFrame, metric: str, a: str, b: str) -> pd.DataFrame:
+    """One row per trial both configs ran, with ``a``, ``b`` and ``snr_db``."""
+    wide = g.assign(_v=metric_values(g[metric])).pivot_table(index=["snr_db", "trial"], columns="config", values="_v",
+                                                        aggfunc="first", dropna=False)
+    return wide[[a, b]].rename(columns={a: "a", b: "b"}).reset_index()
+
+
+def compare_pair(pairs: pd.DataFrame, binary: bool, higher_is_better: bool) -> dict:
+    """The paired comparison of one pair of configs on ``pairs`` (columns a, b, snr_db)."""
+    diff, low, high = paired_difference(pairs.a, pairs.b, pairs.snr_db)
+    only_a, only_b, p = mcnemar_exact(pairs.a, pairs.b) if binary else (np.nan, np.nan, np.nan)
+    significant = bool(np.isfinite(low) and (low > 0 or high < 0) and (not binary or p < 1 - CONFIDENCE))
+    ok = np.isfinite(pairs.a) & np.isfinite(pairs.b)
+    better = "tie"
+    if significant:
+        better = "b" if (diff > 0) == higher_is_better else "a"
+    return {"n_pairs": int(ok.sum()), "mean_a": float(pairs.a[ok].mean()), "mean_b": float(pairs.b[ok].mean()),
+            "difference": diff, "difference_low": low, "difference_high": high, "only_a": only_a, "only_b": only_b,
+            "mcnemar_p": p, "significant": significant, "better": better}
+
+
+def _groups(trials: pd.DataFrame, task_of: dict):
+    """(scenario, task, its trials) per scenario config and task with a ranking metric."""
+    tasks = trials.config.map(lambda c: task_of[c].name if c in task_of else "")
+    for (scenario, name), g in trials.groupby([trials.scenario, tasks], sort=False):
+        task = next((t for t in task_of.values() if t.name == name), None)
+        if task is not None and task.ranking_metric and task.ranking_metric in g:
+            yield scenario, task, g
+
+
+def comparisons_frame(trials: pd.DataFrame, task_of: dict) -> pd.DataFrame:
+    """Every pair of method configs of each (scenario config, task), per SNR
+    level and over all levels: :data:`COMPARISON_COLUMNS`."""
+    rows = []
+    for scenario, task, g in _groups(trials, task_of):
+        configs = list(dict.fromkeys(g.config))
+        for a, b in itertools.combinations(configs, 2):
+            pairs = _pairs_frame(g, task.ranking_metric, a, b)
+            key = {"scenario": scenario, "task": task.name, "metric": task.ranking_metric, "config_a": a,
+                   "config_b": b}
+            for snr, at in [(ALL_LEVELS, pairs), *pairs.groupby("snr_db", sort=True)]:
+                row = compare_pair(at, task.ranking_binary, task.ranking_higher_is_better)
+                row["better"] = {"a": a, "b": b}.get(row["better"], "tie")
+                rows.append({**key, "snr_db": snr, **row})
+    return pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
+
+
+def glance(trials: pd.DataFrame, task_of: dict, comparisons: pd.DataFrame, chance: dict) -> list[dict]:
+    """Per (scenario config, task): the configs ranked (mean of the ranking
+    metric over the levels with its interval, the chance Pd where calibrated),
+    the winner, its margin over the runner-up and whether it is a tie."""
+    out = []
+    for scenario, task, g in _groups(trials, task_of):
+        values = g.assign(_v=metric_values(g[task.ranking_metric]))
+        ranking = []
+        for config, c in values.groupby("config", sort=False):
+            mean, low, high = bootstrap_mean_ci(c._v, c.snr_db)
+            ranking.append({"config": config, "mean": mean, "low": low, "high": high,
+                            "chance": chance.get((scenario, config), np.nan)})
+        sign = -1.0 if task.ranking_higher_is_better else 1.0
+        ranking.sort(key=lambda r: sign * r["mean"] if np.isfinite(r["mean"]) else np.inf)
+        entry = {"scenario": scenario, "task": task, "ranking": ranking, "levels": int(g.snr_db.nunique()),
+                 "winner": ranking[0]["config"], "runner_up": None, "margin": None}
+        if len(ranking) > 1:
+            a, b = ranking[0]["config"], ranking[1]["config"]
+            pick = comparisons[(comparisons.scenario == scenario) & (comparisons.task == task.name)
+                               & comparisons.snr_db.isna()]
+            row = pick[((pick.config_a == a) & (pick.config_b == b)) | ((pick.config_a == b) & (pick.config_b == a))]
+            r = row.iloc[0]
+            flip = 1.0 if r.config_b == a else -1.0      # the rows hold b − a: as winner − runner-up
+            low, high = sorted((flip * r.difference_low, flip * r.difference_high))
+            entry.update(runner_up=b, margin={"difference": flip * r.difference, "low": low, "high": high,
+                                              "tie": not r.significant, "mcnemar_p": r.mcnemar_p})
+        out.append(entry)
+    return out

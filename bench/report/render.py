@@ -1,0 +1,93 @@
+"""The report's Jinja2 templates (``bench/templates/*.j2``, packaged data).
+
+``report.md`` and ``report.html`` come from the same template,
+``report.md.j2``, with a format switch ``html``: the HTML build renders it as
+Markdown with a placeholder for the interactive figures, then converts it
+(:mod:`bench.report.html`). One Markdown source keeps report.md readable on
+GitHub and the HTML identical in content (docs/architecture.md, 'Report').
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pandas as pd
+
+from bench.markdown import fmt, table
+
+
+@functools.lru_cache(maxsize=1)
+def environment():
+    import jinja2
+    env = jinja2.Environment(loader=jinja2.PackageLoader("bench", "templates"), autoescape=False,
+                             keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True,
+                             undefined=jinja2.StrictUndefined)
+    env.filters["fmt"] = fmt
+    return env
+
+
+def render(name: str, **values) -> str:
+    """Template ``name`` (in bench/templates) rendered with ``values``, blank-line runs collapsed."""
+    text = environment().get_template(name).render(**values)
+    while "\n\n\n" in text:
+        text = text.replace("\n\n\n", "\n\n")
+    return text.strip("\n")
+
+
+def section_macro(name: str):
+    """The macro ``name`` of ``sections.md.j2`` (the harness's own sections), as a function."""
+    return getattr(environment().get_template("sections.md.j2").module, name)
+
+
+def _interval(mid, low, high, signed: bool = False) -> str:
+    f = (lambda x: ("+" if signed and np.isfinite(x) and x > 0 else "") + fmt(x))
+    return f"{f(mid)} [{f(low)}, {f(high)}]"
+
+
+def _p(p) -> str:
+    return "" if p is None or not np.isfinite(p) else fmt(float(p), 2)
+
+
+def glance_markdown(entries: list[dict]) -> str:
+    """The *Results at a glance* section (``glance.md.j2``)."""
+    if not entries:
+        return ""
+    view = []
+    for g in entries:
+        show_chance = any(np.isfinite(r["chance"]) for r in g["ranking"])
+        header = ["rank", "config", f"{g['task'].ranking_label} [95% CI]"] + (["chance Pd"] if show_chance else [])
+        rows = [[str(i), f"`{r['config']}`", _interval(r["mean"], r["low"], r["high"])] +
+                ([fmt(r["chance"])] if show_chance else []) for i, r in enumerate(g["ranking"], start=1)]
+        margin = g["margin"]
+        if margin is not None:
+            margin = {"text": _interval(margin["difference"], margin["low"], margin["high"], signed=True),
+                      "tie": margin["tie"], "p": _p(margin["mcnemar_p"])}
+        view.append({**g, "margin": margin, "table": table(header, rows)})
+    return render("glance.md.j2", entries=view, any_binary=any(g["task"].ranking_binary for g in entries))
+
+
+#: Above this many pairs, a scenario config's comparison table is folded (<details>).
+FOLD_PAIRS = 6
+
+
+def comparisons_markdown(comparisons: pd.DataFrame, task_of: dict) -> str:
+    """The *Paired comparisons* section (``comparisons.md.j2``): the all-level rows."""
+    overall = comparisons[comparisons.snr_db.isna()]
+    if overall.empty:
+        return ""
+    tasks = {t.name: t for t in task_of.values()}
+    blocks = []
+    for (scenario, name), g in overall.groupby(["scenario", "task"], sort=False):
+        task = tasks[name]
+        header = ["a", "b", f"mean a", f"mean b", "b − a [95% CI]"] + \
+            (["a only", "b only", "McNemar p"] if task.ranking_binary else []) + ["better"]
+        rows = [[f"`{r.config_a}`", f"`{r.config_b}`", fmt(r.mean_a), fmt(r.mean_b),
+                 _interval(r.difference, r.difference_low, r.difference_high, signed=True)] +
+                ([str(int(r.only_a)), str(int(r.only_b)), _p(r.mcnemar_p)] if task.ranking_binary else []) +
+                ["**tie**" if r.better == "tie" else f"`{r.better}`"] for r in g.itertuples()]
+        blocks.append({"caption": f"{task.noun.capitalize()} on `{scenario}`: {task.ranking_label} "
+                                  f"({'higher' if task.ranking_higher_is_better else 'lower'} is better).",
+                       "table": table(header, rows), "pairs": len(rows), "folded": len(rows) > FOLD_PAIRS})
+    return render("comparisons.md.j2", blocks=blocks,
+                  any_binary=any(tasks[n].ranking_binary for n in overall.task.unique()))
