@@ -398,12 +398,12 @@ def update_scratch(d, m):
 
 @numba.njit(cache=True)
 def _predict_kernel(x, P, F, Q, u):
-    """x (n, d), P (n, d, d), F (d, d), Q (n, d, d) (any strides), u (n, d)."""
+    """x (n, d), P (n, d, d), F (n, d, d), Q (n, d, d) (any strides), u (n, d)."""
     n, d = x.shape
     x_out, P_out = np.empty((n, d)), np.empty((n, d, d))
     FP = np.empty((d, d))
     for i in range(n):
-        predict_one(x[i], P[i], F, Q[i], u[i], x_out[i], P_out[i], FP)
+        predict_one(x[i], P[i], F[i], Q[i], u[i], x_out[i], P_out[i], FP)
     return x_out, P_out
 
 
@@ -428,15 +428,20 @@ def _stacked(a: np.ndarray, tail: int) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=float).reshape(-1, *a.shape[a.ndim - tail:])
 
 
+def _per_trial(A: np.ndarray, lead: tuple, d: int, n: int) -> np.ndarray:
+    """A (d, d) shared or (..., d, d) per trial as an (n, d, d) view (no copy when shared)."""
+    return np.broadcast_to(A, (*lead, d, d)).reshape(-1, d, d) if A.ndim > 2 else np.broadcast_to(A, (n, d, d))
+
+
 def predict_batched(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray, u: np.ndarray | None = None):
     """x_k+1|k = F x_k|k (+ u), P_k+1|k = F P_k|k F' + Q, over leading axes: x (..., d),
-    P (..., d, d); F (d, d) shared; Q (d, d) or per trial (..., d, d); u (..., d) an
-    additive input (e.g. B u) or None."""
+    P (..., d, d); F and Q (d, d) shared or per trial (..., d, d) (e.g. the AR tracker's
+    per-trial coefficients); u (..., d) an additive input (e.g. B u) or None."""
     lead, d = x.shape[:-1], x.shape[-1]
     xs, Ps = _stacked(x, 1), _stacked(P, 2)
-    Qs = np.broadcast_to(Q, (*lead, d, d)).reshape(-1, d, d) if Q.ndim > 2 else np.broadcast_to(Q, (len(xs), d, d))
+    Fs, Qs = (_per_trial(np.asarray(A, dtype=float), lead, d, len(xs)) for A in (F, Q))
     us = np.zeros_like(xs) if u is None else _stacked(np.broadcast_to(u, x.shape), 1)
-    x_next, P_next = _predict_kernel(xs, Ps, np.ascontiguousarray(F, dtype=float), Qs, us)
+    x_next, P_next = _predict_kernel(xs, Ps, Fs, Qs, us)
     return x_next.reshape(x.shape), P_next.reshape(P.shape)
 
 
