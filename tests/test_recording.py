@@ -295,7 +295,7 @@ def test_empty_recording(tmp_path):
 def test_live_viewer_without_display_raises_one_line(monkeypatch):
     from bench.recording import sinks
 
-    monkeypatch.setattr(sinks, "_has_display", lambda: False)
+    monkeypatch.setattr(sinks, "has_display", lambda: False)
     with pytest.raises(RuntimeError) as err:
         LiveViewer(tasks=TASKS, recording_id="live")
     assert "\n" not in str(err.value) and "viewer" in str(err.value)

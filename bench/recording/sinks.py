@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import errno
 import os
-import shutil
-import socket
 import struct
 import sys
 from collections.abc import Iterable, Mapping
@@ -25,6 +23,7 @@ from bench.recording import blueprint as bp
 from bench.recording.draw import log_records
 from bench.recording.layout import trial_layout
 from bench.recording.record import TrialRecord
+from bench.recording.serve import has_display, listening, rerun_executable
 from bench.recording.summary import log_summary, summary_charts
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
@@ -98,30 +97,6 @@ def rrd_complete(path: str | os.PathLike) -> bool:
     return tail[20:28] == _RRD_FOOTER_MAGIC and offset + length + 32 == size
 
 
-def _has_display() -> bool:
-    """False on Linux/BSD without X11 or Wayland: the viewer cannot open."""
-    if sys.platform.startswith(("win", "darwin")):
-        return True
-    return any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"))
-
-
-def _viewer_executable() -> str | None:
-    """The ``rerun`` binary: on PATH, or next to this interpreter (venv not activated)."""
-    found = shutil.which("rerun")
-    if found:
-        return found
-    local = Path(sys.executable).with_name("rerun.exe" if os.name == "nt" else "rerun")
-    return str(local) if local.exists() else None
-
-
-def _port_open(port: int) -> bool:
-    try:
-        with socket.create_connection(("127.0.0.1", port), timeout=1.0):
-            return True
-    except OSError:
-        return False
-
-
 class LiveViewer:
     """Stream records to a spawned Rerun viewer (``bench run --viewer``).
 
@@ -138,9 +113,9 @@ class LiveViewer:
                  port: int = 9876):
         import rerun as rr
 
-        if not _has_display():
+        if not has_display():
             raise RuntimeError("cannot open the Rerun viewer: no display (DISPLAY/WAYLAND_DISPLAY unset)")
-        exe = _viewer_executable()
+        exe = rerun_executable()
         if exe is None:
             raise RuntimeError("cannot open the Rerun viewer: `rerun` executable not found")
         stream = rr.RecordingStream(application_id, recording_id=recording_id)
@@ -152,7 +127,7 @@ class LiveViewer:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else repr(exc)
             raise RuntimeError(f"cannot open the Rerun viewer: {first}") from exc
         # rr.spawn only warns when the viewer dies at start-up: check for real.
-        if not _port_open(port):
+        if not listening(port, timeout_s=1.0):
             stream.disconnect()
             raise RuntimeError(f"cannot open the Rerun viewer: nothing listens on port {port}")
         self._attach(stream, tasks)
