@@ -243,7 +243,8 @@ def _run_locked(args, plan, out_dir: Path, command: str) -> int:
         tasks = {m.label: registry.get_task(task) for m, task in zip(plan.methods, plan.method_tasks)}
         try:
             viewer = LiveViewer(tasks=tasks, application_id=plan.name,
-                                recording_id=f"{plan.name}-{plan.fingerprint()}")
+                                recording_id=f"{plan.name}-{plan.fingerprint()}",
+                                recording_name=f"{plan.name} · {plan.fingerprint()[:12]} (live)")
         except RuntimeError as exc:
             raise ConfigError("--viewer", str(exc)) from None
     on_result = None

@@ -373,7 +373,8 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     if recording and records:
         on_phase("recording")
         write_recording(out_dir / "recording.rrd", records, _recording_summary(summary, present),
-                        tasks=task_of, recording_id=f"{title}-{store.meta('fingerprint')}")
+                        tasks=task_of, recording_id=f"{title}-{store.meta('fingerprint')}",
+                        application_id=title, recording_name=f"{title} · {str(store.meta('fingerprint'))[:12]}")
         parts.append(_section_recording(sweep["record"]["trials"], out_dir, present))
     parts.append(_section_provenance(record, store, provenance()))
     report = out_dir / "report.md"

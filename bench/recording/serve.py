@@ -43,7 +43,16 @@ def has_display() -> bool:
 
 
 def rerun_executable() -> str | None:
-    """The ``rerun`` binary: on PATH, or next to this interpreter (venv not activated)."""
+    """The ``rerun`` binary: rerun-sdk's own (``rerun_cli/rerun``: the ``rerun`` on PATH is
+    a Python wrapper that would outlive a stop signal's target), else next to this
+    interpreter (venv not activated), else on PATH."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("rerun_cli")
+    if spec is not None and spec.origin:
+        binary = Path(spec.origin).with_name("rerun.exe" if os.name == "nt" else "rerun")
+        if binary.is_file() and os.access(binary, os.X_OK):
+            return str(binary)
     local = Path(sys.executable).with_name("rerun.exe" if os.name == "nt" else "rerun")
     if local.exists():
         return str(local)

@@ -118,6 +118,7 @@ class TrackingTask(Task):
     summary_columns = ("n_trials", "rmse_mean", "rmse_low", "rmse_high", "realised_snr_db", "divergence_rate",
                        "divergence_low", "divergence_high", "nees_mean")
     headline_columns = ("rmse_mean", "rmse_low", "rmse_high", "divergence_rate", "nees_mean")
+    recording_charts = (("rmse_mean", "RMSE (m)"), ("divergence_rate", "divergence rate"))
     method_entities = ("estimate",)
 
     # -------------------------------------------------------------- worker side
