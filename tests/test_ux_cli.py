@@ -119,8 +119,8 @@ def test_progress_prints_periodic_lines_to_a_file():
     progress.close()
     lines = stream.getvalue().splitlines()
     assert lines[0] == "bench: calibration: 0/4 units (0%), 0:00 elapsed"
-    assert any(re.fullmatch(r"bench: calibration: 2/4 units \(50%\), 0:00 elapsed, ETA 0:00", x) for x in lines)
-    assert "bench: calibration: done, 2/4 units in 0:00" in lines
+    assert any(re.fullmatch(r"bench: calibration: 2/4 units \(50%\), 0:0\d elapsed, ETA 0:0\d", x) for x in lines)
+    assert any(re.fullmatch(r"bench: calibration: done, 2/4 units in 0:0\d", x) for x in lines)
     assert lines[-2:] == ["bench: report: started", "bench: report: done, in 0:00"]
 
 
@@ -144,7 +144,8 @@ def test_run_names_its_phases_on_stderr_and_resuming_a_finished_run_says_so(writ
     assert "\r" not in first.stderr
     again = _bench("run", sweep, "--out", out, "--workers", 1, "--no-record")
     assert again.returncode == 0, again.stderr
-    assert f"Nothing to run: all 8 units stored in {out}" in again.stderr
+    assert re.search(rf"^Nothing to run: all \d+ units stored in {re.escape(str(out))}$", again.stderr, re.M), \
+        again.stderr
     assert "calibration" not in again.stderr and "evaluation" not in again.stderr
 
 
