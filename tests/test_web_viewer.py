@@ -25,7 +25,7 @@ CHROMIUM = "/usr/bin/chromium"
 ROOT = Path(__file__).resolve().parent.parent
 #: Seconds the page holds its load event: the viewer's Wasm compiles and the recording
 #: streams with a software rasterizer on a busy machine.
-LOAD_WAIT_S = 75
+LOAD_WAIT_S = 120
 
 pytestmark = pytest.mark.skipif(not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} is absent (apt-get install chromium)")
 
