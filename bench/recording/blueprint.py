@@ -18,13 +18,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from bench.recording.layout import TrialLayout
 from bench.recording.paths import rerun_path
 from bench.recording.record import TrialRecord
 
-__all__ = ["MAX_TABS", "TrialTab", "Views", "blueprint", "legend_clear_axis", "relative", "trial_tab"]
+__all__ = ["MAX_TABS", "TrialTab", "Views", "blueprint", "legend_headroom", "relative", "trial_tab"]
 
 #: Trials that get their own tab in the default blueprint; more tabs are unusable.
 MAX_TABS = 12
@@ -52,32 +50,23 @@ class TrialTab:
 
     layout: TrialLayout
     views: tuple[Views, ...]
-    #: per trace name, the (min, max) of its finite values over the trial's methods
-    trace_ranges: dict = field(default_factory=dict)
 
 
 def trial_tab(layout: TrialLayout, rec: TrialRecord) -> TrialTab:
-    ranges: dict[str, tuple[float, float]] = {}
-    for label, trace in rec.methods.items():
-        for key, values in trace.traces.items():
-            finite = np.asarray(values, float)[np.isfinite(values)]
-            if finite.size:
-                lo, hi = ranges.get(key, (np.inf, -np.inf))
-                ranges[key] = (min(lo, float(finite.min())), max(hi, float(finite.max())))
-    return TrialTab(layout, tuple(task.views(layout, rec) for task in layout.tasks), ranges)
+    return TrialTab(layout, tuple(task.views(layout, rec) for task in layout.tasks))
 
 
-#: Share of a plot's height kept free above the data for the legend (top right).
-LEGEND_HEADROOM = 0.5
+#: Share of a plot's data range kept free above the data for the legend (top right).
+LEGEND_HEADROOM = 0.6
 
 
-def legend_clear_axis(lo: float, hi: float):
-    """A y axis from ``lo`` to ``hi`` with room above for a legend in the top corner,
-    so the legend never covers the data (rerun draws legends inside the plot)."""
-    import rerun.blueprint as rrb
-
+def legend_headroom(lo: float, hi: float) -> float:
+    """A value above ``hi`` by LEGEND_HEADROOM of the range ``lo``..``hi``: a series drawn
+    there (e.g. the onset marker) makes the plot's automatic y range leave room for the
+    legend above the data. (A blueprint ``ScalarAxis`` range is not applied by the 0.41
+    viewer, measured: its plots fit the data.)"""
     span = (hi - lo) or max(abs(hi), 1.0)
-    return rrb.ScalarAxis(range=(lo - 0.05 * span, hi + LEGEND_HEADROOM * span))
+    return hi + LEGEND_HEADROOM * span
 
 
 def relative(layout: TrialLayout, path: str) -> str:
@@ -88,10 +77,9 @@ def relative(layout: TrialLayout, path: str) -> str:
     return "+ $origin" + rerun_path(path)[len(rerun_path(layout.root)):]
 
 
-def _trace_views(layout: TrialLayout, ranges: dict) -> list:
+def _trace_views(layout: TrialLayout) -> list:
     """One time-series view per trace name (``error_x`` of every method
-    together), or a single one when there are many names; the legend, top right,
-    only where several methods share the view, above the data."""
+    together), or a single one when there are many names."""
     import rerun.blueprint as rrb
 
     by_key: dict[str, list[str]] = {}
@@ -103,13 +91,10 @@ def _trace_views(layout: TrialLayout, ranges: dict) -> list:
     origin = rerun_path(layout.root)
     if len(by_key) > MAX_TRACE_VIEWS:
         return [rrb.TimeSeriesView(origin=origin, name="traces", contents=[p for v in by_key.values() for p in v])]
-    views = []
-    for key, paths in by_key.items():
-        several = len(paths) > 1
-        axis = legend_clear_axis(*ranges[key]) if several and key in ranges else None
-        views.append(rrb.TimeSeriesView(origin=origin, name=key, contents=paths, axis_y=axis,
-                                        plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=several)))
-    return views
+    # The legend only where several methods share the view (else the view's name says it).
+    return [rrb.TimeSeriesView(origin=origin, name=key, contents=paths,
+                               plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=len(paths) > 1))
+            for key, paths in by_key.items()]
 
 
 def _trial_container(tab: TrialTab, title: str):
@@ -122,7 +107,7 @@ def _trial_container(tab: TrialTab, title: str):
     if not any(v.draws_scene for v in tab.views) and (layout.has_xy or any(v.has_xy for v in tab.views)):
         bottom.append(rrb.Spatial2DView(origin=origin, name="track (north up)"))
     bottom += [v for views in tab.views for v in views.bottom]
-    bottom += _trace_views(layout, tab.trace_ranges)
+    bottom += _trace_views(layout)
     if not top and bottom:
         top.append(bottom.pop(0))
     if not top:

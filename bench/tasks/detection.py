@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Scene, has_shape, require
-from bench.recording.blueprint import Views, legend_clear_axis, relative
+from bench.recording.blueprint import Views, legend_headroom, relative
 from bench.recording.draw import log_series
 from bench.recording.layout import TrialLayout
 from bench.recording.paths import rerun_path
@@ -106,8 +106,8 @@ def _drawn(tr: MethodTrace) -> dict[str, bool]:
             "alarms": stat and "alarms" in tr.arrays and bool(tr.arrays["alarms"].any())}
 
 
-#: The maneuver onset marker: white, on the viewer's dark background.
-ONSET_COLOR = (245, 245, 245)
+#: The maneuver onset marker: a mid grey, seen on the viewer's light and dark themes.
+ONSET_COLOR = (150, 150, 150)
 
 
 def _onset(rec: TrialRecord) -> int | None:
@@ -240,10 +240,12 @@ class DetectionTask(Task):
                            rr.SeriesPoints(names="alarms", colors=[m.color], markers=["cross"],
                                            marker_sizes=[5.0]))
             if drawn["statistic"] and onset is not None:
-                # A vertical segment across the statistic's range at the onset step.
-                lo, hi = _value_range(tr)
-                log_series(stream, m.path("onset"), t, np.array([onset, onset]), np.array([lo, hi]),
-                           rr.SeriesLines(names="maneuver onset", colors=[ONSET_COLOR], widths=[1.5]))
+                # A down-pointing marker above the data at the onset step; its height also
+                # makes the plot's automatic range leave room for the legend.
+                log_series(stream, m.path("onset"), t, np.array([onset]),
+                           np.array([legend_headroom(*_value_range(tr))]),
+                           rr.SeriesPoints(names="maneuver onset", colors=[ONSET_COLOR], markers=["down"],
+                                           marker_sizes=[8.0]))
 
     def views(self, layout: TrialLayout, rec: TrialRecord) -> Views:
         """One plot per detector (statistic, threshold, alarms, onset): statistics of
@@ -262,7 +264,6 @@ class DetectionTask(Task):
                 shown.append("onset")
             views.append(rrb.TimeSeriesView(origin=origin, name=m.label,
                                             contents=[relative(layout, m.path(c)) for c in shown],
-                                            axis_y=legend_clear_axis(*_value_range(tr)),
                                             plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=True)))
         if not views:
             return Views()
