@@ -57,7 +57,7 @@ def trial_tab(layout: TrialLayout, rec: TrialRecord) -> TrialTab:
 
 
 #: Share of a plot's data range kept free above the data for the legend (top right).
-LEGEND_HEADROOM = 0.6
+LEGEND_HEADROOM = 1.0
 
 
 def legend_headroom(lo: float, hi: float) -> float:
