@@ -282,7 +282,7 @@ def cmd_report(args) -> int:
     from bench.progress import Progress
     from bench.report import build_outputs
     out_dir = Path(args.dir)
-    progress = Progress()
+    progress = Progress(quiet=True)       # `bench report` stays one line on error (its tests, its users)
     with runfolder.open_for_report(out_dir), _store_errors(out_dir):
         try:
             report = build_outputs(out_dir, recording=not args.no_record, on_phase=progress.phase)

@@ -68,7 +68,10 @@ def write_recording(
         # The sink (and its blueprint) must be attached before logging.
         stream.save(tmp, default_blueprint=bp.blueprint(tabs, charts, informative_snr(summary, tasks)))
         try:
-            stream.send_recording_name(recording_name or recording_id)
+            try:
+                stream.send_recording_name(recording_name or recording_id)
+            except RuntimeError:      # the writer already failed (disk full, ulimit -f): checked below
+                pass
             # The summary first: the viewer opens on it and a browser shows it while the
             # trials (megabytes of frames) still stream in.
             log_summary(stream, summary, tasks)
