@@ -1,5 +1,12 @@
 """The ``bench`` command: ``list``, ``run``, ``report``, ``view``, ``perf``.
 
+Arguments are checked before anything heavy is imported: the parser, ``--version``,
+the preset names and ``bench list``'s presets need no plugin, NumPy or pandas, and
+``bench list`` reads its plugin listing from a cache (:mod:`bench.listing`), so they
+answer in a fraction of a second. Run outputs go to ``runs/<name>/`` unless ``--out``
+says otherwise (git ignores ``runs/``; committed reports are written with ``--out
+reports/NAME``).
+
 Every fault ends with one line on stderr (``error: WHERE: PROBLEM``), never a
 traceback, and an exit code (:data:`EXIT_CODES`): 2 for bad input (before anything
 is written), 3 when the machine refuses (file system, disk, store), 4 when another
@@ -10,18 +17,16 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import importlib.resources
 import os
 import shlex
-import shutil
 import sqlite3
-import subprocess
 import sys
 import traceback
 from pathlib import Path
 
-from bench import registry
-from bench.errors import ConfigError, Fault, os_fault
+from bench import __version__
+from bench.errors import ConfigError, Fault, os_fault, unknown_name
+from bench.listing import plugin_listing, preset_descriptions, presets
 
 EXIT_BUG = 1
 EXIT_BAD_INPUT = 2
@@ -51,35 +56,40 @@ class _Parser(argparse.ArgumentParser):
         raise ConfigError("", f"{self.prog}: {message}")
 
 
-def _presets() -> dict[str, object]:
-    root = importlib.resources.files("bench") / "presets"
-    return {p.name[:-5]: p for p in root.iterdir() if p.name.endswith(".toml")}
+#: Where ``bench run`` writes unless ``--out`` is given (git-ignored).
+RUNS_DIR = Path("runs")
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if not 1 <= value <= 1024:
-        raise argparse.ArgumentTypeError(f"expected 1 to 1024, got {value}")
-    return value
+def _int_in(lo: int, hi: int, what: str = "", note: str = ""):
+    """An argparse type: a whole number in [lo, hi]."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a {what or 'whole number'}, got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"expected {lo} to {hi}{note}, got {value}")
+        return value
+    return parse
+
+
+_positive_int = _int_in(1, 1024)
+_port = _int_in(1024, 65534, "port number", " (the next port is the gRPC server's)")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from bench.executors import default_workers
     p = _Parser(prog="bench", description="Benchmark radar maneuver detectors, trackers and TBD methods.",
                 epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--version", action="version", version=f"bench {__version__} (radar-maneuver-bench)")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    ls = sub.add_parser("list", help="tasks, methods and scenarios, with task and summary")
+    ls = sub.add_parser("list", help="presets, tasks, methods and scenarios, with their summaries")
     ls.add_argument("-v", "--verbose", action="store_true", help="show every parameter with its default")
     run = sub.add_parser("run", help="run (or resume) a sweep")
     run.add_argument("sweep", nargs="?", help="sweep file (TOML)")
-    run.add_argument("--preset", help=f"a packaged sweep: {', '.join(sorted(_presets()))}")
-    run.add_argument("--out", help="run folder (default: reports/<name>/): new, empty, or a run folder; "
+    run.add_argument("--preset", help=f"a packaged sweep: {', '.join(presets())} (bench list describes them)")
+    run.add_argument("--out", help=f"run folder (default: {RUNS_DIR}/<name>/): new, empty, or a run folder; "
                                    "one run at a time")
-    run.add_argument("--workers", type=_positive_int, default=default_workers(),
-                     help="worker processes (default: CPU count)")
+    run.add_argument("--workers", type=_positive_int, help="worker processes (default: CPU count)")
     run.add_argument("--executor", default="local", choices=["local", "dask"],
                      help="where units run: local processes, or a dask cluster (needs the [dask] extra)")
     run.add_argument("--scheduler", metavar="ADDRESS",
@@ -90,7 +100,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--fresh", action="store_true",
                      help="discard stored results and start over (removes only the files listed in the "
                           "folder's bench-manifest.txt)")
-    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--quiet", action="store_true",
+                     help="no progress (a bar on a terminal, else a line per phase and every 10 s)")
     run.add_argument("--no-record", action="store_true", help="do not write recording.rrd")
     run.add_argument("--viewer", action="store_true", help="stream trials live to a spawned Rerun viewer")
     run.add_argument("--yes", action="store_true", help="run a very large sweep without asking")
@@ -104,53 +115,42 @@ def build_parser() -> argparse.ArgumentParser:
     cmp.add_argument("--out", help="also write compare.csv, compare_summary.csv and compare.md into this folder")
     cmp.add_argument("--fail-on-regression", action="store_true",
                      help=f"exit {EXIT_REGRESSION} when a method config got significantly worse (for CI)")
-    view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
+    view = sub.add_parser("view", help="open a run's recording in the Rerun viewer (--web: in a browser)")
     view.add_argument("dir")
+    view.add_argument("--web", action="store_true",
+                      help="serve the recording to a browser on 127.0.0.1 and print the URL (no display needed)")
+    view.add_argument("--port", type=_port, default=9090, help="--web: the web viewer's HTTP port (default 9090; "
+                                                               "the gRPC server takes the next one)")
+    view.add_argument("--renderer", choices=["webgl", "webgpu"], default="webgl",
+                      help="--web: the browser's graphics backend (default webgl: works without WebGPU)")
     perf = sub.add_parser("perf", help="measure every method's speed and memory against its reference, "
                                        "and scene generation")
-    perf.add_argument("--out", default="reports/perf", help="output folder (default: reports/perf)")
+    perf.add_argument("--out", default=str(RUNS_DIR / "perf"),
+                      help=f"output folder (default: {RUNS_DIR / 'perf'}; the committed one: reports/perf)")
     perf.add_argument("--methods", nargs="+", help="only these methods")
     perf.add_argument("--sizes", nargs="+", help="only these named sizes (e.g. small paper)")
     perf.add_argument("--executors", action="store_true",
                       help="also time one compute-bound sweep per executor (local x1, local xN, dask xN)")
-    perf.add_argument("--workers", type=_positive_int, default=default_workers(), help="N for --executors")
+    perf.add_argument("--workers", type=_positive_int, help="N for --executors (default: CPU count)")
     return p
 
 
 # ------------------------------------------------------------------ commands
 
 def cmd_list(args) -> int:
-    from bench.params import describe_params
-    print("tasks:")
-    for name, task in registry.tasks().items():
-        print(f"  {name:<20} {task.summary()}")
-    for title, table in (("scenarios", registry.scenarios()), ("methods", registry.methods())):
-        print(f"{title}:")
-        for name, cls in table.items():
-            kind = ", ".join(cls.tasks) if title == "scenarios" else cls.task
-            print(f"  {name:<14} {kind:<20} {cls.summary()}")
-            if args.verbose:
-                for pname, ptype, default, doc in describe_params(cls.Params):
-                    print(f"      {pname} ({ptype}, default {default!r}): {doc}")
-    missing = registry.unavailable()
-    if missing:
-        print("unavailable:")
-        for u in missing:
-            print(f"  {u.source:<14} {u.error}")
+    print("presets (bench run --preset NAME):")
+    for name, description in preset_descriptions():
+        print(f"  {name:<20} {description}")
+    print(plugin_listing(args.verbose), flush=True)
     return 0
 
 
 def _load_plan(args):
     from bench.config import load_sweep, parse_sweep_text
-    if bool(args.sweep) == bool(args.preset):
-        raise ConfigError("", "give a sweep file or --preset NAME (one of them)")
     if args.preset:
-        presets = _presets()
-        if args.preset not in presets:
-            raise ConfigError("--preset", f"unknown preset {args.preset!r} (known: {', '.join(sorted(presets))})")
         source = f"preset {args.preset}"
         try:
-            return parse_sweep_text(presets[args.preset].read_bytes(), source, allow_large=args.yes)
+            return parse_sweep_text(presets()[args.preset].read_bytes(), source, allow_large=args.yes)
         except ConfigError as err:
             raise ConfigError(f"{source}: {err.field}" if err.field else source, err.problem) from None
     try:
@@ -166,10 +166,23 @@ def _command_line(args) -> str:
     return shlex.join(words)
 
 
-def _check_executor(args) -> None:
-    """Executor options, checked before anything is written."""
+def _check_arguments(args) -> None:
+    """What the command line alone decides, before the sweep (and NumPy) is loaded."""
+    if bool(args.sweep) == bool(args.preset):
+        raise ConfigError("", "give a sweep file or --preset NAME (one of them)")
+    if args.preset and args.preset not in presets():
+        raise ConfigError("--preset", unknown_name("preset", args.preset, presets()))
     if args.scheduler is not None and args.executor != "dask":
         raise ConfigError("--scheduler", "only with --executor dask")
+
+
+def _workers(args) -> int:
+    from bench.executors import default_workers
+    return args.workers or default_workers()
+
+
+def _check_executor(args) -> None:
+    """Executor options, checked before anything is written."""
     if args.executor == "dask":
         from bench.executors import require_dask
         require_dask()
@@ -208,6 +221,7 @@ def _store_errors(out_dir: Path):
 
 
 def cmd_run(args) -> int:
+    _check_arguments(args)
     from bench import runfolder
     _check_executor(args)
     plan = _load_plan(args)
@@ -216,7 +230,7 @@ def cmd_run(args) -> int:
               file=sys.stderr)
         for scenario, method, reason in plan.skipped:
             print(f"  {method} on {scenario}: {reason}", file=sys.stderr)
-    out_dir = Path(args.out) if args.out else Path("reports") / plan.name
+    out_dir = Path(args.out) if args.out else RUNS_DIR / plan.name
     command = _command_line(args)
     created = not os.path.lexists(out_dir)
     lock = runfolder.open_for_run(out_dir, fresh=args.fresh, what=f"bench run, {plan.name}")
@@ -233,6 +247,8 @@ def cmd_run(args) -> int:
 
 def _run_locked(args, plan, out_dir: Path, command: str) -> int:
     """The run, in the locked folder."""
+    from bench import registry
+    from bench.progress import Progress
     from bench.report import build_outputs
     from bench.runner import Interrupted, plan_record, run_sweep, write_plan_toml
     viewer = None
@@ -240,8 +256,9 @@ def _run_locked(args, plan, out_dir: Path, command: str) -> int:
         from bench.recording import LiveViewer
         tasks = {m.label: registry.get_task(task) for m, task in zip(plan.methods, plan.method_tasks)}
         try:
-            viewer = LiveViewer(tasks=tasks, application_id="radar-bench",
-                                recording_id=f"{plan.name}-{plan.fingerprint()}")
+            viewer = LiveViewer(tasks=tasks, application_id=plan.name,
+                                recording_id=f"{plan.name}-{plan.fingerprint()}",
+                                recording_name=f"{plan.name} · {plan.fingerprint()[:12]} (live)")
         except RuntimeError as exc:
             raise ConfigError("--viewer", str(exc)) from None
     on_result = None
@@ -250,10 +267,11 @@ def _run_locked(args, plan, out_dir: Path, command: str) -> int:
 
         def on_result(result):
             viewer.log_records([TrialRecord.from_bytes(b) for _, b in result.records])
+    progress = Progress(quiet=args.quiet)
     try:
-        store = run_sweep(plan, out_dir, plan_record=plan_record(plan, command), workers=args.workers,
+        store = run_sweep(plan, out_dir, plan_record=plan_record(plan, command), workers=_workers(args),
                           executor=args.executor, fresh=False, quiet=args.quiet, on_result=on_result,
-                          scheduler=args.scheduler, retry_failed=args.retry_failed)
+                          scheduler=args.scheduler, retry_failed=args.retry_failed, progress=progress)
     except Interrupted as exc:
         return _interrupted(out_dir, command, exc.stored, exc.total)
     except KeyboardInterrupt:              # outside the units (opening the store, closing the executor)
@@ -264,30 +282,33 @@ def _run_locked(args, plan, out_dir: Path, command: str) -> int:
     try:
         store.close()
         write_plan_toml(out_dir / "plan.toml", plan, command)
-        report = build_outputs(out_dir, recording=not args.no_record)
+        report = build_outputs(out_dir, recording=not args.no_record, on_phase=progress.phase)
     except KeyboardInterrupt:
         return _interrupted(out_dir, command, *_stored_units(plan, out_dir))
+    finally:
+        progress.close()
     print(f"wrote {report}")
     return 0
 
 
 def cmd_report(args) -> int:
     from bench import runfolder
+    from bench.progress import Progress
     from bench.report import build_outputs
     out_dir = Path(args.dir)
+    progress = Progress(quiet=True)       # `bench report` stays one line on error (its tests, its users)
     with runfolder.open_for_report(out_dir), _store_errors(out_dir):
-        report = build_outputs(out_dir, recording=not args.no_record)
+        try:
+            report = build_outputs(out_dir, recording=not args.no_record, on_phase=progress.phase)
+        finally:
+            progress.close()
     print(f"wrote {report}")
     return 0
 
 
 def cmd_view(args) -> int:
-    path = Path(args.dir) / "recording.rrd"
-    if not path.exists():
-        raise ConfigError("", f"{path} does not exist (was the run made with --no-record?)")
-    exe = shutil.which("rerun")
-    cmd = [exe, str(path)] if exe else [sys.executable, "-m", "rerun", str(path)]
-    return subprocess.call(cmd)
+    from bench.recording.serve import view
+    return view(Path(args.dir), web=args.web, port=args.port, renderer=args.renderer)
 
 
 def cmd_compare(args) -> int:
@@ -296,15 +317,16 @@ def cmd_compare(args) -> int:
 
 
 def cmd_perf(args) -> int:
+    from bench import registry
     from bench.perf import check_sizes, prepare_out, run_perf
     known = set(registry.methods())
     for name in args.methods or []:
         if name not in known:
-            raise ConfigError("--methods", f"unknown method {name!r} (known: {', '.join(sorted(known))})")
+            raise ConfigError("--methods", unknown_name("method", name, known))
     check_sizes(args.methods, args.sizes)  # every bad argument is refused before the folder is touched
     prepare_out(Path(args.out))            # a file, a read-only folder: refused before hours of measuring
     report = run_perf(Path(args.out), methods=args.methods, sizes=args.sizes, executors=args.executors,
-                      workers=args.workers, progress=lambda line: print(line, file=sys.stderr))
+                      workers=_workers(args), progress=lambda line: print(line, file=sys.stderr))
     print(f"wrote {report}")
     return 0
 
@@ -330,10 +352,12 @@ def main(argv: list[str] | None = None) -> int:
     # rerun's file writer logs its failures from a thread; write_recording checks the file
     # itself and reports them as one line: silence the log (unless the user set RUST_LOG).
     os.environ.setdefault("RUST_LOG", "warn,re_log_encoding::rrd::file_sink=off")
-    from bench.executors import sigterm_as_interrupt
-    restore_sigterm = sigterm_as_interrupt()       # SIGTERM ends a command as Ctrl-C does (exit 130)
+    restore_sigterm = lambda: None  # noqa: E731 - until a command runs
     try:
-        args = build_parser().parse_args(argv)
+        args = build_parser().parse_args(argv)   # before any heavy import: argument errors answer at once
+        if args.command != "list":
+            from bench.executors import sigterm_as_interrupt
+            restore_sigterm = sigterm_as_interrupt()   # SIGTERM ends a command as Ctrl-C does (exit 130)
         return COMMANDS[args.command](args)
     except ConfigError as err:
         _error(str(err))

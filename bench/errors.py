@@ -39,6 +39,17 @@ class ConfigError(ValueError):
         return ConfigError(field, self.problem)
 
 
+def unknown_name(kind: str, name: str, known) -> str:
+    """``unknown method 'cumulnt' (did you mean 'cumulant'? known: ...)``: one line, the
+    closest known name first (:func:`difflib.get_close_matches`), then every known one."""
+    import difflib
+
+    known = sorted(known)
+    close = difflib.get_close_matches(str(name), known, n=1, cutoff=0.6)
+    hint = f"did you mean {close[0]!r}? " if close else ""
+    return f"unknown {kind} {name!r} ({hint}known: {', '.join(known) or 'none'})"
+
+
 class Fault(Exception):
     """The environment refused (file system, disk, store I/O): ``PATH: CAUSE``, exit 3."""
 

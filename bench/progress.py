@@ -1,12 +1,27 @@
-"""A progress bar on stderr: units done / total, rate and ETA.
+"""Progress of a command on stderr, phase by phase (calibration, evaluation, report, recording).
 
-Quiet when stderr is not a terminal or when asked (``--quiet``).
+On a terminal, a `tqdm <https://tqdm.github.io>`_ bar per phase names the phase and
+shows units done / total, rate and ETA. Anywhere else (CI, ``nohup``, a file) a bar
+would be one endless line of carriage returns, so plain lines are printed instead: one
+when a phase starts, one every :data:`PERIOD_S` seconds while it runs (from a timer
+thread, so a phase whose units take minutes is never silent) and one when it ends::
+
+    bench: evaluation: 37/100 units (37%), 1:02 elapsed, ETA 1:45
+
+``quiet`` prints nothing. tqdm draws the bar; the plain lines are ours because tqdm
+has no line mode for files (it rewrites one line with ``\\r`` whatever the stream).
 """
 
 from __future__ import annotations
 
 import sys
+import threading
 import time
+
+__all__ = ["PERIOD_S", "Progress"]
+
+#: Seconds between two plain progress lines when stderr is not a terminal.
+PERIOD_S = 10.0
 
 
 def _fmt_seconds(s: float) -> str:
@@ -15,39 +30,104 @@ def _fmt_seconds(s: float) -> str:
 
 
 class Progress:
-    def __init__(self, total: int, done: int = 0, *, quiet: bool = False, label: str = "units",
-                 stream=None):
-        self.total, self.done, self.label = total, done, label
+    """One command's phases. ``phase(name, total, done)`` starts a phase (ending the
+    previous one), ``advance()`` counts a unit of it, ``close()`` ends the last one.
+    A phase without ``total`` (report, recording) only says it started and how long
+    it has run."""
+
+    def __init__(self, *, quiet: bool = False, stream=None, period_s: float = PERIOD_S,
+                 label: str = "units"):
         self.stream = stream or sys.stderr
-        self.enabled = not quiet and hasattr(self.stream, "isatty") and self.stream.isatty()
-        self._start = time.monotonic()
-        self._start_done = done
-        self._last = 0.0
-        self.draw(force=True)
+        self.quiet = quiet
+        self.terminal = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.period_s = period_s
+        self.label = label
+        self.name: str | None = None
+        self.total: int | None = None
+        self.done = 0
+        self._start_done = 0
+        self._started = time.monotonic()
+        self._bar = None
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._timer: threading.Thread | None = None
+
+    # ---------------------------------------------------------------- the phases
+
+    def phase(self, name: str, total: int | None = None, done: int = 0) -> None:
+        """Start phase ``name`` (``total`` units of which ``done`` are already stored)."""
+        self._end_phase()
+        with self._lock:
+            self.name, self.total, self.done, self._start_done = name, total, done, done
+            self._started = time.monotonic()
+        if self.quiet:
+            return
+        if self.terminal and total is not None:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, initial=done, desc=name, unit=" " + self.label.rstrip("s"),
+                             file=self.stream, dynamic_ncols=True, leave=True, mininterval=0.2)
+        else:
+            self._line(f"{name}: started" if total is None else None)
+            self._start_timer()
 
     def advance(self, k: int = 1) -> None:
-        self.done += k
-        self.draw()
-
-    def draw(self, force: bool = False) -> None:
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        if not force and now - self._last < 0.1 and self.done < self.total:
-            return
-        self._last = now
-        width = 30
-        frac = self.done / self.total if self.total else 1.0
-        bar = "#" * int(width * frac) + "-" * (width - int(width * frac))
-        elapsed = now - self._start
-        new = self.done - self._start_done
-        eta = _fmt_seconds(elapsed / new * (self.total - self.done)) if new else "?"
-        self.stream.write(f"\r[{bar}] {self.done}/{self.total} {self.label}  "
-                          f"{_fmt_seconds(elapsed)} elapsed, ETA {eta} ")
-        self.stream.flush()
+        with self._lock:
+            self.done += k
+        if self._bar is not None:
+            self._bar.update(k)
 
     def close(self) -> None:
-        if self.enabled:
-            self.draw(force=True)
-            self.stream.write("\n")
+        """End the current phase (safe to call twice)."""
+        self._end_phase()
+        self._wake.set()
+
+    # ---------------------------------------------------------------- internals
+
+    def status(self) -> str:
+        """The current phase as one line (without the ``bench:`` prefix)."""
+        with self._lock:
+            name, total, done, start_done = self.name, self.total, self.done, self._start_done
+            elapsed = time.monotonic() - self._started
+        if total is None:
+            return f"{name}: {_fmt_seconds(elapsed)} elapsed"
+        pct = f" ({100 * done // total}%)" if total else ""
+        new = done - start_done
+        eta = f", ETA {_fmt_seconds(elapsed / new * (total - done))}" if new and done < total else ""
+        return f"{name}: {done}/{total} {self.label}{pct}, {_fmt_seconds(elapsed)} elapsed{eta}"
+
+    def _line(self, text: str | None = None) -> None:
+        try:
+            self.stream.write(f"bench: {text or self.status()}\n")
             self.stream.flush()
+        except (OSError, ValueError):   # a closed or full stderr never stops a run
+            pass
+
+    def _start_timer(self) -> None:
+        self._wake = threading.Event()
+        wake = self._wake
+
+        def tick():
+            while not wake.wait(self.period_s):
+                self._line()
+
+        self._timer = threading.Thread(target=tick, name="bench-progress", daemon=True)
+        self._timer.start()
+
+    def _end_phase(self) -> None:
+        if self.name is None:
+            return
+        self._wake.set()
+        if self._timer is not None:
+            self._timer.join()
+            self._timer = None
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+        elif not self.quiet:
+            with self._lock:
+                total, done = self.total, self.done
+                elapsed = _fmt_seconds(time.monotonic() - self._started)
+            counted = f"{done}/{total} {self.label} " if total is not None else ""
+            self._line(f"{self.name}: done, {counted}in {elapsed}")
+        self.name = None

@@ -35,9 +35,12 @@ import pkgutil
 import re
 import traceback
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from bench.core import Method, Scenario
-from bench.errors import ConfigError
+from bench.errors import ConfigError, unknown_name
+
+if TYPE_CHECKING:  # pragma: no cover - typing only; bench.core (NumPy) is imported on discovery
+    from bench.core import Method, Scenario
 
 _METHODS: dict[str, type[Method]] = {}
 _SCENARIOS: dict[str, type[Scenario]] = {}
@@ -183,6 +186,7 @@ def _load_entry_points(group: str) -> None:
 
 
 def _register_class(obj, group: str) -> None:
+    from bench.core import Method, Scenario
     from bench.tasks.base import Task
 
     if not isinstance(obj, type):
@@ -204,6 +208,11 @@ def _last_line(exc: BaseException) -> str:
     line = str(exc) if isinstance(exc, PluginError) else traceback.format_exception_only(type(exc), exc)[-1].strip()
     line = "".join(c if c.isprintable() else repr(c)[1:-1] for c in line[:1200])
     return line if len(line) <= 300 else line[:297] + "..."
+
+
+def discovered() -> bool:
+    """Whether this process has imported the plugins already."""
+    return _DISCOVERED
 
 
 def discover() -> None:
@@ -282,8 +291,7 @@ def _lookup(table: dict, name: str, kind: str, field: str):
     reason = unavailable_reason(name)
     if reason is not None:
         raise ConfigError(field, f"{kind} {name!r} is unavailable: {reason}")
-    known = ", ".join(table) or "none"
-    raise ConfigError(field, f"unknown {kind} {name!r} (known: {known})")
+    raise ConfigError(field, unknown_name(kind, name, table))
 
 
 def get_method(name: str, field: str = "method") -> type[Method]:

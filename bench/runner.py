@@ -413,11 +413,15 @@ def _capped_workers(workers: int, to_run: int, quiet: bool) -> int:
 
 def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
               executor: str = "local", fresh: bool = False, quiet: bool = False,
-              on_result=None, scheduler: str | None = None, retry_failed: bool = False) -> Store:
+              on_result=None, scheduler: str | None = None, retry_failed: bool = False,
+              progress: Progress | None = None) -> Store:
     """Run (or resume) a sweep into ``out_dir``; returns the open store.
 
     ``retry_failed``: also re-run the (unit, method config) pairs whose run failed,
-    the calibration ones before the thresholds are computed.
+    the calibration ones before the thresholds are computed. ``progress`` (default: a
+    new :class:`~bench.progress.Progress`, silent when ``quiet``) shows the phases
+    ``calibration`` and ``evaluation``; the caller closes it. A run with nothing left
+    to compute says so in one line (unless ``quiet``).
 
     A unit whose worker dies or overruns the plan's ``unit_timeout_s`` is run again one
     method config at a time; the configs that fail alone are stored as failed with the
@@ -428,7 +432,8 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
     cal_units, eval_units = plan_units(plan)
     total = len(cal_units) + len(eval_units)
     timeout = getattr(plan, "unit_timeout_s", None)
-    ex = store = progress = None
+    ex = store = None
+    progress = progress or Progress(quiet=quiet)
     with _StopOnSignal() as stop:
         try:
             if scheduler is not None:          # an existing cluster: connect before the folder is touched
@@ -446,12 +451,15 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
                 + retry_tasks(plan, cal_units, failed)
             to_run = len(cal_tasks) + sum(u.key not in done for u in eval_units) \
                 + sum(u.key in failed for u in eval_units)
-            progress = Progress(total + len(failed), sum(u.key in done for u in cal_units + eval_units),
-                                quiet=quiet)
+            if to_run == 0 and not quiet:
+                print(f"Nothing to run: all {total} units stored in {out_dir}", file=sys.stderr)
             if ex is None:
                 ex = SerialExecutor() if to_run == 0 else \
                     make_executor(executor, _capped_workers(workers, to_run, quiet), scheduler)
             started = time.monotonic()
+            if cal_tasks:
+                stored = sum(u.key in done for u in cal_units)
+                progress.phase("calibration", stored + len(cal_tasks), stored)
             _run_phase(ex, cal_tasks, store, progress, stop, timeout)
             if not stop():
                 thresholds: dict[str, dict[str, float | None]] = {
@@ -464,16 +472,19 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
                     thresholds[c.scenario][c.method] = c.used if np.isfinite(c.used) else None
                 tasks = [UnitTask(plan, u, thresholds[u.scenario_label]) for u in eval_units
                          if u.key not in done] + retry_tasks(plan, eval_units, failed, thresholds)
+                if tasks:
+                    stored = sum(u.key in done for u in eval_units)
+                    progress.phase("evaluation", stored + len(tasks), stored)
                 _run_phase(ex, tasks, store, progress, stop, timeout, on_result)
         except KeyboardInterrupt:              # a second signal: the units in flight are lost
-            if progress is not None:
-                progress.close()
+            progress.close()
             if ex is not None:
                 ex.kill()
             if store is None:
                 raise
             raise Interrupted(len(store.done_units()), total) from None
         except BaseException:
+            progress.close()
             if ex is not None:
                 ex.kill()
             raise

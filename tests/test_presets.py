@@ -25,7 +25,7 @@ def test_preset_is_a_valid_sweep(name):
 
 def test_quick_preset_runs_as_the_readme_says(bench_cli, tmp_path):
     bench_cli("run", "--preset", "quick", "--quiet", cwd=tmp_path, check=True)
-    out = tmp_path / "reports" / "quick"
+    out = tmp_path / "runs" / "quick"          # the default folder (git-ignored)
     for name in ("plan.toml", "results.sqlite", "trials.csv", "summary.csv", "report.md", "recording.rrd",
                  "figures/pd_vs_snr.png"):
         assert (out / name).exists(), name

@@ -193,8 +193,8 @@ def test_entity_paths(rrd, records):
         f"{cum}/statistic", f"{cum}/threshold", f"{cum}/alarms", f"{cum}/innovation",
         f"{inno}/statistic", f"{inno}/threshold", f"{root}/ekf/estimate",
         "/summary/table",
-        "/summary/pd_vs_snr/cumulant_window-32",
-        "/summary/pd_vs_snr/innovation_window-5_variant-fading",
+        "/summary/maneuver-detection/pd_vs_snr/cumulant_window-32",
+        "/summary/maneuver-detection/pd_vs_snr/innovation_window-5_variant-fading",
     ]
     for p in expected:
         assert rerun_path(p) in paths, p
@@ -295,7 +295,7 @@ def test_empty_recording(tmp_path):
 def test_live_viewer_without_display_raises_one_line(monkeypatch):
     from bench.recording import sinks
 
-    monkeypatch.setattr(sinks, "_has_display", lambda: False)
+    monkeypatch.setattr(sinks, "has_display", lambda: False)
     with pytest.raises(RuntimeError) as err:
         LiveViewer(tasks=TASKS, recording_id="live")
     assert "\n" not in str(err.value) and "viewer" in str(err.value)
@@ -548,7 +548,7 @@ def test_task_entity_paths(task_rrd):
         f"{trk}/truth", f"{trk}/measurements", f"{trk}/measurements/all", f"{trk}/measurements/glint",
         f"{trk}/ekf/estimate", f"{trk}/ekf/error_x", f"{trk}/ekf/error_y", f"{trk}/ekf/error_pos",
         f"{trk}/imm_models-3/estimate", f"{trk}/imm_models-3/error_pos",
-        "/summary/table", "/summary/rmse_vs_snr/ekf", "/summary/rmse_vs_snr/imm_models-3",
+        "/summary/table", "/summary/tracking/rmse_vs_snr/ekf", "/summary/tracking/rmse_vs_snr/imm_models-3",
     ]
     for p in expected:
         assert rerun_path(p) in paths, p
@@ -558,7 +558,7 @@ def test_task_entity_paths(task_rrd):
     # Null trial: no truth at all; NaN pd everywhere: no Pd chart.
     assert rerun_path(f"{null}/frames/truth_track") not in paths
     assert rerun_path(f"{null}/truth") not in paths
-    assert not any(p.startswith("/summary/pd_vs_snr") for p in paths)
+    assert not any("/pd_vs_snr" in p for p in paths)
 
 
 def test_frames_read_back_north_up(task_rrd, task_records):
@@ -639,7 +639,7 @@ def test_summary_without_pd_column(tmp_path, task_records):
     summary = _tracking_summary().drop(columns=["pd"])
     out = write_recording(tmp_path / "r.rrd", task_records[2:], summary, tasks=TASKS, recording_id="no-pd")
     paths = set(RrdReader(out).store().schema().entity_paths())
-    assert "/summary/rmse_vs_snr/ekf" in paths and "/summary/table" in paths
+    assert "/summary/tracking/rmse_vs_snr/ekf" in paths and "/summary/table" in paths
     with pytest.raises(ValueError, match="missing column"):
         write_recording(tmp_path / "bad.rrd", [], summary.drop(columns=["snr_db"]), tasks=TASKS, recording_id="x")
 

@@ -10,25 +10,27 @@ spawned viewer (:class:`LiveViewer`). The modules:
 * :mod:`~bench.recording.draw`: logging, the harness's part and the primitives tasks draw with;
 * :mod:`~bench.recording.summary`: Pd / RMSE bars and the summary table;
 * :mod:`~bench.recording.blueprint`: the default tabs;
-* :mod:`~bench.recording.sinks`: the file and the live viewer.
+* :mod:`~bench.recording.sinks`: the file and the live viewer;
+* :mod:`~bench.recording.serve`: ``bench view`` (native viewer, or ``--web`` in a browser).
 
 What a task keeps of a trial and how it draws it live with the task
 (:mod:`bench.tasks`). Nothing here imports rerun at import time.
 """
 
-from bench.recording.paths import entity_name, entity_root, method_entity_names, rerun_path, snr_part
-from bench.recording.record import MethodTrace, Quantised, TrialRecord
-from bench.recording.sinks import LiveViewer, write_recording
+import importlib
 
-__all__ = [
-    "LiveViewer",
-    "MethodTrace",
-    "Quantised",
-    "TrialRecord",
-    "entity_name",
-    "entity_root",
-    "method_entity_names",
-    "rerun_path",
-    "snr_part",
-    "write_recording",
-]
+#: Public names -> the module that defines them, imported on first use (PEP 562), so that
+#: ``bench view`` (:mod:`~bench.recording.serve`) does not pay for pandas and SciPy.
+_EXPORTS = {
+    "entity_name": "paths", "entity_root": "paths", "method_entity_names": "paths", "rerun_path": "paths",
+    "snr_part": "paths", "MethodTrace": "record", "Quantised": "record", "TrialRecord": "record",
+    "LiveViewer": "sinks", "write_recording": "sinks",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"bench.recording.{_EXPORTS[name]}"), name)

@@ -1,6 +1,9 @@
-"""The default blueprint of a recording: one tab per trial, then the summary.
+"""The default blueprint of a recording: the summary, then one tab per chosen trial.
 
-The first :data:`MAX_TABS` trials (by scenario, SNR, trial) get a tab each.
+The viewer opens on the summary (each task's charts against SNR, split by scenario
+config, and the table). Up to :data:`MAX_TABS` trials get a tab each, every scenario
+config in turn, from its most informative SNR level (where Pd is nearest 0.5, for the
+tasks that say so: ``Task.informative_column``) outwards.
 A trial's tab stacks a row of large views over a row of smaller ones: each
 task present gives its own (``Task.views``, e.g. a detector's statistics on
 top, a TBD method's frames and value maps); the harness adds the 2-D track
@@ -19,7 +22,7 @@ from bench.recording.layout import TrialLayout
 from bench.recording.paths import rerun_path
 from bench.recording.record import TrialRecord
 
-__all__ = ["MAX_TABS", "TrialTab", "Views", "blueprint", "relative", "trial_tab"]
+__all__ = ["MAX_TABS", "TrialTab", "Views", "blueprint", "legend_headroom", "relative", "trial_tab"]
 
 #: Trials that get their own tab in the default blueprint; more tabs are unusable.
 MAX_TABS = 12
@@ -53,6 +56,19 @@ def trial_tab(layout: TrialLayout, rec: TrialRecord) -> TrialTab:
     return TrialTab(layout, tuple(task.views(layout, rec) for task in layout.tasks))
 
 
+#: Share of a plot's data range kept free above the data for the legend (top right).
+LEGEND_HEADROOM = 1.0
+
+
+def legend_headroom(lo: float, hi: float) -> float:
+    """A value above ``hi`` by LEGEND_HEADROOM of the range ``lo``..``hi``: a series drawn
+    there (e.g. the onset marker) makes the plot's automatic y range leave room for the
+    legend above the data. (A blueprint ``ScalarAxis`` range is not applied by the 0.41
+    viewer, measured: its plots fit the data.)"""
+    span = (hi - lo) or max(abs(hi), 1.0)
+    return hi + LEGEND_HEADROOM * span
+
+
 def relative(layout: TrialLayout, path: str) -> str:
     """A view's content entry for ``path``, relative to the trial root.
 
@@ -75,7 +91,10 @@ def _trace_views(layout: TrialLayout) -> list:
     origin = rerun_path(layout.root)
     if len(by_key) > MAX_TRACE_VIEWS:
         return [rrb.TimeSeriesView(origin=origin, name="traces", contents=[p for v in by_key.values() for p in v])]
-    return [rrb.TimeSeriesView(origin=origin, name=key, contents=paths) for key, paths in by_key.items()]
+    # The legend only where several methods share the view (else the view's name says it).
+    return [rrb.TimeSeriesView(origin=origin, name=key, contents=paths,
+                               plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=len(paths) > 1))
+            for key, paths in by_key.items()]
 
 
 def _trial_container(tab: TrialTab, title: str):
@@ -100,29 +119,67 @@ def _trial_container(tab: TrialTab, title: str):
     return rrb.Vertical(*top, row, name=title, row_shares=[3] * len(top) + [2])
 
 
-def _summary_tab(charts: tuple[tuple[str, str], ...]):
+def _summary_tab(charts):
+    """The charts of :func:`bench.recording.summary.summary_charts` (a grid when
+    there are many), the table beside them."""
     import rerun.blueprint as rrb
 
-    views = [rrb.BarChartView(origin=root, name=title) for root, title in charts]
-    views.append(rrb.TextDocumentView(origin="/summary/table", name="summary"))
-    return rrb.Horizontal(*views, column_shares=[3] * len(charts) + [2], name="summary")
+    # No legend: a bar chart's legend lists whole entity paths over the bars (its axes
+    # cannot make room); the table's colour key names the methods instead.
+    views = [rrb.BarChartView(origin=chart.root, name=chart.title, plot_legend=rrb.PlotLegend(visible=False))
+             for chart in charts]
+    table = rrb.TextDocumentView(origin="/summary/table", name="summary table")
+    if not views:
+        return rrb.Horizontal(table, name="summary")
+    plots = views[0] if len(views) == 1 else rrb.Vertical(*views) if len(views) <= 3 else rrb.Grid(*views)
+    return rrb.Horizontal(plots, table, column_shares=[3, 1], name="summary")
 
 
-def chosen(tabs: list[TrialTab]) -> list[TrialTab]:
-    """The trials that get a tab: the first MAX_TABS by scenario, SNR and trial."""
-    return sorted(tabs, key=lambda tab: tab.layout.sort_key)[:MAX_TABS]
+def _informativeness(tab: TrialTab, informative: dict[str, float], middle: dict[str, float]):
+    """Sort key within a scenario config: the informative SNR level first (else the
+    middle one), then the levels nearest it; null trials last."""
+    layout = tab.layout
+    snr = layout.sort_key[2] if not layout.sort_key[1] else None
+    if snr is None:
+        return (1, 0.0, 0.0, layout.sort_key[3])
+    best = informative.get(layout.scenario, middle.get(layout.scenario, snr))
+    return (0, abs(snr - best), snr, layout.sort_key[3])
 
 
-def blueprint(tabs: list[TrialTab], charts: tuple | None):
-    """Tabs: the chosen trials, then the summary (``charts`` from
-    :func:`bench.recording.summary.summary_charts`; None: no summary tab)."""
+def chosen(tabs: list[TrialTab], informative: dict[str, float] | None = None) -> list[TrialTab]:
+    """The trials that get a tab, at most MAX_TABS: every scenario config gets its turn
+    (round robin, so every family is reachable), each starting from its most
+    informative SNR level (``informative``: scenario config -> SNR, from
+    :func:`bench.recording.summary.informative_snr`; else the middle recorded level)."""
+    informative = informative or {}
+    by_scenario: dict[str, list[TrialTab]] = {}
+    for tab in sorted(tabs, key=lambda tab: tab.layout.sort_key):
+        by_scenario.setdefault(tab.layout.scenario, []).append(tab)
+    queues = []
+    for scenario, group in by_scenario.items():
+        levels = sorted({t.layout.sort_key[2] for t in group if not t.layout.sort_key[1]})
+        middle = {scenario: levels[(len(levels) - 1) // 2]} if levels else {}
+        queues.append(sorted(group, key=lambda tab: _informativeness(tab, informative, middle)))
+    picked: list[TrialTab] = []
+    while len(picked) < MAX_TABS and any(queues):
+        for queue in queues:
+            if queue and len(picked) < MAX_TABS:
+                picked.append(queue.pop(0))
+    order = {scenario: i for i, scenario in enumerate(by_scenario)}
+    return sorted(picked, key=lambda tab: (order[tab.layout.scenario], picked.index(tab)))
+
+
+def blueprint(tabs: list[TrialTab], charts, informative: dict[str, float] | None = None):
+    """Tabs: the summary first, where the viewer opens (``charts`` from
+    :func:`bench.recording.summary.summary_charts`; None: no summary tab), then the
+    chosen trials, the most informative of each scenario config first."""
     import rerun.blueprint as rrb
 
     several = len({tab.layout.scenario for tab in tabs}) > 1
     containers = [_trial_container(tab, f"{tab.layout.scenario} {tab.layout.title}" if several
-                                   else tab.layout.title) for tab in chosen(tabs)]
+                                   else tab.layout.title) for tab in chosen(tabs, informative)]
     if charts is not None:
-        containers.append(_summary_tab(charts))
+        containers.insert(0, _summary_tab(charts))
     parts = [rrb.TimePanel(timeline="step")]
     if containers:
         parts.insert(0, rrb.Tabs(*containers, active_tab=0))

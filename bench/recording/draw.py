@@ -24,6 +24,9 @@ Entity paths under a trial root ``/{scenario}/snr_{±NN}dB/trial_{NNN}``::
     .../measurements/all        static Points2D of every measurement
     .../{method}/{trace}        Scalars (extra series: whitened innovation, error_x, ...)
 
+Every image drawn by :func:`log_image` / :func:`log_image_series` gets a colour scale
+(:func:`log_colour_scale`) under ``{image}/colour_scale``.
+
 rerun is imported inside the functions: importing this module stays cheap.
 """
 
@@ -37,7 +40,8 @@ from bench.recording.layout import MEASUREMENT_COLOR, TRUTH_COLOR, TrialLayout
 from bench.recording.paths import rerun_path
 from bench.recording.record import Quantised, TrialRecord
 
-__all__ = ["FLUSH_EVERY", "indexes", "log_image", "log_image_series", "log_points", "log_record", "log_records",
+__all__ = ["COLOUR_SCALE", "FLUSH_EVERY", "indexes", "log_colour_scale", "log_image", "log_image_series",
+           "log_points", "log_record", "log_records",
            "log_series", "log_static_points", "log_track", "north_up", "quant_info"]
 
 #: Records logged between two flushes: the file sink queue is unbounded.
@@ -130,10 +134,37 @@ def log_image(stream, path: str, q: Quantised, colormap: str) -> None:
 
     if q.codes.size == 0:
         return
+    log_colour_scale(stream, path, q, colormap)
     path = rerun_path(path)
     stream.log(path, rr.DepthImage(np.ascontiguousarray(q.codes[::-1, :]), colormap=colormap,
                                    depth_range=(1.0, 255.0), meter=1.0), static=True)
     stream.log(path, quant_info(q), static=True)
+
+
+#: Entity under an image that holds its colour scale (a bar beside it, with its values).
+COLOUR_SCALE = "colour_scale"
+
+
+def log_colour_scale(stream, image_path: str, q: Quantised, colormap: str) -> None:
+    """A colour scale for the image at ``image_path``: a vertical bar of the codes
+    1..255 in the same colormap, right of the image (``q.codes``: (H, W) or (K, H, W)),
+    labelled with the values at its top, middle and bottom (``q.lo``..``q.hi``)."""
+    import rerun as rr
+
+    height, width = int(q.codes.shape[-2]), int(q.codes.shape[-1])
+    if height == 0 or width == 0:
+        return
+    bar_w, gap = max(2, width // 25), max(1, width // 50)
+    column = np.linspace(255.0, 1.0, height).round().astype(np.uint8)   # top: the highest value
+    bar = np.ascontiguousarray(np.repeat(column[:, None], bar_w, axis=1))
+    path = rerun_path(f"{image_path}/{COLOUR_SCALE}")
+    stream.log(path, rr.Transform3D(translation=[float(width + gap), 0.0, 0.0]), static=True)
+    stream.log(path, rr.DepthImage(bar, colormap=colormap, depth_range=(1.0, 255.0), meter=1.0), static=True)
+    values = (q.hi, (q.lo + q.hi) / 2, q.lo)
+    stream.log(rerun_path(f"{image_path}/{COLOUR_SCALE}/values"),
+               rr.Points2D([[bar_w + 0.5, 0.5], [bar_w + 0.5, height / 2], [bar_w + 0.5, height - 0.5]],
+                           labels=[f"{v:.3g}" for v in values], radii=[rr.components.Radius.ui_points(0.5)],
+                           colors=[(230, 230, 230)], show_labels=True), static=True)
 
 
 def log_image_series(stream, path: str, q: Quantised, t: np.ndarray, colormap: str, extra: dict | None = None) -> None:
@@ -144,6 +175,7 @@ def log_image_series(stream, path: str, q: Quantised, t: np.ndarray, colormap: s
     k = q.codes.shape[0]
     if k == 0 or q.codes.size == 0:
         return
+    log_colour_scale(stream, path, q, colormap)
     path = rerun_path(path)
     fmt = rr.components.ImageFormat(width=int(q.codes.shape[2]), height=int(q.codes.shape[1]),
                                     channel_datatype=rr.ChannelDatatype.U8)

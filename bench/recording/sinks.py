@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import errno
 import os
-import shutil
-import socket
 import struct
 import sys
 from collections.abc import Iterable, Mapping
@@ -25,7 +23,8 @@ from bench.recording import blueprint as bp
 from bench.recording.draw import log_records
 from bench.recording.layout import trial_layout
 from bench.recording.record import TrialRecord
-from bench.recording.summary import log_summary, summary_charts
+from bench.recording.serve import has_display, listening, rerun_executable
+from bench.recording.summary import informative_snr, log_summary, summary_charts
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd
@@ -41,6 +40,7 @@ def write_recording(
     tasks: Mapping[str, Any],
     recording_id: str,
     application_id: str = "radar-bench",
+    recording_name: str | None = None,
 ) -> Path:
     """Write ``records`` (and the ``summary`` curves) to an ``.rrd`` file.
 
@@ -48,9 +48,10 @@ def write_recording(
     (:func:`bench.runfolder.atomic_output`) and renamed only once complete (footer
     written, and checked: rerun's writer thread only logs a failed write, a full disk
     or a file-size limit would otherwise leave a truncated ``recording.rrd``).
-    ``summary`` needs columns ``method`` and ``snr_db``; ``pd`` and ``rmse_mean``
-    (either, both or none; NaN rows skipped) become bar charts, every row and column
-    goes into the table. Returns ``path``.
+    ``summary`` needs columns ``method`` and ``snr_db``; the columns each task charts
+    (``Task.recording_charts``; NaN rows skipped) become bar charts, every row and column
+    goes into the table. The viewer lists the recording under ``application_id`` by
+    ``recording_name`` (default: ``recording_id``). Returns ``path``.
     """
     import rerun as rr
 
@@ -60,15 +61,21 @@ def write_recording(
     records = list(records)  # iterated twice: blueprint, then logging
     layouts = [trial_layout(r, tasks) for r in records]  # fails on bad names before any I/O
     tabs = [bp.trial_tab(lay, rec) for lay, rec in zip(layouts, records)]
-    charts = summary_charts(summary)
+    charts = summary_charts(summary, tasks)
     runfolder.folder_for(path.parent)
     with runfolder.atomic_output(path) as (_, tmp):
         stream = rr.RecordingStream(application_id, recording_id=recording_id)
         # The sink (and its blueprint) must be attached before logging.
-        stream.save(tmp, default_blueprint=bp.blueprint(tabs, charts))
+        stream.save(tmp, default_blueprint=bp.blueprint(tabs, charts, informative_snr(summary, tasks)))
         try:
+            try:
+                stream.send_recording_name(recording_name or recording_id)
+            except RuntimeError:      # the writer already failed (disk full, ulimit -f): checked below
+                pass
+            # The summary first: the viewer opens on it and a browser shows it while the
+            # trials (megabytes of frames) still stream in.
+            log_summary(stream, summary, tasks)
             log_records(records, stream, layouts)
-            log_summary(stream, summary)
             stream.flush()
         finally:
             stream.disconnect()  # writes the footer
@@ -98,30 +105,6 @@ def rrd_complete(path: str | os.PathLike) -> bool:
     return tail[20:28] == _RRD_FOOTER_MAGIC and offset + length + 32 == size
 
 
-def _has_display() -> bool:
-    """False on Linux/BSD without X11 or Wayland: the viewer cannot open."""
-    if sys.platform.startswith(("win", "darwin")):
-        return True
-    return any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"))
-
-
-def _viewer_executable() -> str | None:
-    """The ``rerun`` binary: on PATH, or next to this interpreter (venv not activated)."""
-    found = shutil.which("rerun")
-    if found:
-        return found
-    local = Path(sys.executable).with_name("rerun.exe" if os.name == "nt" else "rerun")
-    return str(local) if local.exists() else None
-
-
-def _port_open(port: int) -> bool:
-    try:
-        with socket.create_connection(("127.0.0.1", port), timeout=1.0):
-            return True
-    except OSError:
-        return False
-
-
 class LiveViewer:
     """Stream records to a spawned Rerun viewer (``bench run --viewer``).
 
@@ -135,12 +118,12 @@ class LiveViewer:
     """
 
     def __init__(self, *, tasks: Mapping[str, Any], recording_id: str, application_id: str = "radar-bench",
-                 port: int = 9876):
+                 port: int = 9876, recording_name: str | None = None):
         import rerun as rr
 
-        if not _has_display():
+        if not has_display():
             raise RuntimeError("cannot open the Rerun viewer: no display (DISPLAY/WAYLAND_DISPLAY unset)")
-        exe = _viewer_executable()
+        exe = rerun_executable()
         if exe is None:
             raise RuntimeError("cannot open the Rerun viewer: `rerun` executable not found")
         stream = rr.RecordingStream(application_id, recording_id=recording_id)
@@ -152,9 +135,10 @@ class LiveViewer:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else repr(exc)
             raise RuntimeError(f"cannot open the Rerun viewer: {first}") from exc
         # rr.spawn only warns when the viewer dies at start-up: check for real.
-        if not _port_open(port):
+        if not listening(port, timeout_s=1.0):
             stream.disconnect()
             raise RuntimeError(f"cannot open the Rerun viewer: nothing listens on port {port}")
+        stream.send_recording_name(recording_name or recording_id)
         self._attach(stream, tasks)
 
     @classmethod
@@ -170,6 +154,7 @@ class LiveViewer:
         self._tasks = dict(tasks)
         self._tabs: list[bp.TrialTab] = []
         self._summary: tuple | None = None  # charts of the logged summary
+        self._informative: dict[str, float] = {}
         self._shown: tuple | None = None
 
     def log_records(self, records: Iterable[TrialRecord]) -> None:
@@ -182,16 +167,17 @@ class LiveViewer:
 
     def log_summary(self, summary: pd.DataFrame | None) -> None:
         """Log the Pd / RMSE vs SNR bars and table, and add the summary tab."""
-        charts = log_summary(self._stream, summary)
+        charts = log_summary(self._stream, summary, self._tasks)
         if charts is not None:
-            self._summary = charts
+            self._summary = tuple(charts)
+            self._informative = informative_snr(summary, self._tasks)
         self._send_blueprint()
 
     def _send_blueprint(self) -> None:
         # Only when the tabs change: each send replaces the viewer's layout.
-        chosen = tuple(tab.layout.root for tab in bp.chosen(self._tabs))
+        chosen = tuple(tab.layout.root for tab in bp.chosen(self._tabs, self._informative))
         if (chosen, self._summary) != self._shown:
-            self._stream.send_blueprint(bp.blueprint(self._tabs, self._summary))
+            self._stream.send_blueprint(bp.blueprint(self._tabs, self._summary, self._informative))
             self._shown = (chosen, self._summary)
 
     def close(self) -> None:

@@ -324,11 +324,15 @@ def preset_notes(source: str) -> str:
     return path.read_text(encoding="utf-8").strip() if path.is_file() else ""
 
 
-def build_outputs(out_dir: Path, *, recording: bool = True) -> Path:
+def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None) -> Path:
     """(Re)build every output of a run folder from its store; returns report.md's path.
 
     Every file is written whole (a temporary file renamed into place) and listed in the
-    folder's manifest (:mod:`bench.runfolder`); the caller holds the folder's lock."""
+    folder's manifest (:mod:`bench.runfolder`); the caller holds the folder's lock.
+    ``on_phase(name)`` is called as each phase starts: ``report`` (CSVs, figures,
+    report.md) and ``recording`` (recording.rrd), for the progress lines."""
+    on_phase = on_phase or (lambda name: None)
+    on_phase("report")
     out_dir = Path(out_dir)
     db = out_dir / "results.sqlite"
     if not db.exists():
@@ -336,7 +340,7 @@ def build_outputs(out_dir: Path, *, recording: bool = True) -> Path:
     store = Store(db)
     try:
         with runfolder.writing(out_dir):
-            return _build(store, out_dir, recording)
+            return _build(store, out_dir, recording, on_phase)
     finally:
         store.close()
 
@@ -366,7 +370,7 @@ def _recording_summary(summary: pd.DataFrame, tasks) -> pd.DataFrame:
     return summary[[c for c in summary.columns if c in wanted]]
 
 
-def _build(store: Store, out_dir: Path, recording: bool) -> Path:
+def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     runfolder.folder_for(out_dir / "figures")     # refuses a linked figures/ before anything is written
     record = store.plan()
     sweep = record["sweep"]
@@ -401,8 +405,10 @@ def _build(store: Store, out_dir: Path, recording: bool) -> Path:
     parts += [s for task, ctx in contexts for s in task.trial_sections(ctx)]
     parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
     if recording and records:
+        on_phase("recording")
         write_recording(out_dir / "recording.rrd", records, _recording_summary(summary, present),
-                        tasks=task_of, recording_id=f"{title}-{store.meta('fingerprint')}")
+                        tasks=task_of, recording_id=f"{title}-{store.meta('fingerprint')}",
+                        application_id=title, recording_name=f"{title} · {str(store.meta('fingerprint'))[:12]}")
         parts.append(_section_recording(sweep["record"]["trials"], out_dir, present))
     parts.append(_section_provenance(record, store, provenance()))
     page = {"title": title, "description": sweep.get("description") or "", "command": record.get("command", ""),

@@ -160,6 +160,14 @@ class Task:
     curve_column: ClassVar[str] = ""
     #: whether the task's report draws a ROC (Pd against per-step Pfa from the stored statistics)
     has_roc: ClassVar[bool] = False
+    #: the recording's summary charts: (summary.csv column, axis title with its unit), one
+    #: bar chart each against SNR, per scenario config (docs/architecture.md, 'Recordings')
+    recording_charts: ClassVar[tuple[tuple[str, str], ...]] = (("pd", "Pd"), ("rmse_mean", "RMSE (m)"))
+    #: the summary column that finds a scenario config's most informative SNR level, the
+    #: one whose value (averaged over configs) is nearest ``informative_target``: the
+    #: recording's tabs open there (e.g. Pd = 0.5); "" for none (the middle level)
+    informative_column: ClassVar[str] = ""
+    informative_target: ClassVar[float] = 0.5
     #: children of a trial root / of a method entity the task logs (reserved names)
     scene_entities: ClassVar[tuple[str, ...]] = ()
     method_entities: ClassVar[tuple[str, ...]] = ()

@@ -27,12 +27,12 @@ import numpy as np
 import pandas as pd
 
 from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Scene, has_shape, require
-from bench.recording.blueprint import Views, relative
+from bench.recording.blueprint import Views, legend_headroom, relative
 from bench.recording.draw import log_series
 from bench.recording.layout import TrialLayout
 from bench.recording.paths import rerun_path
 from bench.recording.record import MethodTrace, TrialRecord, check_shape
-from bench.tasks.base import OutputError, ReportContext, Task
+from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task
 from bench.tasks.detection_metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
 
 __all__ = ["DetectionScene", "DetectionTask", "method_trace"]
@@ -106,6 +106,24 @@ def _drawn(tr: MethodTrace) -> dict[str, bool]:
             "alarms": stat and "alarms" in tr.arrays and bool(tr.arrays["alarms"].any())}
 
 
+#: The maneuver onset marker: a mid grey, seen on the viewer's light and dark themes.
+ONSET_COLOR = (150, 150, 150)
+
+
+def _onset(rec: TrialRecord) -> int | None:
+    """The recorded onset step, if the trial has one within its steps."""
+    onset = rec.info.get("onset_step")
+    return int(onset) if onset is not None and 0 <= int(onset) < len(rec.t) else None
+
+
+def _value_range(tr: MethodTrace) -> tuple[float, float]:
+    """The range a detector's plot shows: its statistic and its threshold."""
+    values = [float(np.min(tr.arrays["statistic"])), float(np.max(tr.arrays["statistic"]))]
+    if tr.threshold is not None and math.isfinite(tr.threshold):
+        values.append(float(tr.threshold))
+    return min(values), max(values)
+
+
 class DetectionTask(Task):
     """Maneuver detection: a per-step statistic, alarms at a calibrated per-step Pfa."""
 
@@ -139,7 +157,9 @@ class DetectionTask(Task):
     ranking_binary = True
     curve_column = "pd"
     has_roc = True
-    method_entities = ("statistic", "threshold", "alarms")
+    recording_charts = (("pd", "Pd"), ("delay_mean", "mean delay (steps)"))
+    informative_column = "pd"
+    method_entities = ("statistic", "threshold", "alarms", "onset")
 
     # -------------------------------------------------------------- worker side
 
@@ -178,6 +198,13 @@ class DetectionTask(Task):
                                        detect_window=int(batch.scene.detect_window_steps),
                                        null_start=self.null_start(batch, out))
 
+    def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:
+        """The trial's maneuver onset step (none under the null), marked in its plots."""
+        onset = batch.scene.onset_step
+        if onset is None:
+            return RecordedScene()
+        return RecordedScene(info={"onset_step": int(np.broadcast_to(np.asarray(onset), (batch.n,))[i])})
+
     def recorded_method(self, batch: Batch, out: DetectionOutput, i: int, threshold: float) -> MethodTrace:
         stat = out.statistic[i]
         return method_trace(stat, threshold, stat >= threshold, {k: v[i] for k, v in out.traces.items()})
@@ -201,6 +228,7 @@ class DetectionTask(Task):
 
         t = np.asarray(rec.t, dtype=np.float64)
         every = np.arange(t.shape[0])
+        onset = _onset(rec)
         for m in layout.methods_of(self):
             tr = rec.methods[m.label]
             drawn = _drawn(tr)
@@ -211,21 +239,42 @@ class DetectionTask(Task):
             if drawn["threshold"]:
                 # Lighter and thinner than the statistic: a reference line.
                 log_series(stream, m.path("threshold"), t, every, np.full(t.shape[0], tr.threshold),
-                           rr.SeriesLines(names=f"{m.label} threshold", colors=[(*m.color, 150)], widths=[1.0]))
+                           rr.SeriesLines(names="threshold", colors=[(*m.color, 150)], widths=[1.0]))
             if drawn["alarms"]:
                 hits = np.flatnonzero(tr.arrays["alarms"])
                 log_series(stream, m.path("alarms"), t, hits, stat[hits],
-                           rr.SeriesPoints(names=f"{m.label} alarms", colors=[m.color], markers=["cross"],
+                           rr.SeriesPoints(names="alarms", colors=[m.color], markers=["cross"],
                                            marker_sizes=[5.0]))
+            if drawn["statistic"] and onset is not None:
+                # A down-pointing marker above the data at the onset step; its height also
+                # makes the plot's automatic range leave room for the legend.
+                log_series(stream, m.path("onset"), t, np.array([onset]),
+                           np.array([legend_headroom(*_value_range(tr))]),
+                           rr.SeriesPoints(names="maneuver onset", colors=[ONSET_COLOR], markers=["down"],
+                                           marker_sizes=[8.0]))
 
     def views(self, layout: TrialLayout, rec: TrialRecord) -> Views:
+        """One plot per detector (statistic, threshold, alarms, onset): statistics of
+        different detectors live on different scales (a NIS in units of χ², a
+        cumulant, wavelet energies), so they never share an axis. Each plot's axis
+        leaves room above the data for its legend."""
         import rerun.blueprint as rrb
 
-        contents = [relative(layout, m.path(child)) for m in layout.methods_of(self)
-                    for child, shown in _drawn(rec.methods[m.label]).items() if shown]
-        if not contents:
+        origin, views = rerun_path(layout.root), []
+        for m in layout.methods_of(self):
+            tr = rec.methods[m.label]
+            shown = [child for child, on in _drawn(tr).items() if on]
+            if not shown:
+                continue
+            if _onset(rec) is not None:
+                shown.append("onset")
+            views.append(rrb.TimeSeriesView(origin=origin, name=m.label,
+                                            contents=[relative(layout, m.path(c)) for c in shown],
+                                            plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=True)))
+        if not views:
             return Views()
-        return Views(top=[rrb.TimeSeriesView(origin=rerun_path(layout.root), name="statistics", contents=contents)])
+        top = views[0] if len(views) == 1 else rrb.Horizontal(*views) if len(views) <= 3 else rrb.Grid(*views)
+        return Views(top=[top])
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
         from bench.tasks import detection_report

@@ -42,7 +42,7 @@ from bench.calibration import cell_order_statistics
 from bench.core import TBD, Batch, Scene, TBDOutput, has_shape, require
 from bench.metrics import per_step_rmse
 from bench.recording.blueprint import Views, relative
-from bench.recording.draw import log_image, log_image_series, log_series, log_track
+from bench.recording.draw import COLOUR_SCALE, log_image, log_image_series, log_series, log_track
 from bench.recording.layout import TRUTH_COLOR, MethodLayout, TrialLayout
 from bench.recording.paths import rerun_path
 from bench.recording.record import MethodTrace, TrialRecord, check_shape
@@ -262,6 +262,8 @@ class TBDTask(Task):
                        "rmse_all_high", "snr_offset_unit_innovation_db")
     headline_columns = ("pd", "pd_low", "pd_high", "pfa", "pfa_low", "pfa_high", "rmse_mean", "rmse_low",
                         "rmse_high")
+    recording_charts = (("pd", "Pd"), ("rmse_mean", "RMSE of detected tracks (m)"))
+    informative_column = "pd"
     scene_entities = ("frames",)
     ranking_metric = "detected"
     ranking_higher_is_better = True
@@ -385,7 +387,8 @@ class TBDTask(Task):
         for m in layout.methods_of(self):
             drawn = _drawn(rec.methods[m.label], image)
             if drawn["value"]:
-                contents = [relative(layout, m.path("value"))] + (
+                contents = [relative(layout, m.path("value")),
+                            relative(layout, m.path(f"value/{COLOUR_SCALE}")) + "/**"] + (
                     [relative(layout, _track_path(layout, m))] if drawn["track"] else [])
                 images.append(rrb.Spatial2DView(origin=origin, name=f"{m.label} value", contents=contents))
             scores += [relative(layout, m.path(c)) for c in ("score", "threshold") if drawn[c]]

@@ -166,6 +166,7 @@ class TrackingTask(Task):
     ranking_higher_is_better = False
     ranking_label = "mean per-trial position RMSE (m)"
     curve_column = "rmse_mean"
+    recording_charts = (("rmse_mean", "RMSE (m)"), ("divergence_rate", "divergence rate"))
     method_entities = ("estimate",)
 
     # -------------------------------------------------------------- worker side

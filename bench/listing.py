@@ -1,0 +1,153 @@
+"""What ``bench list`` prints: the presets, then the tasks, scenarios and methods.
+
+The presets are read from their TOML files (``name`` and ``description``) without
+importing any plugin. Listing the plugins needs them imported (each registers itself,
+docs/architecture.md, 'Plugins'), which costs seconds (NumPy, SciPy, pandas, numba).
+So the plugin listing is cached: a text file under the user's cache folder
+(``$XDG_CACHE_HOME`` or ``~/.cache``, ``radar-maneuver-bench/``) named by a
+fingerprint of everything the listing depends on — this package's version, the
+interpreter, the size and modification time of every ``.py`` file of the ``bench``,
+``methods``, ``scenarios`` and ``models`` packages, and the ``bench.*`` entry points
+with their distributions' versions and source files. Any edit, install or upgrade
+changes the fingerprint, so a stale listing is never shown; a listing with an
+unavailable plugin is never cached (its cause may be a missing dependency installed
+later). An unwritable cache folder only costs the speed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.resources
+import importlib.util
+import json
+import os
+import sys
+import tomllib
+from pathlib import Path
+
+__all__ = ["plugin_listing", "preset_descriptions", "presets"]
+
+#: The packages whose sources the plugin listing depends on.
+PACKAGES = ("bench", "methods", "scenarios", "models")
+ENTRY_POINT_GROUPS = ("bench.tasks", "bench.scenarios", "bench.methods")
+
+
+def presets() -> dict[str, object]:
+    """Preset name -> its packaged sweep file (``bench/presets/NAME.toml``)."""
+    root = importlib.resources.files("bench") / "presets"
+    return {p.name[:-5]: p for p in sorted(root.iterdir(), key=lambda p: p.name) if p.name.endswith(".toml")}
+
+
+def preset_descriptions() -> list[tuple[str, str]]:
+    """(name, description) of every preset, from its sweep file alone."""
+    out = []
+    for name, path in presets().items():
+        try:
+            description = str(tomllib.loads(path.read_text(encoding="utf-8")).get("description", ""))
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+            description = f"(unreadable: {type(exc).__name__})"
+        out.append((name, " ".join(description.split())))
+    return out
+
+
+def _tree_stats(root: Path, digest) -> None:
+    """Feed the path, size and mtime of every .py file under ``root`` to ``digest``."""
+    for dirpath, dirnames, filenames in os.walk(root):
+        dirnames[:] = sorted(d for d in dirnames if d != "__pycache__")
+        for name in sorted(filenames):
+            if name.endswith(".py"):
+                st = os.stat(os.path.join(dirpath, name))
+                digest.update(f"{dirpath}/{name}:{st.st_size}:{st.st_mtime_ns}\n".encode())
+
+
+def _package_dir(name: str) -> Path | None:
+    """Where a top-level package's sources are, found without importing it."""
+    try:
+        spec = importlib.util.find_spec(name)
+    except (ImportError, ValueError):
+        return None
+    if spec is None:
+        return None
+    if spec.submodule_search_locations:
+        return Path(next(iter(spec.submodule_search_locations)))
+    return Path(spec.origin).parent if spec.origin else None
+
+
+def fingerprint() -> str:
+    """A digest that changes whenever the plugin listing could."""
+    import importlib.metadata
+
+    from bench import __version__
+
+    digest = hashlib.sha256(f"{__version__}\n{sys.executable}\n{sys.version}\n".encode())
+    for package in PACKAGES:
+        where = _package_dir(package)
+        digest.update(f"package {package} {where}\n".encode())
+        if where is not None:
+            _tree_stats(where, digest)
+    eps = importlib.metadata.entry_points()
+    for group in ENTRY_POINT_GROUPS:
+        for ep in sorted(eps.select(group=group), key=lambda e: e.name):
+            dist = getattr(ep, "dist", None)
+            digest.update(f"{group} {ep.name} {ep.value} {getattr(dist, 'name', '')} "
+                          f"{getattr(dist, 'version', '')}\n".encode())
+            where = _package_dir(ep.value.split(":")[0].split(".")[0])
+            if where is not None and where.name not in ("site-packages", "dist-packages"):
+                _tree_stats(where, digest)
+    return digest.hexdigest()[:32]
+
+
+def _cache_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "radar-maneuver-bench"
+
+
+def _render(verbose: bool) -> tuple[str, bool]:
+    """The plugin listing from the registry (imports every plugin); whether all are available."""
+    from bench import registry
+    from bench.params import describe_params
+
+    lines = ["tasks:"]
+    lines += [f"  {name:<20} {task.summary()}" for name, task in registry.tasks().items()]
+    for title, table in (("scenarios", registry.scenarios()), ("methods", registry.methods())):
+        lines.append(f"{title}:")
+        for name, cls in table.items():
+            kind = ", ".join(cls.tasks) if title == "scenarios" else cls.task
+            lines.append(f"  {name:<14} {kind:<20} {cls.summary()}")
+            if verbose:
+                lines += [f"      {pname} ({ptype}, default {default!r}): {doc}"
+                          for pname, ptype, default, doc in describe_params(cls.Params)]
+    missing = registry.unavailable()
+    if missing:
+        lines.append("unavailable:")
+        lines += [f"  {u.source:<14} {u.error}" for u in missing]
+    return "\n".join(lines), not missing
+
+
+def plugin_listing(verbose: bool = False) -> str:
+    """The tasks, scenarios and methods as ``bench list`` prints them (cached, see above).
+
+    A process that has already imported the plugins (or registered one in-process, as
+    tests do) lists its registry as it is, without the cache."""
+    from bench import registry
+
+    path = None if registry.discovered() else \
+        _cache_dir() / f"list-{fingerprint()}{'-v' if verbose else ''}.json"
+    if path is not None:
+        try:
+            return json.loads(path.read_text(encoding="utf-8"))["text"]
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    text, cacheable = _render(verbose)
+    if path is not None and cacheable:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+            tmp.write_text(json.dumps({"text": text}), encoding="utf-8")
+            os.replace(tmp, path)
+            for old in path.parent.glob("list-*.json"):      # listings of earlier sources
+                if not old.name.startswith(path.name.split("-v")[0].removesuffix(".json")):
+                    old.unlink(missing_ok=True)
+        except OSError:
+            pass
+    return text
