@@ -155,14 +155,19 @@ def _segment_mean(x: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return np.divide(np.where(mask, x, 0.0).sum(axis=1), count, out=np.full(len(x), np.nan), where=count > 0)
 
 
-def segment_time_averaged_rmse(stacked: np.ndarray) -> float:
+def segment_time_averaged_rmse(stacked: np.ndarray):
     """Time-averaged RMSE over a segment: ``stacked`` (n, K, 2) holds squared
     errors and a 0/1 segment mask; per step, the RMSE over the trials in the
-    segment at that step, averaged over the steps where any trial is."""
+    segment at that step, averaged over the steps where any trial is. Of a stack
+    (r, n, K, 2) (bootstrap resamples), one value per data set (r,)."""
     sq, mask = stacked[..., 0], stacked[..., 1] > 0.5
-    count = mask.sum(axis=0)
-    per_step = np.sqrt(np.where(mask, sq, 0.0).sum(axis=0)[count > 0] / count[count > 0])
-    return float(per_step.mean()) if per_step.size else float("nan")
+    count = mask.sum(axis=-2)
+    total = np.where(mask, sq, 0.0).sum(axis=-2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        per_step = np.where(count > 0, np.sqrt(total / np.maximum(count, 1)), np.nan)
+        seen = (count > 0).sum(axis=-1)
+        value = np.where(seen > 0, np.nansum(per_step, axis=-1) / np.maximum(seen, 1), np.nan)
+    return float(value) if np.ndim(value) == 0 else value
 
 
 def summarise_maneuvers(g: pd.DataFrame, cell_series: dict) -> dict:
