@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from bench.report.render import environment
+from bench.report.render import environment, sentence_case
 
 PLACEHOLDER = '<div id="bench-interactive"></div>'
 _IMG = re.compile(r'(<img[^>]*?src=")(figures/[^"]+\.png)(")')
@@ -58,7 +58,7 @@ def interactive_figures(summary: pd.DataFrame, task_of: dict) -> str:
                 fig.add_trace(go.Scatter(
                     x=c.snr_db, y=y, mode="lines+markers", name=config, error_y=error,
                     hovertemplate=f"{config}<br>SNR %{{x:.1f}} dB<br>{col} %{{y:.3g}}<extra></extra>"))
-            fig.update_layout(title=f"{task.noun.capitalize()} on {scenario}: {col} (summary.csv) against SNR",
+            fig.update_layout(title=f"{sentence_case(task.noun)} on {scenario}: {col} (summary.csv) against SNR",
                               xaxis_title="SNR (dB)", yaxis_title=f"{col} (95% interval)", template="plotly_white", height=420,
                               yaxis_type="linear" if task.ranking_binary else "log",   # a probability; an error
                               legend=dict(orientation="h", y=-0.2))

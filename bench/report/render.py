@@ -18,6 +18,11 @@ from bench.markdown import fmt, table
 
 
 @functools.lru_cache(maxsize=1)
+def sentence_case(text: str) -> str:
+    """``text`` with its first letter upper case, the rest as written ("CFAR detectors" stays)."""
+    return text[:1].upper() + text[1:]
+
+
 def environment():
     import jinja2
     env = jinja2.Environment(loader=jinja2.PackageLoader("bench", "templates"), autoescape=False,
@@ -55,7 +60,7 @@ def glance_markdown(entries: list[dict]) -> str:
         return ""
     view = []
     for g in entries:
-        show_chance = any(np.isfinite(r["chance"]) for r in g["ranking"])
+        show_chance = g["task"].ranking_binary and any(np.isfinite(r["chance"]) for r in g["ranking"])
         header = ["rank", "config", f"{g['task'].ranking_label} [95% CI]"] + (["chance Pd"] if show_chance else [])
         rows = [[str(i), f"`{r['config']}`", _interval(r["mean"], r["low"], r["high"])] +
                 ([fmt(r["chance"])] if show_chance else []) for i, r in enumerate(g["ranking"], start=1)]
@@ -86,7 +91,7 @@ def comparisons_markdown(comparisons: pd.DataFrame, task_of: dict) -> str:
                  _interval(r.difference, r.difference_low, r.difference_high, signed=True)] +
                 ([str(int(r.only_a)), str(int(r.only_b)), _p(r.mcnemar_p)] if task.ranking_binary else []) +
                 ["**tie**" if r.better == "tie" else f"`{r.better}`"] for r in g.itertuples()]
-        blocks.append({"caption": f"{task.noun.capitalize()} on `{scenario}`: {task.ranking_label} "
+        blocks.append({"caption": f"{sentence_case(task.noun)} on `{scenario}`: {task.ranking_label} "
                                   f"({'higher' if task.ranking_higher_is_better else 'lower'} is better).",
                        "table": table(header, rows), "pairs": len(rows), "folded": len(rows) > FOLD_PAIRS})
     return render("comparisons.md.j2", blocks=blocks,

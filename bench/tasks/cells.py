@@ -165,6 +165,10 @@ class CellDetectionTask(Task):
     method_entities = ("statistic", "threshold_map", "detections")
     ranking_metric = "hit_fraction"
     ranking_higher_is_better = True
+    ranking_label = "fraction of a map's targets detected"
+    curve_column = "pd"
+    recording_charts = (("pd", "Pd"), ("false_alarms_per_map", "false alarms per map"))
+    informative_column = "pd"
 
     summary_columns = SUMMARY_COLUMNS
     headline_columns = ("pd", "pd_low", "pd_high", "pfa", "pfa_low", "pfa_high", "false_alarms_per_map")

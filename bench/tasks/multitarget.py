@@ -204,6 +204,9 @@ class MultiTargetTask(Task):
     headline_columns = ("gospa_mean", "gospa_low", "gospa_high", "init_delay_mean", "false_track_rate_mean")
     ranking_metric = "gospa_m"
     ranking_higher_is_better = False
+    ranking_label = "time-averaged GOSPA (m)"
+    curve_column = "gospa_mean"
+    recording_charts = (("gospa_mean", "GOSPA (m)"), ("false_track_rate_mean", "false tracks per hour"))
     scene_entities = ("truths", "plots")                 # bench/tasks/multitarget_recording.py draws them
     method_entities = ("tracks", "gates", "track_lines")
 
