@@ -109,7 +109,8 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
     of its trials, completed by its calibrations (:meth:`Task.apply_calibration`)."""
     tasks = {m["label"]: m["task"] for m in record["methods"]}
     task_of = _task_of(record)
-    columns = summary_columns(registry.tasks().values())
+    present = set(tasks.values())               # only the run's tasks: no columns that are empty by design
+    columns = summary_columns(t for name, t in registry.tasks().items() if name in present)
     parts = [registry.get_task(task).summarise(g, series) for task, g in trials.groupby(trials.config.map(tasks))] \
         if len(trials) else []
     summary = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=columns)
