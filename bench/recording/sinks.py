@@ -32,6 +32,7 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
 __all__ = ["LiveViewer", "write_recording"]
 
 
+
 def write_recording(
     path: str | os.PathLike,
     records: list[TrialRecord],
@@ -63,22 +64,27 @@ def write_recording(
     tabs = [bp.trial_tab(lay, rec) for lay, rec in zip(layouts, records)]
     charts = summary_charts(summary, tasks)
     runfolder.folder_for(path.parent)
-    with runfolder.atomic_output(path) as (_, tmp):
-        stream = rr.RecordingStream(application_id, recording_id=recording_id)
-        # The sink (and its blueprint) must be attached before logging.
-        stream.save(tmp, default_blueprint=bp.blueprint(tabs, charts, informative_snr(summary, tasks)))
-        try:
-            try:
-                stream.send_recording_name(recording_name or recording_id)
-            except RuntimeError:      # the writer already failed (disk full, ulimit -f): checked below
-                pass
-            # The summary first: the viewer opens on it and a browser shows it while the
-            # trials (megabytes of frames) still stream in.
-            log_summary(stream, summary, tasks)
-            log_records(records, stream, layouts)
-            stream.flush()
-        finally:
-            stream.disconnect()  # writes the footer
+    # Rerun encodes into memory and we write the bytes: a full disk or a file-size limit
+    # is then an OSError of our own write (one line, exit 3), where rerun's file sink
+    # only logs it in its writer thread and its flush / disconnect wait forever.
+    stream = rr.RecordingStream(application_id, recording_id=recording_id)
+    memory = stream.memory_recording()
+    try:
+        stream.send_blueprint(bp.blueprint(tabs, charts, informative_snr(summary, tasks)),
+                              make_active=True, make_default=True)
+        stream.send_recording_name(recording_name or recording_id)
+        # The summary first: the viewer opens on it and a browser shows it while the
+        # trials (megabytes of frames) still stream in.
+        log_summary(stream, summary, tasks)
+        log_records(records, stream, layouts)
+        stream.flush()
+        data = memory.drain_as_bytes()  # a whole .rrd, footer included (checked below)
+    finally:
+        stream.disconnect()
+    with runfolder.atomic_output(path) as (handle, tmp):
+        handle.write(data)
+        handle.flush()
+        os.fsync(handle.fileno())
         if not rrd_complete(tmp):
             raise OSError(errno.EIO, "the recording could not be written whole"
                                      f"{space_hint(path) or ' (is the disk full?)'}", str(path))
