@@ -8,10 +8,11 @@ So the plugin listing is cached: a text file under the user's cache folder
 fingerprint of everything the listing depends on — this package's version, the
 interpreter, the size and modification time of every ``.py`` file of the ``bench``,
 ``methods``, ``scenarios`` and ``models`` packages, and the ``bench.*`` entry points
-with their distributions' versions and source files. Any edit, install or upgrade
-changes the fingerprint, so a stale listing is never shown; a listing with an
-unavailable plugin is never cached (its cause may be a missing dependency installed
-later). An unwritable cache folder only costs the speed.
+with their distributions' versions and source files, and the name and version of every
+installed distribution (so installing a missing dependency, e.g. the ``[peers]`` extra,
+refreshes a listing that showed its plugin as unavailable). Any edit, install or upgrade
+changes the fingerprint, so a stale listing is never shown. An unwritable cache folder
+only costs the speed.
 """
 
 from __future__ import annotations
@@ -94,6 +95,8 @@ def fingerprint() -> str:
             where = _package_dir(ep.value.split(":")[0].split(".")[0])
             if where is not None and where.name not in ("site-packages", "dist-packages"):
                 _tree_stats(where, digest)
+    installed = sorted(f"{d.metadata['Name']}=={d.version}" for d in importlib.metadata.distributions())
+    digest.update(("\n".join(installed) + "\n").encode())
     return digest.hexdigest()[:32]
 
 
@@ -102,8 +105,8 @@ def _cache_dir() -> Path:
     return Path(base) / "radar-maneuver-bench"
 
 
-def _render(verbose: bool) -> tuple[str, bool]:
-    """The plugin listing from the registry (imports every plugin); whether all are available."""
+def _render(verbose: bool) -> str:
+    """The plugin listing from the registry (imports every plugin)."""
     from bench import registry
     from bench.params import describe_params
 
@@ -121,7 +124,7 @@ def _render(verbose: bool) -> tuple[str, bool]:
     if missing:
         lines.append("unavailable:")
         lines += [f"  {u.source:<14} {u.error}" for u in missing]
-    return "\n".join(lines), not missing
+    return "\n".join(lines)
 
 
 def plugin_listing(verbose: bool = False) -> str:
@@ -138,8 +141,8 @@ def plugin_listing(verbose: bool = False) -> str:
             return json.loads(path.read_text(encoding="utf-8"))["text"]
         except (OSError, ValueError, KeyError, TypeError):
             pass
-    text, cacheable = _render(verbose)
-    if path is not None and cacheable:
+    text = _render(verbose)
+    if path is not None:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
