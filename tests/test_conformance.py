@@ -19,7 +19,10 @@ PAIRS = [(s, m) for s, scls in registry.scenarios().items() for m, mcls in regis
 
 
 def test_every_method_has_a_scenario_and_nothing_is_unavailable():
-    assert registry.unavailable() == []
+    """Every built-in plugin imports, except a peer whose optional extra is not
+    installed here (``[peers]``: CI installs ``[test]`` only), which says so."""
+    broken = [u for u in registry.unavailable() if "extra (pip install" not in u.error]
+    assert broken == []
     runnable = {m for _, m in PAIRS}
     assert runnable == set(registry.methods())
 
