@@ -45,10 +45,12 @@ def write_recording(
 ) -> Path:
     """Write ``records`` (and the ``summary`` curves) to an ``.rrd`` file.
 
-    Atomic: the file is written to a temporary file of a unique name beside ``path``
-    (:func:`bench.runfolder.atomic_output`) and renamed only once complete (footer
-    written, and checked: rerun's writer thread only logs a failed write, a full disk
-    or a file-size limit would otherwise leave a truncated ``recording.rrd``).
+    Atomic: rerun encodes the recording into memory; bench writes the bytes to a
+    temporary file of a unique name beside ``path`` (:func:`bench.runfolder.atomic_output`),
+    checks the footer, and renames it. A full disk or a file-size limit is then an
+    OSError of that write (one line, exit 3), never a truncated ``recording.rrd`` or a
+    wait on rerun's writer thread. The whole recording is held in memory once (tens of
+    MB for the largest committed preset).
     ``summary`` needs columns ``method`` and ``snr_db``; the columns each task charts
     (``Task.recording_charts``; NaN rows skipped) become bar charts, every row and column
     goes into the table. The viewer lists the recording under ``application_id`` by
