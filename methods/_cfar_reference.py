@@ -19,7 +19,7 @@ import numpy as np
 import scipy.ndimage
 
 from bench.tasks.cells import CellDetectionOutput
-from models import cfar
+from models import cfar, cfar_regression
 
 AXIS = {"range": 1, "doppler": 2}
 
@@ -77,33 +77,34 @@ def os_axis(maps: np.ndarray, L: int, g: int, k: int, axis: str) -> tuple[np.nda
 
 
 def regression_axis(maps: np.ndarray, params, axis: str) -> tuple[np.ndarray, np.ndarray]:
-    """(fit, S) of the regression CFAR along ``axis``, one line at a time."""
+    """(noise level, S) of the regression CFAR along ``axis``, one line at a time by lstsq."""
+    curve = cfar_regression.Curve(params.family, params.order, params.iterations, params.exclusion_factor)
     lines = maps.astype(np.float64) if axis == "doppler" else maps.astype(np.float64).transpose(0, 2, 1)
     flat = lines.reshape(-1, lines.shape[-1])
     M, Q = flat.shape[1], params.order + 1
-    phi = cfar.legendre_basis(M, params.order)
-    fit = np.empty_like(flat)
+    phi = cfar_regression.legendre_basis(M, params.order)
+    level = np.empty_like(flat)
     leverage = np.empty_like(flat)
     included = np.ones(flat.shape, dtype=bool)
     for p, x in enumerate(flat):
+        y = np.log(np.maximum(x, np.finfo(np.float64).tiny)) if curve.is_log else x
         use = np.ones(M, dtype=bool)
         for it in range(params.iterations + 1):
-            coef = np.linalg.lstsq(phi[use], x[use], rcond=None)[0]
-            line_fit = phi @ coef
+            m = cfar_regression.noise_moments(curve, censored=it > 0)[0]
+            fitted = phi @ np.linalg.lstsq(phi[use], y[use], rcond=None)[0]
+            level[p] = np.exp(fitted - m) if curve.is_log else fitted / m
             if it == params.iterations:
                 break
-            keep = x <= params.exclusion_factor * line_fit
+            keep = x <= params.exclusion_factor * level[p]
             if keep.sum() >= 2 * Q:
                 use = keep
-        G_inv = np.linalg.inv(phi[use].T @ phi[use])
-        fit[p], included[p] = line_fit, use
-        leverage[p] = np.einsum("mq,qr,mr->m", phi, G_inv, phi)
-    fit, leverage = cfar.censoring_corrected(fit, included, leverage, params.iterations, params.exclusion_factor)
-    sig = cfar.regression_significance(flat, fit, included, leverage)
-    fit, sig = fit.reshape(lines.shape), sig.reshape(lines.shape)
+        included[p] = use
+        leverage[p] = np.einsum("mq,qr,mr->m", phi, np.linalg.inv(phi[use].T @ phi[use]), phi)
+    sig = cfar_regression.significance(flat, level, included, leverage, curve)
+    level, sig = level.reshape(lines.shape), sig.reshape(lines.shape)
     if axis == "range":
-        fit, sig = fit.transpose(0, 2, 1), sig.transpose(0, 2, 1)
-    return fit, sig
+        level, sig = level.transpose(0, 2, 1), sig.transpose(0, 2, 1)
+    return level, sig
 
 
 def ca(maps: np.ndarray, params):

@@ -17,6 +17,9 @@ compared with U0 = K mu:
   the k-th smallest x_k is the noise estimate mu; U0 = K mu"
   (将参考单元中N(N=2L)个信号的值排序,取出其中第k个最小值xk,xk即为噪声估计值μ).
 
+The third detector, the adaptive regression CFAR, fits a curve instead of
+a window: :mod:`models.cfar_regression`.
+
 The CA text says the register holds N = 2L + 1 cells and averages "the N
 reference cells"; the register of 2L + 1 includes the cell under test, so
 both detectors here use N = 2L reference cells, L per side, as the OS text
@@ -413,85 +416,7 @@ def window_cfar(maps: np.ndarray, detector: str, windows: dict, dimension: str, 
     return statistic, pick(mus["range"], mus["doppler"])
 
 
-# ------------------------------------------------------------------ regression
-
-def legendre_basis(M: int, order: int) -> np.ndarray:
-    """(M, order + 1): Legendre polynomials P_0..P_order at M points evenly
-    spread over [-1, 1] (the polynomial family, well conditioned at high order)."""
-    return np.polynomial.legendre.legvander(np.linspace(-1.0, 1.0, M), order)
-
-
-def regression_fit(lines: np.ndarray, order: int, iterations: int,
-                   exclusion_factor: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Least-squares polynomial fit of each line's power spectrum (P, M),
-    the noise estimate of the adaptive regression CFAR: "curve regression
-    fitted to the power spectrum; the fit is the noise estimate"
-    (通过曲线回归分析对功率谱进行曲线拟合,拟合出的结果即为噪声估计).
-
-    Robust iterations (ours; the document prints none): after each fit the
-    cells above ``exclusion_factor`` times the fit are left out and the line
-    refitted, ``iterations`` times (a line keeps its previous cells if fewer
-    than 2 (order + 1) would remain). Returns the fit (P, M), the included
-    cells (P, M) bool and the leverage q_i = phi_i' G^-1 phi_i (P, M) of every
-    cell in the final fit, G = sum over included cells of phi phi' (for an
-    included cell q_i is the hat-matrix diagonal h_ii).
-    """
-    x = np.asarray(lines, dtype=np.float64)
-    Q = order + 1
-    phi = legendre_basis(x.shape[1], order)                            # (M, Q)
-    outer = (phi[:, :, None] * phi[:, None, :]).reshape(-1, Q * Q)      # (M, Q^2): phi_m phi_m'
-    included = np.ones(x.shape, dtype=bool)
-    for it in range(iterations + 1):
-        w = included.astype(np.float64)
-        G_inv = np.linalg.inv((w @ outer).reshape(-1, Q, Q))            # (P, Q, Q): one matmul for every G
-        coef = np.matmul(G_inv, ((w * x) @ phi)[:, :, None])[:, :, 0]   # (P, Q)
-        fit = coef @ phi.T
-        if it == iterations:
-            break
-        keep = x <= exclusion_factor * fit
-        enough = keep.sum(axis=1) >= 2 * Q
-        included = np.where(enough[:, None], keep, included)
-    leverage = G_inv.reshape(-1, Q * Q) @ outer.T                      # phi_i' G^-1 phi_i, (P, M)
-    return fit, included, leverage
-
-
-def regression_significance(x, fit, included, leverage):
-    """S = -log10 Pfa at t = x / fit under homogeneous exponential noise, by a
-    moment-matched gamma law of the rest of the fit (our derivation).
-
-    The fit at cell i is y_i = sum_j h_ij x_j with sum_j h_ij = 1 (the basis
-    holds the constant) and sum_j h_ij^2 = h_ii (H idempotent). For an
-    included cell, y_i = h_ii x_i + R with E R = sigma^2 (1 - h) and
-    Var R = sigma^4 (h - h^2); R taken as a gamma variable of those moments
-    (shape (1 - h)/h, scale h sigma^2), "x_i > t y_i" is x_i (1 - h t) > t R and
-
-        Pfa(t) = (1 - h t)^((1 - h)/h)     for t < 1/h, 0 beyond,
-
-    exact when the weights are equal (a CA window that includes the cell
-    under test: h = 1/(N + 1) gives (1 - t/(N + 1))^N). For an excluded cell
-    (robust iterations) the fit does not contain x_i: y_i has mean sigma^2 and
-    variance g sigma^4, g = phi_i' G^-1 phi_i, and the same gamma
-    approximation gives Pfa(t) = (1 + g t)^(-1/g) (CA's form with N = 1/g).
-    A non-positive fit (the curve failed there) makes any power significant
-    (the cap). All capped at MAX_SIGNIFICANCE.
-    """
-    x = np.asarray(x, dtype=np.float64)
-    q = np.clip(leverage, 1e-12, 1.0 - 1e-9)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        t = np.where(fit > 0, x / np.where(fit > 0, fit, 1.0), np.inf)
-        inside = -((1.0 - q) / q) * np.log1p(-np.minimum(q * t, 1.0)) / _LOG10
-        outside = np.log1p(q * t) / (q * _LOG10)
-        s = np.where(included, inside, outside)
-    s = np.where(x > 0, s, 0.0)
-    return np.minimum(np.nan_to_num(s, nan=MAX_SIGNIFICANCE, posinf=MAX_SIGNIFICANCE), MAX_SIGNIFICANCE)
-
-
-def regression_threshold_factor(pfa: float, leverage: float) -> float:
-    """K of an included cell of leverage h: the inverse of (1 - h K)^((1 - h)/h),
-    K = (1 - pfa^(h / (1 - h))) / h (:func:`regression_significance`)."""
-    h = leverage
-    return float(-math.expm1(math.log(min(pfa, 1.0)) * h / (1.0 - h)) / h)
-
+# ------------------------------------------------------------------ threshold factors along an axis
 
 def ca_factor_along(pfa: float, M: int, L: int, g: int) -> np.ndarray:
     """(M,) K of CA-CFAR per cell of an axis at its own N' (:func:`reference_counts`)."""
@@ -505,54 +430,6 @@ def os_factor_along(pfa: float, M: int, L: int, g: int, k: int) -> np.ndarray:
     ks = edge_rank(k, 2 * L, N)
     factors = {pair: os_threshold_factor(pfa, *pair) for pair in set(zip(N.tolist(), ks.tolist()))}
     return np.array([factors[pair] for pair in zip(N.tolist(), ks.tolist())])
-
-
-def regression_factor_along(pfa: float, M: int, order: int) -> np.ndarray:
-    """(M,) K of the regression CFAR per cell of a line at its leverage in the
-    plain fit (no cell left out; :func:`regression_threshold_factor`)."""
-    phi = legendre_basis(M, order)
-    h = np.einsum("mq,qr,mr->m", phi, np.linalg.inv(phi.T @ phi), phi)
-    return np.array([regression_threshold_factor(pfa, float(x)) for x in np.clip(h, 1e-12, 1 - 1e-9)])
-
-
-def censored_exponential_moments(c: float) -> tuple[float, float]:
-    """(mean, variance) of an Exp(1) variable given that it is at most c:
-    beta = (1 - (1 + c) e^-c) / (1 - e^-c), E[x^2 | x <= c] = (2 - (c^2 + 2c + 2) e^-c) / (1 - e^-c)."""
-    tail = math.exp(-c)
-    beta = (1.0 - (1.0 + c) * tail) / (1.0 - tail)
-    second = (2.0 - (c * c + 2.0 * c + 2.0) * tail) / (1.0 - tail)
-    return beta, second - beta * beta
-
-
-def censoring_corrected(fit, included, leverage, iterations: int, exclusion_factor: float):
-    """The robust fit unbiased for homogeneous exponential noise (ours): cells
-    above c = ``exclusion_factor`` times the fit are left out, so the fit
-    estimates beta(c) sigma^2, the mean of the censored exponential; the fit
-    is divided by beta, and the leverage of a left-out cell (its fit's
-    variance over sigma^4, :func:`regression_significance`) scaled to the
-    censored cells' variance, v(c) / beta^2 (:func:`censored_exponential_moments`).
-    No change without robust iterations."""
-    if iterations == 0:
-        return fit, leverage
-    beta, var = censored_exponential_moments(exclusion_factor)
-    return fit / beta, np.where(included, leverage, leverage * var / beta ** 2)
-
-
-def regression_cfar(maps: np.ndarray, order: int, iterations: int, exclusion_factor: float,
-                    axis: str) -> tuple[np.ndarray, np.ndarray]:
-    """Adaptive regression CFAR along ``axis`` of maps (n, R, D): the fitted
-    curve of each line (along Doppler: each range cell's power spectrum) and
-    the significance (:func:`regression_significance`), both (n, R, D) float32."""
-    maps = np.asarray(maps, dtype=np.float64)
-    lines = maps if axis == "doppler" else maps.transpose(0, 2, 1)
-    flat = lines.reshape(-1, lines.shape[-1])
-    fit, included, leverage = regression_fit(flat, order, iterations, exclusion_factor)
-    fit, leverage = censoring_corrected(fit, included, leverage, iterations, exclusion_factor)
-    sig = regression_significance(flat, fit, included, leverage)
-    fit, sig = fit.reshape(lines.shape), sig.reshape(lines.shape)
-    if axis == "range":
-        fit, sig = fit.transpose(0, 2, 1), sig.transpose(0, 2, 1)
-    return np.ascontiguousarray(fit, dtype=np.float32), np.ascontiguousarray(sig, dtype=np.float32)
 
 
 # ------------------------------------------------------------------ combination and peaks

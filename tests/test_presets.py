@@ -31,6 +31,7 @@ def test_quick_preset_runs_as_the_readme_says(bench_cli, tmp_path):
                  "figures/pd_vs_snr.png"):
         assert (out / name).exists(), name
     assert set(pd.read_csv(out / "summary.csv").method) == set(registry.methods())   # every method shows
+    assert "None: every method config ran on every unit." in (out / "report.md").read_text().split("## Failures")[1]
 
 
 def test_maneuver_detection_preset_smoke(bench_cli, tmp_path):
@@ -135,6 +136,7 @@ def test_cfar_preset_smoke(bench_cli, tmp_path):
     assert set(summary.scenario) == {"rd-map-mixed", "rd-map-homogeneous"}
     report = (tmp_path / "out" / "report.md").read_text()
     assert "which detector wins where" in report and "CFAR loss" in report
+    assert "None: every method config ran on every unit." in report.split("## Failures")[1], "a config failed"
     assert (tmp_path / "out" / "figures" / "cells_rd_map_detections.png").exists()
 
 

@@ -254,18 +254,20 @@ def _unavailable_text(skipped: list) -> list[str]:
 def _section_calibration(cals, summary: pd.DataFrame, task_of: dict) -> str:
     if not cals:
         return ""
-    measured = summary.groupby("config").agg(fa_pfa=("pfa", "mean"))
+    measured = summary.groupby(["scenario", "config"]).pfa.mean()
+    several = len({c.scenario for c in cals}) > 1
     rows = []
     for c in cals:
         task = task_of[c.method]
-        in_eval = measured.fa_pfa.get(c.method, np.nan) if task.evaluation_pfa else np.nan
-        rows.append([f"`{c.method}`", c.mode, f"{c.pfa:g} {task.pfa_unit}",
+        in_eval = measured.get((c.scenario, c.method), np.nan) if task.evaluation_pfa else np.nan
+        rows.append(([f"`{c.scenario}`"] if several else []) + [f"`{c.method}`", c.mode, f"{c.pfa:g} {task.pfa_unit}",
                      _fmt(c.nominal, 4),
                      f"{_fmt(c.nominal_pfa)} [{_fmt(c.nominal_pfa_low)}, {_fmt(c.nominal_pfa_high)}]",
                      _fmt(c.used, 4), f"{_fmt(c.used_pfa)} [{_fmt(c.used_pfa_low)}, {_fmt(c.used_pfa_high)}]",
                      _fmt(in_eval), f"{_fmt(c.chance_pd)} [{_fmt(c.chance_pd_low)}, {_fmt(c.chance_pd_high)}]",
                      f"{c.null_values:,}"])
-    header = ["config", "mode", "requested Pfa", "nominal threshold", "measured Pfa of nominal [95% CI]",
+    header = (["scenario config"] if several else []) + [
+              "config", "mode", "requested Pfa", "nominal threshold", "measured Pfa of nominal [95% CI]",
               "threshold used", "measured Pfa of the threshold used [95% CI]", "Pfa in evaluation",
               "chance Pd [95% CI]", "null values"]
     empty = {"–", "– [–, –]"}

@@ -95,7 +95,7 @@ def _section_pfa(scene_trials: pd.DataFrame, configs: list[str], sc: str, pfa: f
         nominal = "–" if cal is None else fmt_interval(cal.nominal_pfa, cal.nominal_pfa_low, cal.nominal_pfa_high)
         rows.append([f"`{config}`", nominal, *(fmt_interval(*c) for c in cells), fmt_interval(*whole),
                      fmt(whole[0] / pfa)])
-    mode = next(iter(null.values())).mode if null else "nominal"
+    mode = _threshold_mode(cals, sc)
     return "\n\n".join([
         f"### `{sc}`: measured per-cell Pfa by clutter region",
         f"Requested Pfa {pfa:g} per cell. *Null maps, nominal K*: the per-cell Pfa of the detector's closed-form "
@@ -194,7 +194,12 @@ def _paired_difference(trials: pd.DataFrame, a: str, b: str) -> tuple[float, flo
     return (float(diff.mean()), *bootstrap_mean_interval(diff))
 
 
-def _section_winners(scene: pd.DataFrame, scene_trials: pd.DataFrame, sc: str, snr: float) -> str:
+def _threshold_mode(cals: list, sc: str) -> str:
+    """The calibration mode of a scenario config's thresholds (nominal when none was calibrated)."""
+    return next((c.mode for c in cals if c.scenario == sc), "nominal")
+
+
+def _section_winners(scene: pd.DataFrame, scene_trials: pd.DataFrame, sc: str, snr: float, mode: str) -> str:
     at = _at(scene, snr)
     rows = []
     for group in _present(scene):
@@ -212,14 +217,18 @@ def _section_winners(scene: pd.DataFrame, scene_trials: pd.DataFrame, sc: str, s
         rows.append([group, f"`{best.config}`", _interval(best, col), _interval(best, pfa_col), verdict])
     configs = list(dict.fromkeys(at.config))
     at_trials = scene_trials[np.isclose(scene_trials.snr_db, snr)]
-    pairs = [[f"`{a}` − `{b}`", fmt_interval(*_paired_difference(at_trials, a, b))]
+    pairs = [[f"`{a}` − `{b}`", fmt_interval(*(0.0 if abs(v) < 1e-12 else v          # float noise of a tie
+                                                  for v in _paired_difference(at_trials, a, b)))]
              for i, a in enumerate(configs) for b in configs[i + 1:]]
     return "\n\n".join([
         f"### `{sc}`: which detector wins where (at {fmt(snr)} dB)",
         "Per region, the config with the highest Pd, its Pd and its measured per-cell Pfa in that region on "
         "the same maps (95% intervals, clustered by map); a win is *alone* when its Pd interval lies above "
-        "every other config's. Read the Pd beside the Pfa: at nominal thresholds the detectors do not share a "
-        "per-cell Pfa (the ROC above compares them at equal Pfa).",
+        "every other config's. " + (
+            "Read the Pd beside the Pfa: at nominal thresholds the detectors do not share a per-cell Pfa (the "
+            "ROC above compares them at equal Pfa)." if mode == "nominal" else
+            f"The thresholds ({mode}) give every config the same per-cell Pfa over the whole map, not in each "
+            "region: read the Pd beside the region's Pfa."),
         table(["region", "best config", "Pd [95% CI]", "Pfa in the region [95% CI]", "verdict"], rows),
         "Over the whole map (every target), paired over the same maps: the difference in Pd with a bootstrap "
         "interval over maps (an interval above 0: the first config detects more).",
@@ -267,6 +276,6 @@ def sections(ctx: ReportContext) -> list[str]:
                   _section_loss(scene, sc, ctx.pfa),
                   _section_masking(scene, sc),
                   _section_roc(ctx, scene, sc, snr, ctx.fig_dir / f"cells_roc_{name}.png"),
-                  _section_winners(scene, scene_trials, sc, snr)]
+                  _section_winners(scene, scene_trials, sc, snr, _threshold_mode(ctx.calibrations, sc))]
     parts.append(_section_map(ctx, set(ctx.configs), reference))
     return [p for p in parts if p]
