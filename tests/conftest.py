@@ -1,8 +1,56 @@
+"""Shared fixtures and the suite's settings.
+
+The suite runs in parallel (pytest-xdist, ``addopts`` in pyproject.toml): a fixture that
+writes must write under ``tmp_path``/``tmp_path_factory``, which are per worker. A
+session-scoped fixture runs once per worker process.
+"""
+
+import os
+import shutil
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+#: Hypothesis for every run of the suite (CI included): the same examples every time
+#: (``derandomize``), no per-example deadline (a loaded CI machine is no bug), no example
+#: database in the working tree. ``max_examples`` is the default for a test that does not
+#: ask for a count; the statistical tests set theirs with ``@settings`` and keep them.
+#: ``HYPOTHESIS_PROFILE=default`` gives Hypothesis's own randomised search instead.
+settings.register_profile("ci", derandomize=True, deadline=None, database=None, max_examples=25,
+                          print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+#: Test modules each run by one xdist worker as a whole: each has a module-scoped fixture
+#: that costs a bench run (or several tests that share one), made once that way. The other
+#: tests go one by one to whichever worker is free.
+ONE_WORKER_MODULES = ("tests/test_cells_task.py", "tests/test_cli.py", "tests/test_recording.py",
+                      "tests/test_reliability_io.py", "tests/test_report_ux.py")
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadgroup`` with ONE_WORKER_MODULES as groups. xdist's own grouping, by the
+    ``xdist_group`` mark, never reaches its scheduler under pytest 9 (the worker appends the
+    group to ``item._nodeid``, which pytest 9 no longer reads), so the groups are named here,
+    by module, for the scheduler on the controller."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadGroupScheduling
+
+    missing = [m for m in ONE_WORKER_MODULES if not (config.rootpath / m).is_file()]
+    assert not missing, f"ONE_WORKER_MODULES names no module: {missing}"
+
+    class ModuleGroups(LoadGroupScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::", 1)[0]
+            return module if module in ONE_WORKER_MODULES else super()._split_scope(nodeid)
+
+    return ModuleGroups(config, log)
 
 
 def run_bench(*args, cwd=None, timeout=300, check=False):
@@ -40,12 +88,29 @@ trials = 1
 """
 
 
+def small_sweep_text(trials=12, snr="[0, 8]", chunk=5, h0=60) -> str:
+    """SMALL_SWEEP filled in; the defaults are the small sweep of ``write_sweep`` and ``small_run``."""
+    return SMALL_SWEEP.format(trials=trials, snr=snr, chunk=chunk, h0=h0)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def private_cache_home(tmp_path_factory):
+    """``$XDG_CACHE_HOME`` of this test process and the ``bench`` processes it starts: a
+    folder of its own, so the suite neither reads nor writes the user's cache (the ``bench
+    list`` cache, README 'Commands') and parallel workers never share one."""
+    cache = tmp_path_factory.mktemp("cache-home")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("XDG_CACHE_HOME", str(cache))
+        yield cache
+
+
 @pytest.fixture
 def write_sweep(tmp_path):
-    def write(name="sweep.toml", trials=12, snr="[0, 8]", chunk=5, h0=60, text=None):
+    """Write a sweep file under ``tmp_path``: ``text``, or the small sweep with ``sizes``
+    (``small_sweep_text``'s keywords) changed."""
+    def write(name="sweep.toml", text=None, **sizes):
         path = tmp_path / name
-        path.write_text(textwrap.dedent(text) if text is not None else
-                        SMALL_SWEEP.format(trials=trials, snr=snr, chunk=chunk, h0=h0))
+        path.write_text(textwrap.dedent(text) if text is not None else small_sweep_text(**sizes))
         return path
     return write
 
@@ -53,3 +118,23 @@ def write_sweep(tmp_path):
 @pytest.fixture
 def bench_cli():
     return run_bench
+
+
+@pytest.fixture(scope="session")
+def small_run(tmp_path_factory) -> Path:
+    """The small sweep (``write_sweep()``'s) run once through the CLI with one worker, its
+    recording included: a complete run folder (``small/sweep.toml``'s ``run/``) that the
+    tests using it only read. A test that changes the folder takes ``small_run_copy``."""
+    root = tmp_path_factory.mktemp("small")
+    sweep = root / "sweep.toml"
+    sweep.write_text(small_sweep_text())
+    run_bench("run", sweep, "--out", root / "run", "--workers", 1, "--quiet", check=True)
+    return root / "run"
+
+
+@pytest.fixture
+def small_run_copy(small_run, tmp_path) -> Path:
+    """A copy of ``small_run`` (``tmp_path / "run"``) for a test to change."""
+    out = tmp_path / "run"
+    shutil.copytree(small_run, out, symlinks=True)
+    return out

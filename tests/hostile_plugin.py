@@ -58,7 +58,7 @@ class Crash(Method):
             if params.how == "keyboard-interrupt":
                 raise KeyboardInterrupt
             if params.how == "sleep":
-                time.sleep(120)
+                time.sleep(3600)                 # for as long as a test lasts: until stopped
             if params.how == "wait-file":
                 release = os.environ["HOSTILE_RELEASE"]
                 open(f"{release}.started.{int(batch.trials[0])}", "w").close()

@@ -53,9 +53,8 @@ def test_summary_columns_keep_their_order():
     assert summary_columns(registry.tasks().values()) == SUMMARY_COLUMNS
 
 
-def test_run_writes_every_output_and_report_rebuilds_them(bench_cli, write_sweep, tmp_path):
-    out = tmp_path / "run"
-    bench_cli("run", write_sweep(), "--out", out, "--workers", 1, "--quiet", check=True)
+def test_run_writes_every_output_and_report_rebuilds_them(bench_cli, small_run_copy):
+    out = small_run_copy                       # the small sweep's run folder, recording included
     for name in ("plan.toml", "results.sqlite", "trials.csv", "summary.csv", "calibration.csv", "report.md",
                  "recording.rrd", "figures/pd_vs_snr.png", "figures/delay_vs_snr.png", "figures/runtime.png"):
         assert (out / name).exists(), name
@@ -110,9 +109,8 @@ def _check_recording(rrd, trials):
     assert proc.returncode == 0, proc.stderr
 
 
-def test_plan_toml_reruns_to_the_same_results(bench_cli, write_sweep, tmp_path):
-    a, b = tmp_path / "a", tmp_path / "b"
-    bench_cli("run", write_sweep(), "--out", a, "--workers", 1, "--quiet", "--no-record", check=True)
+def test_plan_toml_reruns_to_the_same_results(bench_cli, small_run, tmp_path):
+    a, b = small_run, tmp_path / "b"
     bench_cli("run", a / "plan.toml", "--out", b, "--workers", 1, "--quiet", "--no-record", check=True)
     assert (a / "trials.csv").read_text() == (b / "trials.csv").read_text()
 
@@ -167,15 +165,15 @@ def _stored_units(db) -> int:
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory):
     """A sweep long enough to interrupt, and its uninterrupted results."""
-    from conftest import SMALL_SWEEP
+    from conftest import run_bench, small_sweep_text
     root = tmp_path_factory.mktemp("resume")
     sweep = root / "sweep.toml"
-    sweep.write_text(SMALL_SWEEP.format(trials=40, snr="[-3, 0, 3, 6, 9]", chunk=4, h0=200))
-    from conftest import run_bench
+    sweep.write_text(small_sweep_text(trials=40, snr="[-3, 0, 3, 6, 9]", chunk=4, h0=200))
     run_bench("run", sweep, "--out", root / "whole", "--workers", 1, "--quiet", "--no-record", check=True)
     return sweep, root / "whole"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig, workers", [(signal.SIGKILL, 1), (signal.SIGINT, 2)])
 def test_interrupted_run_resumes_to_the_uninterrupted_results(bench_cli, uninterrupted, tmp_path, sig, workers):
     sweep, whole = uninterrupted
@@ -219,6 +217,7 @@ def written_since(path, t: float) -> bool:
     return path.exists() and path.stat().st_mtime >= t
 
 
+@pytest.mark.slow
 def test_a_run_killed_at_several_points_resumes_to_the_uninterrupted_results(bench_cli, uninterrupted, tmp_path):
     """One run stopped again and again — after its first unit, during calibration, during
     evaluation, with every unit stored but the report not yet written — alternating Ctrl-C
@@ -269,9 +268,8 @@ def test_a_run_killed_at_several_points_resumes_to_the_uninterrupted_results(ben
                                   pd.read_csv(whole / "summary.csv").drop(columns="seconds_per_trial"))
 
 
-def test_a_run_folder_refuses_a_different_sweep(bench_cli, write_sweep, tmp_path):
-    out = tmp_path / "run"
-    bench_cli("run", write_sweep(), "--out", out, "--workers", 1, "--quiet", "--no-record", check=True)
+def test_a_run_folder_refuses_a_different_sweep(bench_cli, write_sweep, small_run_copy):
+    out = small_run_copy                       # the small sweep's run folder
     proc = bench_cli("run", write_sweep("other.toml", trials=13), "--out", out, "--quiet")
     assert proc.returncode == 2 and "--fresh" in proc.stderr
     bench_cli("run", write_sweep("other.toml", trials=13), "--out", out, "--quiet", "--fresh", "--no-record",

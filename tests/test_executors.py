@@ -18,18 +18,14 @@ RUNS = [
 ]
 
 
-@pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    """The small sweep run with the first configuration of RUNS."""
-    from conftest import SMALL_SWEEP, run_bench
-    root = tmp_path_factory.mktemp("executors")
-    name, options, chunk = RUNS[0]
-    sweep = root / f"{name}.toml"
-    sweep.write_text(SMALL_SWEEP.format(trials=12, snr="[0, 8]", chunk=chunk, h0=60))
-    run_bench("run", sweep, "--out", root / name, *options, "--quiet", "--no-record", check=True)
-    return root / name / "trials.csv"
+@pytest.fixture
+def reference(small_run):
+    """The small sweep run with the first configuration of RUNS: ``small_run`` (chunk 5, one
+    local worker; its recording does not change the trials)."""
+    return small_run / "trials.csv"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, options, chunk", RUNS[1:], ids=[r[0] for r in RUNS[1:]])
 def test_identical_trials_whatever_the_executor_workers_and_chunks(reference, bench_cli, write_sweep, tmp_path,
                                                                    name, options, chunk):

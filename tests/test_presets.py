@@ -24,6 +24,7 @@ def test_preset_is_a_valid_sweep(name):
     assert plan.name == name
 
 
+@pytest.mark.slow
 def test_quick_preset_runs_as_the_readme_says(bench_cli, tmp_path):
     bench_cli("run", "--preset", "quick", "--quiet", cwd=tmp_path, check=True)
     out = tmp_path / "runs" / "quick"          # the default folder (git-ignored)
@@ -34,6 +35,7 @@ def test_quick_preset_runs_as_the_readme_says(bench_cli, tmp_path):
     assert "None: every method config ran on every unit." in (out / "report.md").read_text().split("## Failures")[1]
 
 
+@pytest.mark.slow
 def test_maneuver_detection_preset_smoke(bench_cli, tmp_path):
     """The paper preset, every config, at reduced trials and SNR levels."""
     sweep = _preset("maneuver-detection")
@@ -53,6 +55,7 @@ def test_maneuver_detection_preset_smoke(bench_cli, tmp_path):
     assert "at 5.0 dB" in report.split("## One trial over time", 1)[1]    # the paper's Fig. 2 level (dB to 0.1)
 
 
+@pytest.mark.slow
 def test_tbd_small_preset_runs_through_the_cli(bench_cli, tmp_path):
     bench_cli("run", "--preset", "tbd-small", "--quiet", "--out", tmp_path / "tbd", cwd=tmp_path, check=True)
     out = tmp_path / "tbd"
@@ -66,6 +69,7 @@ def test_tbd_small_preset_runs_through_the_cli(bench_cli, tmp_path):
         assert (out / name).exists(), name
 
 
+@pytest.mark.slow
 def test_tbd_preset_smoke(bench_cli, tmp_path):
     """The paper preset's methods and calibration on a small grid, few trials and levels."""
     sweep = _preset("tbd")
@@ -77,6 +81,7 @@ def test_tbd_preset_smoke(bench_cli, tmp_path):
     assert set(pd.read_csv(tmp_path / "out" / "summary.csv").method) == {"dp-tbd", "dp-tbd-mf"}
 
 
+@pytest.mark.slow
 def test_tbd_ablations_preset_smoke(bench_cli, tmp_path):
     """The ablation preset's scenarios, configs and calibration on a small grid, few trials and levels."""
     sweep = _preset("tbd-ablations")
@@ -99,6 +104,7 @@ def test_tbd_ablations_preset_smoke(bench_cli, tmp_path):
     assert "per-cell Pfa" in report
 
 
+@pytest.mark.slow
 def test_glint_tracking_preset_at_reduced_size(bench_cli, tmp_path):
     """The glint preset through the CLI at reduced trials and duration (the end-to-end test of the tracking suite)."""
     sweep = _preset("glint-tracking")
@@ -119,6 +125,7 @@ def test_glint_tracking_preset_at_reduced_size(bench_cli, tmp_path):
     assert "## Tracking: position RMSE" in report and "## Calibration" not in report
 
 
+@pytest.mark.slow
 def test_cfar_preset_smoke(bench_cli, tmp_path):
     """The CFAR preset's scenario configs, detectors and calibration on small maps, few maps and levels."""
     from scenarios.rd_map import RdMap
@@ -140,6 +147,7 @@ def test_cfar_preset_smoke(bench_cli, tmp_path):
     assert (tmp_path / "out" / "figures" / "cells_rd_map_detections.png").exists()
 
 
+@pytest.mark.slow
 def test_multi_target_preset_smoke(bench_cli, tmp_path):
     """The multi-target preset's scenario configs and trackers, few trials and short runs; the
     Stone Soup peer runs when the [peers] extra is installed and is listed as not run otherwise."""
@@ -159,6 +167,7 @@ def test_multi_target_preset_smoke(bench_cli, tmp_path):
     assert ("`stonesoup-jpda` (stonesoup-jpda): needs the [peers] extra" in report) != peers
 
 
+@pytest.mark.slow
 def test_ar_tracking_preset_at_reduced_size(bench_cli, tmp_path):
     """The ar-tracking preset through the CLI at reduced trials: every tracker on every
     maneuvering config, the quiet / maneuver / onset split and the paired table."""

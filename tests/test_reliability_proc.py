@@ -152,6 +152,7 @@ trials = 1
 """
 
 
+@pytest.mark.slow
 def test_a_dying_or_exiting_plugin_fails_its_units_and_the_run_completes(hostile, tmp_path):
     """One worker (the driver survives a method's os._exit), then --retry-failed once the
     faults are gone: the results of a clean run."""
@@ -215,15 +216,14 @@ h0_trials = 10
 """
 
 
+@pytest.mark.slow
 def test_a_unit_past_its_time_limit_fails_and_its_worker_is_replaced(hostile, tmp_path):
     sweep = tmp_path / "slow.toml"
     sweep.write_text(SLOW_SWEEP)
     marker = uuid.uuid4().hex
-    started = time.monotonic()
     run = _bench(hostile, "run", sweep, "--out", tmp_path / "run", "--workers", 8, "--no-record",
-                 timeout=100, **{MARKER: marker})
-    assert run.returncode == 0, run.stderr
-    assert time.monotonic() - started < 100                          # the method sleeps 120 s
+                 **{MARKER: marker})
+    assert run.returncode == 0, run.stderr                           # the method sleeps an hour: it was stopped
     # 2 calibration + 2 evaluation units: 4 workers, said in one line
     assert "4 units to run: starting 4 workers (--workers 8)" in run.stderr.splitlines(), run.stderr
     with sqlite3.connect(tmp_path / "run" / "results.sqlite") as con:
@@ -293,6 +293,7 @@ def test_kill_9_of_the_driver_leaves_no_process_and_an_incomplete_report(hostile
     assert f"**Incomplete run: {HELD_FREE} of {HELD_UNITS} units stored.**" in text
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
 def test_a_stopped_run_stores_its_units_in_flight_and_leaves_no_process(hostile, tmp_path, sig):
     proc, marker, release, sweep = _held_run(hostile, tmp_path)

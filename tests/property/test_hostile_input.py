@@ -31,7 +31,6 @@ import signal
 import subprocess
 import sys
 import tempfile
-import time
 import tracemalloc
 import typing
 from pathlib import Path
@@ -572,10 +571,12 @@ def test_the_console_script_rejects_hostile_files_the_same_way(tmp_path):
 # value at a bound is either refused up front in one line (a constraint across parameters, a
 # method that cannot run on the scenario config, a unit above the memory limit) or runs to
 # completion at a small size (the scenario's ``small_params``, a few trials, one worker, a
-# 1 GB unit memory limit) within a time budget, with no failed unit.
+# 1 GB unit memory limit) with no failed unit. How fast is ``bench perf``'s to say; a case
+# that hangs fails after CASE_HANG_S.
 
-#: seconds a case at a bound may take (the longest, a 10 000-step scene, takes about 6 s)
-CASE_BUDGET_S = 30.0
+#: seconds after which a case at a bound counts as hung: far beyond the longest (a 10 000-step
+#: scene, about 6 s once its kernels are compiled; their first compilation can take a minute)
+CASE_HANG_S = 300
 #: the cheapest method of each task, run on the scenario cases
 CHEAP_METHOD = {"maneuver-detection": "innovation", "tracking": "ekf", "tbd": "dp-tbd", "multi-target": "gnn-ekf"}
 HUGE_INTS = (10 ** 400, -10 ** 400)
@@ -642,13 +643,13 @@ BEYOND_BOUNDS = [pytest.param(kind, name, field, _value(v, size), id=f"{name}.{f
                  for kind, name, field, elem, meta, size in _fields() for side, v in _beyond_bounds(elem, meta)]
 
 
-class _OverBudget(Exception):
+class _Hung(Exception):
     pass
 
 
 def run_to_completion(data) -> str:
-    """Validate ``data``; if accepted, run it (one worker, in-process) within CASE_BUDGET_S and
-    check no unit failed. Returns "refused" or "ran"."""
+    """Validate ``data``; if accepted, run it (one worker, in-process) and check no unit
+    failed. Returns "refused" or "ran"."""
     from bench.runner import plan_record, run_sweep
     try:
         plan = parse_sweep(data, "bounds.toml")
@@ -656,11 +657,10 @@ def run_to_completion(data) -> str:
         assert "\n" not in str(err) and len(str(err)) < 600, str(err)
         return "refused"
 
-    def over(*_):
-        raise _OverBudget(f"more than {2 * CASE_BUDGET_S:g} s")
-    previous = signal.signal(signal.SIGALRM, over)
-    signal.alarm(int(2 * CASE_BUDGET_S))             # a hang fails the case instead of the suite
-    started = time.perf_counter()
+    def hung(*_):
+        raise _Hung(f"still running after {CASE_HANG_S} s")
+    previous = signal.signal(signal.SIGALRM, hung)
+    signal.alarm(CASE_HANG_S)                        # a hang fails the case instead of the suite
     try:
         with tempfile.TemporaryDirectory() as tmp:
             store = run_sweep(plan, Path(tmp) / "out", plan_record=plan_record(plan, "bounds"), workers=1,
@@ -672,10 +672,8 @@ def run_to_completion(data) -> str:
     finally:
         signal.alarm(0)
         signal.signal(signal.SIGALRM, previous)
-    elapsed = time.perf_counter() - started
     failed = runs[runs.error.notna()]
     assert failed.empty, sorted(set(failed.method + ": " + failed.error))[:3]
-    assert elapsed < CASE_BUDGET_S, f"{elapsed:.1f} s"
     return "ran"
 
 
@@ -688,24 +686,8 @@ def test_values_beyond_every_bound_are_refused_in_one_line(kind, name, field, va
     assert f"params.{field}" in err, err
 
 
-@pytest.fixture(scope="module")
-def compiled_kernels():
-    """Run every method once on a small instance of a scenario of its task, so the numba
-    kernels are compiled (and cached on disk, where the worker processes find them) before
-    any case is timed: the budget is for the run, not for a cold JIT cache."""
-    from bench.params import build_params
-    from bench.rng import TrialRNG
-    for method in registry.methods().values():
-        for scenario in registry.scenarios().values():
-            if method.serves(scenario.name, scenario.tasks):
-                batch = scenario().generate(build_params(scenario.Params, scenario.small_params), 0.0, 2,
-                                            TrialRNG(1, 0, 1, range(2)))
-                method().run(batch, build_params(method.Params, {}))
-                break
-
-
 @pytest.mark.parametrize("kind, name, params", AT_BOUNDS)
-def test_values_at_every_bound_run_to_completion(kind, name, params, compiled_kernels):
+def test_values_at_every_bound_run_to_completion(kind, name, params):
     run_to_completion(_sweep_with(kind, name, params))
 
 
