@@ -229,6 +229,34 @@ def _window_sig(is_os, t, N, k, log_den):
     return _os_log_survival(t, N, k, log_den) / _LOG10 if is_os else _ca_sig(t, N)
 
 
+#: t_a < t_b (1 - ORDER_MARGIN) orders CA's significances at t_a and t_b with margin to spare
+#: (:func:`_combined_sig`): log1p's error (an ulp, 1e-16) is far below the gap it opens
+ORDER_MARGIN = 1e-9
+
+
+@numba.njit(cache=True, inline="always")
+def _clearly_below(a: float, b: float) -> bool:
+    """0 <= a < b (1 - ORDER_MARGIN) (False for a NaN)."""
+    return 0.0 <= a < b * (1.0 - ORDER_MARGIN)
+
+
+@numba.njit(cache=True, inline="always")
+def _combined_sig(is_os, t_r, n_r, k_r, t_d, n_d, k_d, both, log_den):
+    """min (``both``) or max of the range and Doppler significances at ratios
+    t_r, t_d. CA at equal N' (every cell away from the edges when the windows
+    match): S = N' log10(1 + t/N') rises with t, so the smaller (larger) S is
+    the one at the smaller (larger) t, and only that one is computed when the
+    ratios differ by more than ORDER_MARGIN (far beyond the rounding of the
+    log, so the value is the one both would give, bit for bit); otherwise both."""
+    lo = t_r if t_r < t_d else t_d               # selects, not branches: the order is a coin toss
+    hi = t_d if t_r < t_d else t_r
+    if not is_os and n_r == n_d and _clearly_below(lo, hi):
+        return _ca_sig(lo if both else hi, n_r)
+    s_r = _window_sig(is_os, t_r, n_r, k_r, log_den)
+    s_d = _window_sig(is_os, t_d, n_d, k_d, log_den)
+    return min(s_r, s_d) if both else max(s_r, s_d)
+
+
 @numba.njit(cache=True)
 def _map_significance(x, keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, is_os, log_den, out):
     """out = the capped significance of the active dimensions combined ("both":
@@ -246,12 +274,13 @@ def _map_significance(x, keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, bot
         for j in range(n_kept):
             d = kept[j]
             v = x[r, d]
-            s_r = _window_sig(is_os, _ratio(v, mu_r[r, d]), n_r[r], k_r[r], log_den) if use_r else 0.0
-            s_d = _window_sig(is_os, _ratio(v, mu_d[r, d]), n_d[d], k_d[d], log_den) if use_d else 0.0
             if use_r and use_d:
-                s = min(s_r, s_d) if both else max(s_r, s_d)
+                s = _combined_sig(is_os, _ratio(v, mu_r[r, d]), n_r[r], k_r[r], _ratio(v, mu_d[r, d]), n_d[d],
+                                  k_d[d], both, log_den)
+            elif use_r:
+                s = _window_sig(is_os, _ratio(v, mu_r[r, d]), n_r[r], k_r[r], log_den)
             else:
-                s = s_r if use_r else s_d
+                s = _window_sig(is_os, _ratio(v, mu_d[r, d]), n_d[d], k_d[d], log_den)
             out[r, d] = _capped(s)
 
 
@@ -328,6 +357,16 @@ def _noise_lines(is_os, x, window, c, buf, mu):
 
 
 @numba.njit(cache=True)
+def _transpose_into(src, dst):
+    """dst (B, A) = src (A, B).T: contiguous reads, strided writes (a map's
+    columns of dst stay in cache; measured faster than tiles at these sizes)."""
+    A, B = src.shape
+    for a in range(A):
+        for b in range(B):
+            dst[b, a] = src[a, b]
+
+
+@numba.njit(cache=True)
 def _window_cfar_fused(x, is_os, use_r, use_d, both, window_r, window_d, n_r, k_r, n_d, k_d, log_den,
                        half_range, half_doppler, statistic, noise):
     """:func:`window_cfar_composed` in one pass per map x[p] (R, D), its
@@ -339,9 +378,9 @@ def _window_cfar_fused(x, is_os, use_r, use_d, both, window_r, window_d, n_r, k_
     values as the composition, so the result is bit-identical."""
     P, R, D = x.shape
     mu_r = np.empty((R, D), dtype=np.float32)
-    mu_d = np.empty((R, D), dtype=np.float32)
     x_t = np.empty((D, R), dtype=np.float32)
     mu_t = np.empty((D, R), dtype=np.float32)
+    mu_d = mu_t.T                                # read in place: a transposing copy back would thrash the cache
     c_r = np.empty((R + 1, D))
     c_d = np.empty((D + 1, R))
     buf_r = np.empty((window_r[7], D), dtype=np.float32)
@@ -354,9 +393,8 @@ def _window_cfar_fused(x, is_os, use_r, use_d, both, window_r, window_d, n_r, k_
         if use_r:
             _noise_lines(is_os, x[p], window_r, c_r, buf_r, mu_r)
         if use_d:
-            x_t[:, :] = x[p].T
+            _transpose_into(x[p], x_t)
             _noise_lines(is_os, x_t, window_d, c_d, buf_d, mu_t)
-            mu_d[:, :] = mu_t.T
         if peaks:
             _local_maxima_map(x[p], half_range, half_doppler, row_max, box_max, keep)
         _map_significance(x[p], keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, is_os, log_den,

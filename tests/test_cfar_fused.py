@@ -1,7 +1,8 @@
 """The fused window-CFAR kernel (models.cfar.window_cfar) is bit-identical to
 its composition of steps (models.cfar.window_cfar_composed: noise estimate per
-axis, local maxima, significance, combination), decisions and significances,
-for random map sizes, windows, OS ranks, dimensions and peak boxes."""
+axis, local maxima, significance, combination) and to the per-axis detectors
+combined afterwards (models.cfar.fold), decisions and significances, for
+random map sizes, windows, OS ranks, dimensions and peak boxes."""
 
 import numpy as np
 from hypothesis import given, settings
@@ -20,6 +21,8 @@ def _cases(draw):
         g = draw(st.integers(0, 3))
         L = draw(st.integers(1, max(1, min(12, M - 2 * g - 2))))
         windows[axis] = (L, g, draw(st.integers(1, 2 * L)))
+    if draw(st.booleans()):                                      # equal N' along both axes (CA's one-log path)
+        windows["doppler"] = windows["range"]
     active = ("range", "doppler") if dimension in ("both", "either") else (dimension,)
     peaks = draw(st.sampled_from([(0, 0), (1, 1), (2, 0), (0, 3), (2, 1)]))
     return detector, dimension, (draw(st.integers(1, 4)), R, D), {a: windows[a] for a in active}, peaks
@@ -51,3 +54,10 @@ def test_fused_kernel_equals_the_composition_bit_for_bit(case, seed, clutter):
         np.testing.assert_array_equal(_bits(got), _bits(want))
     # the decisions at any threshold follow from the significances: identical too
     assert np.array_equal(fused[0] > 2.0, composed[0] > 2.0)
+    # and both equal the per-axis detectors combined afterwards (cfar.fold, as the regression
+    # CFAR does): checks the combined significance (one log where CA's two ratios are ordered)
+    per_axis = {axis: cfar.ca_cfar(maps, L, g, axis) if detector == "ca" else cfar.os_cfar(maps, L, g, k, axis)
+                for axis, (L, g, k) in windows.items()}
+    folded = cfar.fold(maps, per_axis, dimension, half_range, half_doppler)
+    for got, want in zip(fused, folded):
+        np.testing.assert_array_equal(_bits(got), _bits(want))
