@@ -187,7 +187,8 @@ def _ca_mean_lines(x, L, g, inv_count, c, mu):
     (``inv_count`` = 1 / N' per cell of the axis).
     """
     A, B = x.shape
-    c[0, :] = 0.0
+    for b in range(B):                           # element loops: a slice copy costs a call per row
+        c[0, b] = 0.0
     for a in range(A):
         for b in range(B):
             c[a + 1, b] = c[a, b] + x[a, b]
@@ -262,25 +263,33 @@ def _map_significance(x, keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, bot
     """out = the capped significance of the active dimensions combined ("both":
     the smaller, else the larger), at the cells of one map x (R, D) where
     ``keep``; 0 elsewhere (so the logs are paid only at the local maxima of
-    the peak detection)."""
+    the peak detection). Per row: the kept cells' indices, their ratios
+    t = x / mu, then the logs in a loop of their own."""
     R, D = x.shape
     kept = np.empty(D, dtype=np.int64)
+    t_r = np.zeros(D)
+    t_d = np.zeros(D)
     for r in range(R):
         n_kept = 0
-        for d in range(D):                       # the kept cells' indices, branch-free
+        for d in range(D):                       # zeros, and the kept cells' indices, branch-free
             out[r, d] = 0.0
+        for d in range(D):
             kept[n_kept] = d
             n_kept += keep[r, d]
         for j in range(n_kept):
             d = kept[j]
-            v = x[r, d]
+            if use_r:
+                t_r[j] = _ratio(x[r, d], mu_r[r, d])
+            if use_d:
+                t_d[j] = _ratio(x[r, d], mu_d[r, d])
+        for j in range(n_kept):
+            d = kept[j]
             if use_r and use_d:
-                s = _combined_sig(is_os, _ratio(v, mu_r[r, d]), n_r[r], k_r[r], _ratio(v, mu_d[r, d]), n_d[d],
-                                  k_d[d], both, log_den)
+                s = _combined_sig(is_os, t_r[j], n_r[r], k_r[r], t_d[j], n_d[d], k_d[d], both, log_den)
             elif use_r:
-                s = _window_sig(is_os, _ratio(v, mu_r[r, d]), n_r[r], k_r[r], log_den)
+                s = _window_sig(is_os, t_r[j], n_r[r], k_r[r], log_den)
             else:
-                s = _window_sig(is_os, _ratio(v, mu_d[r, d]), n_d[d], k_d[d], log_den)
+                s = _window_sig(is_os, t_d[j], n_d[d], k_d[d], log_den)
             out[r, d] = _capped(s)
 
 
@@ -400,10 +409,10 @@ def _window_cfar_fused(x, is_os, use_r, use_d, both, window_r, window_d, n_r, k_
         _map_significance(x[p], keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, is_os, log_den,
                           statistic[p])
         if use_r and use_d:
-            if both:
-                np.maximum(mu_r, mu_d, noise[p])
-            else:
-                np.minimum(mu_r, mu_d, noise[p])
+            for r in range(R):                   # np.maximum / np.minimum, cell by cell along the row
+                for d in range(D):
+                    noise[p, r, d] = np.maximum(mu_r[r, d], mu_d[r, d]) if both else np.minimum(mu_r[r, d],
+                                                                                                mu_d[r, d])
         else:
             noise[p] = mu_r if use_r else mu_d
 

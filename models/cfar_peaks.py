@@ -29,14 +29,16 @@ def _local_maxima_map(x, half_range, half_doppler, row_max, box_max, keep):
     box's offsets, vectorised along the row; the box cut at the map's edges."""
     R, D = x.shape
     for r in range(R):
-        row_max[r, :] = x[r, :]
+        for d in range(D):                       # element loops: a slice copy costs a call per row
+            row_max[r, d] = x[r, d]
         for e in range(1, half_doppler + 1):
             for d in range(D - e):
                 row_max[r, d] = _larger(row_max[r, d], x[r, d + e])
             for d in range(e, D):
                 row_max[r, d] = _larger(row_max[r, d], x[r, d - e])
     for r in range(R):
-        box_max[:] = row_max[r, :]
+        for d in range(D):
+            box_max[d] = row_max[r, d]
         for q in range(max(r - half_range, 0), min(r + half_range + 1, R)):
             for d in range(D):
                 box_max[d] = _larger(box_max[d], row_max[q, d])

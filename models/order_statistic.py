@@ -91,13 +91,16 @@ def _os_kth_lines(x, L, g, k, comps, n_comps, of_k, wires, buf, mu):
     for i in range(A):
         n_ref = 0
         for a in range(max(i - g - L, 0), max(i - g, 0)):
-            buf[n_ref, :] = x[a, :]
+            for b in range(B):                   # element loops: a slice copy costs a call per row
+                buf[n_ref, b] = x[a, b]
             n_ref += 1
         for a in range(min(i + g + 1, A), min(i + g + L + 1, A)):
-            buf[n_ref, :] = x[a, :]
+            for b in range(B):
+                buf[n_ref, b] = x[a, b]
             n_ref += 1
         for w in range(n_ref, wires):
-            buf[w, :] = np.inf
+            for b in range(B):
+                buf[w, b] = np.inf
         kk = (k * n_ref + N - 1) // N
         net = of_k[kk]
         for c in range(n_comps[net]):
@@ -106,7 +109,8 @@ def _os_kth_lines(x, L, g, k, comps, n_comps, of_k, wires, buf, mu):
                 lo = min(buf[u, b], buf[v, b])
                 buf[v, b] = max(buf[u, b], buf[v, b])
                 buf[u, b] = lo
-        mu[i, :] = buf[kk - 1, :]
+        for b in range(B):
+            mu[i, b] = buf[kk - 1, b]
 
 
 @numba.njit(cache=True)
