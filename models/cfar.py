@@ -43,10 +43,15 @@ transform of t, so "S > -log10(pfa)" is exactly "t > K(pfa)" and one
 threshold serves every detector, window and dimension. S is capped at
 :data:`MAX_SIGNIFICANCE` (Pfa = 1e-300, the smallest the calibration takes).
 
-All kernels take a batch of maps with a leading trial axis and run along
-axis 1 of a (P, A, B) array: the range axis of (n, R, D) maps directly, the
-Doppler axis as (n R, D, 1). Single-threaded and free of shared state
-(parallelism comes from the harness's worker processes).
+All kernels take a batch of maps with a leading trial axis; the per-axis
+ones run along axis 1 of a (P, A, B) array (the Doppler axis on the
+transposed maps), and :func:`window_cfar` runs CA or OS in one fused pass
+per map (:func:`_window_cfar_fused`), bit-identical to its composed steps
+(:func:`window_cfar_composed`, the readable oracle). The order-statistic
+machinery is in :mod:`models.order_statistic`, the peak detection in
+:mod:`models.cfar_peaks` (re-exported here). Single-threaded and free of
+shared state (parallelism comes from the harness's worker processes; ``bench
+perf`` measures one core).
 """
 
 from __future__ import annotations
