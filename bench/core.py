@@ -298,7 +298,8 @@ class Method(Component):
     * a *reference implementation* (:meth:`reference_run`, declared by setting
       :attr:`reference_name`): the straightforward code the method is timed
       against;
-    * :meth:`transitions`: the work of a DP method, for transitions per second;
+    * :meth:`work`: the work a batch is, in the method's own unit (trials by
+      default; cells of a map, DP state transitions), for ``<unit>_per_second``;
     * :attr:`perf_targets`: goals the performance report checks.
     """
 
@@ -312,7 +313,8 @@ class Method(Component):
     #: ``bench perf``: trials the (slow) reference runs on, at most the method's; None: as many
     reference_trials: ClassVar[int | None] = None
     #: ``bench perf``: size name (or ``"*"`` for every size) -> {measure: goal}, measures
-    #: ``speedup`` (at least), ``transitions_per_second`` (at least), ``seconds_per_trial`` (at most)
+    #: ``speedup`` (at least), ``<unit>_per_second`` of a :meth:`work` unit (at least),
+    #: ``seconds_per_trial`` (at most)
     perf_targets: ClassVar[dict[str, dict[str, float]]] = {}
 
     def run(self, batch: Batch, params) -> Any:
@@ -331,10 +333,12 @@ class Method(Component):
         when :attr:`reference_name` is set."""
         raise NotImplementedError
 
-    def transitions(self, batch: Batch, params) -> int | None:
-        """State transitions a DP method evaluates per trial of ``batch``;
-        None (the default): not a DP method, nothing to count."""
-        return None
+    def work(self, batch: Batch, params) -> tuple[str, float]:
+        """(unit, count): the work :meth:`run` does on ``batch``, counted in the
+        method's own unit (a plural noun: "cells", "transitions"), which ``bench
+        perf`` divides by the time to report ``<unit>_per_second``. The default:
+        ("trials", the batch's trials)."""
+        return "trials", float(batch.n)
 
     @classmethod
     def serves(cls, scenario_name: str, scenario_tasks) -> bool:

@@ -11,12 +11,16 @@ batch, on at most ``Method.reference_trials`` trials.
 
 Each measurement runs in a fresh process, so ``peak_rss_mb`` (the process's
 maximum resident set size, including the interpreter, the libraries and the
-batch) is the method's alone. DP methods report ``Method.transitions(batch,
-params)`` (state transitions evaluated per trial) and methods may declare
-``Method.perf_targets`` (``speedup``, ``transitions_per_second``,
+batch) is the method's alone, and runs single-threaded (:data:`ONE_CORE`: numba,
+OpenMP, MKL and OpenBLAS held to one thread), so every rate is per core. The
+reference is timed like the method (best of a few repetitions after a warm-up).
+Every method counts its work in its own unit (``Method.work(batch, params) ->
+(unit, count)``: trials by default, cells of a CFAR map, DP state transitions),
+reported as ``<unit>_per_second`` beside ``trials_per_second``, and methods may
+declare ``Method.perf_targets`` (``speedup``, ``<unit>_per_second``,
 ``seconds_per_trial``), which the report shows against the measurements. The
 plugin protocol (:mod:`bench.core`) gives every one of these a default, read
-here as "not provided". Nothing here is asserted by tests: speed is measured,
+here as "not provided".
 
 Scene generation is measured too, in its own table: for every (scenario,
 size) of the measured methods, ``Scenario.generate`` of that many trials
@@ -33,6 +37,7 @@ worker, N local workers and N Dask workers, to measure the executors' scaling.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import multiprocessing
 import os
 import platform
@@ -50,11 +55,13 @@ from bench.markdown import fmt, table
 from bench.params import build_params
 from bench.rng import EVALUATION, TrialRNG, stable_key
 
-PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "reference", "reference_seconds_per_trial",
-                "speedup", "peak_rss_mb"]
+PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "trials_per_second", "reference",
+                "reference_seconds_per_trial", "speedup", "peak_rss_mb"]
 SCENE_COLUMNS = ["scenario", "size", "trials", "seconds_per_trial", "peak_rss_mb"]
 SEED = 20261121
 REPEATS = 3
+#: the environment of a measuring process: one thread per library, so a rate is per core
+ONE_CORE = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
 
 
 @dataclass(frozen=True)
@@ -113,20 +120,18 @@ def measure(job: Job) -> dict:
     params = method.Params()
     warm = _batch(job, 1)
     batch = _batch(job, job.trials)
-    out = {"name": None, "transitions": None}
+    out = {"name": None, "work_unit": None, "work_per_trial": None}
     if job.reference:
         ref = reference_of(method)
         if ref is None:
             return {**out, "seconds_per_trial": np.nan, "peak_rss_mb": np.nan}
         out["name"], fn = ref
-        fn(warm, params)
-        seconds = _timed(lambda: fn(batch, params), 1)
     else:
-        method.run(warm, params)
-        seconds = _timed(lambda: method.run(batch, params), REPEATS)
-        transitions = method.transitions(batch, params)
-        if transitions is not None:
-            out["transitions"] = float(transitions)
+        fn = method.run
+        out["work_unit"], count = method.work(batch, params)
+        out["work_per_trial"] = float(count) / job.trials
+    fn(warm, params)
+    seconds = _timed(lambda: fn(batch, params), REPEATS)
     return {**out, "seconds_per_trial": seconds / job.trials, "peak_rss_mb": _peak_rss_mb()}
 
 
@@ -147,9 +152,25 @@ def measure_scene(job: SceneJob) -> dict:
     return {"seconds_per_trial": best / job.trials, "peak_rss_mb": _peak_rss_mb()}
 
 
+@contextlib.contextmanager
+def _environment(values: dict[str, str]):
+    """``os.environ`` updated with ``values`` inside the block (processes started there inherit it)."""
+    saved = {name: os.environ.get(name) for name in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
 def _in_fresh_process(job: Job | SceneJob) -> dict:
+    """``measure`` (or ``measure_scene``) in a fresh spawned process held to one core (:data:`ONE_CORE`)."""
     ctx = multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
+    with _environment(ONE_CORE), cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
         return pool.submit(measure_scene if isinstance(job, SceneJob) else measure, job).result()
 
 
@@ -229,19 +250,31 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
         r = _in_fresh_process(Job(job.method, job.scenario, job.size, job.scenario_params, ref_trials, True))
         speedup = r["seconds_per_trial"] / m["seconds_per_trial"] if np.isfinite(r["seconds_per_trial"]) else np.nan
         rows.append({"method": job.method, "size": job.size, "trials": job.trials,
-                     "seconds_per_trial": m["seconds_per_trial"], "reference": r["name"] or "",
-                     "reference_seconds_per_trial": r["seconds_per_trial"], "speedup": speedup,
-                     "peak_rss_mb": m["peak_rss_mb"]})
-        tps = m["transitions"] / m["seconds_per_trial"] if m["transitions"] else np.nan
+                     "seconds_per_trial": m["seconds_per_trial"], "trials_per_second": 1.0 / m["seconds_per_trial"],
+                     "reference": r["name"] or "", "reference_seconds_per_trial": r["seconds_per_trial"],
+                     "speedup": speedup, "peak_rss_mb": m["peak_rss_mb"],
+                     f"{m['work_unit']}_per_second": m["work_per_trial"] / m["seconds_per_trial"]})
         extra.append({"scenario": job.scenario, "params": job.scenario_params, "reference_trials": ref_trials,
-                      "transitions_per_second": tps,
                       "targets": registry.get_method(job.method).perf_targets})
     scenes = measure_scenes([job for job, _ in planned], progress)
     scaling, sweep = None, ""
     if executors:
         plan = scaling_plan()
         scaling, sweep = executor_scaling(workers, progress, plan), f"Preset `{plan.name}`: {plan.description}"
-    return write_report(Path(out_dir), pd.DataFrame(rows, columns=PERF_COLUMNS), extra, scaling, sweep, scenes)
+    return write_report(Path(out_dir), perf_table(rows), extra, scaling, sweep, scenes)
+
+
+def perf_table(rows: list[dict]) -> pd.DataFrame:
+    """The rows of ``perf.csv``: :data:`PERF_COLUMNS`, then one ``<unit>_per_second``
+    column per other work unit the methods reported (:meth:`bench.core.Method.work`;
+    empty where a method counts another unit)."""
+    units = sorted({key for row in rows for key in row if key.endswith("_per_second")} - set(PERF_COLUMNS))
+    return pd.DataFrame(rows, columns=PERF_COLUMNS + units)
+
+
+def rate_columns(perf: pd.DataFrame) -> list[str]:
+    """The ``<unit>_per_second`` columns of a perf table, trials first."""
+    return [column for column in perf.columns if column.endswith("_per_second")]
 
 
 # ------------------------------------------------------------------ executors
@@ -289,14 +322,16 @@ def executor_scaling(workers: int, progress=print, plan=None) -> pd.DataFrame:
 
 # ------------------------------------------------------------------ report
 
-def _target_text(targets: dict, row: dict, tps: float) -> str:
+def _target_text(targets: dict, row: dict) -> str:
     checks = []
     for key, goal in targets.items():
         if key == "speedup":
             value, ok = row["speedup"], row["speedup"] >= goal
             checks.append(f"speed-up ≥ {goal:g}: {fmt(value)} {'✓' if ok else '✗'}")
-        elif key == "transitions_per_second":
-            checks.append(f"≥ {goal:.0e} transitions/s: {tps:.2e} {'✓' if tps >= goal else '✗'}")
+        elif key.endswith("_per_second"):
+            rate = row.get(key, np.nan)
+            ok = bool(np.isfinite(rate) and rate >= goal)
+            checks.append(f"≥ {goal:.0e} {key.removesuffix('_per_second')}/s: {rate:.2e} {'✓' if ok else '✗'}")
         elif key == "seconds_per_trial":
             value = row["seconds_per_trial"]
             checks.append(f"≤ {goal:g} s/trial: {fmt(value)} {'✓' if value <= goal else '✗'}")
@@ -328,7 +363,7 @@ def _scene_section(scenes: pd.DataFrame) -> list[str]:
         targets = cls.perf_targets if cls is not None else {}
         goal = targets.get(r["size"], targets.get("*", {}))
         rows.append([f"`{r['scenario']}`", r["size"], r["trials"], f"{r['seconds_per_trial'] * 1e3:.3g}",
-                     f"{r['peak_rss_mb']:.0f}", _target_text(goal, r, np.nan)])
+                     f"{r['peak_rss_mb']:.0f}", _target_text(goal, r)])
     return ["## Scene generation", "`Scenario.generate` alone (the scene every unit of a sweep draws before "
             "its methods run), at each size of the table above: one core, fresh process, best of 3 runs after "
             "a one-trial warm-up; `scene.csv` holds the same numbers.",
@@ -344,21 +379,23 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
     _write_csv(perf, out_dir / "perf.csv")
     if scenes is not None:
         _write_csv(scenes, out_dir / "scene.csv")
-    rows = []
+    rows, rates = [], rate_columns(perf)
     for row, info in zip(perf.to_dict("records"), extra):
-        tps = info["transitions_per_second"]
         targets = info["targets"].get(row["size"], info["targets"].get("*", {}))
         rows.append([f"`{row['method']}`", row["size"], row["trials"], f"{row['seconds_per_trial'] * 1e3:.3g}",
-                     f"{1.0 / row['seconds_per_trial']:.3g}", "–" if not np.isfinite(tps) else f"{tps:.3g}",
+                     *("–" if not np.isfinite(row[rate]) else f"{row[rate]:.3g}" for rate in rates),
                      row["reference"] or "–",
                      "–" if not np.isfinite(row["reference_seconds_per_trial"])
                      else f"{row['reference_seconds_per_trial'] * 1e3:.3g} ({info['reference_trials']} trials)",
-                     fmt(row["speedup"]), f"{row['peak_rss_mb']:.0f}", _target_text(targets, row, tps)])
+                     fmt(row["speedup"]), f"{row['peak_rss_mb']:.0f}", _target_text(targets, row)])
     parts = ["# Performance", "Written by `bench perf`; `perf.csv` holds the same numbers. One core per "
-             "measurement, best of 3 runs after a one-trial warm-up (JIT compilation is not timed); the "
-             "reference runs once on its trials in a separate fresh process. Peak RSS is the whole "
-             "measuring process's (interpreter and libraries included).",
-             table(["method", "size", "trials", "ms per trial", "trials/s", "transitions/s", "reference",
+             "measurement (a fresh process, numba, OpenMP, MKL and OpenBLAS held to one thread), best of 3 "
+             "runs after a one-trial warm-up (JIT compilation is not timed); the reference likewise, on its "
+             "trials, in a separate fresh process. Rates are per core: trials per second, and each method's "
+             "own work unit per second (`Method.work`: cells of a CFAR map, DP state transitions). Peak RSS "
+             "is the whole measuring process's (interpreter and libraries included).",
+             table(["method", "size", "trials", "ms per trial",
+                    *(f"{rate.removesuffix('_per_second')}/s per core" for rate in rates), "reference",
                     "reference ms per trial", "speed-up", "peak RSS (MB)", "targets"], rows),
              "Sizes: " + "; ".join(sorted({f"`{i['scenario']}` {r['size']} = {i['params'] or 'defaults'}"
                                           for r, i in zip(perf.to_dict("records"), extra)}))]

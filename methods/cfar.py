@@ -205,6 +205,10 @@ class CfarMethod(Method):
     def check_scenario(self, params, scenario_params) -> str | None:
         return window_problem(params, scenario_params)
 
+    def work(self, batch: Batch, params) -> tuple[str, float]:
+        """("cells", range x Doppler cells x maps): the cells under test of the batch."""
+        return "cells", float(np.prod(batch.z.shape[:1] + batch.z.shape[2:]))
+
     def threshold_factors(self, params, pfa: float) -> dict[str, float]:
         """K per active dimension for ``pfa`` at the full window."""
         return {axis: self.axis_factor(params, pfa, axis) for axis in active_axes(params.dimension)}

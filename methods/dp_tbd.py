@@ -171,11 +171,11 @@ class DpTbd(Method):
         score, track = reference_dp_tbd(_frames32(batch), window_radius(params.max_speed_m_s, batch))
         return TBDOutput(score=score, track=track)
 
-    def transitions(self, batch: Batch, params) -> int:
-        """State transitions evaluated per trial: cells x window x (frames - 1)."""
+    def work(self, batch: Batch, params) -> tuple[str, float]:
+        """State transitions evaluated: cells x window x (frames - 1) per trial."""
         q = window_radius(params.max_speed_m_s, batch)
-        _, K, H, W = batch.z.shape
-        return H * W * (2 * q + 1) ** 2 * (K - 1)
+        n, K, H, W = batch.z.shape
+        return "transitions", float(n * H * W * (2 * q + 1) ** 2 * (K - 1))
 
     def check_scenario(self, params, scenario_params) -> str | None:
         return radius_problem(params.max_speed_m_s, scenario_params)
@@ -548,11 +548,11 @@ class DpTbdMf(Method):
                                coef0, const0, coef1, const1, coef2, const2, score, track, value)
         return TBDOutput(score=score, track=track, value=value)
 
-    def transitions(self, batch: Batch, params) -> int:
-        """State transitions evaluated per trial: cells x (2q+1)^4 x (frames - 2)."""
+    def work(self, batch: Batch, params) -> tuple[str, float]:
+        """State transitions evaluated: cells x (2q+1)^4 x (frames - 2) per trial."""
         q = window_radius(params.max_speed_m_s, batch)
-        _, K, H, W = batch.z.shape
-        return H * W * (2 * q + 1) ** 4 * max(K - 2, 0)
+        n, K, H, W = batch.z.shape
+        return "transitions", float(n * H * W * (2 * q + 1) ** 4 * max(K - 2, 0))
 
     def check_scenario(self, params, scenario_params) -> str | None:
         """The window radius (:func:`radius_problem`), and for AR noise the 3 x 3

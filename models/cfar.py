@@ -46,21 +46,28 @@ transform of t, so "S > -log10(pfa)" is exactly "t > K(pfa)" and one
 threshold serves every detector, window and dimension. S is capped at
 :data:`MAX_SIGNIFICANCE` (Pfa = 1e-300, the smallest the calibration takes).
 
-All kernels take a batch of maps with a leading trial axis and run along
-axis 1 of a (P, A, B) array: the range axis of (n, R, D) maps directly, the
-Doppler axis as (n R, D, 1). Single-threaded and free of shared state
-(parallelism comes from the harness's worker processes).
+All kernels take a batch of maps with a leading trial axis; the per-axis
+ones run along axis 1 of a (P, A, B) array (the Doppler axis on the
+transposed maps), and :func:`window_cfar` runs CA or OS in one fused pass
+per map (:func:`_window_cfar_fused`), bit-identical to its composed steps
+(:func:`window_cfar_composed`, the readable oracle). The order-statistic
+machinery is in :mod:`models.order_statistic`, the peak detection in
+:mod:`models.cfar_peaks` (re-exported here). Single-threaded and free of
+shared state (parallelism comes from the harness's worker processes; ``bench
+perf`` measures one core).
 """
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numba
 import numpy as np
-import scipy.ndimage
 import scipy.optimize
+
+from models.cfar_peaks import _local_maxima_map, local_maxima, local_maxima_scipy, with_peaks  # noqa: F401
+from models.order_statistic import (_os_kth_axis1, _os_kth_lines, _os_log_denominators, _os_log_survival,
+                                    selection_networks)
 
 #: the cap of the significance -log10 Pfa: Pfa = 1e-300, the smallest the calibration accepts
 MAX_SIGNIFICANCE = 300.0
@@ -145,32 +152,6 @@ def _ca_sig(t: float, N: int) -> float:
 
 
 @numba.njit(cache=True, inline="always")
-def _os_sig(t: float, N: int, k: int, log_den) -> float:
-    """-log10 of prod_{i<k} (N - i)/(N - i + t) = [sum_i log(N - i + t) - sum_i log(N - i)] / ln 10:
-    the numerator as a running product (folded into a log whenever it grows
-    large: one log per cell in practice), the denominator from the table
-    ``log_den[N, k]`` (:func:`_os_log_denominators`); no division in the loop."""
-    total = 0.0
-    prod = 1.0
-    for i in range(k):
-        prod *= N - i + t
-        if prod > 1e200:
-            total += math.log(prod)
-            prod = 1.0
-    return (total + math.log(prod) - log_den[N, k]) / _LOG10
-
-
-@numba.njit(cache=True)
-def _os_log_denominators(N: int):
-    """log_den[n, k] = sum_{i<k} log(n - i) for 0 <= k <= n <= N."""
-    log_den = np.zeros((N + 1, N + 1))
-    for n in range(1, N + 1):
-        for k in range(1, n + 1):
-            log_den[n, k] = log_den[n, k - 1] + math.log(n - k + 1)
-    return log_den
-
-
-@numba.njit(cache=True, inline="always")
 def _ratio(x: float, mu: float) -> float:
     """t = x / mu; an empty estimate (mu = 0) makes any power infinitely significant."""
     if mu > 0.0:
@@ -204,115 +185,34 @@ def os_significance(t, N, k):
 # ------------------------------------------------------------------ noise estimates
 
 @numba.njit(cache=True)
-def _ca_mean_axis1(x, L, g, inv_count, mu):
-    """CA-CFAR's mu along axis 1 of x (P, A, B) float32, the B cells of a row
-    at once: running sums, O(1) per cell.
+def _ca_mean_lines(x, L, g, inv_count, c, mu):
+    """CA-CFAR's mu along axis 0 of one map x (A, B) float32, the B cells of a
+    row at once: running sums, O(1) per cell.
 
-    The prefix sums c[j] = sum_{a<j} x[a] (float64) give each window sum as
-    two differences: right = c[min(i+g+L+1, A)] - c[min(i+g+1, A)],
+    The prefix sums c[j] = sum_{a<j} x[a] (float64, in ``c`` (A + 1, B)) give
+    each window sum as two differences: right = c[min(i+g+L+1, A)] - c[min(i+g+1, A)],
     left = c[max(i-g, 0)] - c[max(i-g-L, 0)]; mu = (left + right) / N'
     (``inv_count`` = 1 / N' per cell of the axis).
     """
-    P, A, B = x.shape
-    c = np.empty((A + 1, B))
-    for p in range(P):
-        c[0, :] = 0.0
-        for a in range(A):
-            for b in range(B):
-                c[a + 1, b] = c[a, b] + x[p, a, b]
-        for i in range(A):
-            hi, lo = min(i + g + L + 1, A), min(i + g + 1, A)
-            lhi, llo = max(i - g, 0), max(i - g - L, 0)
-            for b in range(B):
-                mu[p, i, b] = (c[hi, b] - c[lo, b] + c[lhi, b] - c[llo, b]) * inv_count[i]
-
-
-def _batcher_network(n: int) -> list[tuple[int, int]]:
-    """Batcher's odd-even merge sorting network on n = 2^m wires: the
-    comparators (i, j), i < j, in order; after them wire w holds the w-th
-    smallest value."""
-    def merge(lo: int, hi: int, r: int):
-        step = 2 * r
-        if step < hi - lo:
-            yield from merge(lo, hi, step)
-            yield from merge(lo + r, hi, step)
-            yield from ((i, i + r) for i in range(lo + r, hi - r, step))
-        else:
-            yield (lo, lo + r)
-
-    def sort(lo: int, hi: int):
-        if hi - lo >= 1:
-            mid = lo + (hi - lo) // 2
-            yield from sort(lo, mid)
-            yield from sort(mid + 1, hi)
-            yield from merge(lo, hi, 1)
-
-    return list(sort(0, n - 1))
-
-
-#: networks on at most this many wires are pruned per k (beyond, one full sorting network serves every k)
-PRUNED_WIRES = 64
-
-
-@functools.lru_cache(maxsize=16)
-def selection_networks(N: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """Comparator lists that put the k-th smallest of N values on wire k - 1:
-    Batcher's network on the next power of two (the spare wires hold +inf),
-    pruned for each k = 1..N to the comparators wire k - 1 depends on (up to
-    PRUNED_WIRES wires; beyond, the whole network for every k). Returns
-    (comparators (lists, C, 2) int64, counts (lists,), list of each k (N + 1,), wires)."""
-    wires = 1 << max(0, (N - 1).bit_length())
-    network = _batcher_network(wires) if wires > 1 else []
-    if wires > PRUNED_WIRES:
-        lists, of_k = [network], np.zeros(N + 1, dtype=np.int64)
-    else:
-        lists, of_k = [], np.arange(N + 1, dtype=np.int64)
-        for k in range(N + 1):
-            needed, kept = {k - 1}, []
-            for i, j in reversed(network):
-                if i in needed or j in needed:
-                    kept.append((i, j))
-                    needed |= {i, j}
-            lists.append(kept[::-1] if k >= 1 else [])
-    comps = np.zeros((len(lists), max(1, max(len(c) for c in lists)), 2), dtype=np.int64)
-    for index, kept in enumerate(lists):
-        if kept:
-            comps[index, :len(kept)] = kept
-    return comps, np.array([len(c) for c in lists], dtype=np.int64), of_k, wires
+    A, B = x.shape
+    for b in range(B):                           # element loops: a slice copy costs a call per row
+        c[0, b] = 0.0
+    for a in range(A):
+        for b in range(B):
+            c[a + 1, b] = c[a, b] + x[a, b]
+    for i in range(A):
+        hi, lo = min(i + g + L + 1, A), min(i + g + 1, A)
+        lhi, llo = max(i - g, 0), max(i - g - L, 0)
+        for b in range(B):
+            mu[i, b] = (c[hi, b] - c[lo, b] + c[lhi, b] - c[llo, b]) * inv_count[i]
 
 
 @numba.njit(cache=True)
-def _os_kth_axis1(x, L, g, k, comps, n_comps, of_k, wires, mu):
-    """OS-CFAR's mu along axis 1 of x (P, A, B) float32, B cells at once: for
-    the cells i of a row, their reference rows (the +-L cells beyond the
-    guards, those inside the map) are copied into a (wires, B) buffer padded
-    with +inf, and a selection network (:func:`selection_networks`) of
-    element-wise min/max across the B lanes leaves the k'-th smallest,
-    k' = ceil(k N' / 2L), on wire k' - 1: branch-free and vectorised, O(N log^2 N)
-    comparisons per cell."""
-    P, A, B = x.shape
-    N = 2 * L
-    buf = np.empty((wires, B), dtype=np.float32)
-    for p in range(P):
-        for i in range(A):
-            n_ref = 0
-            for a in range(max(i - g - L, 0), max(i - g, 0)):
-                buf[n_ref, :] = x[p, a, :]
-                n_ref += 1
-            for a in range(min(i + g + 1, A), min(i + g + L + 1, A)):
-                buf[n_ref, :] = x[p, a, :]
-                n_ref += 1
-            for w in range(n_ref, wires):
-                buf[w, :] = np.inf
-            kk = (k * n_ref + N - 1) // N
-            net = of_k[kk]
-            for c in range(n_comps[net]):
-                u, v = comps[net, c, 0], comps[net, c, 1]
-                for b in range(B):
-                    lo = min(buf[u, b], buf[v, b])
-                    buf[v, b] = max(buf[u, b], buf[v, b])
-                    buf[u, b] = lo
-            mu[p, i, :] = buf[kk - 1, :]
+def _ca_mean_axis1(x, L, g, inv_count, mu):
+    """:func:`_ca_mean_lines` along axis 1 of every map of x (P, A, B) float32."""
+    c = np.empty((x.shape[1] + 1, x.shape[2]))
+    for p in range(x.shape[0]):
+        _ca_mean_lines(x[p], L, g, inv_count, c, mu[p])
 
 
 def window_noise(maps: np.ndarray, detector: str, L: int, g: int, k: int, axis: str) -> np.ndarray:
@@ -334,29 +234,95 @@ def window_noise(maps: np.ndarray, detector: str, L: int, g: int, k: int, axis: 
 
 @numba.njit(cache=True, inline="always")
 def _window_sig(is_os, t, N, k, log_den):
-    return _os_sig(t, N, k, log_den) if is_os else _ca_sig(t, N)
+    """-log10 Pfa(t) of OS (:func:`models.order_statistic._os_log_survival`) or CA."""
+    return _os_log_survival(t, N, k, log_den) / _LOG10 if is_os else _ca_sig(t, N)
+
+
+#: t_a < t_b (1 - ORDER_MARGIN) orders CA's significances at t_a and t_b with margin to spare
+#: (:func:`_combined_sig`): log1p's error (an ulp, 1e-16) is far below the gap it opens
+ORDER_MARGIN = 1e-9
+
+
+@numba.njit(cache=True, inline="always")
+def _clearly_below(a: float, b: float) -> bool:
+    """0 <= a < b (1 - ORDER_MARGIN) (False for a NaN)."""
+    return 0.0 <= a < b * (1.0 - ORDER_MARGIN)
+
+
+@numba.njit(cache=True, inline="always")
+def _combined_sig(is_os, t_r, n_r, k_r, t_d, n_d, k_d, both, log_den):
+    """min (``both``) or max of the range and Doppler significances at ratios
+    t_r, t_d. CA at equal N' (every cell away from the edges when the windows
+    match): S = N' log10(1 + t/N') rises with t, so the smaller (larger) S is
+    the one at the smaller (larger) t, and only that one is computed when the
+    ratios differ by more than ORDER_MARGIN (far beyond the rounding of the
+    log, so the value is the one both would give, bit for bit); otherwise both."""
+    lo = t_r if t_r < t_d else t_d               # selects, not branches: the order is a coin toss
+    hi = t_d if t_r < t_d else t_r
+    if not is_os and n_r == n_d and _clearly_below(lo, hi):
+        return _ca_sig(lo if both else hi, n_r)
+    s_r = _window_sig(is_os, t_r, n_r, k_r, log_den)
+    s_d = _window_sig(is_os, t_d, n_d, k_d, log_den)
+    return min(s_r, s_d) if both else max(s_r, s_d)
+
+
+@numba.njit(cache=True)
+def _map_significance(x, keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, is_os, log_den, out):
+    """out = the capped significance of the active dimensions combined ("both":
+    the smaller, else the larger), at the cells of one map x (R, D) where
+    ``keep``; 0 elsewhere (so the logs are paid only at the local maxima of
+    the peak detection). Per row: the kept cells' indices, their ratios
+    t = x / mu, then the logs in a loop of their own."""
+    R, D = x.shape
+    kept = np.empty(D, dtype=np.int64)
+    t_r = np.zeros(D)
+    t_d = np.zeros(D)
+    for r in range(R):
+        n_kept = 0
+        for d in range(D):                       # zeros, and the kept cells' indices, branch-free
+            out[r, d] = 0.0
+        for d in range(D):
+            kept[n_kept] = d
+            n_kept += keep[r, d]
+        for j in range(n_kept):
+            d = kept[j]
+            if use_r:
+                t_r[j] = _ratio(x[r, d], mu_r[r, d])
+            if use_d:
+                t_d[j] = _ratio(x[r, d], mu_d[r, d])
+        for j in range(n_kept):
+            d = kept[j]
+            if use_r and use_d:
+                s = _combined_sig(is_os, t_r[j], n_r[r], k_r[r], t_d[j], n_d[d], k_d[d], both, log_den)
+            elif use_r:
+                s = _window_sig(is_os, t_r[j], n_r[r], k_r[r], log_den)
+            else:
+                s = _window_sig(is_os, t_d[j], n_d[d], k_d[d], log_den)
+            out[r, d] = _capped(s)
 
 
 @numba.njit(cache=True)
 def _window_significance(x, keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, is_os, log_den, out):
-    """out = the capped significance of the active dimensions combined ("both":
-    the smaller, else the larger), at the cells where ``keep``; 0 elsewhere
-    (so the logs are paid only at the local maxima of the peak detection)."""
-    P, R, D = x.shape
-    for p in range(P):
-        for r in range(R):
-            for d in range(D):
-                if not keep[p, r, d]:
-                    out[p, r, d] = 0.0
-                    continue
-                v = x[p, r, d]
-                s_r = _window_sig(is_os, _ratio(v, mu_r[p, r, d]), n_r[r], k_r[r], log_den) if use_r else 0.0
-                s_d = _window_sig(is_os, _ratio(v, mu_d[p, r, d]), n_d[d], k_d[d], log_den) if use_d else 0.0
-                if use_r and use_d:
-                    s = min(s_r, s_d) if both else max(s_r, s_d)
-                else:
-                    s = s_r if use_r else s_d
-                out[p, r, d] = _capped(s)
+    """:func:`_map_significance` on every map of x (P, R, D)."""
+    for p in range(x.shape[0]):
+        _map_significance(x[p], keep[p], mu_r[p], n_r, k_r, mu_d[p], n_d, k_d, use_r, use_d, both, is_os,
+                          log_den, out[p])
+
+
+def _axis_windows(detector: str, windows: dict, sizes: dict) -> tuple[dict, dict, np.ndarray]:
+    """({axis: N' per cell}, {axis: k' per cell (CA: N')}, the log-denominator
+    table of :func:`models.order_statistic._os_log_survival`) of the windows
+    ``{axis: (L, g, k)}`` on axes of ``sizes`` ``{axis: M}`` cells."""
+    counts, ranks, full = {}, {}, 1
+    for axis, (L, g, k) in windows.items():
+        counts[axis] = reference_counts(sizes[axis], L, g).astype(np.int64)
+        ranks[axis] = (edge_rank(k, 2 * L, counts[axis]) if detector == "os" else counts[axis]).astype(np.int64)
+        full = max(full, 2 * L)
+    return counts, ranks, _os_log_denominators(full)
+
+
+#: the per-cell array of an axis no active dimension uses (never read)
+_UNUSED = np.zeros(1, dtype=np.int64)
 
 
 def window_significance(maps: np.ndarray, detector: str, windows: dict, mus: dict, dimension: str,
@@ -366,20 +332,13 @@ def window_significance(maps: np.ndarray, detector: str, windows: dict, mus: dic
     ``{axis: mu}`` and windows ``{axis: (L, g, k)}``, at each cell's own N'
     and k'; 0 where ``keep`` is False (None: every cell)."""
     n, R, D = maps.shape
-    sizes = {"range": R, "doppler": D}
-    counts, ranks, full = {}, {}, 1
-    for axis, (L, g, k) in windows.items():
-        counts[axis] = reference_counts(sizes[axis], L, g).astype(np.int64)
-        ranks[axis] = (edge_rank(k, 2 * L, counts[axis]) if detector == "os" else counts[axis]).astype(np.int64)
-        full = max(full, 2 * L)
+    counts, ranks, log_den = _axis_windows(detector, windows, {"range": R, "doppler": D})
     some = next(iter(mus.values()))
-    dummy = np.zeros(1, dtype=np.int64)
     out = np.empty(maps.shape, dtype=np.float32)
     _window_significance(maps, np.ones(maps.shape, np.bool_) if keep is None else keep,
-                         mus.get("range", some), counts.get("range", dummy), ranks.get("range", dummy),
-                         mus.get("doppler", some), counts.get("doppler", dummy), ranks.get("doppler", dummy),
-                         "range" in mus, "doppler" in mus, dimension == "both", detector == "os",
-                         _os_log_denominators(full), out)
+                         mus.get("range", some), counts.get("range", _UNUSED), ranks.get("range", _UNUSED),
+                         mus.get("doppler", some), counts.get("doppler", _UNUSED), ranks.get("doppler", _UNUSED),
+                         "range" in mus, "doppler" in mus, dimension == "both", detector == "os", log_den, out)
     return out
 
 
@@ -400,12 +359,108 @@ def os_cfar(maps: np.ndarray, L: int, g: int, k: int, axis: str) -> tuple[np.nda
     return mu, window_significance(maps, "os", {axis: (L, g, k)}, {axis: mu}, axis)
 
 
+# ------------------------------------------------------------------ window CFAR, fused
+
+@numba.njit(cache=True, inline="always")
+def _noise_lines(is_os, x, window, c, buf, mu):
+    """mu along axis 0 of one map x (A, B): :func:`_ca_mean_lines` or
+    :func:`models.order_statistic._os_kth_lines`, ``window`` = (L, g, k, 1/N'
+    per cell, the selection networks of N = 2L)."""
+    L, g, k, inv_count, comps, n_comps, of_k, wires = window
+    if is_os:
+        _os_kth_lines(x, L, g, k, comps, n_comps, of_k, wires, buf, mu)
+    else:
+        _ca_mean_lines(x, L, g, inv_count, c, mu)
+
+
+@numba.njit(cache=True)
+def _transpose_into(src, dst):
+    """dst (B, A) = src (A, B).T: contiguous reads, strided writes (a map's
+    columns of dst stay in cache; measured faster than tiles at these sizes)."""
+    A, B = src.shape
+    for a in range(A):
+        for b in range(B):
+            dst[b, a] = src[a, b]
+
+
+@numba.njit(cache=True)
+def _window_cfar_fused(x, is_os, use_r, use_d, both, window_r, window_d, n_r, k_r, n_d, k_d, log_den,
+                       half_range, half_doppler, statistic, noise):
+    """:func:`window_cfar_composed` in one pass per map x[p] (R, D), its
+    scratch (a few maps' worth) reused from map to map while it sits in cache:
+    the range noise estimate along axis 0 of the map, the Doppler one along
+    axis 0 of its transpose (vector lanes either way), the local maxima, the
+    significance at the kept cells only, and the noise estimates combined
+    ("both": the larger, "either": the smaller); the same kernels on the same
+    values as the composition, so the result is bit-identical."""
+    P, R, D = x.shape
+    mu_r = np.empty((R, D), dtype=np.float32)
+    x_t = np.empty((D, R), dtype=np.float32)
+    mu_t = np.empty((D, R), dtype=np.float32)
+    mu_d = mu_t.T                                # read in place: a transposing copy back would thrash the cache
+    c_r = np.empty((R + 1, D))
+    c_d = np.empty((D + 1, R))
+    buf_r = np.empty((window_r[7], D), dtype=np.float32)
+    buf_d = np.empty((window_d[7], R), dtype=np.float32)
+    keep = np.ones((R, D), dtype=np.bool_)
+    row_max = np.empty((R, D), dtype=np.float32)
+    box_max = np.empty(D, dtype=np.float32)
+    peaks = half_range > 0 or half_doppler > 0
+    for p in range(P):
+        if use_r:
+            _noise_lines(is_os, x[p], window_r, c_r, buf_r, mu_r)
+        if use_d:
+            _transpose_into(x[p], x_t)
+            _noise_lines(is_os, x_t, window_d, c_d, buf_d, mu_t)
+        if peaks:
+            _local_maxima_map(x[p], half_range, half_doppler, row_max, box_max, keep)
+        _map_significance(x[p], keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, is_os, log_den,
+                          statistic[p])
+        if use_r and use_d:
+            for r in range(R):                   # np.maximum / np.minimum, cell by cell along the row
+                for d in range(D):
+                    noise[p, r, d] = np.maximum(mu_r[r, d], mu_d[r, d]) if both else np.minimum(mu_r[r, d],
+                                                                                                mu_d[r, d])
+        else:
+            noise[p] = mu_r if use_r else mu_d
+
+
+def _fused_window(detector: str, window: tuple[int, int, int] | None, M: int) -> tuple:
+    """The ``window`` argument of :func:`_noise_lines` for an axis of M cells
+    (a placeholder of the same types where the axis is not active)."""
+    L, g, k = window or (1, 0, 1)
+    inv_count = 1.0 / reference_counts(M, L, g)
+    comps, n_comps, of_k, wires = selection_networks(2 * L) if detector == "os" and window else selection_networks(1)
+    return L, g, k, inv_count, comps, n_comps, of_k, wires
+
+
 def window_cfar(maps: np.ndarray, detector: str, windows: dict, dimension: str, half_range: int,
                 half_doppler: int) -> tuple[np.ndarray, np.ndarray]:
     """(statistic, noise estimate) (n, R, D) float32 of CA or OS over the
     active dimensions ``windows`` ``{axis: (L, g, k)}``, combined
     (``dimension``, :func:`combine`), with the peak detection folded in; the
-    significance computed at the local maxima only."""
+    significance computed at the local maxima only. One pass per map
+    (:func:`_window_cfar_fused`), bit-identical to :func:`window_cfar_composed`."""
+    maps = np.ascontiguousarray(maps, dtype=np.float32)
+    n, R, D = maps.shape
+    counts, ranks, log_den = _axis_windows(detector, windows, {"range": R, "doppler": D})
+    statistic = np.empty(maps.shape, dtype=np.float32)
+    noise = np.empty(maps.shape, dtype=np.float32)
+    _window_cfar_fused(maps, detector == "os", "range" in windows, "doppler" in windows, dimension == "both",
+                       _fused_window(detector, windows.get("range"), R),
+                       _fused_window(detector, windows.get("doppler"), D),
+                       counts.get("range", _UNUSED), ranks.get("range", _UNUSED),
+                       counts.get("doppler", _UNUSED), ranks.get("doppler", _UNUSED), log_den,
+                       half_range, half_doppler, statistic, noise)
+    return statistic, noise
+
+
+def window_cfar_composed(maps: np.ndarray, detector: str, windows: dict, dimension: str, half_range: int,
+                         half_doppler: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`window_cfar` composed of its steps over the whole batch (the
+    readable oracle of the fused kernel): the noise estimate per active
+    axis (:func:`window_noise`), the local maxima, the significance at them
+    (:func:`window_significance`), the noise estimates combined."""
     maps = np.ascontiguousarray(maps, dtype=np.float32)
     mus = {axis: window_noise(maps, detector, L, g, k, axis) for axis, (L, g, k) in windows.items()}
     keep = local_maxima(maps, half_range, half_doppler)
@@ -448,65 +503,9 @@ def combine(per_axis: dict, dimension: str) -> tuple[np.ndarray, np.ndarray]:
     return np.maximum(sig_r, sig_d), np.minimum(mu_r, mu_d)
 
 
-def with_peaks(maps: np.ndarray, sig: np.ndarray, half_range: int, half_doppler: int,
-               peaks=None) -> np.ndarray:
-    """The statistic (n, R, D) float32: the significance where the cell is a
-    local maximum of the power (``peaks``, default :func:`local_maxima`), 0 elsewhere."""
-    keep = (peaks or local_maxima)(maps, half_range, half_doppler)
-    return np.where(keep, sig, np.float32(0.0)).astype(np.float32, copy=False)
-
-
 def fold(maps: np.ndarray, per_axis: dict, dimension: str, half_range: int,
          half_doppler: int, peaks=None) -> tuple[np.ndarray, np.ndarray]:
     """(statistic, noise estimate) (n, R, D) float32 of a CFAR method: its
     dimensions combined (:func:`combine`), then the peak detection folded in."""
     sig, mu = combine(per_axis, dimension)
     return with_peaks(maps, sig, half_range, half_doppler, peaks), np.asarray(mu, dtype=np.float32)
-
-
-@numba.njit(cache=True)
-def _local_maxima(x, half_range, half_doppler, keep):
-    """keep[p, r, d] = x[p, r, d] >= the box maximum: separable, first along
-    Doppler (per row), then along range over the row maxima, each as a running
-    maximum over the box's offsets, vectorised along the row; the box cut at
-    the map's edges."""
-    P, R, D = x.shape
-    row_max = np.empty((R, D), dtype=x.dtype)
-    box_max = np.empty(D, dtype=x.dtype)
-    for p in range(P):
-        for r in range(R):
-            row_max[r, :] = x[p, r, :]
-            for e in range(1, half_doppler + 1):
-                for d in range(D - e):
-                    row_max[r, d] = max(row_max[r, d], x[p, r, d + e])
-                for d in range(e, D):
-                    row_max[r, d] = max(row_max[r, d], x[p, r, d - e])
-        for r in range(R):
-            box_max[:] = row_max[r, :]
-            for q in range(max(r - half_range, 0), min(r + half_range + 1, R)):
-                for d in range(D):
-                    box_max[d] = max(box_max[d], row_max[q, d])
-            for d in range(D):
-                keep[p, r, d] = x[p, r, d] >= box_max[d]
-
-
-def local_maxima(maps: np.ndarray, half_range: int, half_doppler: int) -> np.ndarray:
-    """(n, R, D) bool: cells whose power is the largest of the box of
-    +-half_range range and +-half_doppler Doppler cells around them (the box
-    cut at the map's edges; ties keep every tied cell). All True when both
-    half-widths are 0 (no peak detection)."""
-    if half_range == 0 and half_doppler == 0:
-        return np.ones(maps.shape, dtype=bool)
-    maps = np.ascontiguousarray(maps, dtype=np.float32)
-    keep = np.empty(maps.shape, dtype=np.bool_)
-    _local_maxima(maps, half_range, half_doppler, keep)
-    return keep
-
-
-def local_maxima_scipy(maps: np.ndarray, half_range: int, half_doppler: int) -> np.ndarray:
-    """:func:`local_maxima` by ``scipy.ndimage.maximum_filter`` (the straightforward
-    implementation; mode "nearest" repeats the edge cells, which cannot change a maximum)."""
-    if half_range == 0 and half_doppler == 0:
-        return np.ones(maps.shape, dtype=bool)
-    box = scipy.ndimage.maximum_filter(maps, size=(1, 2 * half_range + 1, 2 * half_doppler + 1), mode="nearest")
-    return maps >= box

@@ -59,3 +59,37 @@ def test_each_method_is_timed_on_a_scenario_it_accepts(monkeypatch):
         assert cls.serves(scenario.name, scenario.tasks)
         assert cls().check_scenario(build_params(cls.Params, {}), build_params(scenario.Params,
                                                                                job.scenario_params)) is None
+
+
+def _perf_rows():
+    base = {"trials": 100, "seconds_per_trial": 1e-4, "reference": "ref", "reference_seconds_per_trial": 2e-3,
+            "speedup": 20.0, "peak_rss_mb": 300.0}
+    return [{**base, "method": "ca-cfar", "size": "small", "trials_per_second": 1e4, "cells_per_second": 4.6e7},
+            {**base, "method": "dp-tbd", "size": "paper", "trials_per_second": 1e4,
+             "transitions_per_second": 3e10},
+            {**base, "method": "cv-kf", "size": "default", "trials_per_second": 1e4}]
+
+
+def test_perf_csv_has_a_rate_column_per_work_unit(tmp_path):
+    """Every row has trials_per_second; each other work unit (``Method.work``) gets its
+    ``<unit>_per_second`` column, empty for methods counting another unit."""
+    from bench.perf import perf_table, rate_columns
+
+    registry.discover()
+    perf = perf_table(_perf_rows())
+    assert list(perf.columns) == PERF_COLUMNS + ["cells_per_second", "transitions_per_second"]
+    assert rate_columns(perf) == ["trials_per_second", "cells_per_second", "transitions_per_second"]
+    extra = [{"scenario": "rd-map", "params": {}, "reference_trials": 100, "targets": {}},
+             {"scenario": "tbd-grid", "params": {}, "reference_trials": 4,
+              "targets": {"paper": {"transitions_per_second": 1e10}}},
+             {"scenario": "maneuvering-1d", "params": {}, "reference_trials": 20,
+              "targets": {"*": {"cells_per_second": 1.0}}}]
+    text = re.sub(" +", " ", write_report(tmp_path, perf, extra, None).read_text())
+    assert "| trials/s per core | cells/s per core | transitions/s per core |" in text
+    assert "| `ca-cfar` | small | 100 | 0.1 | 1e+04 | 4.6e+07 | – | ref |" in text
+    assert "≥ 1e+10 transitions/s: 3.00e+10 ✓" in text
+    assert "≥ 1e+00 cells/s: nan ✗" in text                     # a goal in a unit the method does not count
+    written = pd.read_csv(tmp_path / "perf.csv")
+    assert written["cells_per_second"].tolist()[0] == 4.6e7 and written["cells_per_second"].isna().tolist()[1:] \
+        == [True, True]
+    assert written["transitions_per_second"].notna().tolist() == [False, True, False]

@@ -1,5 +1,7 @@
 """The optional members of the plugin protocol (``bench.core``) as plugins declare them."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -20,7 +22,8 @@ def test_a_declared_reference_is_implemented_and_an_implemented_one_declared(nam
     assert overrides == (cls.reference_name is not None), name
     assert cls.reference_trials is None or cls.reference_trials >= 1
     for size, targets in cls.perf_targets.items():
-        assert set(targets) <= {"speedup", "transitions_per_second", "seconds_per_trial"}, (name, size)
+        for measure in targets:
+            assert measure in {"speedup", "seconds_per_trial"} or measure.endswith("_per_second"), (name, size)
 
 
 @pytest.mark.parametrize("cls", list(registry.scenarios().values()))
@@ -34,7 +37,7 @@ def test_scenario_perf_sizes_are_valid_params(cls):
 
 def test_defaults_mean_not_provided():
     assert Method.reference_name is None and Method.reference_trials is None and Method.perf_targets == {}
-    assert Method().transitions(None, None) is None
+    assert Method().work(SimpleNamespace(n=7), None) == ("trials", 7.0)
     assert reference_of(Method()) is None
     assert Scenario.small_params == {} and Scenario.perf_sizes == {"default": ({}, 100)}
 
@@ -64,3 +67,20 @@ def test_innovation_detectors_share_the_filterpy_reference(monkeypatch):
 def test_the_scaling_sweep_is_a_packaged_preset():
     plan = scaling_plan()
     assert plan.name == "perf-scaling" and plan.record_trials == 0
+
+
+@pytest.mark.parametrize("name, cls", METHODS)
+def test_work_is_a_unit_and_a_positive_count(name, cls):
+    """``Method.work`` on the small instance of each scenario the method serves: a plural
+    unit name and a positive count (``bench perf`` reports ``<unit>_per_second``)."""
+    for scenario in registry.scenarios().values():
+        if not cls.serves(scenario.name, scenario.tasks):
+            continue
+        params = build_params(scenario.Params, scenario.small_params)
+        method_params = cls.Params()
+        if cls().check_scenario(method_params, params) is not None:
+            continue
+        batch = scenario().generate(params, float(scenario.perf_snr_db), 2, TrialRNG(1, 0, 0, range(2)))
+        unit, count = cls().work(batch, method_params)
+        assert unit.isidentifier() and unit.endswith("s") and count > 0, (name, scenario.name, unit, count)
+        break
