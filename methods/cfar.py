@@ -156,10 +156,13 @@ def regression_problem(order: int, dimension: str, scenario_params) -> str | Non
     return None
 
 
-def finish(method, maps: np.ndarray, per_axis: dict, dimension: str, params) -> CellDetectionOutput:
-    """The dimensions combined, the peak detection folded in (:func:`models.cfar.fold`),
-    and the method's per-cell threshold factor for the recording's threshold map."""
-    statistic, mu = cfar.fold(maps, per_axis, dimension, params.peak_range, params.peak_doppler)
+def finish(method, maps: np.ndarray, per_axis: dict, dimension: str, params,
+           keep: np.ndarray) -> CellDetectionOutput:
+    """The dimensions combined, the peak detection's local maxima ``keep``
+    folded in (:func:`models.cfar.fold`), and the method's per-cell threshold
+    factor for the recording's threshold map."""
+    statistic, mu = cfar.fold(maps, per_axis, dimension, params.peak_range, params.peak_doppler,
+                              peaks=lambda *_: keep)
     return CellDetectionOutput(statistic=statistic, noise_estimate=mu,
                                threshold_factor=partial(method.factor_map, params, shape=maps.shape[1:]))
 
@@ -363,9 +366,10 @@ class RegressionCfar(CfarMethod):
 
     def run(self, batch: Batch, params) -> CellDetectionOutput:
         maps = maps_of(batch)
-        per_axis = {axis: cfar_regression.regression_cfar(maps, curve_of(params), axis)
+        keep = cfar.local_maxima(maps, params.peak_range, params.peak_doppler)     # the significance is paid there only
+        per_axis = {axis: cfar_regression.regression_cfar(maps, curve_of(params), axis, keep)
                     for axis in active_axes(params.dimension)}
-        return finish(self, maps, per_axis, params.dimension, params)
+        return finish(self, maps, per_axis, params.dimension, params, keep)
 
     def reference_run(self, batch: Batch, params) -> CellDetectionOutput:
         return _cfar_reference.regression(maps_of(batch), params)
@@ -427,14 +431,16 @@ class RegionAdaptive(CfarMethod):
     def run(self, batch: Batch, params) -> CellDetectionOutput:
         maps = maps_of(batch)
         choice = self.detector_map(batch.scene, params)
+        keep = cfar.local_maxima(maps, params.peak_range, params.peak_doppler)
         sig = np.zeros(maps.shape, dtype=np.float32)
         mu = np.zeros(maps.shape, dtype=np.float32)
         for detector in DETECTORS:
             where = choice == detector
             if where.any():
-                s, m = self._detector(detector, maps, params)
+                s, m = self._detector(detector, maps, params, keep & where)
                 sig[:, where], mu[:, where] = s[:, where], m[:, where]
-        return CellDetectionOutput(statistic=cfar.with_peaks(maps, sig, params.peak_range, params.peak_doppler),
+        return CellDetectionOutput(statistic=cfar.with_peaks(maps, sig, params.peak_range, params.peak_doppler,
+                                                             peaks=lambda *_: keep),
                                    noise_estimate=mu, threshold_factor=partial(self.factor_map, params,
                                                                               shape=maps.shape[1:], choice=choice))
 
@@ -445,9 +451,11 @@ class RegionAdaptive(CfarMethod):
         return names[np.asarray(scene.region_labels, dtype=np.intp)]
 
     @staticmethod
-    def _detector(detector: str, maps: np.ndarray, params):
+    def _detector(detector: str, maps: np.ndarray, params, keep: np.ndarray):
+        """(significance, noise estimate) of one detector over the whole maps
+        (the regression's significance only where ``keep``: the kept cells of its regions)."""
         if detector == "regression":
-            per_axis = {axis: cfar_regression.regression_cfar(maps, curve_of(params), axis)
+            per_axis = {axis: cfar_regression.regression_cfar(maps, curve_of(params), axis, keep)
                         for axis in active_axes(params.regression_dimension)}
             return cfar.combine(per_axis, params.regression_dimension)
         per_axis = {}

@@ -330,15 +330,24 @@ def factor_along(pfa: float, M: int, curve: Curve) -> np.ndarray:
 
 # ------------------------------------------------------------------ the detector
 
-def regression_cfar(maps: np.ndarray, curve: Curve, axis: str) -> tuple[np.ndarray, np.ndarray]:
+def regression_cfar(maps: np.ndarray, curve: Curve, axis: str,
+                    keep: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Adaptive regression CFAR along ``axis`` of maps (n, R, D): the noise
     level of each line (along Doppler: each range cell's power spectrum) and
-    the significance (:func:`significance`), both (n, R, D) float32."""
+    the significance (:func:`significance`), both (n, R, D) float32. With
+    ``keep`` (n, R, D) bool (the peak detection's local maxima), the
+    significance is computed at those cells only and is 0 elsewhere (the
+    same values where kept: it is computed cell by cell)."""
     maps = np.asarray(maps, dtype=np.float64)
     lines = maps if axis == "doppler" else maps.transpose(0, 2, 1)
     flat = lines.reshape(-1, lines.shape[-1])
     level, included, leverage = regression_fit(flat, curve)
-    sig = significance(flat, level, included, leverage, curve)
+    if keep is None:
+        sig = significance(flat, level, included, leverage, curve)
+    else:
+        at = (keep if axis == "doppler" else np.asarray(keep).transpose(0, 2, 1)).reshape(flat.shape)
+        sig = np.zeros(flat.shape)
+        sig[at] = significance(flat[at], level[at], included[at], leverage[at], curve)
     level, sig = level.reshape(lines.shape), sig.reshape(lines.shape)
     if axis == "range":
         level, sig = level.transpose(0, 2, 1), sig.transpose(0, 2, 1)

@@ -37,7 +37,7 @@ def test_version_matches_pyproject():
 def test_license_matches_pyproject():
     license_text = (ROOT / "LICENSE").read_text()
     meta = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    assert meta["license"]["text"] == "MIT" and license_text.startswith("MIT License")
+    assert meta["license"] == "MIT" and meta["license-files"] == ["LICENSE"] and license_text.startswith("MIT License")
 
 
 def test_list_shows_every_preset_with_its_description(tmp_path):
