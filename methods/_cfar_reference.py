@@ -87,12 +87,12 @@ def regression_axis(maps: np.ndarray, params, axis: str) -> tuple[np.ndarray, np
     leverage = np.empty_like(flat)
     included = np.ones(flat.shape, dtype=bool)
     for p, x in enumerate(flat):
-        y = np.log(np.maximum(x, np.finfo(np.float64).tiny)) if curve.is_log else x
+        y = cfar_regression.fitted_variable(x, curve)
         use = np.ones(M, dtype=bool)
         for it in range(params.iterations + 1):
             m = cfar_regression.noise_moments(curve, censored=it > 0)[0]
             fitted = phi @ np.linalg.lstsq(phi[use], y[use], rcond=None)[0]
-            level[p] = np.exp(fitted - m) if curve.is_log else fitted / m
+            level[p] = cfar_regression.noise_level(fitted, curve, m)
             if it == params.iterations:
                 break
             keep = x <= params.exclusion_factor * level[p]

@@ -207,12 +207,13 @@ def polynomial_significance(t, included, leverage, curve: Curve):
 
 
 @numba.njit(cache=True)
-def _log_expectation(a, b, nodes, log_weights):
+def _log_expectation(a, b, nodes, log_weights, terms):
     """ln E[exp(-exp(a + b Z))], Z ~ N(0, 1), by Gauss-Hermite quadrature
     centred on the mode of the log integrand f(z) = -exp(a + b z) - z^2/2
     (Newton on f'(z) = -b exp(a + b z) - z) and scaled by its curvature, so
     deep tails (a >> 0, the integrand's mass far out in the lower tail of
-    Z) keep their accuracy."""
+    Z) keep their accuracy. ``terms``: scratch of len(nodes), the caller's
+    (no allocation per cell)."""
     z = 0.0
     for _ in range(50):
         e = math.exp(min(a + b * z, 700.0))
@@ -222,7 +223,6 @@ def _log_expectation(a, b, nodes, log_weights):
             break
     s = 1.0 / math.sqrt(b * b * math.exp(min(a + b * z, 700.0)) + 1.0)
     top = -math.inf
-    terms = np.empty(nodes.size)
     for k in range(nodes.size):
         u = z + math.sqrt(2.0) * s * nodes[k]
         terms[k] = log_weights[k] + nodes[k] * nodes[k] - math.exp(min(a + b * u, 700.0)) - 0.5 * u * u
@@ -235,6 +235,7 @@ def _log_expectation(a, b, nodes, log_weights):
 
 @numba.njit(cache=True)
 def _log_polynomial_sig(log_t, included, leverage, m, v, nodes, log_weights, out):
+    terms = np.empty(nodes.size)
     for i in range(log_t.size):
         q = min(max(leverage[i], 1e-12), 1.0 - 1e-9)
         if included[i]:
@@ -243,7 +244,7 @@ def _log_polynomial_sig(log_t, included, leverage, m, v, nodes, log_weights, out
         else:
             a = log_t[i]
             b = math.sqrt(v * q)
-        out[i] = -_log_expectation(a, b, nodes, log_weights) / math.log(10.0)
+        out[i] = -_log_expectation(a, b, nodes, log_weights, terms) / math.log(10.0)
 
 
 def log_polynomial_significance(t, included, leverage, curve: Curve):

@@ -191,7 +191,9 @@ def _paired_difference(trials: pd.DataFrame, a: str, b: str) -> tuple[float, flo
     diff = (ha - hb).dropna().to_numpy(float)
     if diff.size == 0:
         return (np.nan, np.nan, np.nan)
-    return (float(diff.mean()), *bootstrap_mean_interval(diff))
+    mean = float(diff.mean())
+    return (0.0 if abs(mean) < 1e-12 else mean,          # hit fractions that cancel leave float noise, not a gain
+            *bootstrap_mean_interval(diff))
 
 
 def _threshold_mode(cals: list, sc: str) -> str:
@@ -217,8 +219,7 @@ def _section_winners(scene: pd.DataFrame, scene_trials: pd.DataFrame, sc: str, s
         rows.append([group, f"`{best.config}`", _interval(best, col), _interval(best, pfa_col), verdict])
     configs = list(dict.fromkeys(at.config))
     at_trials = scene_trials[np.isclose(scene_trials.snr_db, snr)]
-    pairs = [[f"`{a}` − `{b}`", fmt_interval(*(0.0 if abs(v) < 1e-12 else v          # float noise of a tie
-                                                  for v in _paired_difference(at_trials, a, b)))]
+    pairs = [[f"`{a}` − `{b}`", fmt_interval(*_paired_difference(at_trials, a, b))]
              for i, a in enumerate(configs) for b in configs[i + 1:]]
     return "\n\n".join([
         f"### `{sc}`: which detector wins where (at {fmt(snr)} dB)",
