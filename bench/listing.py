@@ -31,12 +31,16 @@ __all__ = ["plugin_listing", "preset_descriptions", "presets"]
 #: The packages whose sources the plugin listing depends on.
 PACKAGES = ("bench", "methods", "scenarios", "models")
 ENTRY_POINT_GROUPS = ("bench.tasks", "bench.scenarios", "bench.methods")
+#: a paper's claims beside its preset: ``bench/presets/NAME`` + this (:mod:`bench.claims`)
+CLAIMS_SUFFIX = ".claims.toml"
 
 
 def presets() -> dict[str, object]:
-    """Preset name -> its packaged sweep file (``bench/presets/NAME.toml``)."""
+    """Preset name -> its packaged sweep file (``bench/presets/NAME.toml``; a paper's
+    claims beside it, ``NAME.claims.toml``, are not a sweep)."""
     root = importlib.resources.files("bench") / "presets"
-    return {p.name[:-5]: p for p in sorted(root.iterdir(), key=lambda p: p.name) if p.name.endswith(".toml")}
+    return {p.name[:-5]: p for p in sorted(root.iterdir(), key=lambda p: p.name)
+            if p.name.endswith(".toml") and not p.name.endswith(CLAIMS_SUFFIX)}
 
 
 def preset_descriptions() -> list[tuple[str, str]]:

@@ -91,19 +91,31 @@ def frame_table(df: pd.DataFrame) -> str:
     return table([cell(c) for c in df.columns], [[cell(v) for v in row] for row in df.itertuples(index=False)])
 
 
-def snr50(summary: pd.DataFrame, pd_column: str = "pd", floors: dict | None = None) -> pd.DataFrame:
+def crossing_floors(pd_column: str, chance: dict, equal_chance: float) -> dict | None:
+    """The floor of each config's ``pd_column`` curve for :func:`snr50`: for ``pd`` its
+    chance Pd (``chance``: config -> chance Pd, where calibrated), for ``pd_equal_chance``
+    the chance Pd every calibrated config was set to (``equal_chance``, the sweep's
+    ``[calibration] chance_pd``); no floor for other columns."""
+    floors = {k: v for k, v in chance.items() if np.isfinite(v)}
+    if pd_column == "pd":
+        return floors
+    return {c: equal_chance for c in floors} if pd_column == "pd_equal_chance" else None
+
+
+def snr50(summary: pd.DataFrame, pd_column: str = "pd", floors: dict | None = None,
+          level: float = 0.5) -> pd.DataFrame:
     """Per config: the SNR at which ``pd_column`` (default ``pd``; also
-    ``pd_equal_chance``, binomial proportions of ``n_trials``) reaches 0.5, by
+    ``pd_equal_chance``, binomial proportions of ``n_trials``) reaches ``level``, by
     :func:`bench.metrics.fit_crossing` with the config's floor (``floors``:
     config -> chance Pd; 0 where absent). ``crossing`` holds the result, ``mid``
     its estimate (NaN unless fitted), ``order`` a sort key. ``pd_step``, an
     average over correlated steps rather than a binomial count, is crossed by
-    linear interpolation, its interval where the 95% band crosses 0.5."""
+    linear interpolation, its interval where the 95% band crosses ``level``."""
     rows = []
     for (scenario, method, config), g in summary.groupby(["scenario", "method", "config"], sort=False):
         g = g.sort_values("snr_db")
         if pd_column == "pd_step":
-            mid, low, high = snr_at_pd(g.snr_db, g[pd_column], g[f"{pd_column}_low"], g[f"{pd_column}_high"])
+            mid, low, high = snr_at_pd(g.snr_db, g[pd_column], g[f"{pd_column}_low"], g[f"{pd_column}_high"], level)
             kind = "below" if np.isneginf(mid) else "above" if np.isnan(mid) else "fit"
             c = Crossing(kind, mid, low if kind == "fit" else (float(g.snr_db.iloc[-1]) if kind == "above"
                                                                else -np.inf),
@@ -111,7 +123,7 @@ def snr50(summary: pd.DataFrame, pd_column: str = "pd", floors: dict | None = No
         else:
             n = g.n_trials.to_numpy(float)
             c = fit_crossing(g.snr_db, np.round(g[pd_column].to_numpy(float) * n), n,
-                             floor=float((floors or {}).get(config, 0.0) or 0.0))
+                             floor=float((floors or {}).get(config, 0.0) or 0.0), level=level)
         rows.append({"scenario": scenario, "method": method, "config": config, "crossing": c, "mid": c.mid,
                      "order": c.order})
     return pd.DataFrame(rows)

@@ -9,9 +9,9 @@ import pytest
 
 from bench import registry, tomlw
 from bench.config import parse_sweep
+from bench.listing import presets
 
-PRESETS = sorted(p.name[:-5] for p in (importlib.resources.files("bench") / "presets").iterdir()
-                 if p.name.endswith(".toml"))
+PRESETS = sorted(presets())
 
 
 def _preset(name: str) -> dict:

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench import figures, registry, runfolder
+from bench import claims, figures, registry, runfolder
 from bench.calibration import EQUAL_CHANCE_PD
 from bench.errors import ConfigError
 from bench.markdown import fmt as _fmt
@@ -318,13 +318,31 @@ def _section_recording(n: int, out_dir: Path, tasks: list) -> str:
     return _section("recording", n, str(out_dir), [t.recording_text for t in tasks if t.recording_text])
 
 
+def _preset_name(source: str) -> str:
+    """The preset a run came from (its plan's source ``preset NAME``), else ""."""
+    return source.split(" ", 1)[1] if source.startswith("preset ") else ""
+
+
 def preset_notes(source: str) -> str:
     """The packaged notes of a preset (``bench/presets/NAME.md``), if any."""
     import importlib.resources
-    if not source.startswith("preset "):
+    if not _preset_name(source):
         return ""
-    path = importlib.resources.files("bench") / "presets" / f"{source.split(' ', 1)[1]}.md"
+    path = importlib.resources.files("bench") / "presets" / f"{_preset_name(source)}.md"
     return path.read_text(encoding="utf-8").strip() if path.is_file() else ""
+
+
+def _paper_vs_ours(source: str, tables: dict[str, pd.DataFrame], equal_chance: float, out_dir: Path) -> str:
+    """The preset's *Paper vs ours*: its claims (``NAME.claims.toml``) evaluated on the
+    tables as written to CSV, claims.csv written, the table and the rendered notes; a
+    preset with notes but no claims file keeps its notes as they are."""
+    file = claims.preset_claims(_preset_name(source)) if _preset_name(source) else None
+    if file is None:
+        return preset_notes(source)
+    evaluation = claims.evaluate(file, claims.Tables(**{k: claims.csv_frame(v) for k, v in tables.items()},
+                                                     equal_chance=equal_chance))
+    _write_csv(evaluation.frame(), out_dir / "claims.csv")
+    return claims.claims_markdown(evaluation, preset_notes(source))
 
 
 def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None) -> Path:
@@ -391,7 +409,8 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     records = [TrialRecord.from_bytes(b) for b in store.records()]   # every read before the first write
     _write_csv(trials, out_dir / "trials.csv")
     _write_csv(summary, out_dir / "summary.csv")
-    _write_csv(pd.DataFrame([c.as_row() for c in cals]), out_dir / "calibration.csv")
+    calibration = pd.DataFrame([c.as_row() for c in cals])
+    _write_csv(calibration, out_dir / "calibration.csv")
     if not steps.empty:
         _write_csv(steps, out_dir / "steps.csv")
     fig_dir = out_dir / "figures"
@@ -401,7 +420,9 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     chance = {(c.scenario, c.method): c.chance_pd for c in cals}
     comparisons = comparisons_frame(trials, task_of)
     _write_csv(comparisons, out_dir / "comparisons.csv")
-    parts = [preset_notes(record.get("source", "")),   # the paper-vs-ours table leads a preset's sections
+    chance_level = sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD)
+    tables = {"summary": summary, "comparisons": comparisons, "calibration": calibration}
+    parts = [_paper_vs_ours(record.get("source", ""), tables, chance_level, out_dir),   # leads a preset's sections
              _section_plan(record, store, present), _section_calibration(cals, summary, task_of)]
     parts += [s for task, ctx in contexts for s in task.report_sections(ctx)]
     parts.append(comparisons_markdown(comparisons, task_of))

@@ -14,7 +14,7 @@ import functools
 import numpy as np
 import pandas as pd
 
-from bench.markdown import fmt, table
+from bench.markdown import fmt, fmt_db, table
 
 
 @functools.lru_cache(maxsize=1)
@@ -29,7 +29,15 @@ def environment():
                              keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True,
                              undefined=jinja2.StrictUndefined)
     env.filters["fmt"] = fmt
+    env.filters["db"] = fmt_db
+    env.filters["pct"] = percent
     return env
+
+
+def percent(x) -> str:
+    """A proportion as a percentage, 3 significant digits ("–" when missing)."""
+    text = fmt(None if x is None else 100.0 * float(x))
+    return text if text == "–" else f"{text}%"
 
 
 def render(name: str, **values) -> str:

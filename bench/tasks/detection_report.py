@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from bench import figures
-from bench.markdown import crossing_difference, crossing_text, fmt, fmt_db, snr50, table
+from bench.markdown import crossing_difference, crossing_floors, crossing_text, fmt, fmt_db, snr50, table
 from bench.store import Store
 from bench.tasks.base import ReportContext
 from bench.tasks.detection_metrics import roc_curve
@@ -95,8 +95,7 @@ def _section_pd_definitions(summary: pd.DataFrame, chance_pd: float, floors: dic
         return ""
     cells, ranks = {}, {}
     for column, _ in PD_DEFINITIONS:
-        s = snr50(summary, column, floors={c: chance_pd for c in floors} if column == "pd_equal_chance"
-                  else floors if column == "pd" else None)
+        s = snr50(summary, column, crossing_floors(column, floors, chance_pd))
         ranks[column] = dict(zip(s.config, s.order.rank(method="min")))
         cells[column] = {b.config: crossing_text(b.crossing)[0] for b in s.itertuples()}
     configs = list(dict.fromkeys(summary.config))

@@ -1,0 +1,627 @@
+"""Claims as code: a paper's claims checked against the run's own tables.
+
+A paper preset declares its paper's claims beside its sweep, in
+``bench/presets/NAME.claims.toml`` (data, never code; the schema is in
+docs/architecture.md, 'Report'). Each claim names the quantity that tests it
+as a query over the run's summary, calibration and comparison tables (exactly
+as written to summary.csv, calibration.csv and comparisons.csv, so a committed
+report's claims are evaluated again from its committed CSVs alone), the
+direction or value the paper claims, and the verdict rule. The report prints
+the "Paper vs ours" table from the results and renders the preset's notes
+(``NAME.md``) and each claim's ``reason`` as Jinja2 templates filled from them:
+no number the run produces is ever typed.
+
+Quantities give (value, low, high): a 95% interval where the table has one.
+Crossings are the SNR at which a Pd column reaches a level, computed as the
+report's SNR-at-Pd tables compute them (:func:`bench.markdown.snr50`); a
+difference of two quantities has the conservative interval
+[a.low − b.high, a.high − b.low] (the Minkowski difference of the two 95%
+intervals). A quantity whose config or scenario config did not run (an
+optional method unavailable here) makes its claim *not comparable*. Nothing
+here names a method, a scenario or a task: they are the claims file's data.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import pandas as pd
+
+from bench.errors import ConfigError
+from bench.listing import CLAIMS_SUFFIX
+from bench.markdown import crossing_floors, fmt, fmt_db, snr50, table
+
+#: the columns of claims.csv, in order
+CLAIMS_COLUMNS = ["id", "claim", "where", "original", "english", "quantity", "value", "low", "high", "unit",
+                  "verdict", "scope", "reason"]
+REPRODUCES, DOES_NOT, NOT_COMPARABLE, CONVERSION = "reproduces", "does not reproduce", "not comparable", "conversion"
+#: ``snr_db`` of a paired quantity over every level (comparisons.csv's blank ``snr_db``)
+ALL_LEVELS = "all"
+
+_ID = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")
+_CLAIM_KEYS = {"id", "claim", "where", "original", "english", "quantity", "unit", "expect", "value", "tolerance",
+               "min", "max", "reason", "scope", "also"}
+_REQUIRED = ("id", "claim", "where", "expect")
+#: expect -> the keys it needs besides the required ones
+_EXPECT_NEEDS = {"negative": ("quantity",), "positive": ("quantity",), "value": ("quantity", "value"),
+                 "between": ("quantity", "min", "max"), "not-comparable": ("reason",), "conversion": ("reason",)}
+#: kind -> (required keys, optional keys); every kind may carry ``scale`` (a multiplier applied to the result)
+_KINDS = {
+    "summary": ({"config", "snr_db", "column"}, {"scenario"}),
+    "calibration": ({"config", "column"}, {"scenario"}),
+    "paired": ({"a", "b", "snr_db"}, {"scenario", "metric"}),
+    "crossing": ({"config"}, {"scenario", "column", "level"}),
+    "crossing_difference": ({"a", "b"}, {"scenario", "scenario_a", "scenario_b", "column", "level"}),
+    "difference": ({"a", "b"}, set()),
+    "ratio": ({"a", "b"}, set()),
+}
+_INLINE = ("difference", "ratio")        # kinds whose a and b are quantities themselves
+
+
+# ------------------------------------------------------------------ the file
+
+@dataclass(frozen=True)
+class Claim:
+    """One ``[[claim]]`` of a claims file, validated."""
+
+    id: str
+    claim: str
+    where: str
+    expect: str
+    quantity: dict | None = None
+    original: str = ""
+    english: str = ""
+    unit: str = ""
+    value: float | None = None
+    tolerance: float = 0.0
+    min: float | None = None
+    max: float | None = None
+    reason: str = ""
+    scope: str = ""
+    also: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ClaimsFile:
+    """A preset's claims: ``paper`` (how the report names it) and its claims, in file order."""
+
+    name: str          # the file's name, for error messages
+    paper: str
+    claims: tuple[Claim, ...]
+
+
+def _text(value: Any, field: str, *, empty: bool = False) -> str:
+    if not isinstance(value, str) or (not empty and not value.strip()):
+        raise ConfigError(field, f"expected a non-empty string, got {value!r}"[:200])
+    return value
+
+
+def _number(value: Any, field: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(field, f"expected a finite number, got {value!r}"[:200])
+    return float(value)
+
+
+def _unknown(table: Mapping, allowed: set, field: str) -> None:
+    for key in table:
+        if key not in allowed:
+            raise ConfigError(f"{field}.{key}", f"unknown key (allowed: {', '.join(sorted(allowed))})")
+
+
+def _quantity(q: Any, field: str) -> dict:
+    """An inline quantity, checked: its kind, its keys, its values' types."""
+    if not isinstance(q, dict):
+        raise ConfigError(field, f"expected an inline table with a kind, got {q!r}"[:200])
+    kind = q.get("kind")
+    if kind not in _KINDS:
+        raise ConfigError(f"{field}.kind", f"expected one of {', '.join(_KINDS)}, got {kind!r}")
+    required, optional = _KINDS[kind]
+    _unknown(q, required | optional | {"kind", "scale"}, field)
+    for key in sorted(required - set(q)):
+        raise ConfigError(f"{field}.{key}", f"missing (a {kind} quantity needs {', '.join(sorted(required))})")
+    out = dict(q)
+    for key in ("scale", "level"):
+        if key in q:
+            out[key] = _number(q[key], f"{field}.{key}")
+    if "snr_db" in q and not (kind == "paired" and q["snr_db"] == ALL_LEVELS):
+        out["snr_db"] = _number(q["snr_db"], f"{field}.snr_db")
+    if kind == "crossing_difference" and "scenario" in q and ({"scenario_a", "scenario_b"} & set(q)):
+        raise ConfigError(f"{field}.scenario", "give scenario, or scenario_a and scenario_b, not both")
+    for key in ("a", "b"):
+        if key in q:
+            out[key] = _quantity(q[key], f"{field}.{key}") if kind in _INLINE else _text(q[key], f"{field}.{key}")
+    for key in ("config", "column", "scenario", "scenario_a", "scenario_b", "metric"):
+        if key in q:
+            _text(q[key], f"{field}.{key}")
+    return out
+
+
+def _claim(raw: Any, field: str) -> Claim:
+    if not isinstance(raw, dict):
+        raise ConfigError(field, f"expected a table, got {raw!r}"[:200])
+    _unknown(raw, _CLAIM_KEYS, field)
+    for key in _REQUIRED:
+        if key not in raw:
+            raise ConfigError(f"{field}.{key}", "missing")
+    expect = raw["expect"]
+    if expect not in _EXPECT_NEEDS:
+        raise ConfigError(f"{field}.expect", f"expected one of {', '.join(_EXPECT_NEEDS)}, got {expect!r}")
+    for key in _EXPECT_NEEDS[expect]:
+        if key not in raw:
+            raise ConfigError(f"{field}.{key}", f"missing (expect = {expect!r} needs it)")
+    if not _ID.match(_text(raw["id"], f"{field}.id")):
+        raise ConfigError(f"{field}.id", f"expected kebab-case (a-z, 0-9, -), got {raw['id']!r}")
+    also = raw.get("also", {})
+    if not isinstance(also, dict):
+        raise ConfigError(f"{field}.also", f"expected a table of named quantities, got {also!r}"[:200])
+    for name in also:
+        if not re.match(r"^[A-Za-z_][A-Za-z0-9_]*$", name):
+            raise ConfigError(f"{field}.also.{name}", "expected a template name (letters, digits, _)")
+    numbers = {k: _number(raw[k], f"{field}.{k}") for k in ("value", "tolerance", "min", "max") if k in raw}
+    if "min" in numbers and "max" in numbers and numbers["min"] > numbers["max"]:
+        raise ConfigError(f"{field}.max", f"expected >= min ({numbers['min']:g}), got {numbers['max']:g}")
+    texts = {k: _text(raw[k], f"{field}.{k}", empty=k not in ("claim", "where"))
+             for k in ("claim", "where", "original", "english", "unit", "reason", "scope") if k in raw}
+    return Claim(id=raw["id"], expect=expect, **texts, **numbers,
+                 quantity=_quantity(raw["quantity"], f"{field}.quantity") if "quantity" in raw else None,
+                 also={name: _quantity(q, f"{field}.also.{name}") for name, q in also.items()})
+
+
+def parse(text: str, name: str) -> ClaimsFile:
+    """A claims file's text, validated: unknown keys, missing fields or a bad kind
+    raise :class:`ConfigError` naming the file and the field, e.g.
+    ``maneuver-detection.claims.toml: claim[2].quantity.kind: expected one of ...``."""
+    try:
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError("", f"not valid TOML: {exc}") from None
+        _unknown(data, {"paper", "claim"}, "")
+        paper = _text(data.get("paper"), "paper")
+        raws = data.get("claim")
+        if not isinstance(raws, list) or not raws:
+            raise ConfigError("claim", "missing: give at least one [[claim]]")
+        claims = tuple(_claim(raw, f"claim[{i}]") for i, raw in enumerate(raws))
+        seen = set()
+        for i, c in enumerate(claims):
+            if c.id in seen:
+                raise ConfigError(f"claim[{i}].id", f"repeated id {c.id!r}")
+            seen.add(c.id)
+    except ConfigError as err:
+        raise ConfigError(f"{name}: {err.field.lstrip('.')}" if err.field else name, err.problem) from None
+    return ClaimsFile(name, paper, claims)
+
+
+def load(path: str | Path) -> ClaimsFile:
+    path = Path(path)
+    return parse(path.read_text(encoding="utf-8"), path.name)
+
+
+def preset_claims(preset: str) -> ClaimsFile | None:
+    """The packaged claims of preset ``preset`` (``bench/presets/NAME.claims.toml``), if any."""
+    import importlib.resources
+    path = importlib.resources.files("bench") / "presets" / f"{preset}{CLAIMS_SUFFIX}"
+    return parse(path.read_text(encoding="utf-8"), path.name) if path.is_file() else None
+
+
+# ------------------------------------------------------------------ the run's tables
+
+@dataclass(frozen=True)
+class Tables:
+    """The run's tables as written to CSV (and read back: :func:`read_tables`),
+    and the chance Pd every detector is calibrated to for equal-chance Pd
+    (the sweep's ``[calibration] chance_pd``: the floor of that Pd column)."""
+
+    summary: pd.DataFrame
+    comparisons: pd.DataFrame
+    calibration: pd.DataFrame
+    equal_chance: float
+
+
+def _read_csv(text_or_path) -> pd.DataFrame:
+    """A CSV as written by the report; pandas >= 3 parses floats round-trip (what
+    ``float_precision="round_trip"`` asked of earlier versions), so values are bit-exact."""
+    try:
+        return pd.read_csv(text_or_path)
+    except pd.errors.EmptyDataError:
+        return pd.DataFrame()
+
+
+def csv_frame(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` exactly as its CSV reads back, so claims evaluated at report time and
+    from the committed CSVs are the same numbers."""
+    return _read_csv(io.StringIO(df.to_csv(index=False, lineterminator="\n")))
+
+
+def read_tables(folder: str | Path) -> Tables:
+    """A report folder's committed tables: summary.csv, comparisons.csv,
+    calibration.csv and plan.toml's ``[calibration] chance_pd``."""
+    from bench.calibration import EQUAL_CHANCE_PD
+    folder = Path(folder)
+    frames = [_read_csv(folder / f"{name}.csv") if (folder / f"{name}.csv").exists() else pd.DataFrame()
+              for name in ("summary", "comparisons", "calibration")]
+    plan = tomllib.loads((folder / "plan.toml").read_text(encoding="utf-8")) if (folder / "plan.toml").exists() else {}
+    return Tables(*frames, float(plan.get("calibration", {}).get("chance_pd", EQUAL_CHANCE_PD)))
+
+
+# ------------------------------------------------------------------ quantities
+
+class Missing(Exception):
+    """A config or scenario config the claim names did not run."""
+
+
+@dataclass(frozen=True)
+class Value:
+    value: float
+    low: float = math.nan
+    high: float = math.nan
+    p: float = math.nan
+
+    def scaled(self, k: float) -> Value:
+        low, high = self.low * k, self.high * k
+        return Value(self.value * k, *((high, low) if k < 0 else (low, high)), self.p)
+
+
+def _scenario(df: pd.DataFrame, q: dict) -> str:
+    """The scenario config a quantity names, or the run's only one."""
+    if "scenario" in q:
+        if q["scenario"] not in set(df.scenario):
+            raise Missing(f"scenario config `{q['scenario']}`")
+        return q["scenario"]
+    scenarios = list(dict.fromkeys(df.scenario))
+    if len(scenarios) != 1:
+        raise ConfigError("scenario", f"the run has {len(scenarios)} scenario configs ({', '.join(scenarios)}): "
+                                      "name one")
+    return scenarios[0]
+
+
+def _rows(df: pd.DataFrame, q: dict, config_column: str, config: str) -> pd.DataFrame:
+    """The rows of ``config`` (in ``config_column``) on the quantity's scenario config."""
+    if df.empty or config not in set(df[config_column]):
+        raise Missing(f"`{config}`")
+    scenario = _scenario(df, q)
+    rows = df[(df.scenario == scenario) & (df[config_column] == config)]
+    if rows.empty:
+        raise Missing(f"`{config}` on `{scenario}`")
+    return rows
+
+
+def _column(columns, column: str) -> str:
+    if column not in columns:
+        raise ConfigError("column", f"no column {column!r} in the table")
+    return column
+
+
+def _interval_of(row: pd.Series, column: str) -> Value:
+    """``column`` of one row, with ``column_low`` / ``column_high`` where the table has them."""
+    bound = (lambda s: float(row[f"{column}_{s}"]) if f"{column}_{s}" in row.index else math.nan)
+    return Value(float(row[_column(row.index, column)]), bound("low"), bound("high"))
+
+
+def _summary(q: dict, t: Tables) -> Value:
+    rows = _rows(t.summary, q, "config", q["config"])
+    at = rows[np.isclose(rows.snr_db.astype(float), q["snr_db"])]
+    if at.empty:
+        raise ConfigError("snr_db", f"no level {q['snr_db']:g} dB for `{q['config']}` (levels: "
+                                    f"{', '.join(fmt_db(s) for s in rows.snr_db)})")
+    return _interval_of(at.iloc[0], q["column"])
+
+
+def _calibration(q: dict, t: Tables) -> Value:
+    return _interval_of(_rows(t.calibration, q, "method", q["config"]).iloc[0], q["column"])
+
+
+def _paired(q: dict, t: Tables) -> Value:
+    """comparisons.csv's row for (a, b), oriented so that value = mean(b) − mean(a)."""
+    df = t.comparisons
+    for config in (q["a"], q["b"]):
+        if df.empty or config not in set(df.config_a) | set(df.config_b):
+            raise Missing(f"`{config}`")
+    df = df[df.scenario == _scenario(df, q)]
+    metric = q.get("metric") or _task_metric(df, q)
+    snr = df.snr_db.isna() if q["snr_db"] == ALL_LEVELS else np.isclose(df.snr_db, q["snr_db"])
+    rows = df[snr & (df.metric == metric)]
+    same = rows[(rows.config_a == q["a"]) & (rows.config_b == q["b"])]
+    swapped = rows[(rows.config_a == q["b"]) & (rows.config_b == q["a"])]
+    if same.empty and swapped.empty:
+        raise ConfigError("snr_db", f"no comparison of `{q['a']}` and `{q['b']}` on {metric} at {q['snr_db']}")
+    r = (same if len(same) else swapped).iloc[0]
+    v = Value(float(r.difference), float(r.difference_low), float(r.difference_high), float(r.mcnemar_p))
+    return v if len(same) else v.scaled(-1.0)
+
+
+def _task_metric(df: pd.DataFrame, q: dict) -> str:
+    """The ranking metric of the task the pair belongs to (``Task.ranking_metric``)."""
+    from bench import registry
+    tasks = set(df[(df.config_a.isin([q["a"], q["b"]])) | (df.config_b.isin([q["a"], q["b"]]))].task)
+    if len(tasks) != 1:
+        raise ConfigError("metric", f"the pair belongs to {len(tasks)} tasks: name the metric")
+    return registry.get_task(tasks.pop()).ranking_metric
+
+
+def _crossing_value(crossing) -> Value:
+    """A :class:`bench.metrics.Crossing` as (value, low, high): NaN value unless fitted;
+    outside the swept range an open bound (±inf) on the far side."""
+    value = crossing.mid if crossing.kind == "fit" else math.nan
+    low = -math.inf if crossing.kind == "below" else crossing.low
+    high = math.inf if crossing.kind == "above" else crossing.high
+    return Value(value, low, high)
+
+
+def _crossing(q: dict, t: Tables) -> Value:
+    config, column = q["config"], q.get("column", "pd")
+    rows = _rows(t.summary, q, "config", config)
+    _column(rows.columns, column)
+    cal = t.calibration
+    chance = {config: float(r.chance_pd) for r in _rows(cal, q, "method", config).itertuples()} \
+        if not cal.empty and "chance_pd" in cal and config in set(cal.method) else {}
+    found = snr50(rows, column, crossing_floors(column, chance, t.equal_chance), q.get("level", 0.5))
+    return _crossing_value(found.crossing.iloc[0])
+
+
+def _minus(a: Value, b: Value) -> Value:
+    """a − b with the conservative interval [a.low − b.high, a.high − b.low]."""
+    return Value(a.value - b.value, a.low - b.high, a.high - b.low)
+
+
+def _crossing_difference(q: dict, t: Tables) -> Value:
+    side = (lambda s: {**q, "config": q[s], "scenario": q.get(f"scenario_{s}", q.get("scenario"))})
+    a, b = ({k: v for k, v in side(s).items() if v is not None} for s in ("a", "b"))
+    return _minus(_crossing(a, t), _crossing(b, t))
+
+
+def _ratio(a: Value, b: Value) -> Value:
+    return Value(a.value / b.value, a.low / b.high, a.high / b.low)
+
+
+def quantity(q: dict, t: Tables) -> Value:
+    """The value of quantity ``q`` (validated by :func:`parse`) on the tables ``t``."""
+    kind = q["kind"]
+    if kind in _INLINE:
+        a, b = quantity(q["a"], t), quantity(q["b"], t)
+        with np.errstate(all="ignore"):
+            v = _minus(a, b) if kind == "difference" else _ratio(a, b)
+    else:
+        v = {"summary": _summary, "calibration": _calibration, "paired": _paired, "crossing": _crossing,
+             "crossing_difference": _crossing_difference}[kind](q, t)
+    return v.scaled(q["scale"]) if "scale" in q else v
+
+
+def describe(q: dict | None) -> str:
+    """A quantity as one line: ``crossing(config=..., column=pd_step)``."""
+    if q is None:
+        return ""
+    show = (lambda v: describe(v) if isinstance(v, dict) else f"{v:g}" if isinstance(v, float) else str(v))
+    return f"{q['kind']}({', '.join(f'{k}={show(v)}' for k, v in q.items() if k != 'kind')})"
+
+
+# ------------------------------------------------------------------ verdicts and results
+
+def _number_text(x: float, unit: str) -> str:
+    if math.isinf(x):
+        return "−∞" if x < 0 else "+∞"
+    return fmt_db(x) if unit == "dB" else fmt(x)
+
+
+def value_text(v: Value, unit: str = "") -> str:
+    """``value [low, high] unit`` as the table prints it: dB to 0.1, else 3 significant
+    digits; an interval alone (a crossing the levels do not resolve, or outside the
+    swept range) as "between a and b", "< b" or "> a"."""
+    f = (lambda x: _number_text(x, unit))
+    has = (lambda x: not math.isnan(x))
+    if has(v.value):
+        text = f(v.value) + (f" [{f(v.low)}, {f(v.high)}]" if has(v.low) or has(v.high) else "")
+    elif has(v.low) and has(v.high):
+        text = (f"< {f(v.high)}" if math.isinf(v.low) else f"> {f(v.low)}" if math.isinf(v.high)
+                else f"between {f(v.low)} and {f(v.high)}")
+    else:
+        return "–"
+    return f"{text} {unit}" if unit else text
+
+
+def _bounds(v: Value) -> tuple[float, float]:
+    """The interval a verdict reads: the quantity's, else the value alone."""
+    if math.isnan(v.low) and math.isnan(v.high):
+        return v.value, v.value
+    return v.low, v.high
+
+
+def verdict(c: Claim, v: Value | None) -> tuple[str, str]:
+    """(verdict, generated reason) of claim ``c`` whose quantity is ``v`` (None: no quantity)."""
+    if c.expect == "not-comparable":
+        return NOT_COMPARABLE, ""
+    if c.expect == "conversion":
+        return CONVERSION, ""
+    low, high = _bounds(v)
+    if math.isnan(low) or math.isnan(high):
+        return NOT_COMPARABLE, "the run gives no value for it"
+    unit = (lambda x: _number_text(x, c.unit))
+    if c.expect in ("negative", "positive"):
+        sign = 1.0 if c.expect == "positive" else -1.0
+        if sign * low > 0 and sign * high > 0:
+            return REPRODUCES, ""
+        if sign * low < 0 and sign * high < 0:
+            return DOES_NOT, "the opposite sign"
+        return DOES_NOT, "tie: the interval covers 0"
+    if c.expect == "value":
+        if low - c.tolerance <= c.value <= high + c.tolerance:
+            return REPRODUCES, ""
+        side = "below" if c.value < low - c.tolerance else "above"
+        return DOES_NOT, (f"the paper's {unit(c.value)} lies {side} our interval"
+                          + (f" widened by its tolerance {unit(c.tolerance)}" if c.tolerance else ""))
+    if c.min <= low and high <= c.max:
+        return REPRODUCES, ""
+    return DOES_NOT, f"not inside [{unit(c.min)}, {unit(c.max)}]"
+
+
+@dataclass(frozen=True)
+class Result:
+    """A claim's or a named quantity's outcome, as templates see it: ``value``, ``low``,
+    ``high``, ``p``, ``text``, ``verdict``, ``reason`` (and ``tie``: the interval covers 0)."""
+
+    value: float = math.nan
+    low: float = math.nan
+    high: float = math.nan
+    p: float = math.nan
+    text: str = "–"
+    verdict: str = ""
+    reason: str = ""
+    missing: str = ""              # what did not run, if anything
+
+    @property
+    def tie(self) -> bool:
+        low, high = _bounds(Value(self.value, self.low, self.high))
+        return not (low > 0 or high < 0)
+
+    def __str__(self) -> str:
+        return self.text
+
+
+def _result(q: dict | None, t: Tables, unit: str) -> Result:
+    if q is None:
+        return Result()
+    try:
+        v = quantity(q, t)
+    except Missing as m:
+        return Result(missing=str(m.args[0]))
+    return Result(v.value, v.low, v.high, v.p, value_text(v, unit))
+
+
+def _environment():
+    from bench.report.render import environment
+    return environment()
+
+
+def render_template(template: str, field: str, **values) -> str:
+    """``template`` rendered by Jinja2 with ``values`` (``claims``, ``q``, ...; filters
+    ``fmt``, ``db``, ``pct``); an error names ``field``."""
+    import jinja2
+    try:
+        return _environment().from_string(template).render(**values).strip()
+    except jinja2.TemplateError as exc:
+        raise ConfigError(field, f"template error: {exc}") from None
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """A claims file evaluated on a run: every claim's result and every named quantity's."""
+
+    file: ClaimsFile
+    claims: dict[str, Result]
+    q: dict[str, Result]
+
+    def frame(self) -> pd.DataFrame:
+        """claims.csv: one row per claim (:data:`CLAIMS_COLUMNS`)."""
+        rows = [{"id": c.id, "claim": c.claim, "where": c.where, "original": c.original, "english": c.english,
+                 "quantity": describe(c.quantity), "value": r.value, "low": r.low, "high": r.high, "unit": c.unit,
+                 "verdict": r.verdict, "scope": c.scope, "reason": r.reason}
+                for c, r in ((c, self.claims[c.id]) for c in self.file.claims)]
+        return pd.DataFrame(rows, columns=CLAIMS_COLUMNS)
+
+    def render(self, text: str, field: str) -> str:
+        return render_template(text, field, claims=self.claims, q=self.q)
+
+
+def evaluate(file: ClaimsFile, tables: Tables) -> Evaluation:
+    """Every claim of ``file`` on ``tables``: quantities, verdicts, then the reasons
+    rendered in file order (a reason may read the claims before it)."""
+    def named(field: str, fn):
+        try:
+            return fn()
+        except ConfigError as err:
+            raise ConfigError(f"{file.name}: {field}.{err.field}" if err.field else f"{file.name}: {field}",
+                              err.problem) from None
+
+    q = {name: named(f"claim[{i}].also.{name}", lambda: _result(quantity_, tables, ""))
+         for i, c in enumerate(file.claims) for name, quantity_ in c.also.items()}
+    results = {}
+    for i, c in enumerate(file.claims):
+        r = named(f"claim[{i}].quantity", lambda: _result(c.quantity, tables, c.unit))
+        if r.missing:
+            results[c.id] = replace(r, verdict=NOT_COMPARABLE, reason=f"{r.missing} did not run")
+            continue
+        word, generated = verdict(c, Value(r.value, r.low, r.high)) if c.quantity else verdict(c, None)
+        results[c.id] = replace(r, verdict=word, reason=generated)
+    evaluation = Evaluation(file, results, q)
+    for i, c in enumerate(file.claims):
+        r = results[c.id]
+        if c.reason and not r.missing:
+            own = render_template(c.reason, f"{file.name}: claim[{i}].reason", claims=results, q=q,
+                                  value=r.value, low=r.low, high=r.high, text=r.text)
+            results[c.id] = replace(r, reason="; ".join(s for s in (r.reason, own) if s))
+    return evaluation
+
+
+# ------------------------------------------------------------------ the report's section
+
+def _paper_cell(c: Claim) -> str:
+    words = f"“{c.original}”" if c.original else ""
+    if c.english:
+        words += f" ({c.english})" if words else c.english
+    paper = f" (paper: {_number_text(c.value, c.unit)}{' ' + c.unit if c.unit else ''})" \
+        if c.expect == "value" else ""
+    return f"{c.where}: {words}{paper}" if words else f"{c.where}{paper}"
+
+
+def claims_markdown(evaluation: Evaluation, notes: str = "") -> str:
+    """The report's *Paper vs ours* section: the table from the evaluated claims,
+    then the preset's notes rendered with ``claims`` and ``q``."""
+    f = evaluation.file
+    rows = []
+    for c in f.claims:
+        r = evaluation.claims[c.id]
+        word = f"**{r.verdict}**" + (f" {c.scope}" if c.scope else "")
+        rows.append([c.claim, _paper_cell(c), r.text, word, r.reason])
+    rows = [[str(x).replace("|", "\\|").replace("\n", " ") for x in row] for row in rows]
+    parts = [f"## Paper vs ours ({f.paper})",
+             table(["claim", "paper (where: words)", "ours [95% CI]", "verdict", "reason"], rows)]
+    if notes.strip():
+        parts.append(evaluation.render(notes, f"{f.name[:-len(CLAIMS_SUFFIX)]}.md"))
+    return "\n\n".join(parts)
+
+
+def write_folder(folder: str | Path) -> Path:
+    """Write claims.csv of a report folder from its committed tables (listed in its
+    manifest, as ``bench report`` writes it): ``python -m bench.claims FOLDER...``."""
+    from bench import runfolder
+    from bench.report import _write_csv
+    folder = Path(folder)
+    frame = evaluate_folder(folder)
+    with runfolder.writing(folder):
+        _write_csv(frame, folder / "claims.csv")
+    return folder / "claims.csv"
+
+
+def evaluate_folder(folder: str | Path, file: ClaimsFile | None = None) -> pd.DataFrame:
+    """claims.csv of a report folder, from its committed CSVs and plan.toml alone:
+    the claims of its preset (plan.toml's ``name``) unless ``file`` is given."""
+    folder = Path(folder)
+    if file is None:
+        name = tomllib.loads((folder / "plan.toml").read_text(encoding="utf-8"))["name"]
+        file = preset_claims(name)
+        if file is None:
+            raise ConfigError(str(folder), f"preset {name!r} has no claims file ({name}{CLAIMS_SUFFIX})")
+    return evaluate(file, read_tables(folder)).frame()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m bench.claims FOLDER...``: claims.csv of each report folder from its CSVs."""
+    import sys
+    for folder in (sys.argv[1:] if argv is None else argv):
+        try:
+            print(write_folder(folder))
+        except ConfigError as err:
+            print(f"error: {err}", file=sys.stderr)
+            return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,279 @@
+"""Claims as code (bench/claims.py; docs/architecture.md, 'Report').
+
+(a) a claims file is validated at load: one line naming the file and the field;
+(b) each quantity kind and verdict rule on small hand-built tables;
+(c) every committed report with a claims file and a committed claims.csv gets the same
+    claims.csv again from its committed CSVs;
+(d) no preset note and no claim reason types a number the run produces.
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+import math
+import re
+import textwrap
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench import claims
+from bench.errors import ConfigError
+from bench.listing import CLAIMS_SUFFIX, presets
+from bench.markdown import fmt, fmt_db
+
+ROOT = Path(__file__).resolve().parents[1]
+PRESETS_DIR = importlib.resources.files("bench") / "presets"
+CLAIM_FILES = sorted(p.name[:-len(CLAIMS_SUFFIX)] for p in PRESETS_DIR.iterdir() if p.name.endswith(CLAIMS_SUFFIX))
+
+GOOD = """
+paper = "A paper"
+
+[[claim]]
+id = "a-beats-b"
+claim = "a beats b"
+where = "Fig. 3"
+quantity = { kind = "paired", a = "b", b = "a", snr_db = "all" }
+expect = "positive"
+"""
+
+
+def _parse(text: str) -> claims.ClaimsFile:
+    return claims.parse(textwrap.dedent(text), "x.claims.toml")
+
+
+# ------------------------------------------------------------------ (a) validation
+
+@pytest.mark.parametrize("change, field, words", [
+    (("expect = \"positive\"", "expect = \"up\""), "claim[0].expect", "expected one of"),
+    (("kind = \"paired\"", "kind = \"pairs\""), "claim[0].quantity.kind", "expected one of"),
+    (("where = \"Fig. 3\"\n", ""), "claim[0].where", "missing"),
+    (("claim = \"a beats b\"", "claim = \"a beats b\"\nwhen = 3"), "claim[0].when", "unknown key"),
+    (("snr_db = \"all\"", "snr_db = \"all\", colour = 1"), "claim[0].quantity.colour", "unknown key"),
+    ((", snr_db = \"all\"", ""), "claim[0].quantity.snr_db", "missing"),
+    (("snr_db = \"all\"", "snr_db = \"some\""), "claim[0].quantity.snr_db", "finite number"),
+    (("id = \"a-beats-b\"", "id = \"A beats\""), "claim[0].id", "kebab-case"),
+    (("expect = \"positive\"", "expect = \"value\""), "claim[0].value", "missing"),
+    (("expect = \"positive\"", "expect = \"not-comparable\""), "claim[0].reason", "missing"),
+    (("paper = \"A paper\"", "paper = \"\""), "paper", "non-empty"),
+    (("paper = \"A paper\"", "paper = \"A paper\"\nauthors = 2"), "authors", "unknown key"),
+])
+def test_a_bad_claims_file_is_one_line_naming_the_file_and_the_field(change, field, words):
+    assert GOOD.count(change[0]) == 1
+    with pytest.raises(ConfigError) as err:
+        _parse(GOOD.replace(*change))
+    message = str(err.value)
+    assert "\n" not in message and message.startswith(f"x.claims.toml: {field}: ") and words in message
+
+
+def test_repeated_ids_and_bad_toml_are_refused():
+    with pytest.raises(ConfigError, match=r"^x.claims.toml: claim\[1\].id: repeated id 'a-beats-b'$"):
+        _parse(GOOD + GOOD.split("\n", 2)[2])
+    with pytest.raises(ConfigError, match=r"^x.claims.toml: not valid TOML"):
+        _parse("paper = ")
+
+
+@pytest.mark.parametrize("name", CLAIM_FILES)
+def test_every_packaged_claims_file_loads_beside_its_preset(name):
+    assert name in presets()                 # a claims file belongs to a preset; it is not one itself
+    assert claims.preset_claims(name).claims
+
+
+# ------------------------------------------------------------------ (b) quantities and verdicts
+
+def _summary(config: str, pd_values, snr=None, n=100, **extra) -> pd.DataFrame:
+    snr = np.arange(len(pd_values), dtype=float) if snr is None else np.asarray(snr, float)
+    pd_values = np.asarray(pd_values, float)
+    return pd.DataFrame({"scenario": "s", "method": config.split("[")[0], "config": config, "snr_db": snr,
+                         "n_trials": n, "pd": pd_values, "pd_low": pd_values - 0.05, "pd_high": pd_values + 0.05,
+                         **extra})
+
+
+def _tables(summary=None, comparisons=None, calibration=None) -> claims.Tables:
+    empty = pd.DataFrame()
+    return claims.Tables(summary if summary is not None else empty, comparisons if comparisons is not None else empty,
+                         calibration if calibration is not None else empty, 0.05)
+
+
+def _comparison(a, b, diff, low, high, p=np.nan, snr=np.nan) -> dict:
+    return {"scenario": "s", "task": "maneuver-detection", "metric": "detected", "snr_db": snr, "config_a": a,
+            "config_b": b, "difference": diff, "difference_low": low, "difference_high": high, "mcnemar_p": p}
+
+
+def _claim(quantity: dict, **keys) -> claims.Claim:
+    return claims.Claim(id="c", claim="c", where="w", quantity=quantity, **{"expect": "positive", **keys})
+
+
+def _verdict(claim: claims.Claim, tables: claims.Tables) -> claims.Result:
+    file = claims.ClaimsFile("x.claims.toml", "P", (claim,))
+    return claims.evaluate(file, tables).claims["c"]
+
+
+PAIRED = {"kind": "paired", "a": "x", "b": "y", "snr_db": "all"}
+
+
+@pytest.mark.parametrize("row, expect, word, reason", [
+    ((0.1, 0.05, 0.15), "positive", "reproduces", ""),
+    ((0.1, -0.01, 0.15), "positive", "does not reproduce", "tie: the interval covers 0"),
+    ((-0.1, -0.15, -0.05), "positive", "does not reproduce", "the opposite sign"),
+    ((-0.1, -0.15, -0.05), "negative", "reproduces", ""),
+    ((0.0, 0.0, 0.0), "negative", "does not reproduce", "tie: the interval covers 0"),
+])
+def test_sign_rules_read_the_interval(row, expect, word, reason):
+    comparisons = pd.DataFrame([_comparison("x", "y", *row, p=0.01)])
+    r = _verdict(_claim(PAIRED, expect=expect), _tables(comparisons=comparisons))
+    assert (r.verdict, r.reason) == (word, reason)
+    assert (r.value, r.low, r.high, r.p) == (*row, 0.01)
+
+
+def test_a_paired_quantity_is_oriented_as_b_minus_a_whichever_order_the_table_holds():
+    comparisons = pd.DataFrame([_comparison("y", "x", 0.1, 0.05, 0.15)])      # the table holds x − y
+    r = _verdict(_claim(PAIRED, expect="negative"), _tables(comparisons=comparisons))
+    assert (r.value, r.low, r.high, r.verdict) == (-0.1, -0.15, -0.05, "reproduces")
+
+
+def test_a_paired_quantity_at_one_level():
+    comparisons = pd.DataFrame([_comparison("x", "y", 0.1, 0.05, 0.15),
+                                _comparison("x", "y", -0.2, -0.3, -0.1, snr=5.0)])
+    r = _verdict(_claim({**PAIRED, "snr_db": 5.0}, expect="negative"), _tables(comparisons=comparisons))
+    assert (r.value, r.verdict) == (-0.2, "reproduces")
+
+
+@pytest.mark.parametrize("paper, tolerance, word", [(0.5, 0.0, "reproduces"), (0.3, 0.0, "does not reproduce"),
+                                                   (0.3, 0.16, "reproduces"), (0.8, 0.0, "does not reproduce")])
+def test_value_rule_widens_the_interval_by_the_tolerance(paper, tolerance, word):
+    summary = _summary("x", [0.2, 0.5, 0.9])                 # pd 0.5 [0.45, 0.55] at 1 dB
+    claim = _claim({"kind": "summary", "config": "x", "snr_db": 1, "column": "pd"}, expect="value", value=paper,
+                   tolerance=tolerance)
+    r = _verdict(claim, _tables(summary=summary))
+    assert r.verdict == word and (word == "reproduces") == (r.reason == "")
+
+
+@pytest.mark.parametrize("lo, hi, word", [(0.4, 0.6, "reproduces"), (0.46, 0.6, "does not reproduce")])
+def test_between_rule_needs_the_whole_interval_inside(lo, hi, word):
+    claim = _claim({"kind": "summary", "config": "x", "snr_db": 1, "column": "pd"}, expect="between", min=lo, max=hi)
+    assert _verdict(claim, _tables(summary=_summary("x", [0.2, 0.5, 0.9]))).verdict == word
+
+
+def test_between_rule_reads_the_value_alone_without_an_interval():
+    summary = _summary("x", [0.2, 0.5, 0.9], delay_mean=[np.nan, 4.0, 3.0])   # no delay_low/high columns
+    claim = _claim({"kind": "summary", "config": "x", "snr_db": 2, "column": "delay_mean"}, expect="between",
+                   min=2.5, max=3.5)
+    r = _verdict(claim, _tables(summary=summary))
+    assert (r.value, math.isnan(r.low), r.verdict) == (3.0, True, "reproduces")
+
+
+def test_not_comparable_and_conversion_keep_their_quantity_and_reason():
+    summary = _summary("x", [0.2, 0.5, 0.9])
+    q = {"kind": "summary", "config": "x", "snr_db": 1, "column": "pd"}
+    r = _verdict(_claim(q, expect="not-comparable", reason="the paper gives {{ 'no' }} axis"), _tables(summary))
+    assert (r.verdict, r.reason, r.value) == ("not comparable", "the paper gives no axis", 0.5)
+    r = _verdict(_claim(q, expect="conversion", reason="ours at {{ text }}"), _tables(summary))
+    assert (r.verdict, r.reason) == ("conversion", "ours at 0.5 [0.45, 0.55]")
+
+
+def test_a_config_that_did_not_run_makes_the_claim_not_comparable():
+    r = _verdict(_claim({"kind": "summary", "config": "peer", "snr_db": 1, "column": "pd"}, reason="{{ 1/0 }}"),
+                 _tables(summary=_summary("x", [0.2, 0.5, 0.9])))
+    assert (r.verdict, r.reason) == ("not comparable", "`peer` did not run")
+
+
+def test_crossing_is_the_reports_probit_and_a_difference_is_conservative():
+    from bench.markdown import snr50
+    snr = np.arange(-10.0, 11.0, 2.0)
+    a = _summary("a", 1 / (1 + np.exp(-(snr + 3))), snr=snr)
+    b = _summary("b", 1 / (1 + np.exp(-(snr - 2))), snr=snr)
+    summary = pd.concat([a, b], ignore_index=True)
+    ca, cb = (snr50(summary[summary.config == c]).crossing.iloc[0] for c in "ab")
+    r = _verdict(_claim({"kind": "crossing_difference", "a": "a", "b": "b"}, expect="negative", unit="dB"),
+                 _tables(summary=summary))
+    assert (r.value, r.low, r.high) == (ca.mid - cb.mid, ca.low - cb.high, ca.high - cb.low)
+    assert r.verdict == "reproduces" and r.text.endswith(" dB")
+    one = _verdict(_claim({"kind": "crossing", "config": "a", "level": 0.5}, expect="value", value=-3.0,
+                          tolerance=0.0, unit="dB"), _tables(summary=summary))
+    assert one.value == ca.mid and one.verdict == "reproduces"
+
+
+def test_a_crossing_above_the_swept_range_is_an_open_interval():
+    summary = _summary("a", [0.0, 0.01, 0.02], snr=[0.0, 1.0, 2.0])
+    r = _verdict(_claim({"kind": "crossing", "config": "a"}, expect="between", min=1.0, max=100.0, unit="dB"),
+                 _tables(summary=summary))
+    assert math.isnan(r.value) and math.isinf(r.high) and r.text.startswith("> ")
+    assert r.verdict == "does not reproduce"          # [2, inf) is not inside [1, 100]
+
+
+def test_the_crossing_of_pd_has_the_configs_chance_pd_as_floor():
+    snr = np.arange(-10.0, 11.0, 2.0)
+    summary = _summary("a", 0.3 + 0.7 / (1 + np.exp(-snr)), snr=snr)
+    calibration = pd.DataFrame({"scenario": ["s"], "method": ["a"], "chance_pd": [0.3]})
+    floored = _verdict(_claim({"kind": "crossing", "config": "a"}), _tables(summary, None, calibration)).value
+    bare = _verdict(_claim({"kind": "crossing", "config": "a"}), _tables(summary)).value
+    assert floored > bare + 0.5          # without the floor the curve starts nearer 0.5
+
+
+def test_difference_ratio_and_scale():
+    summary = _summary("x", [0.2, 0.5, 0.9])
+    pd_at = (lambda s: {"kind": "summary", "config": "x", "snr_db": s, "column": "pd"})
+    r = _verdict(_claim({"kind": "difference", "a": pd_at(2), "b": pd_at(1)}), _tables(summary))
+    assert np.allclose([r.value, r.low, r.high], [0.4, 0.3, 0.5])
+    r = _verdict(_claim({"kind": "ratio", "a": pd_at(2), "b": pd_at(1), "scale": 100}, unit="%", expect="between",
+                        min=150, max=250), _tables(summary))
+    assert np.allclose([r.value, r.low, r.high], [180, 85 / 0.55, 95 / 0.45]) and r.verdict == "reproduces"
+
+
+def test_templates_read_every_claim_and_named_quantity():
+    text = GOOD + """
+    [[claim]]
+    id = "second"
+    claim = "another"
+    where = "eq. 11"
+    quantity = { kind = "calibration", config = "x", column = "chance_pd" }
+    expect = "between"
+    min = 0.0
+    max = 0.1
+    reason = "first {{ claims['a-beats-b'].verdict }}, chance {{ value | pct }}, ours {{ q.thr.text }}"
+    [claim.also]
+    thr = { kind = "calibration", config = "x", column = "used" }
+    """
+    file = claims.parse(textwrap.dedent(text), "x.claims.toml")
+    calibration = pd.DataFrame({"scenario": ["s"], "method": ["x"], "chance_pd": [0.0475], "used": [12.3456]})
+    comparisons = pd.DataFrame([_comparison("b", "a", 0.1, 0.05, 0.15)])
+    evaluation = claims.evaluate(file, _tables(None, comparisons, calibration))
+    assert evaluation.claims["second"].reason == "first reproduces, chance 4.75%, ours 12.3"
+    notes = "{% if claims['a-beats-b'].tie %}tie{% else %}lead {{ claims['a-beats-b'].value | fmt }}{% endif %}"
+    section = claims.claims_markdown(evaluation, notes)
+    assert section.startswith("## Paper vs ours (A paper)") and section.endswith("lead 0.1")
+    assert "| a beats b | Fig. 3 | 0.1 [0.05, 0.15] | **reproduces** | |" in re.sub(r" +", " ", section)
+    with pytest.raises(ConfigError, match=r"^x.claims.toml: claim\[1\].reason: template error"):
+        claims.evaluate(claims.parse(textwrap.dedent(text).replace("q.thr", "q.nothing"), "x.claims.toml"),
+                        _tables(None, comparisons, calibration))
+
+
+def test_claims_csv_has_the_schemas_columns():
+    comparisons = pd.DataFrame([_comparison("b", "a", 0.1, 0.05, 0.15)])
+    frame = claims.evaluate(_parse(GOOD), _tables(comparisons=comparisons)).frame()
+    assert list(frame.columns) == claims.CLAIMS_COLUMNS
+    assert frame.loc[0, "quantity"] == "paired(a=b, b=a, snr_db=all)" and frame.loc[0, "verdict"] == "reproduces"
+
+
+def test_bench_report_writes_claims_csv_and_the_table(small_run_copy, monkeypatch):
+    """A preset run with a claims file: claims.csv (listed in the manifest) and the table
+    where the notes were, the notes rendered after it."""
+    from bench import report, runfolder
+    text = GOOD.replace("A paper", "Small 2026").replace("a-beats-b", "single-step-leads").replace(
+        'a = "b", b = "a"', 'a = "innovation[window=1]", b = "innovation[window=5]"')
+    monkeypatch.setattr(report, "_preset_name", lambda source: "small")
+    monkeypatch.setattr(report.claims, "preset_claims", lambda name: claims.parse(textwrap.dedent(text), "s.toml"))
+    monkeypatch.setattr(report, "preset_notes", lambda source: "Notes: {{ claims['single-step-leads'].verdict }}.")
+    report.build_outputs(small_run_copy, recording=False)
+    written = pd.read_csv(small_run_copy / "claims.csv")
+    again = claims.evaluate_folder(small_run_copy, claims.parse(textwrap.dedent(text), "s.toml"))
+    assert written.id.tolist() == ["single-step-leads"] and written.verdict[0] == again.verdict[0]
+    assert written.value[0] == again.value[0]
+    assert "claims.csv" in runfolder.read_manifest(small_run_copy)
+    md = (small_run_copy / "report.md").read_text()
+    section = md.split("## Paper vs ours (Small 2026)", 1)[1].split("\n## ", 1)[0]
+    assert f"Notes: {written.verdict[0]}." in section and "`innovation[window=1]`" not in section
