@@ -189,11 +189,15 @@ def parse(text: str, name: str) -> ClaimsFile:
         if not isinstance(raws, list) or not raws:
             raise ConfigError("claim", "missing: give at least one [[claim]]")
         claims = tuple(_claim(raw, f"claim[{i}]") for i, raw in enumerate(raws))
-        seen = set()
+        seen, named = set(), set()
         for i, c in enumerate(claims):
             if c.id in seen:
                 raise ConfigError(f"claim[{i}].id", f"repeated id {c.id!r}")
             seen.add(c.id)
+            for also in c.also:          # one namespace ``q`` for the whole file
+                if also in named:
+                    raise ConfigError(f"claim[{i}].also.{also}", "repeated name (an earlier claim has it)")
+                named.add(also)
     except ConfigError as err:
         raise ConfigError(f"{name}: {err.field.lstrip('.')}" if err.field else name, err.problem) from None
     return ClaimsFile(name, paper, claims)
@@ -237,7 +241,8 @@ def _read_csv(text_or_path) -> pd.DataFrame:
 def csv_frame(df: pd.DataFrame) -> pd.DataFrame:
     """``df`` exactly as its CSV reads back, so claims evaluated at report time and
     from the committed CSVs are the same numbers."""
-    return _read_csv(io.StringIO(df.to_csv(index=False, lineterminator="\n")))
+    from bench.report import csv_text
+    return _read_csv(io.StringIO(csv_text(df)))
 
 
 def read_tables(folder: str | Path) -> Tables:
@@ -300,8 +305,13 @@ def _column(columns, column: str) -> str:
 
 
 def _interval_of(row: pd.Series, column: str) -> Value:
-    """``column`` of one row, with ``column_low`` / ``column_high`` where the table has them."""
-    bound = (lambda s: float(row[f"{column}_{s}"]) if f"{column}_{s}" in row.index else math.nan)
+    """``column`` of one row, with ``column_low`` / ``column_high`` where the table has
+    them (for a mean ``X_mean``, ``X_low`` / ``X_high``: summary.csv's ``delay_mean``)."""
+    stem = column[:-len("_mean")] if column.endswith("_mean") else column
+
+    def bound(side: str) -> float:
+        name = next((c for c in (f"{column}_{side}", f"{stem}_{side}") if c in row.index), None)
+        return float(row[name]) if name else math.nan
     return Value(float(row[_column(row.index, column)]), bound("low"), bound("high"))
 
 
@@ -484,9 +494,20 @@ class Result:
         return self.text
 
 
-def _result(q: dict | None, t: Tables, unit: str) -> Result:
+def default_unit(q: dict) -> str:
+    """The unit a quantity has by its kind: dB for a crossing and a difference of two dB
+    quantities; none otherwise (a claim's ``unit`` overrides it)."""
+    if q["kind"] in ("crossing", "crossing_difference"):
+        return "dB"
+    if q["kind"] == "difference" and default_unit(q["a"]) == default_unit(q["b"]) == "dB":
+        return "dB"
+    return ""
+
+
+def _result(q: dict | None, t: Tables, unit: str = "") -> Result:
     if q is None:
         return Result()
+    unit = unit or default_unit(q)
     try:
         v = quantity(q, t)
     except Missing as m:
@@ -539,7 +560,7 @@ def evaluate(file: ClaimsFile, tables: Tables) -> Evaluation:
             raise ConfigError(f"{file.name}: {field}.{err.field}" if err.field else f"{file.name}: {field}",
                               err.problem) from None
 
-    q = {name: named(f"claim[{i}].also.{name}", lambda: _result(quantity_, tables, ""))
+    q = {name: named(f"claim[{i}].also.{name}", lambda: _result(quantity_, tables))
          for i, c in enumerate(file.claims) for name, quantity_ in c.also.items()}
     results = {}
     for i, c in enumerate(file.claims):
@@ -554,7 +575,7 @@ def evaluate(file: ClaimsFile, tables: Tables) -> Evaluation:
         r = results[c.id]
         if c.reason and not r.missing:
             own = render_template(c.reason, f"{file.name}: claim[{i}].reason", claims=results, q=q,
-                                  value=r.value, low=r.low, high=r.high, text=r.text)
+                                  value=r.value, low=r.low, high=r.high, text=r.text, verdict=r.verdict)
             results[c.id] = replace(r, reason="; ".join(s for s in (r.reason, own) if s))
     return evaluation
 

@@ -69,9 +69,12 @@ def test_a_bad_claims_file_is_one_line_naming_the_file_and_the_field(change, fie
     assert "\n" not in message and message.startswith(f"x.claims.toml: {field}: ") and words in message
 
 
-def test_repeated_ids_and_bad_toml_are_refused():
+def test_repeated_ids_names_and_bad_toml_are_refused():
     with pytest.raises(ConfigError, match=r"^x.claims.toml: claim\[1\].id: repeated id 'a-beats-b'$"):
         _parse(GOOD + GOOD.split("\n", 2)[2])
+    also = "[claim.also]\nx = { kind = \"calibration\", config = \"a\", column = \"used\" }\n"
+    with pytest.raises(ConfigError, match=r"^x.claims.toml: claim\[1\].also.x: repeated name"):
+        _parse(GOOD + also + GOOD.split("\n", 2)[2].replace("a-beats-b", "again") + also)
     with pytest.raises(ConfigError, match=r"^x.claims.toml: not valid TOML"):
         _parse("paper = ")
 
@@ -277,3 +280,155 @@ def test_bench_report_writes_claims_csv_and_the_table(small_run_copy, monkeypatc
     md = (small_run_copy / "report.md").read_text()
     section = md.split("## Paper vs ours (Small 2026)", 1)[1].split("\n## ", 1)[0]
     assert f"Notes: {written.verdict[0]}." in section and "`innovation[window=1]`" not in section
+
+
+# ------------------------------------------------------------------ (c) committed reports
+
+def _report_folders() -> list[tuple[str, Path]]:
+    """(preset, its committed report folder) for every preset with a claims file."""
+    out = []
+    for plan in sorted((ROOT / "reports").glob("*/plan.toml")):
+        name = tomllib.loads(plan.read_text(encoding="utf-8")).get("name", "")
+        if name in CLAIM_FILES:
+            out.append((name, plan.parent))
+    return out
+
+
+@pytest.mark.parametrize("name, folder", _report_folders(), ids=lambda x: getattr(x, "name", x))
+def test_committed_claims_csv_is_regenerated_identical_from_the_committed_csvs(name, folder):
+    from bench.report import csv_text
+    committed = folder / "claims.csv"
+    if not committed.exists():
+        pytest.skip(f"{folder.relative_to(ROOT)} has no committed claims.csv yet (written when the report is "
+                    f"regenerated: bench run --preset {name}, or python -m bench.claims {folder.relative_to(ROOT)})")
+    assert csv_text(claims.evaluate_folder(folder)) == committed.read_text(encoding="utf-8")
+
+
+def test_the_maneuver_detection_claims_csv_is_committed():
+    """At least one committed report is checked by the test above (not all skipped)."""
+    assert (ROOT / "reports" / "maneuver-detection" / "claims.csv").exists()
+
+
+# ------------------------------------------------------------------ (d) no typed numbers
+
+#: a literal number: optional sign (ASCII or Unicode minus), digits, decimals, exponent, percent
+_NUMBER = re.compile(r"(?<![\w.])([-−]?\d+(?:\.\d+)?(?:[eE][-−]?\d+)?)(%?)(?![\w])")
+#: references into the paper (figures, equations, steps, sections): not results
+_REFERENCE = re.compile(r"(?:Figs?\.|eqs?\.|Steps?|§|Table|panels?)\s*[\d–\-, ]*(?:and\s+\d+)?", re.IGNORECASE)
+
+
+def _prose(template: str) -> str:
+    """A template's own text: template fields, code spans and references into the paper removed."""
+    text = re.sub(r"\{\{.*?\}\}|\{%.*?%\}|\{#.*?#\}", " ", template, flags=re.S)
+    text = re.sub(r"`[^`]*`", " ", text)
+    return _REFERENCE.sub(" ", text)
+
+
+def literals(text: str) -> list[tuple[str, float]]:
+    """The literal numbers of a template's prose: (as written, value); "5%" is 0.05.
+    Single-digit integers are left out: ordinals and small counts ("χ²(1)", "Step 1"),
+    never a measured value at the printed precision."""
+    out = []
+    for m in _NUMBER.finditer(_prose(text)):
+        written = m.group(1).replace("−", "-")
+        if re.fullmatch(r"-?\d", written):
+            continue
+        out.append((m.group(0), float(written) / (100.0 if m.group(2) else 1.0)))
+    return out
+
+
+def _numbers(value) -> list[float]:
+    if isinstance(value, dict):
+        return [x for v in value.values() for x in _numbers(v)]
+    if isinstance(value, list):
+        return [x for v in value for x in _numbers(v)]
+    return [float(value)] if isinstance(value, (int, float)) and not isinstance(value, bool) else []
+
+
+def parameters(folder: Path, file: claims.ClaimsFile | None) -> set[str]:
+    """Numbers a note may type (as :func:`fmt` prints them): the plan's values (its
+    ``[calibration] chance_pd`` default included), the harness's fixed settings (95%
+    intervals, the crossing level), and the paper's own printed numbers (the claims'
+    ``where``, ``original``, ``english``, ``value``, ``min``, ``max``, ``tolerance``, ``level``)."""
+    from bench.calibration import EQUAL_CHANCE_PD
+    from bench.metrics import CONFIDENCE
+    plan = tomllib.loads((folder / "plan.toml").read_text(encoding="utf-8"))
+    plan.pop("provenance", None)
+    values = _numbers(plan) + [plan.get("calibration", {}).get("chance_pd", EQUAL_CHANCE_PD), CONFIDENCE, 0.5]
+    for c in (file.claims if file else ()):
+        values += [float(w.replace("−", "-")) for w in _NUMBER.findall(f"{c.where} {c.original} {c.english}")
+                   for w in [w[0]]]
+        values += [x for x in (c.value, c.min, c.max, c.tolerance) if x is not None]
+        values += [q["level"] for q in [c.quantity, *c.also.values()] if q and "level" in q]
+    return {fmt(v) for v in values}
+
+
+def run_values(folder: Path, file: claims.ClaimsFile | None) -> tuple[set[str], set[str]]:
+    """What the run produced, as the report prints it: (3 significant digits, dB to 0.1).
+    Every number of summary/comparisons/calibration.csv (dB columns also to 0.1), every
+    claim and named quantity, and every config's SNR at Pd = 0.5 under each Pd column."""
+    from bench.markdown import crossing_floors, snr50
+    tables = claims.read_tables(folder)
+    plain, db = set(), set()
+    for df in (tables.summary, tables.comparisons, tables.calibration):
+        for column in df.select_dtypes("number"):
+            values = df[column].dropna().to_numpy(float)
+            plain |= {fmt(v) for v in values}
+            if column.endswith("_db"):
+                db |= {fmt_db(v) for v in values}
+    chance = dict(zip(tables.calibration.get("method", []), tables.calibration.get("chance_pd", [])))
+    for column in ("pd", "pd_step", "pd_equal_chance"):
+        if column in tables.summary and tables.summary[column].notna().any():
+            for c in snr50(tables.summary, column, crossing_floors(column, chance, tables.equal_chance)).crossing:
+                db |= {fmt_db(x) for x in (c.mid, c.low, c.high) if np.isfinite(x)}
+    if file is not None:
+        evaluation = claims.evaluate(file, tables)
+        for r in [*evaluation.claims.values(), *evaluation.q.values()]:
+            for x in (r.value, r.low, r.high):
+                if np.isfinite(x):
+                    plain.add(fmt(x))
+                    db.add(fmt_db(x))
+    return plain, db
+
+
+def typed_run_numbers(text: str, plain: set[str], db: set[str], allowed: set[str]) -> list[str]:
+    """The literals of ``text`` equal at the printed precision to a number the run produced."""
+    return [written for written, x in literals(text)
+            if fmt(x) not in allowed and (fmt(x) in plain or fmt_db(x) in db)]
+
+
+def test_the_rule_catches_a_typed_crossing_and_lets_parameters_through():
+    plain, db = {"0.33", "-7.17", "2.67"}, {"-7.2", "-7.0"}
+    allowed = {"15", "0.01", "40"}
+    text = ("under any alarm the single-step test leads (−7.0 against −7.2) and fires in 33% of null trials; "
+            "at 15 dB, Pfa 1e-2, the 40-step window, Fig. 3, eqs. 8 and 11, `cumulant-paper[M=32]`, "
+            "{{ q.delay.text }} steps")
+    assert typed_run_numbers(text, plain, db, allowed) == ["−7.0", "−7.2", "33%"]
+
+
+def _prose_fields(name: str) -> list[tuple[str, str]]:
+    """(where, text) of a preset's hand-written prose: its notes and its claims' words."""
+    notes = PRESETS_DIR / f"{name}.md"
+    out = [(f"{name}.md", notes.read_text(encoding="utf-8"))] if notes.is_file() else []
+    file = claims.preset_claims(name)
+    for c in (file.claims if file else ()):
+        out += [(f"{name}{CLAIMS_SUFFIX}: {c.id}.{k}", getattr(c, k)) for k in ("claim", "scope", "reason")]
+    return out
+
+
+NOTED = sorted(p.name[:-3] for p in PRESETS_DIR.iterdir() if p.name.endswith(".md"))
+
+
+@pytest.mark.parametrize("name", NOTED)
+def test_no_note_or_reason_types_a_number_the_run_produces(name):
+    folder = ROOT / "reports" / name
+    if name not in CLAIM_FILES:
+        pytest.skip(f"preset {name} has no claims file yet: its notes are not templates")
+    if not (folder / "summary.csv").exists():
+        pytest.skip(f"no committed report of preset {name} to compare its notes with")
+    file = claims.preset_claims(name)
+    plain, db = run_values(folder, file)
+    allowed = parameters(folder, file)
+    typed = {where: found for where, text in _prose_fields(name)
+             if (found := typed_run_numbers(text, plain, db, allowed))}
+    assert not typed, f"numbers the run produces, typed (make them template fields): {typed}"

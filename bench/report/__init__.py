@@ -57,8 +57,13 @@ def _write_text(path: Path, text: str) -> None:
     runfolder.write_text(path, text)
 
 
+def csv_text(df: pd.DataFrame) -> str:
+    """A table as every CSV of a run is written (floats in full: they read back bit-exact)."""
+    return df.to_csv(index=False, float_format=None, lineterminator="\n")
+
+
 def _write_csv(df: pd.DataFrame, path: Path) -> None:
-    _write_text(path, df.to_csv(index=False, float_format=None, lineterminator="\n"))
+    _write_text(path, csv_text(df))
 
 
 def _scenario_order(record: dict) -> dict[str, int]:
