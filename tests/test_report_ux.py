@@ -187,7 +187,9 @@ def test_glance_winner_matches_the_summary(mixed):
     assert len(blocks) == 3
     for scenario, first in blocks:
         task = task_of[first]
-        if task.ranking_metric == "detected":        # Pd averaged over the levels, from summary.csv
+        if task.equal_chance_metric:                 # detectors: Pd at equal chance Pd, from summary.csv
+            means = summary[summary.scenario == scenario].groupby("config").pd_equal_chance.mean()
+        elif task.ranking_metric == "detected":      # Pd averaged over the levels, from summary.csv
             means = summary[summary.scenario == scenario].groupby("config").pd.mean()
         else:                                          # the per-trial metric, from trials.csv
             means = trials[trials.scenario == scenario].groupby("config")[task.ranking_metric].mean()
@@ -195,17 +197,47 @@ def test_glance_winner_matches_the_summary(mixed):
         assert first == best, (scenario, means)
 
 
+def test_glance_ranks_detectors_at_equal_chance_pd_with_any_alarm_pd_beside(mixed):
+    glance = _section((mixed / "report.md").read_text(), "Results at a glance")
+    block = re.search(r"\*\*Detectors on `cv-turn-cv`\*\*(.*?)(?=\n\*\*\w+ on `|\Z)", glance, re.S).group(1)
+    assert "Pd at equal chance Pd, higher is better" in block
+    assert "| Pd at equal chance Pd [95% CI] | Pd (any alarm) [95% CI] | chance Pd (any alarm) |" in \
+        re.sub(r" +", " ", block)
+    trials = pd.read_csv(mixed / "trials.csv")
+    detectors = trials[trials.scenario == "cv-turn-cv"]
+    assert set(detectors.detected_equal_chance.unique()) <= {0.0, 1.0}      # a 0/1 outcome per trial
+    assert trials[trials.scenario != "cv-turn-cv"].detected_equal_chance.isna().all()
+
+
+@pytest.mark.parametrize("per_level, words", [(1, "not enough trials to rank"), (6, "winner")])
+def test_glance_does_not_rank_on_single_trials(per_level, words):
+    """One trial per level (or identical trials) gives a zero-width interval: no winner."""
+    from types import SimpleNamespace
+    from bench.report.glance import comparisons_frame, glance
+    from bench.report.render import glance_markdown
+    task = SimpleNamespace(name="t", noun="trackers", ranking_metric="err", ranking_higher_is_better=False,
+                           ranking_label="error (m)", ranking_binary=False, equal_chance_metric="")
+    rng = np.random.default_rng(3)
+    trials = pd.DataFrame([{"scenario": "s", "config": c, "snr_db": snr, "trial": i,
+                            "err": base + (rng.normal() if per_level > 1 else 0.0)}
+                           for c, base in (("x", 1.0), ("y", 78.0)) for snr in (0.0, 10.0) for i in range(per_level)])
+    task_of = {"x": task, "y": task}
+    comparisons = comparisons_frame(trials, task_of)
+    text = glance_markdown(glance(trials, task_of, comparisons, {}))
+    assert words in text and ("-77 [-77, -77]" in text) == (per_level == 1)
+
+
 def test_comparisons_are_paired_differences_of_the_trials(mixed):
     comparisons = pd.read_csv(mixed / "comparisons.csv")
     trials = pd.read_csv(mixed / "trials.csv")
     det = comparisons[(comparisons.scenario == "cv-turn-cv") & comparisons.snr_db.notna()]
-    assert len(det) == 3 * 4                      # 3 pairs of 3 detectors, 4 levels
+    assert len(det) == 2 * 3 * 4                  # any alarm and equal chance Pd: 3 pairs of 3 detectors, 4 levels
+    assert set(det.metric) == {"detected", "detected_equal_chance"}
     for r in det.itertuples():
-        a = trials[(trials.config == r.config_a) & (trials.snr_db == r.snr_db)].sort_values("trial").detected
-        b = trials[(trials.config == r.config_b) & (trials.snr_db == r.snr_db)].sort_values("trial").detected
-        assert r.difference == pytest.approx(b.to_numpy(float).mean() - a.to_numpy(float).mean())
-        assert (r.only_a, r.only_b) == (int((a.to_numpy() & ~b.to_numpy()).sum()),
-                                         int((b.to_numpy() & ~a.to_numpy()).sum()))
+        at = trials[trials.snr_db == r.snr_db].sort_values("trial")
+        a, b = (at[at.config == c][r.metric].astype(bool).to_numpy() for c in (r.config_a, r.config_b))
+        assert r.difference == pytest.approx(b.mean() - a.mean())
+        assert (r.only_a, r.only_b) == (int((a & ~b).sum()), int((b & ~a).sum()))
         assert r.difference_low <= r.difference <= r.difference_high
         assert (r.better == "tie") == (not r.significant)
     tracking = comparisons[comparisons.scenario == "glint"]

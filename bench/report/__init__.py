@@ -136,6 +136,16 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
     return summary[columns].reset_index(drop=True)
 
 
+def _calibrated_trials(trials: pd.DataFrame, cals, task_of: dict) -> pd.DataFrame:
+    """``trials`` with the per-trial columns the calibrations give (:meth:`Task.calibrated_trial_columns`:
+    e.g. detection at the threshold of equal chance Pd), NaN for the other rows."""
+    parts: dict[str, list[pd.Series]] = {}
+    for c in cals:
+        for name, values in task_of[c.method].calibrated_trial_columns(trials, c).items():
+            parts.setdefault(name, []).append(values)
+    return trials.assign(**{name: pd.concat(values).reindex(trials.index) for name, values in parts.items()})
+
+
 def steps_frame(trials: pd.DataFrame, series: dict, record: dict, t_of: dict) -> pd.DataFrame:
     """Per (scenario, config, SNR, step): the task's per-step table
     (:meth:`Task.steps`), with the step's time."""
@@ -408,6 +418,7 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
                         sweep["calibration"]["pfa"], sweep["calibration"]["mode"],
                         sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD),
                         frozenset(label for label, task in task_of.items() if task.pfa_per_cell))
+    trials = _calibrated_trials(trials, cals, task_of)
     summary = summary_frame(trials, series, runs, record, cals)
     t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}
     steps = steps_frame(trials, series, record, t_of)

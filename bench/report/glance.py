@@ -18,7 +18,13 @@ discordant pairs; the exact test is not).
 *At a glance*: per (task, scenario config) the configs ranked by the ranking
 metric averaged over the SNR levels (each level weighing the same), with
 bootstrap intervals; the winner's margin over the runner-up is their paired
-comparison over all levels, "tie" when it is not significant.
+comparison over all levels, "tie" when it is not significant, "not enough
+trials to rank" when the comparison has a single pair or a zero-width interval
+away from 0. A task whose detectors differ in chance Pd (a single-step test
+alarms by chance far more often than a window statistic) declares
+``equal_chance_metric``, the per-trial 0/1 outcome at thresholds that give every
+config the same chance Pd: the configs are ranked on it (McNemar's test
+applies), with the ranking metric as a secondary column.
 """
 
 from __future__ import annotations
@@ -72,48 +78,82 @@ def _groups(trials: pd.DataFrame, task_of: dict):
             yield scenario, task, g
 
 
+def equal_chance_metric(task, g: pd.DataFrame) -> str:
+    """The task's :attr:`~bench.tasks.base.Task.equal_chance_metric` where every config of
+    ``g`` has it (a 0/1 outcome at equal chance Pd), else ""."""
+    column = task.equal_chance_metric
+    if not column or column not in g:
+        return ""
+    return column if metric_values(g[column]).notna().groupby(g.config).all().all() else ""
+
+
+def _metrics(task, g: pd.DataFrame) -> list[tuple[str, bool]]:
+    """(per-trial column, whether 0/1) the configs of ``g`` are compared on: the ranking
+    metric and, where the run has it, the outcome at equal chance Pd."""
+    fair = equal_chance_metric(task, g)
+    return [(task.ranking_metric, task.ranking_binary)] + ([(fair, True)] if fair else [])
+
+
 def comparisons_frame(trials: pd.DataFrame, task_of: dict) -> pd.DataFrame:
     """Every pair of method configs of each (scenario config, task), per SNR
-    level and over all levels: :data:`COMPARISON_COLUMNS`."""
+    level and over all levels, on each of the task's metrics: :data:`COMPARISON_COLUMNS`."""
     rows = []
     for scenario, task, g in _groups(trials, task_of):
         configs = list(dict.fromkeys(g.config))
-        for a, b in itertools.combinations(configs, 2):
-            pairs = _pairs_frame(g, task.ranking_metric, a, b)
-            key = {"scenario": scenario, "task": task.name, "metric": task.ranking_metric, "config_a": a,
-                   "config_b": b}
-            for snr, at in [(ALL_LEVELS, pairs), *pairs.groupby("snr_db", sort=True)]:
-                row = compare_pair(at, task.ranking_binary, task.ranking_higher_is_better)
-                row["better"] = {"a": a, "b": b}.get(row["better"], "tie")
-                rows.append({**key, "snr_db": snr, **row})
+        for metric, binary in _metrics(task, g):
+            for a, b in itertools.combinations(configs, 2):
+                pairs = _pairs_frame(g, metric, a, b)
+                key = {"scenario": scenario, "task": task.name, "metric": metric, "config_a": a, "config_b": b}
+                for snr, at in [(ALL_LEVELS, pairs), *pairs.groupby("snr_db", sort=True)]:
+                    row = compare_pair(at, binary, task.ranking_higher_is_better)
+                    row["better"] = {"a": a, "b": b}.get(row["better"], "tie")
+                    rows.append({**key, "snr_db": snr, **row})
     return pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
+
+
+def _mean_by_config(g: pd.DataFrame, column: str) -> dict[str, tuple[float, float, float]]:
+    """config -> (mean over the levels, each weighing the same; its bootstrap interval)."""
+    values = g.assign(_v=metric_values(g[column]))
+    return {config: bootstrap_mean_ci(c._v, c.snr_db) for config, c in values.groupby("config", sort=False)}
+
+
+def enough_trials(row) -> bool:
+    """Whether a paired comparison can rank: more than one pair, and an interval that is
+    not a single point away from 0 (one trial per level, or identical trials, give the
+    bootstrap nothing to resample: a zero-width interval says nothing about the spread)."""
+    degenerate = row.difference_low == row.difference_high and row.difference != 0
+    return bool(row.n_pairs >= 2 and not degenerate)
 
 
 def glance(trials: pd.DataFrame, task_of: dict, comparisons: pd.DataFrame, chance: dict) -> list[dict]:
     """Per (scenario config, task): the configs ranked (mean of the ranking
     metric over the levels with its interval, the chance Pd where calibrated),
-    the winner, its margin over the runner-up and whether it is a tie."""
+    the winner, its margin over the runner-up and whether it is a tie. Where the
+    task has an outcome at equal chance Pd (:func:`equal_chance_metric`), the configs
+    are ranked on it and the ranking metric is a secondary column (``secondary``)."""
     out = []
     for scenario, task, g in _groups(trials, task_of):
-        values = g.assign(_v=metric_values(g[task.ranking_metric]))
-        ranking = []
-        for config, c in values.groupby("config", sort=False):
-            mean, low, high = bootstrap_mean_ci(c._v, c.snr_db)
-            ranking.append({"config": config, "mean": mean, "low": low, "high": high,
-                            "chance": chance.get((scenario, config), np.nan)})
+        fair = equal_chance_metric(task, g)
+        metric = fair or task.ranking_metric
+        means = _mean_by_config(g, metric)
+        secondary = _mean_by_config(g, task.ranking_metric) if fair else {}
+        ranking = [{"config": config, "mean": mean, "low": low, "high": high,
+                    "chance": chance.get((scenario, config), np.nan), "secondary": secondary.get(config)}
+                   for config, (mean, low, high) in means.items()]
         sign = -1.0 if task.ranking_higher_is_better else 1.0
         ranking.sort(key=lambda r: sign * r["mean"] if np.isfinite(r["mean"]) else np.inf)
         entry = {"scenario": scenario, "task": task, "ranking": ranking, "levels": int(g.snr_db.nunique()),
-                 "winner": ranking[0]["config"], "runner_up": None, "margin": None}
+                 "winner": ranking[0]["config"], "runner_up": None, "margin": None, "equal_chance": bool(fair)}
         if len(ranking) > 1:
             a, b = ranking[0]["config"], ranking[1]["config"]
             pick = comparisons[(comparisons.scenario == scenario) & (comparisons.task == task.name)
-                               & comparisons.snr_db.isna()]
+                               & (comparisons.metric == metric) & comparisons.snr_db.isna()]
             row = pick[((pick.config_a == a) & (pick.config_b == b)) | ((pick.config_a == b) & (pick.config_b == a))]
             r = row.iloc[0]
             flip = 1.0 if r.config_b == a else -1.0      # the rows hold b − a: as winner − runner-up
             low, high = sorted((flip * r.difference_low, flip * r.difference_high))
             entry.update(runner_up=b, margin={"difference": flip * r.difference, "low": low, "high": high,
-                                              "tie": not r.significant, "mcnemar_p": r.mcnemar_p})
+                                              "tie": not r.significant, "mcnemar_p": r.mcnemar_p,
+                                              "enough": enough_trials(r)})
         out.append(entry)
     return out

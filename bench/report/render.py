@@ -68,16 +68,22 @@ def glance_markdown(entries: list[dict]) -> str:
         return ""
     view = []
     for g in entries:
-        show_chance = g["task"].ranking_binary and any(np.isfinite(r["chance"]) for r in g["ranking"])
-        header = ["rank", "config", f"{g['task'].ranking_label} [95% CI]"] + (["chance Pd"] if show_chance else [])
+        task = g["task"]
+        show_chance = task.ranking_binary and any(np.isfinite(r["chance"]) for r in g["ranking"])
+        label = task.equal_chance_label if g["equal_chance"] else task.ranking_label
+        header = ["rank", "config", f"{label} [95% CI]"] + \
+            ([f"{task.ranking_label} (any alarm) [95% CI]"] if g["equal_chance"] else []) + \
+            ([f"chance Pd{' (any alarm)' if g['equal_chance'] else ''}"] if show_chance else [])
         rows = [[str(i), f"`{r['config']}`", _interval(r["mean"], r["low"], r["high"])] +
+                ([_interval(*r["secondary"])] if g["equal_chance"] else []) +
                 ([fmt(r["chance"])] if show_chance else []) for i, r in enumerate(g["ranking"], start=1)]
         margin = g["margin"]
         if margin is not None:
             margin = {"text": _interval(margin["difference"], margin["low"], margin["high"], signed=True),
-                      "tie": margin["tie"], "p": _p(margin["mcnemar_p"])}
-        view.append({**g, "margin": margin, "table": table(header, rows)})
-    return render("glance.md.j2", entries=view, any_binary=any(g["task"].ranking_binary for g in entries))
+                      "tie": margin["tie"], "p": _p(margin["mcnemar_p"]), "enough": margin["enough"]}
+        view.append({**g, "margin": margin, "label": label, "table": table(header, rows)})
+    return render("glance.md.j2", entries=view, any_binary=any(g["task"].ranking_binary for g in entries),
+                  any_equal_chance=any(g["equal_chance"] for g in entries))
 
 
 #: Above this many pairs, a scenario config's comparison table is folded (<details>).
@@ -91,15 +97,18 @@ def comparisons_markdown(comparisons: pd.DataFrame, task_of: dict) -> str:
         return ""
     tasks = {t.name: t for t in task_of.values()}
     blocks = []
-    for (scenario, name), g in overall.groupby(["scenario", "task"], sort=False):
+    for (scenario, name, metric), g in overall.groupby(["scenario", "task", "metric"], sort=False):
         task = tasks[name]
+        fair = metric == task.equal_chance_metric              # a 0/1 outcome at equal chance Pd
+        binary = task.ranking_binary or fair
         header = ["a", "b", f"mean a", f"mean b", "b − a [95% CI]"] + \
-            (["a only", "b only", "McNemar p"] if task.ranking_binary else []) + ["better"]
+            (["a only", "b only", "McNemar p"] if binary else []) + ["better"]
         rows = [[f"`{r.config_a}`", f"`{r.config_b}`", fmt(r.mean_a), fmt(r.mean_b),
                  _interval(r.difference, r.difference_low, r.difference_high, signed=True)] +
-                ([str(int(r.only_a)), str(int(r.only_b)), _p(r.mcnemar_p)] if task.ranking_binary else []) +
+                ([str(int(r.only_a)), str(int(r.only_b)), _p(r.mcnemar_p)] if binary else []) +
                 ["**tie**" if r.better == "tie" else f"`{r.better}`"] for r in g.itertuples()]
-        blocks.append({"caption": f"{sentence_case(task.noun)} on `{scenario}`: {task.ranking_label} "
+        label = task.equal_chance_label if fair else task.ranking_label
+        blocks.append({"caption": f"{sentence_case(task.noun)} on `{scenario}`: {label} "
                                   f"({'higher' if task.ranking_higher_is_better else 'lower'} is better).",
                        "table": table(header, rows), "pairs": len(rows), "folded": len(rows) > FOLD_PAIRS})
     return render("comparisons.md.j2", blocks=blocks,

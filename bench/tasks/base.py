@@ -25,7 +25,7 @@ Worker side (must stay light: no rerun, no matplotlib at import):
 :meth:`check_scene`, :meth:`check_output`, :meth:`null_values`,
 :meth:`null_peaks`, :meth:`null_cells`, :meth:`trial_metrics`,
 :meth:`recorded_scene`, :meth:`recorded_method`. Driver side: :meth:`summarise`,
-:meth:`apply_calibration`, :meth:`steps`, :meth:`log_trial`, :meth:`views`,
+:meth:`apply_calibration`, :meth:`calibrated_trial_columns`, :meth:`steps`, :meth:`log_trial`, :meth:`views`,
 :meth:`report_sections`, :meth:`trial_sections`.
 
 Per-trial metrics are 1-D columns (``trials.csv``) or 2-D *series* (n, K)
@@ -155,6 +155,13 @@ class Task:
     ranking_label: ClassVar[str] = ""
     #: whether ``ranking_metric`` is a 0/1 indicator (paired comparisons add McNemar's exact test)
     ranking_binary: ClassVar[bool] = False
+    #: a per-trial 0/1 column of trials.csv (filled by :meth:`calibrated_trial_columns`) at a
+    #: threshold that gives every config the same chance Pd: the fair basis to rank detectors
+    #: whose chance Pd differs. Where set, *Results at a glance* ranks on it (``ranking_metric``
+    #: a secondary column) and the paired comparisons cover it too; "": none
+    equal_chance_metric: ClassVar[str] = ""
+    #: how the report names its mean ("Pd at equal chance Pd")
+    equal_chance_label: ClassVar[str] = ""
     #: the summary.csv column (with ``_low``/``_high``) drawn against SNR in report.html's
     #: interactive figure and crossed at 0.5 for "SNR at Pd = 0.5"; "": none
     curve_column: ClassVar[str] = ""
@@ -224,6 +231,11 @@ class Task:
     def apply_calibration(self, summary: pd.DataFrame, trials: pd.DataFrame, cal) -> None:
         """Fill the summary columns that come from ``cal`` (one config on one
         scenario config; its rows exist), in place."""
+
+    def calibrated_trial_columns(self, trials: pd.DataFrame, cal) -> dict[str, pd.Series]:
+        """Per-trial columns of trials.csv that need ``cal`` (e.g. :attr:`equal_chance_metric`),
+        for the trials of its scenario config and method config (indexed like ``trials``)."""
+        return {}
 
     def steps(self, trials: pd.DataFrame, series: dict[str, np.ndarray]) -> pd.DataFrame | None:
         """Per-step table of one (scenario, config, SNR) cell from its trials and

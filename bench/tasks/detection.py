@@ -155,6 +155,8 @@ class DetectionTask(Task):
     ranking_higher_is_better = True
     ranking_label = "Pd"
     ranking_binary = True
+    equal_chance_metric = "detected_equal_chance"
+    equal_chance_label = "Pd at equal chance Pd"
     curve_column = "pd"
     has_roc = True
     recording_charts = (("pd", "Pd"), ("delay_mean", "mean delay (steps)"))
@@ -222,6 +224,15 @@ class DetectionTask(Task):
             rows = (summary.scenario == cal.scenario) & (summary.config == cal.method) & (summary.snr_db == snr)
             for col, value in equal_chance_pd(g["peak_statistic"], cal.equal_chance_threshold).items():
                 summary.loc[rows, col] = value
+
+    def calibrated_trial_columns(self, trials: pd.DataFrame, cal) -> dict[str, pd.Series]:
+        """``detected_equal_chance``: 1 where the trial's peak statistic in the detection
+        window reaches the window threshold of equal chance Pd (the per-trial outcome
+        whose mean is ``pd_equal_chance``), 0 otherwise; none without that threshold."""
+        if not math.isfinite(cal.equal_chance_threshold) or "peak_statistic" not in trials:
+            return {}
+        mine = trials[(trials.scenario == cal.scenario) & (trials.config == cal.method)]
+        return {self.equal_chance_metric: (mine.peak_statistic >= cal.equal_chance_threshold).astype(float)}
 
     def log_trial(self, stream, layout: TrialLayout, rec: TrialRecord) -> None:
         import rerun as rr
