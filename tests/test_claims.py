@@ -432,3 +432,15 @@ def test_no_note_or_reason_types_a_number_the_run_produces(name):
     typed = {where: found for where, text in _prose_fields(name)
              if (found := typed_run_numbers(text, plain, db, allowed))}
     assert not typed, f"numbers the run produces, typed (make them template fields): {typed}"
+
+
+def test_a_claim_the_tables_cannot_answer_stops_the_report_before_anything_is_written(small_run_copy, monkeypatch):
+    from bench import report
+    text = GOOD.replace('kind = "paired", a = "b", b = "a", snr_db = "all"',
+                        'kind = "summary", config = "innovation[window=1]", snr_db = 0, column = "no_such_column"')
+    monkeypatch.setattr(report, "_preset_name", lambda source: "small")
+    monkeypatch.setattr(report.claims, "preset_claims", lambda name: claims.parse(textwrap.dedent(text), "s.toml"))
+    before = {p.name: p.stat().st_mtime_ns for p in small_run_copy.iterdir()}
+    with pytest.raises(ConfigError, match=r"^s.toml: claim\[0\].quantity.column: no column 'no_such_column'"):
+        report.build_outputs(small_run_copy, recording=False)
+    assert {p.name: p.stat().st_mtime_ns for p in small_run_copy.iterdir()} == before

@@ -347,17 +347,18 @@ def preset_notes(source: str) -> str:
     return path.read_text(encoding="utf-8").strip() if path.is_file() else ""
 
 
-def _paper_vs_ours(source: str, tables: dict[str, pd.DataFrame], equal_chance: float, out_dir: Path) -> str:
-    """The preset's *Paper vs ours*: its claims (``NAME.claims.toml``) evaluated on the
-    tables as written to CSV, claims.csv written, the table and the rendered notes; a
-    preset with notes but no claims file keeps its notes as they are."""
+def _paper_vs_ours(source: str, tables: dict[str, pd.DataFrame], equal_chance: float) -> tuple:
+    """A preset's *Paper vs ours*: (its claims, ``NAME.claims.toml``, evaluated on the
+    tables as written to CSV; the section: the table, then the rendered notes), or
+    (None, the notes as they are) for a preset without a claims file. Called before
+    anything is written: a claim the tables cannot answer stops the report with one
+    line, nothing written."""
     file = claims.preset_claims(_preset_name(source)) if _preset_name(source) else None
     if file is None:
-        return preset_notes(source)
+        return None, preset_notes(source)
     evaluation = claims.evaluate(file, claims.Tables(**{k: claims.csv_frame(v) for k, v in tables.items()},
                                                      equal_chance=equal_chance))
-    _write_csv(evaluation.frame(), out_dir / "claims.csv")
-    return claims.claims_markdown(evaluation, preset_notes(source))
+    return evaluation, claims.claims_markdown(evaluation, preset_notes(source))
 
 
 def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None) -> Path:
@@ -423,22 +424,25 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}
     steps = steps_frame(trials, series, record, t_of)
     records = [TrialRecord.from_bytes(b) for b in store.records()]   # every read before the first write
+    calibration = pd.DataFrame([c.as_row() for c in cals])
+    comparisons = comparisons_frame(trials, task_of)
+    evaluation, paper_vs_ours = _paper_vs_ours(   # the paper-vs-ours table leads a preset's sections
+        record.get("source", ""), {"summary": summary, "comparisons": comparisons, "calibration": calibration},
+        sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD))
     _write_csv(trials, out_dir / "trials.csv")
     _write_csv(summary, out_dir / "summary.csv")
-    calibration = pd.DataFrame([c.as_row() for c in cals])
     _write_csv(calibration, out_dir / "calibration.csv")
     if not steps.empty:
         _write_csv(steps, out_dir / "steps.csv")
+    _write_csv(comparisons, out_dir / "comparisons.csv")
+    if evaluation is not None:
+        _write_csv(evaluation.frame(), out_dir / "claims.csv")
     fig_dir = out_dir / "figures"
     title = sweep["name"]
     contexts = _task_contexts(present, task_of, summary, trials, steps, series, cals, records, store, out_dir, sweep)
     done, total = len(units), int(store.meta("units_total") or len(units))
     chance = {(c.scenario, c.method): c.chance_pd for c in cals}
-    comparisons = comparisons_frame(trials, task_of)
-    _write_csv(comparisons, out_dir / "comparisons.csv")
-    chance_level = sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD)
-    tables = {"summary": summary, "comparisons": comparisons, "calibration": calibration}
-    parts = [_paper_vs_ours(record.get("source", ""), tables, chance_level, out_dir),   # leads a preset's sections
+    parts = [paper_vs_ours,
              _section_plan(record, store, present), _section_calibration(cals, summary, task_of)]
     parts += [s for task, ctx in contexts for s in task.report_sections(ctx)]
     parts.append(comparisons_markdown(comparisons, task_of))
