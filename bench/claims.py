@@ -167,7 +167,8 @@ def _claim(raw: Any, field: str) -> Claim:
     numbers = {k: _number(raw[k], f"{field}.{k}") for k in ("value", "tolerance", "min", "max") if k in raw}
     if "min" in numbers and "max" in numbers and numbers["min"] > numbers["max"]:
         raise ConfigError(f"{field}.max", f"expected >= min ({numbers['min']:g}), got {numbers['max']:g}")
-    texts = {k: _text(raw[k], f"{field}.{k}", empty=k not in ("claim", "where"))
+    needed = {"claim", "where", *_EXPECT_NEEDS[expect]}          # not-comparable and conversion need a reason
+    texts = {k: _text(raw[k], f"{field}.{k}", empty=k not in needed)
              for k in ("claim", "where", "original", "english", "unit", "reason", "scope") if k in raw}
     return Claim(id=raw["id"], expect=expect, **texts, **numbers,
                  quantity=_quantity(raw["quantity"], f"{field}.quantity") if "quantity" in raw else None,

@@ -58,6 +58,7 @@ def _parse(text: str) -> claims.ClaimsFile:
     (("id = \"a-beats-b\"", "id = \"A beats\""), "claim[0].id", "kebab-case"),
     (("expect = \"positive\"", "expect = \"value\""), "claim[0].value", "missing"),
     (("expect = \"positive\"", "expect = \"not-comparable\""), "claim[0].reason", "missing"),
+    (("expect = \"positive\"", "expect = \"conversion\"\nreason = \" \""), "claim[0].reason", "non-empty"),
     (("paper = \"A paper\"", "paper = \"\""), "paper", "non-empty"),
     (("paper = \"A paper\"", "paper = \"A paper\"\nauthors = 2"), "authors", "unknown key"),
 ])
@@ -83,6 +84,36 @@ def test_repeated_ids_names_and_bad_toml_are_refused():
 def test_every_packaged_claims_file_loads_beside_its_preset(name):
     assert name in presets()                 # a claims file belongs to a preset; it is not one itself
     assert claims.preset_claims(name).claims
+
+
+def _named(q: dict) -> tuple[set[str], set[str]]:
+    """(method configs, scenario configs) a quantity names, inline quantities included."""
+    configs, scenarios = set(), set()
+    for key, value in q.items():
+        if isinstance(value, dict):
+            c, s = _named(value)
+            configs, scenarios = configs | c, scenarios | s
+        elif key in ("config", "a", "b"):
+            configs.add(value)
+        elif key.startswith("scenario"):
+            scenarios.add(value)
+    return configs, scenarios
+
+
+@pytest.mark.parametrize("name", CLAIM_FILES)
+def test_every_config_a_claim_names_is_in_its_presets_sweep(name):
+    """A misspelt label would read as "did not run" (not comparable): only an optional
+    method unavailable here may be absent from a run."""
+    from bench.config import parse_sweep
+    plan = parse_sweep(tomllib.loads(presets()[name].read_text(encoding="utf-8")), f"preset {name}")
+    known = {m.label for m in plan.methods}
+    optional = [entry.get("label", entry["name"]) for entry, _ in plan.skipped_methods]
+    scenarios = {sc.label for sc in plan.scenarios}
+    for c in claims.preset_claims(name).claims:
+        for q in [c.quantity, *c.also.values()]:
+            configs, named_scenarios = _named(q) if q else (set(), set())
+            unknown = {x for x in configs - known if not any(x == o or x.startswith(f"{o}[") for o in optional)}
+            assert not unknown and named_scenarios <= scenarios, (c.id, unknown, named_scenarios - scenarios)
 
 
 # ------------------------------------------------------------------ (b) quantities and verdicts
