@@ -116,8 +116,8 @@ def test_glint_tracking_preset_at_reduced_size(bench_cli, tmp_path):
     bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 2, check=True)
     out = tmp_path / "out"
     summary = pd.read_csv(out / "summary.csv")
-    assert summary.config.nunique() == 6 and summary.scenario.nunique() == 7
-    assert {"viterbi-paper-1d[n=1]", "viterbi-paper-1d[n=3]"} <= set(summary.config)
+    assert summary.config.nunique() == 8 and summary.scenario.nunique() == 7
+    assert {f"viterbi-paper-1d[n={n}]" for n in (1, 3, 9, 27)} <= set(summary.config)
     assert summary.rmse_mean.notna().all() and (summary.rmse_low <= summary.rmse_high).all()
     steps = pd.read_csv(out / "steps.csv")
     assert {"rmse_position", "mean_est_x", "mean_true_x"} <= set(steps.columns)
