@@ -76,7 +76,8 @@ def _peak(axis: str):
 
 def _dimension(default: str):
     return param(default, "range or doppler alone; both: a cell must pass along range and along Doppler "
-                          "(the document's combination); either: along one of them", choices=DIMENSIONS)
+                          "(our reading of the chapter's 综合, 'combine'); either: along one of them",
+                 choices=DIMENSIONS)
 
 
 def _order(default: int):
