@@ -244,7 +244,7 @@ class ARAdaptive(Method):
     unknowns). The prediction error on such a trajectory from the estimate
     X̂_k|k is a'(X_k − X̂_k|k) + w_k, of variance a' P_k|k a + q_k, so the
     minimum-mean-square-error coefficients "in the Kalman-filter framework"
-    solve min a' P_k|k a subject to V'a = e_0:
+    (our reading; the patent prints no equation) solve min a' P_k|k a subject to V'a = e_0:
 
         a = P⁻¹ V (V' P⁻¹ V)⁻¹ e_0                         (:func:`ar_coefficients`)
 
@@ -266,8 +266,9 @@ class ARAdaptive(Method):
         Q_k = max(q̂_k, 0) e_0 e_0'                        (:func:`matched_noise`)
 
     the projection of q̂_k e_0 e_0' on the positive-semi-definite cone
-    (eigenvalue clipping: its one eigenvalue is q̂_k), which is the patent's
-    "保证了状态噪声方差的半正定性" (keeps the state-noise covariance PSD). Samples
+    (eigenvalue clipping: its one eigenvalue is q̂_k): our reading of the
+    patent's "保证了状态噪声方差的半正定性" (keeps the state-noise covariance
+    PSD); the estimator and the clipping are ours, the patent prints neither. Samples
     count from step M on (every lag of the prediction measured); Q₀ is used
     until the window holds W of them. Q_k is estimated at every step,
     whichever order filtered it ("在整个滤波的过程中").

@@ -76,7 +76,8 @@ def _peak(axis: str):
 
 def _dimension(default: str):
     return param(default, "range or doppler alone; both: a cell must pass along range and along Doppler "
-                          "(the document's combination); either: along one of them", choices=DIMENSIONS)
+                          "(our reading of the chapter's 综合, 'combine'); either: along one of them",
+                 choices=DIMENSIONS)
 
 
 def _order(default: int):
@@ -446,8 +447,10 @@ class RegionAdaptive(CfarMethod):
 
     @staticmethod
     def detector_map(scene, params) -> np.ndarray:
-        """(R, D) the detector name of every cell, from its region's name."""
-        names = np.array([getattr(params, name.replace("-", "_")) for name in scene.region_names])
+        """(R, D) the detector name of every cell, from its region's name (the two
+        sides of a split clutter edge take the clutter edge's detector)."""
+        names = np.array([getattr(params, "clutter_edge" if name.startswith("clutter-edge") else name.replace("-", "_"))
+                          for name in scene.region_names])
         return names[np.asarray(scene.region_labels, dtype=np.intp)]
 
     @staticmethod

@@ -70,24 +70,33 @@ def background_power(shape: tuple[int, int], *, bragg=None, interference=None, e
 @dataclass(frozen=True)
 class RegionLevels:
     """Where the clutter-edge region lies: range cells within ``edge_band_cells``
-    of ``edge_range_cell`` (None: no edge)."""
+    of ``edge_range_cell`` (None: no edge); ``edge_sides``: label its two
+    sides as two regions, "clutter-edge-quiet" below the step and
+    "clutter-edge-raised" from it, so that each gets its own targets."""
 
     edge_range_cell: int | None = None
     edge_band_cells: int = 6
+    edge_sides: bool = False
 
 
 def label_regions(parts: BackgroundParts, names: tuple[str, ...], edge: RegionLevels) -> np.ndarray:
     """(R, D) int8 region labels, indices into ``names`` (which holds
-    "homogeneous", "bragg", "interference", "clutter-edge"): Bragg or
+    "homogeneous", "bragg", "interference", "clutter-edge", and with
+    ``edge.edge_sides`` "clutter-edge-quiet", "clutter-edge-raised"): Bragg or
     interference where that component is at least :data:`REGION_LEVEL_DB`
     over the thermal noise (the stronger wins), else clutter-edge within the
-    band around the step, else homogeneous."""
+    band around the step (or its side of the step), else homogeneous."""
     R, D = parts.level.shape
     floor = 10.0 ** (REGION_LEVEL_DB / 10.0)
     labels = np.full((R, D), names.index("homogeneous"), np.int8)
     if edge.edge_range_cell is not None:
-        lo = max(edge.edge_range_cell - edge.edge_band_cells, 0)
-        labels[lo:edge.edge_range_cell + edge.edge_band_cells] = names.index("clutter-edge")
+        step = edge.edge_range_cell
+        lo, hi = max(step - edge.edge_band_cells, 0), step + edge.edge_band_cells
+        if edge.edge_sides:
+            labels[lo:step] = names.index("clutter-edge-quiet")
+            labels[step:hi] = names.index("clutter-edge-raised")
+        else:
+            labels[lo:hi] = names.index("clutter-edge")
     bragg = (parts.bragg >= floor) & (parts.bragg >= parts.interference)
     interference = (parts.interference >= floor) & ~bragg
     labels[bragg] = names.index("bragg")

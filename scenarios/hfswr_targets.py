@@ -50,9 +50,10 @@ class HFSWRTargets(Scenario):
     in Cartesian coordinates (its eq. 6.69) measured in range, azimuth and
     radial velocity with independent Gaussian noise, rho = 0 (eq. 6.71;
     :mod:`models.hfswr`), detections with probability Pd and clutter Poisson
-    with density lambda, uniform over the surveillance region (the
-    assumptions its JPDA is derived under). The chapter prints no numbers for
-    the scan period, the noise, Pd, lambda or the targets: every default
+    with density lambda, uniform over the surveillance region (ours: the
+    chapter's JPDA step 4 takes the clutter in the gate as non-uniform,
+    "非均匀分布"; the JPDA's clutter term here is the uniform density lambda).
+    The chapter prints no numbers for the scan period, the noise, Pd, lambda or the targets: every default
     below is ours, chosen like an HFSWR — a plot per minute, range sigma
     300 m (a 50 kHz sweep has 3 km range cells), azimuth sigma 1 deg (a
     beam-formed linear array), radial velocity sigma 0.2 m/s (a few-minute

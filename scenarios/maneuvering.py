@@ -45,9 +45,11 @@ class Maneuvering(Scenario):
 
     The test target of the AR-model patent ("基于最优AR模型的自适应机动目标跟踪方法",
     adaptive maneuvering-target tracking based on an optimal AR model), whose
-    simulation 1 tracks the range of a target with the acceleration of its
-    figure 3 and compares range and velocity estimates (figures 4-7). The
-    patent prints no numbers for the profile; every default below is ours.
+    simulation 1 tracks a target whose true acceleration is its figure 3 and
+    compares range and velocity estimates (figures 4-7). Our copy of the
+    patent ends at paragraph [0026] with the figures' captions only: no
+    figure's shape, no embodiment, no number. The profile and every default
+    below are ours.
 
     **State** per axis [p, v, a] (m, m/s, m/s^2), axes stacked:
     ``("x", "vx", "ax")`` in 1-D (``dims = 1``: the range), ``("x", "vx",
@@ -55,8 +57,7 @@ class Maneuvering(Scenario):
     [t_k, t_k+1), and the motion is integrated exactly for it:
     p_{k+1} = p_k + v_k T + a_k T^2/2, v_{k+1} = v_k + a_k T.
 
-    **Profile** ``"piecewise"`` (default, after the patent's figure 3, numbers
-    ours): quiet (a = 0) from 0 to ``maneuver_start_s`` = 40 s, a maneuver
+    **Profile** ``"piecewise"`` (default, ours): quiet (a = 0) from 0 to ``maneuver_start_s`` = 40 s, a maneuver
     of ``maneuver_accel_m_s2`` = 20 m/s^2 (about 2 g; in 2-D the second
     value, default -10 m/s^2, on y) for ``maneuver_duration_s`` = 20 s, i.e.
     from 40 s to 60 s, quiet again to the end (``steps`` = 100 at ``dt_s`` =

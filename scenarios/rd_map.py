@@ -60,7 +60,11 @@ class RdMap(Scenario):
     :data:`models.rd_map.REGION_LEVEL_DB` relative to the thermal noise (the
     stronger wins), else ``clutter-edge`` within ``edge_band_cells`` range
     cells of the step, else ``homogeneous`` (the raised level beyond the edge
-    included). ``region_names`` lists :data:`~bench.tasks.cells.REGION_NAMES`.
+    included). With ``edge_sides`` the band is two regions,
+    ``clutter-edge-quiet`` below the step (a range window reaching over it
+    averages the raised level: the noise estimate is pulled up) and
+    ``clutter-edge-raised`` from it (pulled down), each with its own targets,
+    Pd and Pfa. ``region_names`` lists :data:`~bench.tasks.cells.REGION_NAMES`.
 
     **Targets** (fixed cells, the same in every map; :func:`models.rd_map.place_targets`):
     ``targets_per_region`` isolated point targets in each region present, at
@@ -133,6 +137,8 @@ class RdMap(Scenario):
                                      why="one cell at least on each side (checked against range_cells)")
         edge_band_cells: int = param(6, "range cells each side of the step labelled clutter-edge", ge=1, le=2048,
                                      why="one cell to half the largest map")
+        edge_sides: bool = param(False, "the clutter-edge band as two regions, its quiet side and its raised "
+                                        "side, each with targets_per_region targets (Pd and Pfa per side)")
         targets_per_region: int = param(2, "isolated targets in each region present", ge=0, le=64,
                                         why="none to 64 a region (fewer when the region has no room, checked)")
         pairs: int = param(2, "close target pairs in the homogeneous region", ge=0, le=32,
@@ -237,7 +243,8 @@ def scene_layout(p) -> Layout:
                       p.interference_inr_db) if p.interference else None,
         edge=(p.edge_range_cell, p.edge_step_db) if p.clutter_edge else None)
     labels = label_regions(parts, REGION_NAMES, RegionLevels(edge_range_cell=p.edge_range_cell if p.clutter_edge
-                                                             else None, edge_band_cells=p.edge_band_cells))
+                                                             else None, edge_band_cells=p.edge_band_cells,
+                                                             edge_sides=p.edge_sides))
     cells, paired, shortfall = place_targets(labels, REGION_NAMES, per_region=p.targets_per_region, pairs=p.pairs,
                                              pair_offset=tuple(p.pair_offset_cells), spacing=p.target_spacing_cells,
                                              margin=p.margin_cells, seed=p.layout_seed)

@@ -17,7 +17,7 @@ from bench.calibration import calibrate, cell_order_statistics
 from bench.core import Batch, SceneError
 from bench.tasks.base import OutputError
 from bench.tasks.cells import CellDetectionOutput, CellDetectionTask, MapScene
-from bench.tasks.cells_metrics import (REGION_NAMES, cell_trial_metrics, guard_mask, ideal_pd, ideal_snr_at_pd,
+from bench.tasks.cells_metrics import (PAIRED_GROUP, REGION_NAMES, cell_trial_metrics, guard_mask, ideal_pd, ideal_snr_at_pd,
                                        summarise_cells)
 
 HERE = Path(__file__).resolve().parent
@@ -90,7 +90,7 @@ def test_metrics_on_a_hand_built_output():
     assert m["clear_cells_homogeneous"][0] + m["clear_cells_bragg"][0] == m["clear_cells"][0]
     assert m["targets_interference"].tolist() == [0, 0] and m["clear_cells_interference"].tolist() == [0, 0]
     np.testing.assert_allclose(m["target_statistic"][0], [5.0, 2.9, 5.0, 0.0])
-    assert m["target_group"][0].tolist() == [0, 1, 4, 4]
+    assert m["target_group"][0].tolist() == [0, 1, PAIRED_GROUP, PAIRED_GROUP]
 
     trials = pd.DataFrame({k: v for k, v in m.items() if v.ndim == 1})
     trials = trials.assign(scenario="s", method="m", config="m", params="", snr_db=10.0, threshold=3.0,

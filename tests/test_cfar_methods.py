@@ -12,6 +12,7 @@ from bench import registry
 from bench.errors import ConfigError
 from bench.params import build_params
 from bench.rng import TrialRNG
+from bench.tasks.cells_metrics import REGION_NAMES
 from models import cfar
 
 CFAR_METHODS = ("ca-cfar", "os-cfar", "regression-cfar", "region-adaptive")
@@ -117,6 +118,18 @@ def test_region_adaptive_uses_each_regions_detector():
         np.testing.assert_array_equal(out.statistic[:, where], single.statistic[:, where])
     assert set(np.unique(choice)) == {"ca", "os", "regression"}
     assert 0.0 <= out.statistic.min() and out.statistic.max() <= cfar.MAX_SIGNIFICANCE
+
+
+def test_region_adaptive_gives_both_sides_of_a_split_edge_the_edge_detector():
+    """With the clutter edge split into its quiet and raised sides, both take the
+    ``clutter_edge`` choice, and the other regions keep theirs."""
+    adaptive = registry.get_method("region-adaptive")
+    params = build_params(adaptive.Params, {"clutter_edge": "ca"})
+    whole, split = (adaptive.detector_map(_batch(10.0, edge_sides=sides).scene, params) for sides in (False, True))
+    np.testing.assert_array_equal(split, whole)
+    labels = _batch(10.0, edge_sides=True).scene.region_labels
+    sides = np.isin(labels, [REGION_NAMES.index("clutter-edge-quiet"), REGION_NAMES.index("clutter-edge-raised")])
+    assert sides.any() and np.all(split[sides] == "ca")
 
 
 def test_the_log_fit_keeps_the_noise_level_beside_bragg_lines():

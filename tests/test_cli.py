@@ -29,7 +29,8 @@ SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials
                    "rmse_all_mean", "rmse_all_low", "rmse_all_high", "snr_offset_unit_innovation_db",
                    # cell detection (bench/tasks/cells_metrics.py), appended after the earlier tasks'
                    "false_alarms_per_map", "false_alarms_per_map_low", "false_alarms_per_map_high",
-                   *(f"{kind}_{region}{end}" for region in ("homogeneous", "bragg", "interference", "clutter_edge")
+                   *(f"{kind}_{region}{end}" for region in ("homogeneous", "bragg", "interference", "clutter_edge",
+                                                            "clutter_edge_quiet", "clutter_edge_raised")
                      for kind in ("pd", "pfa") for end in ("", "_low", "_high")),
                    "pd_paired", "pd_paired_low", "pd_paired_high", "targets_per_map", "swerling",
                    # multi-target tracking (bench/tasks/multitarget_metrics.py)

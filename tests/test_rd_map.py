@@ -52,7 +52,8 @@ def test_noise_is_exponential_with_the_scene_power_in_every_region():
     each within 5 standard errors (sd of Exp(1) is 1, of its square sqrt(20))."""
     b = make(None, n=200, seed=7)
     u = (b.z[:, 0] / b.scene.noise_power).astype(np.float64)
-    for k, name in enumerate(REGION_NAMES):
+    for k in np.unique(b.scene.region_labels):            # the regions present
+        name = REGION_NAMES[k]
         x = u[:, b.scene.region_labels == k].ravel()
         assert abs(x.mean() - 1.0) < 5 / np.sqrt(x.size), name
         assert abs((x ** 2).mean() - 2.0) < 5 * np.sqrt(20.0) / np.sqrt(x.size), name
@@ -91,6 +92,25 @@ def test_targets_are_where_the_truth_says_and_nothing_else_changes():
     assert ratio.min() > (100 - np.sqrt(30)) ** 2
     np.testing.assert_allclose(sig.scene.realised_snr_db, 40.0)
     assert null.scene.target_cells.shape == (5, 0, 2) and np.all(np.isnan(null.scene.realised_snr_db))
+
+
+def test_edge_sides_split_the_edge_band_at_the_step_with_targets_on_each_side():
+    """With ``edge_sides`` the band's rows below the step are the quiet side, from it the
+    raised side (outside the Bragg lines and the band); each side gets its own isolated
+    targets, and nothing else in the layout's labels changes."""
+    step, band = SMALL["edge_range_cell"], SMALL["edge_band_cells"]
+    whole = make(None, n=1).scene.region_labels
+    sides = make(10.0, n=1, edge_sides=True).scene
+    quiet, raised = REGION_NAMES.index("clutter-edge-quiet"), REGION_NAMES.index("clutter-edge-raised")
+    edge = whole == REGION_NAMES.index("clutter-edge")
+    rows = np.arange(whole.shape[0])[:, None]
+    np.testing.assert_array_equal(sides.region_labels == quiet, edge & (rows < step))
+    np.testing.assert_array_equal(sides.region_labels == raised, edge & (rows >= step) & (rows < step + band))
+    np.testing.assert_array_equal(sides.region_labels[~edge], whole[~edge])
+    labels = sides.region_labels[sides.target_cells[0, :, 0], sides.target_cells[0, :, 1]]
+    isolated = labels[~sides.target_paired[0]]
+    assert (isolated == quiet).sum() == (isolated == raised).sum() == SMALL["targets_per_region"]
+    assert not np.any(labels == REGION_NAMES.index("clutter-edge"))
 
 
 def test_swerling1_target_cells_are_exponential_with_mean_signal_plus_noise():

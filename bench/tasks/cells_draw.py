@@ -23,8 +23,8 @@ from bench.tasks.tbd import cell_pixels
 _MAP_COLORMAP = "viridis"
 _STATISTIC_COLORMAP = "inferno"
 #: one colour per region label, in REGION_NAMES order (homogeneous grey, Bragg blue,
-#: interference orange, clutter edge green)
-_REGION_COLORS = [(90, 90, 90), (60, 120, 230), (240, 150, 40), (60, 190, 90), (200, 60, 200)]
+#: interference orange, clutter edge green; its quiet side light, its raised side dark green)
+_REGION_COLORS = [(90, 90, 90), (60, 120, 230), (240, 150, 40), (60, 190, 90), (150, 230, 140), (20, 120, 50)]
 
 
 def _db(power: np.ndarray) -> np.ndarray:

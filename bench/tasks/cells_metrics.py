@@ -36,8 +36,9 @@ from scipy import optimize, stats
 
 from bench.metrics import bootstrap_mean_interval, by_cell, clustered_rate_interval, mean_realised_snr
 
-#: the clutter regions the task knows, in label order of the built-in scenario
-REGION_NAMES = ("homogeneous", "bragg", "interference", "clutter-edge")
+#: the clutter regions the task knows, in label order of the built-in scenario; the clutter
+#: edge's band is one region, or its two sides (below the step / from it) when a scenario splits it
+REGION_NAMES = ("homogeneous", "bragg", "interference", "clutter-edge", "clutter-edge-quiet", "clutter-edge-raised")
 #: the target group of a closely spaced (paired) target, after the regions' indices
 PAIRED_GROUP = len(REGION_NAMES)
 
