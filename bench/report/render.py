@@ -14,7 +14,7 @@ import functools
 import numpy as np
 import pandas as pd
 
-from bench.markdown import fmt, table
+from bench.markdown import code, fmt, table, text
 
 
 @functools.lru_cache(maxsize=1)
@@ -25,10 +25,14 @@ def sentence_case(text: str) -> str:
 
 def environment():
     import jinja2
-    env = jinja2.Environment(loader=jinja2.PackageLoader("bench", "templates"), autoescape=False,
+    # HTML templates escape every value; Markdown ones take Markdown (text not ours escaped
+    # by the code/text filters or before, bench.markdown)
+    env = jinja2.Environment(loader=jinja2.PackageLoader("bench", "templates"),
+                             autoescape=jinja2.select_autoescape(enabled_extensions=("html.j2",),
+                                                                 default_for_string=True),
                              keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True,
                              undefined=jinja2.StrictUndefined)
-    env.filters["fmt"] = fmt
+    env.filters.update(fmt=fmt, code=code, text=text)
     return env
 
 
@@ -62,7 +66,7 @@ def glance_markdown(entries: list[dict]) -> str:
     for g in entries:
         show_chance = g["task"].ranking_binary and any(np.isfinite(r["chance"]) for r in g["ranking"])
         header = ["rank", "config", f"{g['task'].ranking_label} [95% CI]"] + (["chance Pd"] if show_chance else [])
-        rows = [[str(i), f"`{r['config']}`", _interval(r["mean"], r["low"], r["high"])] +
+        rows = [[str(i), code(r['config']), _interval(r["mean"], r["low"], r["high"])] +
                 ([fmt(r["chance"])] if show_chance else []) for i, r in enumerate(g["ranking"], start=1)]
         margin = g["margin"]
         if margin is not None:
@@ -87,11 +91,11 @@ def comparisons_markdown(comparisons: pd.DataFrame, task_of: dict) -> str:
         task = tasks[name]
         header = ["a", "b", f"mean a", f"mean b", "b − a [95% CI]"] + \
             (["a only", "b only", "McNemar p"] if task.ranking_binary else []) + ["better"]
-        rows = [[f"`{r.config_a}`", f"`{r.config_b}`", fmt(r.mean_a), fmt(r.mean_b),
+        rows = [[code(r.config_a), code(r.config_b), fmt(r.mean_a), fmt(r.mean_b),
                  _interval(r.difference, r.difference_low, r.difference_high, signed=True)] +
                 ([str(int(r.only_a)), str(int(r.only_b)), _p(r.mcnemar_p)] if task.ranking_binary else []) +
-                ["**tie**" if r.better == "tie" else f"`{r.better}`"] for r in g.itertuples()]
-        blocks.append({"caption": f"{sentence_case(task.noun)} on `{scenario}`: {task.ranking_label} "
+                ["**tie**" if r.better == "tie" else code(r.better)] for r in g.itertuples()]
+        blocks.append({"caption": f"{sentence_case(task.noun)} on {code(scenario)}: {task.ranking_label} "
                                   f"({'higher' if task.ranking_higher_is_better else 'lower'} is better).",
                        "table": table(header, rows), "pairs": len(rows), "folded": len(rows) > FOLD_PAIRS})
     return render("comparisons.md.j2", blocks=blocks,
