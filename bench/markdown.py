@@ -78,17 +78,23 @@ def crossing_difference(a, b) -> str:
 
 #: Markdown syntax in text: backslash-escaped (characters both CommonMark and the
 #: ``markdown`` package unescape) or, for HTML's own, written as entities.
-_MARKDOWN_SYNTAX = {**{ord(c): "\\" + c for c in "\\`*_[]"}, ord("<"): "&lt;", ord(">"): "&gt;", ord("&"): "&amp;"}
-_LINE_START = re.compile(r"^([ \t]*)([#+-])", re.MULTILINE)      # a heading, a list item
+_MARKDOWN_SYNTAX = {**{ord(c): "\\" + c for c in "\\`*[]"}, ord("<"): "&lt;", ord(">"): "&gt;", ord("&"): "&amp;"}
+#: An underscore that can open or close emphasis: one not between two letters or digits
+#: (``snake_case`` stays as written; CommonMark and the ``markdown`` package agree).
+_UNDERSCORE = re.compile(r"(?<![^\W_])_|_(?![^\W_])")
+#: What a line may start with that makes it a block (an indented code block, a heading,
+#: a list item, a rule): its indentation dropped, the marker escaped.
+_INDENT = re.compile(r"^[ \t]+", re.MULTILINE)
+_MARKER = re.compile(r"^(\d*)([#+-]|(?<=\d)[.)](?=[ \t]|$))", re.MULTILINE)
 
 
 def text(value, inline: bool = True) -> str:
     """``value`` (text that is not ours) as Markdown that renders as written: control
     characters as escapes, Markdown and HTML syntax escaped (no tag, link, emphasis or
     code span can start), on one line unless ``inline`` is false (then line breaks are
-    kept, and no line starts a heading or a list)."""
-    raw = escape_controls(str(value), inline).translate(_MARKDOWN_SYNTAX)
-    return raw if inline else _LINE_START.sub(r"\1\\\2", raw)
+    kept). No line starts a block: indentation is dropped, a heading or list marker escaped."""
+    raw = _UNDERSCORE.sub(r"\\_", escape_controls(str(value), inline).translate(_MARKDOWN_SYNTAX))
+    return _MARKER.sub(r"\1\\\2", _INDENT.sub("", raw))
 
 
 def code(value) -> str:

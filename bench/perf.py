@@ -362,7 +362,7 @@ def _scene_section(scenes: pd.DataFrame) -> list[str]:
         cls = registry.scenarios().get(r["scenario"])
         targets = cls.perf_targets if cls is not None else {}
         goal = targets.get(r["size"], targets.get("*", {}))
-        rows.append([code(r['scenario']), r["size"], r["trials"], f"{r['seconds_per_trial'] * 1e3:.3g}",
+        rows.append([code(r["scenario"]), r["size"], r["trials"], f"{r['seconds_per_trial'] * 1e3:.3g}",
                      f"{r['peak_rss_mb']:.0f}", _target_text(goal, r)])
     return ["## Scene generation", "`Scenario.generate` alone (the scene every unit of a sweep draws before "
             "its methods run), at each size of the table above: one core, fresh process, best of 3 runs after "
@@ -382,7 +382,7 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
     rows, rates = [], rate_columns(perf)
     for row, info in zip(perf.to_dict("records"), extra):
         targets = info["targets"].get(row["size"], info["targets"].get("*", {}))
-        rows.append([code(row['method']), row["size"], row["trials"], f"{row['seconds_per_trial'] * 1e3:.3g}",
+        rows.append([code(row["method"]), row["size"], row["trials"], f"{row['seconds_per_trial'] * 1e3:.3g}",
                      *("–" if not np.isfinite(row[rate]) else f"{row[rate]:.3g}" for rate in rates),
                      row["reference"] or "–",
                      "–" if not np.isfinite(row["reference_seconds_per_trial"])

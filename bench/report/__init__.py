@@ -200,18 +200,18 @@ def _section_plan(record: dict, store: Store, tasks: list) -> str:
     cal = sweep["calibration"]
     units = ", ".join(f"{t.pfa_unit} for {t.short_noun}" for t in tasks if t.calibrated)
     calibrated = {t.name for t in tasks if t.calibrated}
-    null_for = [code(sc['label']) for sc in record["scenarios"] if calibrated & set(sc.get("tasks", []))]
+    null_for = [code(sc["label"]) for sc in record["scenarios"] if calibrated & set(sc.get("tasks", []))]
     rows = [["seed", sweep["seed"]], ["trials per unit (chunk)", sweep["chunk"]]]
     if null_for:
         rows.append(["calibration", f"{cal['mode']}, requested Pfa {cal['pfa']:g}{f' ({units})' if units else ''}, "
                                     f"{cal['h0_trials']} null trials per scenario config of a calibrated task "
                                     f"({', '.join(null_for)})"])
     resolved = _resolved_scenario_params(sweep)
-    scenarios = [[code(sc['label']), sc["name"], ", ".join(sc.get("tasks", [])),
+    scenarios = [[code(sc["label"]), text(sc["name"]), text(", ".join(sc.get("tasks", []))),
                   _params_text(non_default(registry.get_scenario(sc["name"]), resolved.get(sc["label"], {}))),
                   _snr_text(sc.get("snr_db", sweep.get("snr_db", []))), sc.get("trials", sweep.get("trials"))]
                  for sc in record["scenarios"]]
-    methods = [[code(m['label']), m["name"], m["task"],
+    methods = [[code(m["label"]), text(m["name"]), text(m["task"]),
                 _params_text(non_default(registry.get_method(m["name"]), sweep["methods"][i]["params"]))]
                for i, m in enumerate(record["methods"])]
     return _section(
@@ -230,7 +230,7 @@ def _skipped_pairs_text(skipped: list[dict]) -> list[str]:
     return ["Pairs skipped because the method cannot run on that scenario config (its own reason); "
             "each of these method configs runs on the sweep's other scenario configs:",
             _table(["scenario config", "method config", "reason"],
-                   [[code(p['scenario']), code(p['method']), text(p["reason"])] for p in skipped])]
+                   [[code(p["scenario"]), code(p["method"]), text(p["reason"])] for p in skipped])]
 
 
 def _unavailable_text(skipped: list) -> list[str]:

@@ -66,7 +66,7 @@ def glance_markdown(entries: list[dict]) -> str:
     for g in entries:
         show_chance = g["task"].ranking_binary and any(np.isfinite(r["chance"]) for r in g["ranking"])
         header = ["rank", "config", f"{g['task'].ranking_label} [95% CI]"] + (["chance Pd"] if show_chance else [])
-        rows = [[str(i), code(r['config']), _interval(r["mean"], r["low"], r["high"])] +
+        rows = [[str(i), code(r["config"]), _interval(r["mean"], r["low"], r["high"])] +
                 ([fmt(r["chance"])] if show_chance else []) for i, r in enumerate(g["ranking"], start=1)]
         margin = g["margin"]
         if margin is not None:

@@ -144,7 +144,7 @@ def _maneuvers(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title:
             name = f"tracking_rmse_{slug(comp)}_{slug(scenario)}.png"
             figures.rmse_per_step(curves, fig_dir / name, f"{title}: {scenario} at {fmt(snr)} dB, RMSE of {comp}",
                                   xlabel="time (s)", ylabel=f"RMSE of {comp}")
-            parts.append(f"![RMSE of {comp} over time on {text(scenario)}](figures/{name})")
+            parts.append(f"![RMSE of {text(comp)} over time on {text(scenario)}](figures/{name})")
         break                                   # the first maneuvering scenario config: the papers' figures
     return parts
 
