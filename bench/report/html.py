@@ -119,10 +119,10 @@ def _converter():
         def run(self, root):
             for el in root.iter("a"):
                 if not safe_url(el.get("href", "")):
-                    del el.attrib["href"]
+                    el.attrib.pop("href")
             for el in root.iter("img"):
                 if not _FIGURE.fullmatch(el.get("src", "")):
-                    del el.attrib["src"]
+                    el.attrib.pop("src", None)
             for cell in [*root.iter("td"), *root.iter("th")]:      # "\|" in a cell's code span is "|" (GFM)
                 for el in cell.iter("code"):
                     el.text = AtomicString((el.text or "").replace("\\|", "|"))
