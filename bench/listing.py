@@ -13,6 +13,13 @@ installed distribution (so installing a missing dependency, e.g. the ``[peers]``
 refreshes a listing that showed its plugin as unavailable). Any edit, install or upgrade
 changes the fingerprint, so a stale listing is never shown. An unwritable cache folder
 only costs the speed.
+
+The cache folder may sit on a shared file system (``XDG_CACHE_HOME``), so it is used only
+when it is a real folder (not a link) owned by the user and writable by no one else
+(created 0700); a listing is written to an unpredictable name created exclusively
+(``mkstemp``) then renamed into place, and read without following a link; what is read
+is printed with its control characters escaped (:mod:`bench.escapes`), so a forged
+entry can send no terminal escape sequence.
 """
 
 from __future__ import annotations
@@ -22,9 +29,13 @@ import importlib.resources
 import importlib.util
 import json
 import os
+import stat
 import sys
+import tempfile
 import tomllib
 from pathlib import Path
+
+from bench.escapes import escape_controls
 
 __all__ = ["plugin_listing", "preset_descriptions", "presets"]
 
@@ -109,6 +120,50 @@ def _cache_dir() -> Path:
     return Path(base) / "radar-maneuver-bench"
 
 
+def _private_dir(path: Path) -> bool:
+    """Whether ``path`` is a folder only this user can write (made 0700 if absent): a real
+    folder, not a link, owned by the user, writable by no group or other."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.mkdir(path, 0o700)
+        except FileExistsError:
+            pass
+        st = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISDIR(st.st_mode) and st.st_uid == os.getuid() and not st.st_mode & 0o022
+
+
+def _read_cached(path: Path) -> str | None:
+    """The cached listing at ``path``, a regular file of this user read without following a link; None if none."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_NONBLOCK", 0))
+    except OSError:
+        return None
+    with os.fdopen(fd, "rb") as f:
+        st = os.fstat(f.fileno())
+        if not stat.S_ISREG(st.st_mode) or st.st_uid != os.getuid():
+            return None
+        try:
+            text = json.loads(f.read(1 << 22).decode("utf-8"))["text"]
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
+    return text if isinstance(text, str) else None
+
+
+def _write_cached(path: Path, text: str) -> None:
+    """``text`` to ``path``: a new file of an unpredictable name, created exclusively, renamed into place."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(json.dumps({"text": text}))
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+
+
 def _render(verbose: bool) -> str:
     """The plugin listing from the registry (imports every plugin)."""
     from bench import registry
@@ -138,23 +193,18 @@ def plugin_listing(verbose: bool = False) -> str:
     tests do) lists its registry as it is, without the cache."""
     from bench import registry
 
-    path = None if registry.discovered() else \
-        _cache_dir() / f"list-{fingerprint()}{'-v' if verbose else ''}.json"
-    if path is not None:
-        try:
-            return json.loads(path.read_text(encoding="utf-8"))["text"]
-        except (OSError, ValueError, KeyError, TypeError):
-            pass
-    text = _render(verbose)
-    if path is not None:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-            tmp.write_text(json.dumps({"text": text}), encoding="utf-8")
-            os.replace(tmp, path)
-            for old in path.parent.glob("list-*.json"):      # listings of earlier sources
-                if not old.name.startswith(path.name.split("-v")[0].removesuffix(".json")):
-                    old.unlink(missing_ok=True)
-        except OSError:
-            pass
-    return text
+    folder = None if registry.discovered() else _cache_dir()
+    path = folder / f"list-{fingerprint()}{'-v' if verbose else ''}.json" \
+        if folder is not None and _private_dir(folder) else None
+    text = _read_cached(path) if path is not None else None
+    if text is None:
+        text = _render(verbose)
+        if path is not None:
+            try:
+                _write_cached(path, text)
+                for old in path.parent.glob("list-*.json"):      # listings of earlier sources
+                    if not old.name.startswith(path.name.split("-v")[0].removesuffix(".json")):
+                        old.unlink(missing_ok=True)
+            except OSError:
+                pass
+    return escape_controls(text)

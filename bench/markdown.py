@@ -1,12 +1,21 @@
-"""Small Markdown helpers shared by the report sections."""
+"""Small Markdown helpers shared by the report sections.
+
+Text that is not ours (a sweep's description, file name or ``--out`` path, a plugin's
+error text or reason, parameter values) reaches Markdown only through :func:`code`
+(a code span no backtick can break) or :func:`text` (escaped to render as written);
+:func:`table` escapes the cell separator in every cell. Nothing in them is live
+markup: no HTML tag, no link, no emphasis (docs/architecture.md, 'Report').
+"""
 
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pandas as pd
 
+from bench.escapes import escape_controls
 from bench.metrics import Crossing, fit_crossing, snr_at_pd
 
 
@@ -67,23 +76,60 @@ def crossing_difference(a, b) -> str:
     return f"{low:+.1f}" if low == high else f"between {low:+.1f} and {high:+.1f}"
 
 
+#: Markdown syntax in text: backslash-escaped (characters both CommonMark and the
+#: ``markdown`` package unescape) or, for HTML's own, written as entities.
+_MARKDOWN_SYNTAX = {**{ord(c): "\\" + c for c in "\\`*[]"}, ord("<"): "&lt;", ord(">"): "&gt;", ord("&"): "&amp;"}
+#: An underscore that can open or close emphasis: one not between two letters or digits
+#: (``snake_case`` stays as written; CommonMark and the ``markdown`` package agree).
+_UNDERSCORE = re.compile(r"(?<![^\W_])_|_(?![^\W_])")
+#: What a line may start with that makes it a block (an indented code block, a heading,
+#: a list item, a rule): its indentation dropped, the marker escaped.
+_INDENT = re.compile(r"^[ \t]+", re.MULTILINE)
+_MARKER = re.compile(r"^(\d*)([#+-]|(?<=\d)[.)](?=[ \t]|$))", re.MULTILINE)
+
+
+def text(value, inline: bool = True) -> str:
+    """``value`` (text that is not ours) as Markdown that renders as written: control
+    characters as escapes, Markdown and HTML syntax escaped (no tag, link, emphasis or
+    code span can start), on one line unless ``inline`` is false (then line breaks are
+    kept). No line starts a block: indentation is dropped, a heading or list marker escaped."""
+    raw = _UNDERSCORE.sub(r"\\_", escape_controls(str(value), inline).translate(_MARKDOWN_SYNTAX))
+    return _MARKER.sub(r"\1\\\2", _INDENT.sub("", raw))
+
+
+def code(value) -> str:
+    """``value`` as a Markdown code span that no backtick in it can end: fenced by one
+    backtick more than its longest run of backticks, padded by a space where it starts
+    or ends with one (CommonMark, 'Code spans'); control characters as escapes, on one
+    line. "" for an empty value."""
+    raw = escape_controls(str(value), inline=True)
+    if not raw:
+        return ""
+    fence = "`" * (max((len(run) for run in re.findall("`+", raw)), default=0) + 1)
+    pad = " " if raw[0] in "` " or raw[-1] in "` " else ""
+    return f"{fence}{pad}{raw}{pad}{fence}"
+
+
 def table(header: list[str], rows: list[list]) -> str:
-    """A GitHub-flavoured Markdown table (``tabulate``), cells as given: no
-    number parsing, so "1e-05" or "0.010" stay as the caller formatted them."""
+    """A GitHub-flavoured Markdown table (``tabulate``), cells as given (Markdown: text
+    not ours through :func:`text` or :func:`code`) with every ``|`` escaped, code spans'
+    too (GFM splits the row before it reads a span); no number parsing, so "1e-05" or
+    "0.010" stay as the caller formatted them."""
     from tabulate import tabulate
-    return tabulate([[str(c) for c in r] for r in rows], headers=[str(h) for h in header], tablefmt="github",
+    esc = (lambda c: str(c).replace("|", "\\|"))
+    return tabulate([[esc(c) for c in r] for r in rows], headers=[esc(h) for h in header], tablefmt="github",
                     disable_numparse=True)
 
 
 def cell(value) -> str:
-    """Any value as a table cell: numbers by :func:`fmt`, text with its pipes escaped."""
+    """Any value as a table cell: numbers by :func:`fmt`, text by :func:`text`."""
     if isinstance(value, (bool, np.bool_)):
         return str(bool(value))
     if isinstance(value, (float, np.floating)):
         return fmt(float(value))
     if isinstance(value, (int, np.integer)):
         return fmt(int(value))
-    return "–" if value is None else str(value).replace("|", "\\|")
+    return "–" if value is None else text(value)
 
 
 def frame_table(df: pd.DataFrame) -> str:

@@ -51,7 +51,7 @@ import pandas as pd
 
 from bench import registry
 from bench.errors import ConfigError
-from bench.markdown import fmt, table
+from bench.markdown import code, fmt, table
 from bench.params import build_params
 from bench.rng import EVALUATION, TrialRNG, stable_key
 
@@ -260,7 +260,7 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
     scaling, sweep = None, ""
     if executors:
         plan = scaling_plan()
-        scaling, sweep = executor_scaling(workers, progress, plan), f"Preset `{plan.name}`: {plan.description}"
+        scaling, sweep = executor_scaling(workers, progress, plan), f"Preset {code(plan.name)}: {plan.description}"
     return write_report(Path(out_dir), perf_table(rows), extra, scaling, sweep, scenes)
 
 
@@ -362,7 +362,7 @@ def _scene_section(scenes: pd.DataFrame) -> list[str]:
         cls = registry.scenarios().get(r["scenario"])
         targets = cls.perf_targets if cls is not None else {}
         goal = targets.get(r["size"], targets.get("*", {}))
-        rows.append([f"`{r['scenario']}`", r["size"], r["trials"], f"{r['seconds_per_trial'] * 1e3:.3g}",
+        rows.append([code(r["scenario"]), r["size"], r["trials"], f"{r['seconds_per_trial'] * 1e3:.3g}",
                      f"{r['peak_rss_mb']:.0f}", _target_text(goal, r)])
     return ["## Scene generation", "`Scenario.generate` alone (the scene every unit of a sweep draws before "
             "its methods run), at each size of the table above: one core, fresh process, best of 3 runs after "
@@ -382,7 +382,7 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
     rows, rates = [], rate_columns(perf)
     for row, info in zip(perf.to_dict("records"), extra):
         targets = info["targets"].get(row["size"], info["targets"].get("*", {}))
-        rows.append([f"`{row['method']}`", row["size"], row["trials"], f"{row['seconds_per_trial'] * 1e3:.3g}",
+        rows.append([code(row["method"]), row["size"], row["trials"], f"{row['seconds_per_trial'] * 1e3:.3g}",
                      *("–" if not np.isfinite(row[rate]) else f"{row[rate]:.3g}" for rate in rates),
                      row["reference"] or "–",
                      "–" if not np.isfinite(row["reference_seconds_per_trial"])
@@ -397,7 +397,7 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
              table(["method", "size", "trials", "ms per trial",
                     *(f"{rate.removesuffix('_per_second')}/s per core" for rate in rates), "reference",
                     "reference ms per trial", "speed-up", "peak RSS (MB)", "targets"], rows),
-             "Sizes: " + "; ".join(sorted({f"`{i['scenario']}` {r['size']} = {i['params'] or 'defaults'}"
+             "Sizes: " + "; ".join(sorted({f"{code(i['scenario'])} {r['size']} = {i['params'] or 'defaults'}"
                                           for r, i in zip(perf.to_dict("records"), extra)}))]
     if scenes is not None and len(scenes):
         parts += _scene_section(scenes)

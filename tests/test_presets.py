@@ -164,7 +164,7 @@ def test_multi_target_preset_smoke(bench_cli, tmp_path):
     assert set(summary.method) == {"jpda-ukf", "gnn-ekf"} | ({"stonesoup-jpda"} if peers else set())
     assert summary.scenario.nunique() == 5 and summary.gospa_mean.notna().all()
     assert "## Multi-target tracking: paired comparison" in report
-    assert ("`stonesoup-jpda` (stonesoup-jpda): needs the [peers] extra" in report) != peers
+    assert ("`stonesoup-jpda` (stonesoup-jpda): needs the \\[peers\\] extra" in report) != peers   # Markdown-escaped
 
 
 @pytest.mark.slow

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bench.markdown import frame_table
+from bench.markdown import code, frame_table
 from bench.recording.layout import PALETTE
 from bench.recording.paths import entity_name, method_entity_names, rerun_path
 
@@ -153,7 +153,7 @@ def summary_markdown(summary: pd.DataFrame, tasks: Mapping[str, Any] | None = No
 
     parts = ["# Summary"]
     charts = summary_charts(summary, tasks) or []
-    keys = dict.fromkeys(", ".join(f"{COLOUR_NAMES[PALETTE.index(color)]}: `{rows['method'].iloc[0]}`"
+    keys = dict.fromkeys(", ".join(f"{COLOUR_NAMES[PALETTE.index(color)]}: {code(rows['method'].iloc[0])}"
                                    for _, color, rows in chart.bars) for chart in charts)
     if keys:
         parts += ["Colours of the charts' bars:", "\n".join(f"- {key}" for key in keys)]

@@ -25,8 +25,9 @@ import pandas as pd
 from bench import claims, figures, registry, runfolder
 from bench.calibration import EQUAL_CHANCE_PD
 from bench.errors import ConfigError
+from bench.escapes import escape_controls
+from bench.markdown import code, fmt_db, text
 from bench.markdown import fmt as _fmt
-from bench.markdown import fmt_db
 from bench.markdown import table as _table
 from bench.provenance import provenance
 from bench.report.glance import comparisons_frame, glance
@@ -41,16 +42,6 @@ TRIAL_KEYS = ["scenario", "method", "config", "params", "snr_db", "trial", "seed
               "threshold"]
 #: Summary columns the recording's table always shows, besides the tasks' headline columns.
 RECORDING_KEYS = ("scenario", "method", "snr_db", "n_trials")
-
-
-#: C0 controls but newline and tab, DEL and the C1 controls: shown escaped (``\x1b``) in
-#: report.md, so no text from a sweep (a description) sends terminal escapes or NULs.
-_CONTROLS = {i: repr(chr(i))[1:-1] for i in [*range(0x20), *range(0x7f, 0xa0)] if chr(i) not in "\n\t"}
-
-
-def escape_controls(text: str) -> str:
-    """``text`` with its control characters (but newline and tab) written as escapes."""
-    return text.translate(_CONTROLS)
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -202,7 +193,7 @@ def non_default(cls, params: dict) -> dict:
 
 
 def _params_text(params: dict) -> str:
-    return ", ".join(f"{k}={v}" for k, v in params.items()).replace("|", "\\|") or "defaults"
+    return text(", ".join(f"{k}={v}" for k, v in params.items())) or "defaults"
 
 
 def _section(name: str, *args) -> str:
@@ -224,25 +215,25 @@ def _section_plan(record: dict, store: Store, tasks: list) -> str:
     cal = sweep["calibration"]
     units = ", ".join(f"{t.pfa_unit} for {t.short_noun}" for t in tasks if t.calibrated)
     calibrated = {t.name for t in tasks if t.calibrated}
-    null_for = [f"`{sc['label']}`" for sc in record["scenarios"] if calibrated & set(sc.get("tasks", []))]
+    null_for = [code(sc["label"]) for sc in record["scenarios"] if calibrated & set(sc.get("tasks", []))]
     rows = [["seed", sweep["seed"]], ["trials per unit (chunk)", sweep["chunk"]]]
     if null_for:
         rows.append(["calibration", f"{cal['mode']}, requested Pfa {cal['pfa']:g}{f' ({units})' if units else ''}, "
                                     f"{cal['h0_trials']} null trials per scenario config of a calibrated task "
                                     f"({', '.join(null_for)})"])
     resolved = _resolved_scenario_params(sweep)
-    scenarios = [[f"`{sc['label']}`", sc["name"], ", ".join(sc.get("tasks", [])),
+    scenarios = [[code(sc["label"]), text(sc["name"]), text(", ".join(sc.get("tasks", []))),
                   _params_text(non_default(registry.get_scenario(sc["name"]), resolved.get(sc["label"], {}))),
                   _snr_text(sc.get("snr_db", sweep.get("snr_db", []))), sc.get("trials", sweep.get("trials"))]
                  for sc in record["scenarios"]]
-    methods = [[f"`{m['label']}`", m["name"], m["task"],
+    methods = [[code(m["label"]), text(m["name"]), text(m["task"]),
                 _params_text(non_default(registry.get_method(m["name"]), sweep["methods"][i]["params"]))]
                for i, m in enumerate(record["methods"])]
     return _section(
         "plan",
         _table(["scenario config", "scenario", "tasks", "parameters (not default)", "SNR", "trials per level"],
                scenarios),
-        _table(["", ""], rows), store.meta("snr_definition") or "see the scenario's documentation",
+        _table(["", ""], rows), text(store.meta("snr_definition") or "see the scenario's documentation"),
         _table(["config", "method", "task", "parameters (not default)"], methods),
         _unavailable_text(record.get("unavailable", [])) + _skipped_pairs_text(record.get("skipped_pairs", [])))
 
@@ -254,14 +245,14 @@ def _skipped_pairs_text(skipped: list[dict]) -> list[str]:
     return ["Pairs skipped because the method cannot run on that scenario config (its own reason); "
             "each of these method configs runs on the sweep's other scenario configs:",
             _table(["scenario config", "method config", "reason"],
-                   [[f"`{p['scenario']}`", f"`{p['method']}`", p["reason"]] for p in skipped])]
+                   [[code(p["scenario"]), code(p["method"]), text(p["reason"])] for p in skipped])]
 
 
 def _unavailable_text(skipped: list) -> list[str]:
     """The optional method configs the sweep names that could not run here, and why."""
     if not skipped:
         return []
-    lines = [f"- `{s['label']}` ({s['name']}): {escape_controls(s['reason'])}" for s in skipped]
+    lines = [f"- {code(s['label'])} ({text(s['name'])}): {text(s['reason'])}" for s in skipped]
     return ["**Not run** (marked `optional` in the sweep, unavailable in this environment; their rows are "
             "absent from every table):\n\n" + "\n".join(lines)]
 
@@ -275,7 +266,7 @@ def _section_calibration(cals, summary: pd.DataFrame, task_of: dict) -> str:
     for c in cals:
         task = task_of[c.method]
         in_eval = measured.get((c.scenario, c.method), np.nan) if task.evaluation_pfa else np.nan
-        rows.append(([f"`{c.scenario}`"] if several else []) + [f"`{c.method}`", c.mode, f"{c.pfa:g} {task.pfa_unit}",
+        rows.append(([code(c.scenario)] if several else []) + [code(c.method), c.mode, f"{c.pfa:g} {task.pfa_unit}",
                      _fmt(c.nominal, 4),
                      f"{_fmt(c.nominal_pfa)} [{_fmt(c.nominal_pfa_low)}, {_fmt(c.nominal_pfa_high)}]",
                      _fmt(c.used, 4), f"{_fmt(c.used_pfa)} [{_fmt(c.used_pfa_low)}, {_fmt(c.used_pfa_high)}]",
@@ -301,7 +292,7 @@ def _section_runtime(runs: pd.DataFrame, units: pd.DataFrame, fig_dir: Path, rec
     per = per.rename(columns={"method": "config"}).assign(_o=lambda d: d.config.map(order)).sort_values("_o")
     figures.runtime(per, fig_dir / "runtime.png")
     gen = units.generate_seconds.sum() / units.n.sum()
-    rows = [[f"`{r.config}`", f"{r.seconds_per_trial * 1e3:.3g}", f"{r.n:,}", f"{r.seconds:.3g}"]
+    rows = [[code(r.config), f"{r.seconds_per_trial * 1e3:.3g}", f"{r.n:,}", f"{r.seconds:.3g}"]
             for r in per.itertuples()]
     return _section("runtime", _table(["config", "ms per trial", "trials run", "total seconds"], rows),
                     f"{gen * 1e3:.3g}")
@@ -311,26 +302,27 @@ def _section_failures(runs: pd.DataFrame) -> str:
     bad = runs[runs.error.notna()]
     if bad.empty:
         return _section("failures", "", 0)
-    rows = [[f"`{r.method}`", r.phase, "null" if pd.isna(r.snr_db) else fmt_db(r.snr_db), f"`{r.unit}`",
-             str(r.error).replace("|", "\\|")[:300]] for r in bad.head(50).itertuples()]
+    rows = [[code(r.method), r.phase, "null" if pd.isna(r.snr_db) else fmt_db(r.snr_db), code(r.unit),
+             text(str(r.error)[:300])] for r in bad.head(50).itertuples()]
     return _section("failures", _table(["config", "phase", "SNR (dB)", "unit", "error"], rows), max(0, len(bad) - 50))
 
 
 def _section_provenance(record: dict, store: Store, prov: dict) -> str:
-    rows = [["command", f"`{record.get('command', '')}`"], ["sweep file", f"`{record.get('source', '')}`"],
-            ["plan fingerprint", f"`{store.meta('fingerprint')}`"]]
+    rows = [["command", code(record.get('command', ''))], ["sweep file", code(record.get('source', ''))],
+            ["plan fingerprint", code(store.meta('fingerprint'))]]
     wall = store.meta("last_wall_seconds")
     if wall:
         rows.append(["wall time of the units in the last `bench run` (before report and recording)",
                      f"{float(wall):.1f} s"])
-    rows += [[k, v] for k, v in prov.items()]
+    rows += [[text(k), text(v)] for k, v in prov.items()]
     return _section("provenance", _table(["", ""], rows))
 
 
 def _section_recording(n: int, out_dir: Path, tasks: list) -> str:
     """What ``recording.rrd`` holds: the harness's part, then each task's
     (``Task.recording_text``)."""
-    return _section("recording", n, str(out_dir), [t.recording_text for t in tasks if t.recording_text])
+    return _section("recording", n, code(f"bench view {out_dir}"), code(f"rerun {out_dir / 'recording.rrd'}"),
+                    [t.recording_text for t in tasks if t.recording_text])
 
 
 def _preset_name(source: str) -> str:
@@ -455,13 +447,14 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
                         application_id=title, recording_name=f"{title} · {str(store.meta('fingerprint'))[:12]}")
         parts.append(_section_recording(sweep["record"]["trials"], out_dir, present))
     parts.append(_section_provenance(record, store, provenance()))
-    page = {"title": title, "description": sweep.get("description") or "", "command": record.get("command", ""),
+    page = {"title": text(title), "description": text(sweep.get("description") or "", inline=False),
+            "command": code(record.get("command", "")),
             "incomplete": None if done >= total else {"done": done, "total": total},
             "glance": glance_markdown(glance(trials, task_of, comparisons, chance)),
             "parts": [p for p in parts if p]}
     report = out_dir / "report.md"
     _write_text(report, escape_controls(render("report.md.j2", html=False, **page) + "\n"))
     html = markdown_to_html(escape_controls(render("report.md.j2", html=True, **page)), title, out_dir,
-                            interactive_figures(summary, task_of))
-    _write_text(out_dir / "report.html", escape_controls(html))
+                            escape_controls(interactive_figures(summary, task_of)))
+    _write_text(out_dir / "report.html", html)      # escaped before the policy hashed its scripts
     return report

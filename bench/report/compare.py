@@ -35,7 +35,8 @@ import pandas as pd
 from bench import registry
 from bench.cli import EXIT_REGRESSION
 from bench.errors import ConfigError
-from bench.markdown import fmt, fmt_db, table
+from bench.escapes import escape_controls
+from bench.markdown import code, fmt, fmt_db, table, text
 from bench.report.glance import metric_values
 from bench.metrics import CONFIDENCE, mcnemar_exact, paired_difference, unpaired_difference
 
@@ -171,8 +172,8 @@ def compare_text(a: Run, b: Run, diffs: pd.DataFrame) -> str:
              f"**{r.change}**" if r.significant else r.change] for r in overall.itertuples()]
     level = overall.confidence.iloc[0]
     per = diffs[diffs.snr_db.notna() & diffs.significant]
-    out = [f"# bench compare\n\nA = `{a.path}` ({a.name}), B = `{b.path}` ({b.name}); {len(overall)} "
-           f"(scenario config, method config) matched, {paired}. Intervals over all common SNR levels at "
+    out = [f"# bench compare\n\nA = {code(a.path)} ({text(a.name)}), B = {code(b.path)} ({text(b.name)}); "
+           f"{len(overall)} (scenario config, method config) matched, {paired}. Intervals over all common SNR levels at "
            f"{level:.4g} (95% Bonferroni-adjusted over the {len(overall)} rows); per level at 95%.",
            table(head, rows)]
     if len(per):
@@ -189,8 +190,8 @@ def run_compare(path_a: str, path_b: str, out: str | None, fail_on_regression: b
     """The command: prints the comparison, writes it into ``out`` if given; the exit code."""
     a, b = load_run(path_a), load_run(path_b)
     diffs = compare_runs(a, b)
-    text = compare_text(a, b, diffs)
-    print(text, end="")
+    shown = escape_controls(compare_text(a, b, diffs))     # a terminal obeys no escape from a store
+    print(shown, end="")
     if out:
         from bench import runfolder
         folder = Path(out)
@@ -198,7 +199,7 @@ def run_compare(path_a: str, path_b: str, out: str | None, fail_on_regression: b
         runfolder.write_text(folder / "compare.csv", diffs.to_csv(index=False, lineterminator="\n"))
         runfolder.write_text(folder / "compare_summary.csv",
                              summary_changes(a, b).to_csv(index=False, lineterminator="\n"))
-        runfolder.write_text(folder / "compare.md", text)
+        runfolder.write_text(folder / "compare.md", shown)
         print(f"wrote {folder / 'compare.csv'}, compare_summary.csv and compare.md")
     overall = diffs[diffs.snr_db.isna()]
     regressed = overall[overall.change == "worse"]

@@ -2,17 +2,30 @@
 
 Built from the same Markdown as report.md (``report.md.j2`` with ``html``
 set, :mod:`bench.report.render`), converted by the ``markdown`` package
-(tables; ``md_in_html`` so the tables inside ``<details>`` are rendered), then
-made self-contained: every ``figures/*.png`` embedded as a base64 data URI,
-the CSS and the table-sorting script inline (``page.html.j2``), and, where a
-task declares a ``curve_column``, an interactive plotly figure of it against
-SNR with hover, plotly.js embedded inline once (about 4.8 MB: the file is
-that much larger than the Markdown; no network is needed to open it).
+(tables, fenced code), then made self-contained: every ``figures/*.png``
+embedded as a base64 data URI, the CSS and the table-sorting script inline
+(``page.html.j2``), and, where a task declares a ``curve_column``, an
+interactive plotly figure of it against SNR with hover, plotly.js embedded
+inline once (about 4.8 MB: the file is that much larger than the Markdown; no
+network is needed to open it).
+
+A report is opened from other people's runs, so nothing in it runs but our own
+scripts (docs/architecture.md, 'Report'). The Markdown holds text that is not
+ours only escaped (:mod:`bench.markdown`); on top of that the conversion passes
+no raw HTML at all (the ``markdown`` package's HTML block and inline HTML
+parsers are removed, so every ``<`` in the source is text), our own folds
+(``<details>``) and the figures' placeholder are recognised as whole lines and
+written here, a link keeps its URL only for http(s), a relative path or an
+anchor, an image only for ``figures/*.png``; and the page carries a
+Content-Security-Policy that runs only its own inline scripts (by their sha256)
+and loads nothing from anywhere.
 """
 
 from __future__ import annotations
 
 import base64
+import hashlib
+import html
 import re
 from pathlib import Path
 
@@ -22,6 +35,17 @@ from bench.report.render import environment, sentence_case
 
 PLACEHOLDER = '<div id="bench-interactive"></div>'
 _IMG = re.compile(r'(<img[^>]*?src=")(figures/[^"]+\.png)(")')
+#: Our own HTML in the Markdown, each on a line of its own: a fold's start and end, the placeholder.
+_FOLD = re.compile(r"^<details><summary>([^<>]*)</summary>$")
+_FOLD_END = "</details>"
+#: URLs a link may keep (what a browser reads, entities decoded and blanks removed):
+#: http(s), or relative (no scheme: nothing before a ":" but a path, query or fragment follows).
+_SAFE_URL = re.compile(r"(?i:https?:)|[^:/?#]*(?:[/?#]|$)")
+_URL_BLANKS = re.compile(r"[\x00-\x20\x7f]+")
+_FIGURE = re.compile(r"figures/[^/\\?#:]+\.png")
+_SCRIPT = re.compile(r"<script\b[^>]*>(.*?)</script>", re.DOTALL | re.IGNORECASE)
+_POLICY = "default-src 'none'; script-src {scripts}; style-src 'unsafe-inline'; img-src data:; base-uri 'none'; " \
+          "form-action 'none'"
 
 
 def _embed_images(html: str, out_dir: Path) -> str:
@@ -31,6 +55,12 @@ def _embed_images(html: str, out_dir: Path) -> str:
             return m.group(1) + "data:," + m.group(3)      # never a dangling external reference
         return m.group(1) + "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode() + m.group(3)
     return _IMG.sub(data_uri, html)
+
+
+def _plotly_text(label: str) -> str:
+    """A label in plotly's texts, which read a few HTML tags (``<a href>`` too) and ``%{...}``
+    templates: tags and template starts as entities, shown as written."""
+    return html.escape(str(label)).replace("%", "&#37;")
 
 
 def interactive_figures(summary: pd.DataFrame, task_of: dict) -> str:
@@ -55,10 +85,12 @@ def interactive_figures(summary: pd.DataFrame, task_of: dict) -> str:
                 low, high = c.get(f"{col}_low"), c.get(f"{col}_high")
                 error = None if low is None or high is None else dict(
                     type="data", array=high.to_numpy(float) - y, arrayminus=y - low.to_numpy(float), thickness=1)
+                label = _plotly_text(config)
                 fig.add_trace(go.Scatter(
-                    x=c.snr_db, y=y, mode="lines+markers", name=config, error_y=error,
-                    hovertemplate=f"{config}<br>SNR %{{x:.1f}} dB<br>{col} %{{y:.3g}}<extra></extra>"))
-            fig.update_layout(title=f"{sentence_case(task.noun)} on {scenario}: {col} (summary.csv) against SNR",
+                    x=c.snr_db, y=y, mode="lines+markers", name=label, error_y=error,
+                    hovertemplate=f"{label}<br>SNR %{{x:.1f}} dB<br>{col} %{{y:.3g}}<extra></extra>"))
+            fig.update_layout(title=f"{sentence_case(task.noun)} on {_plotly_text(scenario)}: {col} (summary.csv) "
+                                    "against SNR",
                               xaxis_title="SNR (dB)", yaxis_title=f"{col} (95% interval)", template="plotly_white", height=420,
                               yaxis_type="linear" if task.ranking_binary else "log",   # a probability; an error
                               legend=dict(orientation="h", y=-0.2))
@@ -71,14 +103,71 @@ def interactive_figures(summary: pd.DataFrame, task_of: dict) -> str:
             'entry to hide a config. Error bars: 95% intervals.</p>' + "\n".join(parts) + "</section>")
 
 
-def markdown_to_html(text: str, title: str, out_dir: Path, interactive: str = "") -> str:
-    """The whole page: ``text`` (Markdown) converted, figures embedded, ``interactive`` at the placeholder."""
+def safe_url(url: str) -> bool:
+    """Whether a link may keep ``url``: http(s), a relative path or an anchor (never
+    ``javascript:``, ``data:`` or another scheme, however it is spelt)."""
+    return bool(_SAFE_URL.match(_URL_BLANKS.sub("", html.unescape(url))))
+
+
+def _converter():
+    """The ``markdown`` package without raw HTML, its links and images checked."""
     import markdown
-    text = text.replace("<details>", '<details markdown="1">')
-    body = markdown.markdown(text, extensions=["tables", "md_in_html", "fenced_code"], output_format="html")
-    body = _embed_images(body, out_dir).replace(f"<p>{PLACEHOLDER}</p>", PLACEHOLDER)
-    body = body.replace(PLACEHOLDER, interactive)
-    return environment().get_template("page.html.j2").render(title=title, body=body)
+    from markdown.treeprocessors import Treeprocessor
+    from markdown.util import AtomicString
+
+    class Checked(Treeprocessor):
+        def run(self, root):
+            for el in root.iter("a"):
+                if not safe_url(el.get("href", "")):
+                    el.attrib.pop("href")
+            for el in root.iter("img"):
+                if not _FIGURE.fullmatch(el.get("src", "")):
+                    el.attrib.pop("src", None)
+            for cell in [*root.iter("td"), *root.iter("th")]:      # "\|" in a cell's code span is "|" (GFM)
+                for el in cell.iter("code"):
+                    el.text = AtomicString((el.text or "").replace("\\|", "|"))
+
+    md = markdown.Markdown(extensions=["tables", "fenced_code"], output_format="html")
+    md.preprocessors.deregister("html_block")
+    md.inlinePatterns.deregister("html")
+    md.treeprocessors.register(Checked(md), "checked", 5)     # after "inline" made the links
+    return md
 
 
-__all__ = ["PLACEHOLDER", "interactive_figures", "markdown_to_html"]
+def _body(text: str) -> str:
+    """``text`` (Markdown) as HTML: our folds and placeholder, the rest converted between them."""
+    md, out, chunk = _converter(), [], []
+
+    def flush():
+        out.append(md.reset().convert("\n".join(chunk)))
+        chunk.clear()
+    for line in text.split("\n"):
+        fold = _FOLD.match(line)
+        if fold or line in (_FOLD_END, PLACEHOLDER):
+            flush()
+            out.append(f"<details><summary>{html.escape(fold.group(1))}</summary>" if fold else line)
+        else:
+            chunk.append(line)
+    flush()
+    return "\n".join(out)
+
+
+def with_policy(page: str) -> str:
+    """``page`` with its Content-Security-Policy: its own inline scripts (sha256 of each)
+    and inline styles only, images from data: URIs, nothing loaded from anywhere."""
+    digests = sorted({"'sha256-" + base64.b64encode(hashlib.sha256(s.encode()).digest()).decode() + "'"
+                      for s in _SCRIPT.findall(page)})
+    policy = _POLICY.format(scripts=" ".join(digests) or "'none'")
+    charset = '<meta charset="utf-8">\n'
+    return page.replace(charset, f'{charset}<meta http-equiv="Content-Security-Policy" content="{policy}">\n', 1)
+
+
+def markdown_to_html(text: str, title: str, out_dir: Path, interactive: str = "") -> str:
+    """The whole page: ``text`` (Markdown) converted, figures embedded, ``interactive`` at
+    the placeholder, the policy added (the page is final: a changed script would not run)."""
+    from markupsafe import Markup
+    body = _embed_images(_body(text), out_dir).replace(PLACEHOLDER, interactive)
+    return with_policy(environment().get_template("page.html.j2").render(title=title, body=Markup(body)))
+
+
+__all__ = ["PLACEHOLDER", "interactive_figures", "markdown_to_html", "safe_url", "with_policy"]

@@ -14,7 +14,7 @@ import functools
 import numpy as np
 import pandas as pd
 
-from bench.markdown import fmt, fmt_db, table
+from bench.markdown import code, fmt, fmt_db, table, text
 
 
 @functools.lru_cache(maxsize=1)
@@ -25,12 +25,14 @@ def sentence_case(text: str) -> str:
 
 def environment():
     import jinja2
-    env = jinja2.Environment(loader=jinja2.PackageLoader("bench", "templates"), autoescape=False,
+    # HTML templates escape every value; Markdown ones take Markdown (text not ours escaped
+    # by the code/text filters or before, bench.markdown)
+    env = jinja2.Environment(loader=jinja2.PackageLoader("bench", "templates"),
+                             autoescape=jinja2.select_autoescape(enabled_extensions=("html.j2",),
+                                                                 default_for_string=True),
                              keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True,
                              undefined=jinja2.StrictUndefined)
-    env.filters["fmt"] = fmt
-    env.filters["db"] = fmt_db
-    env.filters["pct"] = percent
+    env.filters.update(fmt=fmt, db=fmt_db, pct=percent, code=code, text=text)
     return env
 
 
@@ -74,7 +76,7 @@ def glance_markdown(entries: list[dict]) -> str:
         header = ["rank", "config", f"{label} [95% CI]"] + \
             ([f"{task.ranking_label} (any alarm) [95% CI]"] if g["equal_chance"] else []) + \
             ([f"chance Pd{' (any alarm)' if g['equal_chance'] else ''}"] if show_chance else [])
-        rows = [[str(i), f"`{r['config']}`", _interval(r["mean"], r["low"], r["high"])] +
+        rows = [[str(i), code(r["config"]), _interval(r["mean"], r["low"], r["high"])] +
                 ([_interval(*r["secondary"])] if g["equal_chance"] else []) +
                 ([fmt(r["chance"])] if show_chance else []) for i, r in enumerate(g["ranking"], start=1)]
         margin = g["margin"]
@@ -103,12 +105,12 @@ def comparisons_markdown(comparisons: pd.DataFrame, task_of: dict) -> str:
         binary = task.ranking_binary or fair
         header = ["a", "b", f"mean a", f"mean b", "b − a [95% CI]"] + \
             (["a only", "b only", "McNemar p"] if binary else []) + ["better"]
-        rows = [[f"`{r.config_a}`", f"`{r.config_b}`", fmt(r.mean_a), fmt(r.mean_b),
+        rows = [[code(r.config_a), code(r.config_b), fmt(r.mean_a), fmt(r.mean_b),
                  _interval(r.difference, r.difference_low, r.difference_high, signed=True)] +
                 ([str(int(r.only_a)), str(int(r.only_b)), _p(r.mcnemar_p)] if binary else []) +
-                ["**tie**" if r.better == "tie" else f"`{r.better}`"] for r in g.itertuples()]
+                ["**tie**" if r.better == "tie" else code(r.better)] for r in g.itertuples()]
         label = task.equal_chance_label if fair else task.ranking_label
-        blocks.append({"caption": f"{sentence_case(task.noun)} on `{scenario}`: {label} "
+        blocks.append({"caption": f"{sentence_case(task.noun)} on {code(scenario)}: {label} "
                                   f"({'higher' if task.ranking_higher_is_better else 'lower'} is better).",
                        "table": table(header, rows), "pairs": len(rows), "folded": len(rows) > FOLD_PAIRS})
     return render("comparisons.md.j2", blocks=blocks,

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from bench.calibration import cell_exceedances
-from bench.markdown import fmt, fmt_crossing, fmt_interval, table
+from bench.markdown import code, fmt, fmt_crossing, fmt_interval, table, text
 from bench.metrics import bootstrap_mean_interval, snr_at_pd
 from bench.recording.record import TrialRecord
 from bench.tasks.base import ReportContext
@@ -62,15 +62,15 @@ def _interval(row, column: str) -> str:
 def _section_pd(scene: pd.DataFrame, sc: str, snr: float, ctx: ReportContext, fig: Path) -> str:
     groups = _present(scene)
     if not groups:
-        return f"### `{sc}`: no targets\n\nThe maps of this scenario config hold no target: Pfa only."
+        return f"### {code(sc)}: no targets\n\nThe maps of this scenario config hold no target: Pfa only."
     swerling = int(scene.swerling.iloc[0])
     pd_panels(scene, groups, [_column(g) for g in groups], ctx.pfa, swerling, fig, f"{ctx.title}: {sc}")
-    rows = [[f"`{r.config}`", *(_interval(r._asdict(), _column(g)) for g in groups), _interval(r._asdict(), "pd")]
+    rows = [[code(r.config), *(_interval(r._asdict(), _column(g)) for g in groups), _interval(r._asdict(), "pd")]
             for r in _at(scene, snr).itertuples()]
     ideal = fmt(float(ideal_pd(snr, ctx.pfa, swerling)))
     return "\n\n".join([
-        f"### `{sc}`: Pd by clutter region",
-        f"![Pd vs SNR by region, {sc}]({fig.relative_to(ctx.fig_dir.parent)})",
+        f"### {code(sc)}: Pd by clutter region",
+        f"![Pd vs SNR by region, {text(sc)}]({fig.relative_to(ctx.fig_dir.parent)})",
         f"Pd [95% CI, clustered by map] at the reference SNR {fmt(snr)} dB (Swerling {swerling}); the ideal "
         f"known-noise detector's Pd there is {ideal}:",
         table(["config", *groups, "all targets"], rows)])
@@ -93,11 +93,11 @@ def _section_pfa(scene_trials: pd.DataFrame, configs: list[str], sc: str, pfa: f
         whole = _pooled_pfa(scene_trials, config, "false_alarms", "clear_cells")
         cal = null.get(config)
         nominal = "–" if cal is None else fmt_interval(cal.nominal_pfa, cal.nominal_pfa_low, cal.nominal_pfa_high)
-        rows.append([f"`{config}`", nominal, *(fmt_interval(*c) for c in cells), fmt_interval(*whole),
+        rows.append([code(config), nominal, *(fmt_interval(*c) for c in cells), fmt_interval(*whole),
                      fmt(whole[0] / pfa)])
     mode = _threshold_mode(cals, sc)
     return "\n\n".join([
-        f"### `{sc}`: measured per-cell Pfa by clutter region",
+        f"### {code(sc)}: measured per-cell Pfa by clutter region",
         f"Requested Pfa {pfa:g} per cell. *Null maps, nominal K*: the per-cell Pfa of the detector's closed-form "
         f"threshold on the whole null maps (the calibration's). The other columns: false alarms over the cells "
         f"outside the targets' guard boxes on the evaluation maps at the threshold used ({mode}), pooled over "
@@ -121,9 +121,9 @@ def _section_loss(scene: pd.DataFrame, sc: str, pfa: float) -> str:
             loss = f"{mid - ideal:+.2f}" if np.isfinite(mid) else "–"
             entries.append(f"{loss} ({fmt_crossing(mid, g.snr_db)} [{fmt_crossing(low, g.snr_db)}, "
                            f"{fmt_crossing(high, g.snr_db)}])")
-        rows.append([f"`{config}`", *entries])
+        rows.append([code(config), *entries])
     return "\n\n".join([
-        f"### `{sc}`: CFAR loss",
+        f"### {code(sc)}: CFAR loss",
         f"CFAR loss (dB) = SNR at which the detector's Pd reaches 0.5 minus that of the ideal known-noise "
         f"detector at the same per-cell Pfa ({pfa:g}; {ideal:.2f} dB for Swerling {swerling}); in brackets the "
         f"SNR at Pd = 0.5 and its interval from the Pd bands (dB).",
@@ -137,9 +137,9 @@ def _section_masking(scene: pd.DataFrame, sc: str) -> str:
     rows = []
     for config, g in scene.groupby("config", sort=False):
         g = g.set_index("snr_db")
-        rows.append([f"`{config}`", *(f"{fmt(g.pd_paired[s])} vs {fmt(g.pd_homogeneous[s])}" for s in levels)])
+        rows.append([code(config), *(f"{fmt(g.pd_paired[s])} vs {fmt(g.pd_homogeneous[s])}" for s in levels)])
     return "\n\n".join([
-        f"### `{sc}`: masking by a close neighbour",
+        f"### {code(sc)}: masking by a close neighbour",
         "Pd of a target with a close neighbour (paired) vs an isolated target in the homogeneous region, per "
         "SNR level (dB): a CFAR whose reference window holds the neighbour raises its noise estimate.",
         table(["config", *(fmt(s) for s in levels)], rows)])
@@ -161,8 +161,8 @@ def _roc_curves(ctx: ReportContext, sc: str, configs: list[str], snr: float, gro
         pfa = np.array([np.add(*cell_exceedances(null_cells, t)).sum() / 2 / total for t in thresholds])
         stat, group = series["target_statistic"], series["target_group"]
         for g in groups:
-            code = PAIRED_GROUP if g == "paired" else REGION_NAMES.index(g)
-            values = stat[group == code]
+            index = PAIRED_GROUP if g == "paired" else REGION_NAMES.index(g)
+            values = stat[group == index]
             if values.size:
                 out[g][config] = (pfa, (values[None, :] >= thresholds[:, None]).mean(axis=1))
     return out
@@ -176,11 +176,11 @@ def _section_roc(ctx: ReportContext, scene: pd.DataFrame, sc: str, snr: float, f
         return ""
     roc_panels(curves, ctx.pfa, fig, f"{ctx.title}: {sc}, ROC at {fmt(snr)} dB")
     return "\n\n".join([
-        f"### `{sc}`: ROC at {fmt(snr)} dB",
+        f"### {code(sc)}: ROC at {fmt(snr)} dB",
         "Pd of each region's targets against the per-cell Pfa over the whole null map, as the threshold on the "
         "statistic moves (from the stored statistics, no re-run; the null maps' order statistics bound the "
         "per-cell Pfa exactly below 64 exceedances a map).",
-        f"![ROC, {sc}]({fig.relative_to(ctx.fig_dir.parent)})"])
+        f"![ROC, {text(sc)}]({fig.relative_to(ctx.fig_dir.parent)})"])
 
 
 def _paired_difference(trials: pd.DataFrame, a: str, b: str) -> tuple[float, float, float]:
@@ -213,16 +213,16 @@ def _section_winners(scene: pd.DataFrame, scene_trials: pd.DataFrame, sc: str, s
         runner = ranked.iloc[1] if len(ranked) > 1 else None
         clear = runner is not None and best[f"{col}_low"] > runner[f"{col}_high"]
         verdict = "alone (intervals apart)" if clear else (
-            "tied within intervals with " + ", ".join(f"`{c}`" for c in ranked.config[1:][
+            "tied within intervals with " + ", ".join(code(c) for c in ranked.config[1:][
                 ranked[f"{col}_high"].iloc[1:] >= best[f"{col}_low"]]) if runner is not None else "only config")
         pfa_col = "pfa" if group == "paired" else f"pfa_{slug(group)}"
-        rows.append([group, f"`{best.config}`", _interval(best, col), _interval(best, pfa_col), verdict])
+        rows.append([group, code(best.config), _interval(best, col), _interval(best, pfa_col), verdict])
     configs = list(dict.fromkeys(at.config))
     at_trials = scene_trials[np.isclose(scene_trials.snr_db, snr)]
-    pairs = [[f"`{a}` − `{b}`", fmt_interval(*_paired_difference(at_trials, a, b))]
+    pairs = [[f"{code(a)} − {code(b)}", fmt_interval(*_paired_difference(at_trials, a, b))]
              for i, a in enumerate(configs) for b in configs[i + 1:]]
     return "\n\n".join([
-        f"### `{sc}`: which detector wins where (at {fmt(snr)} dB)",
+        f"### {code(sc)}: which detector wins where (at {fmt(snr)} dB)",
         "Per region, the config with the highest Pd, its Pd and its measured per-cell Pfa in that region on "
         "the same maps (95% intervals, clustered by map); a win is *alone* when its Pd interval lies above "
         "every other config's. " + (
@@ -250,7 +250,7 @@ def _section_map(ctx: ReportContext, configs: set[str], reference: dict[str, flo
                          ctx.fig_dir / "cells_rd_map_detections.png", f"{ctx.title}: {rec.scenario}")
     return "\n\n".join([
         "### One RD map with each detector's detections (cf. the HFSWR chapter's Fig. 6.24)",
-        f"Map {rec.trial} of `{rec.scenario}` at {fmt(rec.snr_db)} dB: the map in dB with the true targets "
+        f"Map {rec.trial} of {code(rec.scenario)} at {fmt(rec.snr_db)} dB: the map in dB with the true targets "
         "(white circles), the clutter regions, and each detector's declared cells (dots) at its threshold in "
         "force.",
         f"![RD map with detections]({fig.relative_to(ctx.fig_dir.parent)})"])

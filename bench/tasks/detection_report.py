@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from bench import figures
-from bench.markdown import crossing_difference, crossing_floors, crossing_text, fmt, fmt_db, snr50, table
+from bench.markdown import code, crossing_difference, crossing_floors, crossing_text, fmt, fmt_db, snr50, table
 from bench.store import Store
 from bench.tasks.base import ReportContext
 from bench.tasks.detection_metrics import roc_curve
@@ -43,7 +43,7 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
     rows = []
     for c in snr50(summary, floors=floors).itertuples():
         last = summary[summary.config == c.config].sort_values("snr_db").iloc[-1]
-        rows.append([f"`{c.config}`", *crossing_text(c.crossing), f"{fmt(last.pd)} at {fmt_db(last.snr_db)} dB",
+        rows.append([code(c.config), *crossing_text(c.crossing), f"{fmt(last.pd)} at {fmt_db(last.snr_db)} dB",
                      fmt(last.delay_mean)])
     detail = summary.pivot_table(index="snr_db", columns="config", values="pd", sort=False)
     detail_rows = [[fmt_db(s)] + [fmt(v) for v in r] for s, r in zip(detail.index, detail.to_numpy())]
@@ -54,7 +54,7 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
         table(["config", "SNR at Pd = 0.5 (dB)", "95% interval (dB)", "Pd at the highest SNR",
                 "mean delay there (steps)"], rows),
         "<details><summary>Pd per SNR level</summary>\n\n" +
-        table(["SNR (dB)"] + [f"`{c}`" for c in detail.columns], detail_rows) + "\n\n</details>",
+        table(["SNR (dB)"] + [code(c) for c in detail.columns], detail_rows) + "\n\n</details>",
         "## Detection delay",
         "![delay vs SNR](figures/delay_vs_snr.png)",
         "Delay = first alarm at or after the onset minus the onset, over detected trials only.",
@@ -65,7 +65,7 @@ def _section_ranking(summary: pd.DataFrame, floors: dict[str, float]) -> str:
     """Method families ordered by the lowest SNR at which any of their configs reaches Pd = 0.5."""
     best = snr50(summary, floors=floors).sort_values("order", kind="stable").drop_duplicates("method")
     lead = best.crossing.iloc[0]
-    rows = [[f"{rank}", f"`{b.method}`", f"`{b.config}`", *crossing_text(b.crossing),
+    rows = [[f"{rank}", code(b.method), code(b.config), *crossing_text(b.crossing),
               crossing_difference(lead, b.crossing),
               fmt(floors.get(b.config))]
             for rank, b in enumerate(best.itertuples(), start=1)]
@@ -99,7 +99,7 @@ def _section_pd_definitions(summary: pd.DataFrame, chance_pd: float, floors: dic
         ranks[column] = dict(zip(s.config, s.order.rank(method="min")))
         cells[column] = {b.config: crossing_text(b.crossing)[0] for b in s.itertuples()}
     configs = list(dict.fromkeys(summary.config))
-    rows = [[f"`{c}`"] + [f"{cells[col][c]} (#{int(ranks[col][c])})" for col, _ in PD_DEFINITIONS]
+    rows = [[code(c)] + [f"{cells[col][c]} (#{int(ranks[col][c])})" for col, _ in PD_DEFINITIONS]
             for c in configs]
     return "\n\n".join([
         "## Pd under three definitions",
@@ -135,7 +135,7 @@ def _section_roc(store: Store, trials: pd.DataFrame, summary: pd.DataFrame, fig_
     return "\n\n".join([
         "## ROC",
         f"Pd against per-step Pfa at {fmt_db(snr)} dB, of the {len(curves)} config(s) of the tasks that draw a ROC "
-        f"({', '.join(f'`{c}`' for c in curves)}), the level where the configs' mean Pd is closest to "
+        f"({', '.join(code(c) for c in curves)}), the level where the configs' mean Pd is closest to "
         "0.5, computed from the stored statistics without re-running: Pfa from the calibration null "
         "values, Pd from each trial's peak statistic in the detection window.",
         "![ROC](figures/roc.png)",

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from bench import figures
-from bench.markdown import fmt, fmt_interval, table
+from bench.markdown import code, fmt, fmt_interval, table
 from bench.metrics import bootstrap_mean_interval
 from bench.recording.paths import entity_name as slug
 from bench.tasks.base import ReportContext
@@ -29,7 +29,7 @@ def _interval(r, name: str) -> str:
 
 
 def _cell(r) -> list[str]:
-    return [f"`{r.scenario}`", fmt(r.snr_db), fmt(r.scene_pd), fmt(r.clutter_per_scan), f"`{r.config}`"]
+    return [code(r.scenario), fmt(r.snr_db), fmt(r.scene_pd), fmt(r.clutter_per_scan), code(r.config)]
 
 
 CELL_HEADER = ["scenario config", "SNR (dB)", "Pd", "clutter/scan", "config"]
@@ -122,32 +122,32 @@ def _paired(ctx: ReportContext) -> list[str]:
     rows, verdicts = [], {}
     for r in diffs.itertuples():
         if r.diff_low > 0:
-            verdict = f"`{ref}` better"
+            verdict = f"{code(ref)} better"
         elif r.diff_high < 0:
-            verdict = f"`{r.config}` better"
+            verdict = f"{code(r.config)} better"
         else:
             verdict = "no significant difference"
         verdicts.setdefault(r.config, []).append((verdict, r))
         rel = r.diff_mean / r.ref_mean if r.ref_mean > 0 else np.nan
-        rows.append([f"`{r.scenario}`", fmt(r.snr_db), fmt(axes.scene_pd.get(r.scenario)),
-                     fmt(axes.clutter_per_scan.get(r.scenario)), f"`{r.config}`", r.n,
+        rows.append([code(r.scenario), fmt(r.snr_db), fmt(axes.scene_pd.get(r.scenario)),
+                     fmt(axes.clutter_per_scan.get(r.scenario)), code(r.config), r.n,
                      fmt_interval(r.diff_mean, r.diff_low, r.diff_high), fmt(100 * rel), verdict])
     lines = []
     for config, vs in verdicts.items():
-        better = [r for v, r in vs if v.startswith(f"`{ref}`")]
-        worse = [r for v, r in vs if v.startswith(f"`{config}`")]
-        text = (f"- `{ref}` against `{config}`: lower GOSPA in {len(better)} of {len(vs)} cells, higher in "
+        better = [r for v, r in vs if v.startswith(code(ref))]
+        worse = [r for v, r in vs if v.startswith(code(config))]
+        text = (f"- {code(ref)} against {code(config)}: lower GOSPA in {len(better)} of {len(vs)} cells, higher in "
                 f"{len(worse)}, no significant difference in {len(vs) - len(better) - len(worse)}")
         if better:
             best = max(better, key=lambda r: r.diff_mean)
             text += (f"; the largest gain is {fmt(best.diff_mean)} m ({fmt(100 * best.diff_mean / best.ref_mean)} % "
-                     f"of `{ref}`'s GOSPA) at Pd = {fmt(axes.scene_pd.get(best.scenario))}, clutter/scan = "
+                     f"of {code(ref)}'s GOSPA) at Pd = {fmt(axes.scene_pd.get(best.scenario))}, clutter/scan = "
                      f"{fmt(axes.clutter_per_scan.get(best.scenario))}")
         lines.append(text + ".")
     return ["## Multi-target tracking: paired comparison",
-            f"GOSPA of each config minus that of `{ref}` (the sweep's first config) on the same trials, mean "
+            f"GOSPA of each config minus that of {code(ref)} (the sweep's first config) on the same trials, mean "
             "over trials with a 95 % bootstrap interval of the paired differences; positive: "
-            f"`{ref}` has the lower (better) GOSPA. A difference whose interval holds 0 is within sampling "
+            f"{code(ref)} has the lower (better) GOSPA. A difference whose interval holds 0 is within sampling "
             "error.", "\n".join(lines),
             table(CELL_HEADER[:4] + ["config", "trials", "GOSPA(config) - GOSPA(ref) (m)", "% of ref",
                                      "verdict"], rows)]
@@ -165,8 +165,8 @@ def _per_scan(ctx: ReportContext) -> list[str]:
     figures.rmse_per_step(curves, ctx.fig_dir / name, f"{ctx.title}: {hardest.scenario}", xlabel="scan",
                           ylabel="GOSPA (m), mean over trials")
     return ["## Multi-target tracking: GOSPA per scan",
-            f"Mean GOSPA across trials at each scan on `{hardest.scenario}` (SNR {fmt(hardest.snr_db)} dB), "
-            f"the scenario config where `{ref}` has its largest GOSPA; `steps.csv` has every cell, with the "
+            f"Mean GOSPA across trials at each scan on {code(hardest.scenario)} (SNR {fmt(hardest.snr_db)} dB), "
+            f"the scenario config where {code(ref)} has its largest GOSPA; `steps.csv` has every cell, with the "
             "missed and false counts and the numbers of targets and confirmed tracks per scan.",
             f"![GOSPA per scan](figures/{name})"]
 

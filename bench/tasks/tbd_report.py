@@ -18,7 +18,7 @@ import pandas as pd
 
 from bench import figures
 from bench.calibration import gumbel_fit
-from bench.markdown import crossing_difference, crossing_text, fmt, fmt_db, fmt_interval, snr50, table
+from bench.markdown import code, crossing_difference, crossing_text, fmt, fmt_db, fmt_interval, snr50, table
 from bench.tasks.base import ReportContext
 
 
@@ -41,8 +41,8 @@ def _per_scenario_tables(summary: pd.DataFrame, cell, caption: str) -> list[str]
         wide = scene.assign(_cell=[cell(r) for r in scene.itertuples()])
         wide = wide.pivot_table(index="config", columns="snr_db", values="_cell", aggfunc="first", sort=False)
         wide = wide[sorted(wide.columns)]
-        out.append(f"{caption}, `{sc}`:\n\n" + table(["config"] + [fmt_db(s) for s in wide.columns],
-                                                    [[f"`{c}`"] + list(r) for c, r in zip(wide.index,
+        out.append(f"{caption}, {code(sc)}:\n\n" + table(["config"] + [fmt_db(s) for s in wide.columns],
+                                                    [[code(c)] + list(r) for c, r in zip(wide.index,
                                                                                           wide.to_numpy())]))
     return out
 
@@ -54,7 +54,7 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
     for _sc, scene in crossings.groupby("scenario", sort=False):   # gains within a scenario config
         lead = scene.crossing.iloc[0]
         for i, c in enumerate(scene.itertuples()):
-            rows.append([f"`{c.config}`", f"`{c.scenario}`", *crossing_text(c.crossing),
+            rows.append([code(c.config), code(c.scenario), *crossing_text(c.crossing),
                          "–" if i == 0 else crossing_difference(c.crossing, lead)])
     detail = _per_scenario_tables(summary, lambda r: fmt(r.pd), "Pd against SNR (dB)")
     return "\n\n".join([
@@ -67,7 +67,7 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
         "profile likelihood's; *between a and b* where Pd jumps across 0.5 between adjacent levels (from ≤ 0.1 "
         "to ≥ 0.9), which the levels cannot resolve.",
         table(["config", "scenario", "SNR at Pd = 0.5 (dB)", "95% interval (dB)",
-               f"gain over the scenario's first config, `{crossings.config.iloc[0]}` (dB)"], rows),
+               f"gain over the scenario's first config, {code(crossings.config.iloc[0])} (dB)"], rows),
         "<details><summary>Pd per SNR level</summary>\n\n" + "\n\n".join(detail) + "\n\n</details>",
     ])
 
@@ -80,7 +80,7 @@ def _section_null(cals, store, fig_dir: Path, title: str, pfa: float, configs: s
         values, _peaks, _nominal = store.null_values(c.scenario, c.method)
         loc, scale = (c.gumbel_loc, c.gumbel_scale) if np.isfinite(c.gumbel_loc) else gumbel_fit(values)
         fits[f"{c.method} ({c.scenario})" if several else c.method] = (values, loc, scale, c.used)
-        rows.append([f"`{c.method}`", f"`{c.scenario}`", c.mode, f"{c.null_values:,}", fmt(loc, 4), fmt(scale, 4), fmt(c.used, 4),
+        rows.append([code(c.method), code(c.scenario), c.mode, f"{c.null_values:,}", fmt(loc, 4), fmt(scale, 4), fmt(c.used, 4),
                      fmt_interval(c.used_pfa, c.used_pfa_low, c.used_pfa_high),
                      fmt_interval(c.cell_pfa, c.cell_pfa_low, c.cell_pfa_high), fmt(c.cell_threshold, 4),
                      fmt(c.cell_threshold_scene_pfa)])
@@ -147,7 +147,7 @@ def _reductions(summary: pd.DataFrame) -> list[str]:
             if red.empty:
                 continue
             per = ", ".join(f"{fmt_db(snr)} dB: {v:+.1f} %" for snr, v in red.items())
-            lines.append(f"- `{cfg}` vs `{base_cfg}` (`{scenario}`): {per}; mean over SNR {red.mean():+.1f} %")
+            lines.append(f"- {code(cfg)} vs {code(base_cfg)} ({code(scenario)}): {per}; mean over SNR {red.mean():+.1f} %")
     return lines
 
 
@@ -189,7 +189,7 @@ def _section_snr_reference(summary: pd.DataFrame) -> str:
     for sc, g in summary.groupby("scenario", sort=False):
         off = float(g.snr_offset_unit_innovation_db.iloc[0])
         snrs = sorted(g.snr_db.unique())
-        rows.append([f"`{sc}`", f"{10 ** (off / 10):.2f}", f"{off:+.1f}", ", ".join(fmt_db(s) for s in snrs),
+        rows.append([code(sc), f"{10 ** (off / 10):.2f}", f"{off:+.1f}", ", ".join(fmt_db(s) for s in snrs),
                      ", ".join(fmt_db(s + off) for s in snrs)])
     return "\n\n".join([
         "## Track-before-detect: SNR reference",

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from bench import figures
-from bench.markdown import fmt, fmt_db, fmt_interval, table
+from bench.markdown import code, fmt, fmt_db, fmt_interval, table, text
 from bench.metrics import bootstrap_mean_interval
 from bench.recording.paths import entity_name as slug
 from bench.tasks.base import ReportContext
@@ -34,13 +34,13 @@ def _overview(summary: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
     for scenario, g in summary.groupby("scenario", sort=False):
         ref[scenario] = snr = _reference_snr(g)
         at = g[g.snr_db == snr].set_index("config")
-        rows.append([f"`{scenario}`", fmt_db(snr)] +
+        rows.append([code(scenario), fmt_db(snr)] +
                     [fmt_interval(at.rmse_mean.get(c), at.rmse_low.get(c), at.rmse_high.get(c))
                      if c in at.index else "–" for c in configs])
     parts = ["## Tracking: position RMSE",
              "*Time-averaged RMSE* = mean over steps of the per-step position RMSE across trials (metres), "
              "with a 95% bootstrap interval over trials; every method runs on the same trials.",
-             table(["scenario config", "SNR (dB)"] + [f"`{c}`" for c in configs], rows)]
+             table(["scenario config", "SNR (dB)"] + [code(c) for c in configs], rows)]
     if summary.scenario.nunique() > 1:
         pick = pd.concat([g[g.snr_db == ref[s]] for s, g in summary.groupby("scenario", sort=False)])
         values = pick.pivot_table(index="scenario", columns="config", values="rmse_mean", sort=False)
@@ -49,7 +49,7 @@ def _overview(summary: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
         figures.grouped_bars(values, low, high, fig_dir / "tracking_rmse_by_scenario.png",
                              f"{title}: time-averaged position RMSE (95% CI)", "RMSE (m)", log=True)
         parts.append("![RMSE by scenario config](figures/tracking_rmse_by_scenario.png)")
-    health = [[f"`{r.scenario}`", fmt_db(r.snr_db), f"`{r.config}`",
+    health = [[code(r.scenario), fmt_db(r.snr_db), code(r.config),
                fmt_interval(r.divergence_rate, r.divergence_low, r.divergence_high), fmt(r.nees_mean)]
               for r in summary.itertuples()]
     parts.append("<details><summary>Divergence rate and NEES per cell</summary>\n\n"
@@ -68,7 +68,7 @@ def _versus_snr(summary: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
             continue
         name = f"tracking_rmse_vs_snr_{slug(scenario)}.png"
         figures.metric_vs_snr(g, fig_dir / name, f"{title}: {scenario}", log=True)
-        parts.append(f"RMSE against SNR on `{scenario}`:\n\n![RMSE vs SNR]({'figures/' + name})")
+        parts.append(f"RMSE against SNR on {code(scenario)}:\n\n![RMSE vs SNR]({'figures/' + name})")
     return parts
 
 
@@ -82,7 +82,7 @@ def _per_step(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: 
         curves = {c: (s.t.to_numpy(), s.rmse_position.to_numpy()) for c, s in at.groupby("config", sort=False)}
         name = f"tracking_rmse_per_step_{slug(scenario)}.png"
         figures.rmse_per_step(curves, fig_dir / name, f"{title}: {scenario} at {fmt_db(snr)} dB", xlabel="time (s)")
-        parts.append(f"![per-step RMSE on {scenario}](figures/{name})")
+        parts.append(f"![per-step RMSE on {text(scenario)}](figures/{name})")
     first = summary.scenario.iloc[0]
     snr = _reference_snr(summary[summary.scenario == first])
     at = steps[(steps.scenario == first) & (steps.snr_db == snr)]
@@ -94,7 +94,7 @@ def _per_step(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: 
                   for comp in components}
         figures.mean_estimates(one.t.to_numpy(), panels, fig_dir / "tracking_mean_estimate.png",
                                f"{title}: mean estimates on {first} at {fmt_db(snr)} dB ({int(one.n_trials.iloc[0])} trials)")
-        parts.append(f"Mean estimate of every component across trials against the truth, per step, on `{first}` "
+        parts.append(f"Mean estimate of every component across trials against the truth, per step, on {code(first)} "
                      "(state components, and the components the scenario derives from the state, e.g. range, "
                      "bearing and elevation):\n\n![mean estimates](figures/tracking_mean_estimate.png)")
     if parts:
@@ -119,7 +119,7 @@ def _maneuvers(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title:
              "trials); *Q quiet / maneuver*, the mean estimated state-noise scale (m²) of adaptive trackers."]
     rows = []
     for r in summary[summary.rmse_quiet.notna()].itertuples():
-        rows.append([f"`{r.scenario}`", fmt(r.snr_db), f"`{r.config}`",
+        rows.append([code(r.scenario), fmt(r.snr_db), code(r.config),
                      fmt_interval(r.rmse_quiet, r.rmse_quiet_low, r.rmse_quiet_high),
                      fmt_interval(r.rmse_maneuver, r.rmse_maneuver_low, r.rmse_maneuver_high),
                      fmt_interval(r.rmse_onset, r.rmse_onset_low, r.rmse_onset_high)
@@ -144,7 +144,7 @@ def _maneuvers(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title:
             name = f"tracking_rmse_{slug(comp)}_{slug(scenario)}.png"
             figures.rmse_per_step(curves, fig_dir / name, f"{title}: {scenario} at {fmt(snr)} dB, RMSE of {comp}",
                                   xlabel="time (s)", ylabel=f"RMSE of {comp}")
-            parts.append(f"![RMSE of {comp} over time on {scenario}](figures/{name})")
+            parts.append(f"![RMSE of {text(comp)} over time on {text(scenario)}](figures/{name})")
         break                                   # the first maneuvering scenario config: the papers' figures
     return parts
 
@@ -173,11 +173,11 @@ def _paired(summary: pd.DataFrame, trials: pd.DataFrame) -> list[str]:
             for name, _ in PAIRED_METRICS:
                 d = (wide[name][config] - wide[name][first]).to_numpy(float)
                 cells.append(fmt_interval(float(np.nanmean(d)), *bootstrap_mean_interval(d)))
-            rows.append([f"`{scenario}`", fmt(snr), f"`{config}`"] + cells)
+            rows.append([code(scenario), fmt(snr), code(config)] + cells)
     if not rows:
         return []
     return ["### Paired differences against the first method config",
-            f"Per trial, a config's position RMSE minus `{first}`'s on the same trial, averaged over trials "
+            f"Per trial, a config's position RMSE minus {code(first)}'s on the same trial, averaged over trials "
             "(95% bootstrap interval over trials; positive: the first config is better), over the true "
             f"maneuver and over the first {ONSET_WINDOW_STEPS} steps from its onset (the *onset window*, where "
             "a switching tracker detects the maneuver and changes its model). Per-trial RMS, so the means "
