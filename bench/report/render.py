@@ -29,7 +29,7 @@ def environment():
     # by the code/text filters or before, bench.markdown)
     env = jinja2.Environment(loader=jinja2.PackageLoader("bench", "templates"),
                              autoescape=jinja2.select_autoescape(enabled_extensions=("html.j2",),
-                                                                 default_for_string=True),
+                                                                 default_for_string=False),
                              keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True,
                              undefined=jinja2.StrictUndefined)
     env.filters.update(fmt=fmt, db=fmt_db, pct=percent, code=code, text=text)
