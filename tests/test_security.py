@@ -121,8 +121,10 @@ def test_the_cache_folder_is_private(cache):
     assert [p.name for p in written] == [f"list-{'f' * 32}.json"] and (written[0].stat().st_mode & 0o077) == 0
 
 
-@pytest.mark.parametrize("planted", [f"list-{'f' * 32}.json", f".list-{'f' * 32}.json.{os.getpid()}.tmp"])
+@pytest.mark.parametrize("planted", [f"list-{'f' * 32}.json", f".list-{'f' * 32}.json.{{pid}}.tmp"],
+                         ids=["final name", "old pid-named temporary"])
 def test_a_symlink_planted_in_the_cache_is_not_written_through(cache, tmp_path, planted):
+    planted = planted.format(pid=os.getpid())      # the old predictable name; ids fixed for xdist
     victim = tmp_path / "victim"
     victim.write_text("precious")
     cache.mkdir(parents=True, mode=0o700)
