@@ -259,6 +259,26 @@ def test_compare_finds_a_weakened_method(detectors, tmp_path, capsys):
     assert main(["compare", str(base), str(weak)]) == 0
 
 
+def test_compare_refuses_pd_at_another_false_alarm_level_only_for_calibrated_configs(mixed, tmp_path, capsys):
+    """The same run with its stored Pfa changed: the detectors and TBD are not comparable,
+    the tracker (no calibration) is still compared, and the gate fails on the others."""
+    import json
+    import shutil
+    import sqlite3
+    other = Path(shutil.copytree(mixed, tmp_path / "other"))
+    with sqlite3.connect(other / "results.sqlite") as con:
+        plan = json.loads(con.execute("SELECT value FROM meta WHERE key='plan'").fetchone()[0])
+        plan["sweep"]["calibration"]["pfa"] = 0.2
+        con.execute("UPDATE meta SET value=? WHERE key='plan'", (json.dumps(plan),))
+    assert main(["compare", str(mixed), str(other), "--out", str(tmp_path / "cmp"), "--fail-on-regression"]) \
+        == EXIT_REGRESSION
+    overall = pd.read_csv(tmp_path / "cmp" / "compare.csv").query("snr_db != snr_db")       # NaN: over all levels
+    calibrated = overall.config.map(lambda c: _task_of(mixed)[c].calibrated)
+    assert (overall[calibrated].change == "not comparable").all() and calibrated.any()
+    assert (overall[~calibrated].change == "no significant change").all() and (~calibrated).any()
+    assert "Pfa 0.02 in A, 0.2 in B" in capsys.readouterr().out
+
+
 def test_compare_refuses_what_is_not_a_run(detectors, tmp_path, capsys):
     base, _ = detectors
     assert main(["compare", str(tmp_path), str(base)]) == EXIT_BAD_INPUT
