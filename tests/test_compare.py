@@ -132,6 +132,14 @@ def test_an_incomplete_run_is_compared_on_the_trials_both_hold(runs, tmp_path):
     assert overall.paired.all() and (overall.n_a == 10).all() and (overall.n_b == 10).all()
     assert (overall.difference == 0).all() and (overall.change == "no significant change").all()
 
+    def five_trials(plan):                  # the same store as a complete sweep of 5 trials per level
+        plan["sweep"]["trials"] = plan["scenarios"][0]["trials"] = 5
+    _edit(_edit_plan(cut, five_trials), ("UPDATE meta SET value = '14' WHERE key = 'units_total'", ()))
+    code, out, _ = _compare(runs["base"], cut)
+    top = out.split("|")[0]
+    assert code == 0 and "is incomplete" not in top
+    assert "**Trials per level of `cv-turn-cv` differ**: A 10, B 5; compared on the trials both runs hold" in top
+
 
 # ------------------------------------------------------------------ one run only
 

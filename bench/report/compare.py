@@ -99,9 +99,14 @@ class Run:
         bad = r[r.error.notna()]
         return len(r), len(bad), str(bad.error.iloc[0]) if len(bad) else ""
 
+    def _scenario(self, scenario: str) -> dict:
+        return next((s for s in self.record["scenarios"] if s["label"] == scenario), {})
+
     def levels(self, scenario: str) -> list[float]:
-        sc = next((s for s in self.record["scenarios"] if s["label"] == scenario), {})
-        return [float(x) for x in sc.get("snr_db", self.record["sweep"].get("snr_db", []))]
+        return [float(x) for x in self._scenario(scenario).get("snr_db", self.record["sweep"].get("snr_db", []))]
+
+    def trials_per_level(self, scenario: str):
+        return self._scenario(scenario).get("trials", self.record["sweep"].get("trials"))
 
     def calibration(self) -> dict:
         cal = self.record["sweep"].get("calibration", {})
@@ -189,6 +194,10 @@ def comparability_notes(a: Run, b: Run, matched: list[tuple[str, str]], calibrat
             notes.append(f"**SNR levels of `{scenario}` differ**: A {_levels_text(la)}, B {_levels_text(lb)}; "
                          f"compared at the {_plural(common, 'common level')}, the others are listed as in one "
                          "run only.")
+        ta, tb = a.trials_per_level(scenario), b.trials_per_level(scenario)
+        if ta != tb:
+            notes.append(f"**Trials per level of `{scenario}` differ**: A {ta}, B {tb}; compared on the trials "
+                         "both runs hold (n_a, n_b).")
         diff = {k: (pa[scenario].get(k), pb[scenario].get(k)) for k in {**pa[scenario], **pb[scenario]}
                 if pa[scenario].get(k) != pb[scenario].get(k)}
         if diff:
@@ -287,10 +296,9 @@ def _only_rows(run: Run, side: str, scenario: str, config: str, levels=None) -> 
     g = _trials_of(run, scenario, config)
     key = {"scenario": scenario, "task": task.name, "config": config, "metric": task.ranking_metric,
            "paired": False, "change": f"only in {side}"}
-    cells = [(s, g[g.snr_db == s]) for s in sorted(set(g.snr_db))] if levels is None else \
-        [(s, g[g.snr_db == s]) for s in levels]
-    if levels is None:
-        cells.insert(0, (np.nan, g))
+    overall = levels is None
+    cells = ([(np.nan, g)] if overall else []) + [(s, g[g.snr_db == s])
+                                                  for s in (sorted(set(g.snr_db)) if overall else levels)]
     rows = []
     for snr, part in cells:
         n, mean = _one_side(part, task.ranking_metric) if len(part) else (0, np.nan)
