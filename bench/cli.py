@@ -114,7 +114,8 @@ def build_parser() -> argparse.ArgumentParser:
     cmp.add_argument("run_b", metavar="RUN_B", help="run folder B (e.g. after it)")
     cmp.add_argument("--out", help="also write compare.csv, compare_summary.csv and compare.md into this folder")
     cmp.add_argument("--fail-on-regression", action="store_true",
-                     help=f"exit {EXIT_REGRESSION} when a method config got significantly worse (for CI)")
+                     help=f"exit {EXIT_REGRESSION} when a method config got significantly worse, ran in A and "
+                          "failed in B, or is not comparable (for CI)")
     view = sub.add_parser("view", help="open a run's recording in the Rerun viewer (--web: in a browser)")
     view.add_argument("dir")
     view.add_argument("--web", action="store_true",

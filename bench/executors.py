@@ -71,8 +71,8 @@ _IN_WORKER = False
 
 
 def in_worker() -> bool:
-    """Whether this process is a worker of :class:`LocalExecutor` (no user at its terminal:
-    a KeyboardInterrupt there can only come from the code it runs)."""
+    """Whether this process is a worker of :class:`LocalExecutor` or :class:`DaskExecutor` (no
+    user at its terminal: a KeyboardInterrupt there can only come from the code it runs)."""
     return _IN_WORKER
 
 
@@ -416,8 +416,12 @@ class DaskExecutor:
 
     At most two units per worker thread are in flight (the window follows the
     cluster as workers join or leave), so a huge sweep never floods the
-    scheduler. A unit whose worker dies is rescheduled by dask on another worker
-    (``distributed.scheduler.allowed-failures`` times); a unit that raises is
+    scheduler. Dask fails every unit of a worker that dies (``KilledWorker``), the
+    innocent ones beside the culprit too, so a unit whose worker died is run again
+    *alone* on the cluster once the units in flight are done: only a unit that kills
+    its worker while alone yields a :class:`UnitFailure`, and the runner then runs it
+    config by config as it does for the local pool (``bench.runner._run_phase``), so no
+    innocent config is recorded as failed. A unit that raises is
     retried ``retries`` times. Each submitted unit yields exactly one result, and
     the store ignores a second result of a unit it already holds, so a unit is
     never counted twice. Results never depend on the cluster: a unit's random
@@ -447,10 +451,14 @@ class DaskExecutor:
             import dask
 
             _start_forkserver(["bench._forkserver", "distributed"])
-            self._config = dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"})
+            # allowed-failures 0: a unit whose worker dies comes back at once (imap_unordered
+            # runs it again, alone), rather than after killing three more workers.
+            self._config = dask.config.set({"distributed.worker.multiprocessing-method": "forkserver",
+                                           "distributed.scheduler.allowed-failures": 0})
             try:
+                # CRITICAL: a worker that dies is a unit's failure, which the run reports itself
                 self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                            dashboard_address=None, silence_logs=logging.ERROR)
+                                            dashboard_address=None, silence_logs=logging.CRITICAL)
                 self.client = Client(self.cluster, set_as_default=False)
             except BaseException:
                 self.shutdown(cancel=True)
@@ -502,24 +510,37 @@ class DaskExecutor:
 
     def imap_unordered(self, fn: Callable, tasks: Iterable, *, stop: Callable[[], bool] | None = None,
                        timeout: float | None = None) -> Iterator:
-        """As :meth:`LocalExecutor.imap_unordered`; a unit dask gives up on (its workers kept
-        dying, ``KilledWorker``) yields a :class:`UnitFailure`. ``timeout`` is not enforced:
-        a dask worker cannot be stopped in the middle of a unit."""
-        from distributed import as_completed
+        """As :meth:`LocalExecutor.imap_unordered`; a unit whose worker died (``KilledWorker``)
+        is run again alone once the units in flight are done, and yields a :class:`UnitFailure`
+        only if it kills its worker alone too. ``timeout`` is not enforced: a dask worker
+        cannot be stopped in the middle of a unit."""
+        from distributed import KilledWorker, as_completed
 
         todo = iter(tasks)
         running = as_completed(loop=self.client.loop)
         task_of: dict = {}
+        suspects: list = []         # units whose worker died while other units were in flight
+        alone: set = set()          # the key of the unit running alone, if any
+
+        def submit(task):
+            fut = self.client.submit(_on_dask_worker, fn, task, pure=False, retries=self.retries)
+            self._futures.add(fut)
+            task_of[fut.key] = task
+            running.add(fut)
+            return fut
 
         def refill() -> None:
-            while not (stop is not None and stop()) and len(self._futures) < self._limit():
+            if stop is not None and stop():
+                return
+            if suspects:            # drain the cluster, then run the suspects one at a time
+                if not self._futures:
+                    alone.add(submit(suspects.pop(0)).key)
+                return
+            while len(self._futures) < self._limit():
                 task = next(todo, _END)
                 if task is _END:
                     return
-                fut = self.client.submit(fn, task, pure=False, retries=self.retries)
-                self._futures.add(fut)
-                task_of[fut.key] = task
-                running.add(fut)
+                submit(task)
 
         refill()
         while self._futures:
@@ -528,8 +549,20 @@ class DaskExecutor:
                 task = task_of.pop(fut.key)
                 try:
                     result = fut.result()         # the unit's own exception, after its retries
-                except Exception as exc:  # noqa: BLE001 - KilledWorker and the like: this unit failed
+                except KilledWorker:
+                    # Dask blames every unit on a worker that dies, so an innocent unit beside
+                    # the one that killed it fails too: only a unit that kills its worker while
+                    # alone on the cluster is a failure (the runner then isolates its configs).
+                    if fut.key not in alone:
+                        suspects.append(task)
+                        fut.release()
+                        refill()
+                        continue
+                    result = UnitFailure(task, "worker process died while running this unit "
+                                               "(alone on the Dask cluster: KilledWorker)")
+                except Exception as exc:  # noqa: BLE001 - e.g. a result that cannot be sent back: this unit failed
                     result = UnitFailure(task, f"on the Dask cluster: {error_text(exc)}")
+                alone.discard(fut.key)
                 fut.release()
                 yield result
                 refill()
@@ -558,6 +591,14 @@ class DaskExecutor:
     def kill(self) -> None:
         """Stop at once (a second Ctrl-C)."""
         self.shutdown(cancel=True)
+
+
+def _on_dask_worker(fn: Callable, task):
+    """``fn(task)`` on a Dask worker, which from then on is a worker (:func:`in_worker`): a
+    KeyboardInterrupt there comes from the code it runs (a unit's failure), never from a user."""
+    global _IN_WORKER
+    _IN_WORKER = True
+    return fn(task)
 
 
 def check_scheduler(address: str) -> None:

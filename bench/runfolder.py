@@ -294,6 +294,16 @@ def store_tables() -> set[str]:
     return set(re.findall(r"CREATE TABLE IF NOT EXISTS (\w+)", SCHEMA))
 
 
+def read_only_uri(db: Path) -> str:
+    """The SQLite URI that reads the store ``db`` without writing anything: ``mode=ro``, and
+    ``immutable=1`` when it has no write-ahead log (then the file alone holds every commit;
+    ``mode=ro`` alone would create ``-wal``/``-shm`` beside it, or fail on read-only media).
+    With a log (a run in progress, or one killed), ``mode=ro`` reads its commits too, on
+    read-only media as well."""
+    has_wal = os.path.exists(db.with_name(f"{db.name}-wal")) and os.path.exists(db.with_name(f"{db.name}-shm"))
+    return f"{db.absolute().as_uri()}?mode=ro" + ("" if has_wal else "&immutable=1")
+
+
 def check_store(db: Path, *, need_plan: bool = False) -> None:
     """Refuse (one line, exit 2) a ``results.sqlite`` that is not a bench store (garbage,
     truncated, a folder, a link, another program's SQLite file) without modifying it: read
@@ -325,10 +335,8 @@ def check_store(db: Path, *, need_plan: bool = False) -> None:
         raise os_fault(exc, db, "cannot read") from None
     if not header.startswith(b"SQLite format 3\x00"):
         raise refuse("not an SQLite file")
-    has_wal = os.path.exists(db.with_name(f"{STORE}-wal")) and os.path.exists(db.with_name(f"{STORE}-shm"))
-    uri = f"{db.absolute().as_uri()}?mode=ro" + ("" if has_wal else "&immutable=1")
     try:
-        con = sqlite3.connect(uri, uri=True, timeout=30)
+        con = sqlite3.connect(read_only_uri(db), uri=True, timeout=30)
         try:
             tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")
                       if not r[0].startswith("sqlite_")}

@@ -133,8 +133,15 @@ class Store:
     """Writes are transactions (``BEGIN IMMEDIATE``: a check and the write that depends
     on it see one state of the store, whoever else writes)."""
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, *, read_only: bool = False):
         self.path = Path(path)
+        if read_only:       # bench compare: reads, and creates or changes no file (works on read-only media)
+            from bench.runfolder import read_only_uri
+            try:
+                self.db = sqlite3.connect(read_only_uri(self.path), uri=True, timeout=30, isolation_level=None)
+            except sqlite3.Error as exc:
+                raise store_fault(self.path, exc) from None
+            return
         # isolation_level=None: no implicit transactions; writes use _write().
         self.db = sqlite3.connect(self.path, timeout=30, isolation_level=None)
         try:

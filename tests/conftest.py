@@ -28,8 +28,8 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 #: Test modules each run by one xdist worker as a whole: each has a module-scoped fixture
 #: that costs a bench run (or several tests that share one), made once that way. The other
 #: tests go one by one to whichever worker is free.
-ONE_WORKER_MODULES = ("tests/test_cells_task.py", "tests/test_cli.py", "tests/test_recording.py",
-                      "tests/test_reliability_io.py", "tests/test_report_ux.py")
+ONE_WORKER_MODULES = ("tests/test_cells_task.py", "tests/test_cli.py", "tests/test_compare.py",
+                      "tests/test_recording.py", "tests/test_reliability_io.py", "tests/test_report_ux.py")
 
 
 @pytest.hookimpl(optionalhook=True)

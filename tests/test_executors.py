@@ -62,6 +62,30 @@ def test_a_lost_worker_s_unit_is_run_again_and_yielded_once(tmp_path):
     assert sorted(i for i, _ in results) == list(range(12))
 
 
+def test_under_dask_only_the_unit_that_kills_its_worker_fails(tmp_path):
+    """Dask fails every unit of a worker that dies (``KilledWorker``): the units beside the
+    culprit are run again alone and come back; the culprit alone yields a failure."""
+    pytest.importorskip("distributed")
+    from bench.executors import DaskExecutor, UnitFailure
+
+    def unit(i):
+        import os as _os
+        import time as _time
+        if i == 3:
+            _os._exit(1)              # always: the culprit
+        _time.sleep(0.3)              # the others are in flight when it strikes
+        return i
+
+    ex = DaskExecutor(2)
+    try:
+        results = list(ex.imap_unordered(unit, range(8)))
+    finally:
+        ex.shutdown()
+    failures = [r for r in results if isinstance(r, UnitFailure)]
+    assert [f.task for f in failures] == [3] and "worker process died" in failures[0].cause
+    assert sorted(r for r in results if not isinstance(r, UnitFailure)) == [0, 1, 2, 4, 5, 6, 7]
+
+
 def test_workers_that_differ_from_the_driver_are_refused(monkeypatch):
     """Workers must run the driver's harness and plugins, or results would silently differ."""
     pytest.importorskip("distributed")

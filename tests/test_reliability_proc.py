@@ -163,7 +163,34 @@ def test_a_dying_or_exiting_plugin_fails_its_units_and_the_run_completes(hostile
 
     first = _bench(hostile, "run", sweep, "--out", run, "--workers", 1, "--quiet")
     assert first.returncode == 0 and "Traceback" not in first.stderr, first.stderr
-    with sqlite3.connect(run / "results.sqlite") as con:
+    _only_the_culprits_failed(run, clean, "worker process died: it exited with code 3")
+
+    again = _bench(hostile, "run", sweep, "--out", run, "--workers", 2, "--quiet", "--retry-failed", HOSTILE_OFF="1")
+    assert again.returncode == 0, again.stderr
+    assert (run / "trials.csv").read_text() == (clean / "trials.csv").read_text()
+    assert _failures(run / "report.md").strip() == "None: every method config ran on every unit."
+
+
+@pytest.mark.slow
+def test_under_dask_a_dying_plugin_fails_its_units_alone(hostile, tmp_path):
+    """Issue 30, 4b: Dask fails every unit of a worker that dies; the units beside the culprit
+    are run again alone, the culprit's unit config by config (the runner's isolation, as for
+    the local pool): the failures are those of the local pool, the innocent configs' results
+    those of a clean run."""
+    pytest.importorskip("distributed")
+    sweep = tmp_path / "crash.toml"
+    sweep.write_text(CRASH_SWEEP)
+    clean, run = tmp_path / "clean", tmp_path / "run"
+    assert _bench(hostile, "run", sweep, "--out", clean, "--workers", 2, "--quiet", HOSTILE_OFF="1").returncode == 0
+    first = _bench(hostile, "run", sweep, "--out", run, "--executor", "dask", "--workers", 2, "--quiet")
+    assert (run / "report.md").is_file() and "Traceback" not in first.stderr, first.stderr
+    _only_the_culprits_failed(run, clean, "worker process died while running this unit (alone on the Dask")
+
+
+def _only_the_culprits_failed(run, clean, death: str) -> None:
+    """The failures of CRASH_SWEEP: the method's configs on its units above 5 dB (``death``: how
+    its os-exit config's failure begins), every config on the broken scenario's; the rest ran."""
+    with sqlite3.connect(f"file:{run / 'results.sqlite'}?mode=ro", uri=True) as con:
         runs = pd.read_sql_query("SELECT runs.*, units.scenario, units.snr_db FROM runs JOIN units "
                                  "ON runs.unit = units.key", con)
     failed = runs[runs.error.notna()]
@@ -171,7 +198,7 @@ def test_a_dying_or_exiting_plugin_fails_its_units_and_the_run_completes(hostile
     own = failed[failed.scenario == "cv-turn-cv"]
     assert set(own.snr_db) == {10.0} and len(own) == 2 * 3
     causes = own.groupby("method").error.first()
-    assert causes["crash[how=os-exit]"].startswith("worker process died: it exited with code 3")
+    assert causes["crash[how=os-exit]"].startswith(death)
     assert causes["crash[how=system-exit]"].startswith("SystemExit: 4")
     assert causes["crash[how=keyboard-interrupt]"].startswith("KeyboardInterrupt")
     # the scenario's fault: every method config on its units above 5 dB, the rest of it ran
@@ -180,17 +207,12 @@ def test_a_dying_or_exiting_plugin_fails_its_units_and_the_run_completes(hostile
     assert broken.error.str.startswith("the scenario failed to generate the unit: ValueError").all()
     assert runs[runs.snr_db != 10.0].error.isna().all()
     failures = _failures(run / "report.md")
-    assert "exited with code 3" in failures and "SystemExit" in failures and "generate" in failures
+    assert death in failures and "SystemExit" in failures and "generate" in failures
     trials = pd.read_csv(run / "trials.csv")
     reference = pd.read_csv(clean / "trials.csv")
     pd.testing.assert_frame_equal(trials[trials.config == "innovation"].reset_index(drop=True),
                                   reference[(reference.config == "innovation") & ((reference.scenario == "cv-turn-cv")
                                             | (reference.snr_db == 0))].reset_index(drop=True))
-
-    again = _bench(hostile, "run", sweep, "--out", run, "--workers", 2, "--quiet", "--retry-failed", HOSTILE_OFF="1")
-    assert again.returncode == 0, again.stderr
-    assert (run / "trials.csv").read_text() == (clean / "trials.csv").read_text()
-    assert _failures(run / "report.md").strip() == "None: every method config ran on every unit."
 
 
 # ------------------------------------------------------------------ cause 9: time limit, workers cap

@@ -81,13 +81,14 @@ snr_db = [-9, -3, 3]
 
 [[methods]]
 name = "innovation"
-params = {{ window = 5 }}
+label = "candidate"
+params = {{ window = {window} }}
 
 [[methods]]
 name = "wavelet"
 
 [calibration]
-pfa = {pfa}
+pfa = 0.02
 mode = "empirical"
 h0_trials = 100
 
@@ -110,10 +111,11 @@ def mixed(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def detectors(tmp_path_factory) -> tuple[Path, Path]:
-    """The same detector sweep twice: as is, and weakened (a per-step Pfa 100 times
-    smaller raises every threshold; the trials, and so their seeds, are the same)."""
+    """The same detector sweep twice: as is, and with its config "candidate" weakened (a
+    sliding window of 60 steps instead of 5 dilutes the turn; the calibration and the
+    trials, and so their seeds, are the same)."""
     root = tmp_path_factory.mktemp("cmp")
-    return _run(root / "base", DETECTORS.format(pfa=0.02)), _run(root / "weak", DETECTORS.format(pfa=0.0002))
+    return _run(root / "base", DETECTORS.format(window=5)), _run(root / "weak", DETECTORS.format(window=60))
 
 
 def _section(report: str, title: str) -> str:
@@ -282,11 +284,31 @@ def test_compare_finds_a_weakened_method(detectors, tmp_path, capsys):
     diffs = pd.read_csv(tmp_path / "cmp" / "compare.csv")
     overall = diffs[diffs.snr_db.isna()]
     assert overall.paired.all()
-    assert (overall.change == "worse").any() and not (overall.change == "better").any()
-    assert (overall.difference <= 0).all()        # a higher threshold on the same trials never detects more
+    assert dict(zip(overall.config, overall.change)) == {"candidate": "worse", "wavelet": "no significant change"}
+    assert (overall.set_index("config").difference["wavelet"] == 0)      # unchanged: the same trials, the same Pd
     assert "regression:" in captured.err
     # without the flag, the same comparison is a report, not a failure
     assert main(["compare", str(base), str(weak)]) == 0
+
+
+def test_compare_refuses_pd_at_another_false_alarm_level_only_for_calibrated_configs(mixed, tmp_path, capsys):
+    """The same run with its stored Pfa changed: the detectors and TBD are not comparable,
+    the tracker (no calibration) is still compared, and the gate fails on the others."""
+    import json
+    import shutil
+    import sqlite3
+    other = Path(shutil.copytree(mixed, tmp_path / "other"))
+    with sqlite3.connect(other / "results.sqlite") as con:
+        plan = json.loads(con.execute("SELECT value FROM meta WHERE key='plan'").fetchone()[0])
+        plan["sweep"]["calibration"]["pfa"] = 0.2
+        con.execute("UPDATE meta SET value=? WHERE key='plan'", (json.dumps(plan),))
+    assert main(["compare", str(mixed), str(other), "--out", str(tmp_path / "cmp"), "--fail-on-regression"]) \
+        == EXIT_REGRESSION
+    overall = pd.read_csv(tmp_path / "cmp" / "compare.csv").query("snr_db != snr_db")       # NaN: over all levels
+    calibrated = overall.config.map(lambda c: _task_of(mixed)[c].calibrated)
+    assert (overall[calibrated].change == "not comparable").all() and calibrated.any()
+    assert (overall[~calibrated].change == "no significant change").all() and (~calibrated).any()
+    assert "Pfa 0.02 in A, 0.2 in B" in capsys.readouterr().out
 
 
 def test_compare_refuses_what_is_not_a_run(detectors, tmp_path, capsys):
