@@ -144,9 +144,15 @@ def _distribution(top: str, path: Path) -> tuple[str, frozenset[str]]:
     return "", frozenset({top})
 
 
-@functools.lru_cache(maxsize=None)
 def _read_module(name: str, file: Path) -> tuple[str, frozenset[str]]:
-    """(source hash, the modules it may import) of module ``name`` (parsed once per process)."""
+    """(source hash, the modules it may import) of module ``name``; scanned again only
+    when the file changed (an edit between two runs of one process is seen)."""
+    st = file.stat()
+    return _scan_module(name, file, st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=None)
+def _scan_module(name: str, file: Path, _mtime_ns: int, _size: int) -> tuple[str, frozenset[str]]:
     data = file.read_bytes()
     imported = imported_names(data, name, file.name == "__init__.py")
     # importing a.b.c runs a/__init__.py and a/b/__init__.py too
@@ -160,7 +166,6 @@ class CodeIdentity:
     modules: tuple[tuple[str, str], ...]     # (module, its source hash), sorted
 
 
-@functools.lru_cache(maxsize=None)
 def code_identity(module: str) -> CodeIdentity:
     """The code identity of a plugin whose class lives in ``module`` (see the module doc)."""
     path = _module_file(module)
@@ -188,10 +193,10 @@ def code_identity(module: str) -> CodeIdentity:
     return CodeIdentity(digest(json.dumps([dist, modules]).encode()), dist, modules)
 
 
-def config_identity(cls: type, params) -> dict:
+def config_identity(cls: type, params, code: CodeIdentity | None = None) -> dict:
     """The identity of one config of plugin ``cls`` with ``params``: ``identity`` (the
     short hash), ``code``, ``distribution``, ``modules`` and ``data`` (file -> hash)."""
-    code = code_identity(cls.__module__)
+    code = code or code_identity(cls.__module__)
     data = {str(p): file_digest(p) for p in cls().data_files(params)}
     versions = dict(library_versions())
     whole = json.dumps([code.hash, data, versions], sort_keys=True).encode()
@@ -202,9 +207,15 @@ def config_identity(cls: type, params) -> dict:
 def plan_identities(plan) -> dict[str, dict[str, dict]]:
     """``{"scenarios": {label: identity}, "methods": {label: identity}}`` of a plan's configs."""
     from bench import registry
-    return {"scenarios": {sc.label: config_identity(registry.get_scenario(sc.name), sc.params)
-                          for sc in plan.scenarios},
-            "methods": {m.label: config_identity(registry.get_method(m.name), m.params) for m in plan.methods}}
+    codes: dict[str, CodeIdentity] = {}
+
+    def of(cls: type, params) -> dict:
+        if cls.__module__ not in codes:
+            codes[cls.__module__] = code_identity(cls.__module__)
+        return config_identity(cls, params, codes[cls.__module__])
+
+    return {"scenarios": {sc.label: of(registry.get_scenario(sc.name), sc.params) for sc in plan.scenarios},
+            "methods": {m.label: of(registry.get_method(m.name), m.params) for m in plan.methods}}
 
 
 #: where a run folder keeps the results its last run replaced (a store of its own)

@@ -397,3 +397,26 @@ def test_plan_toml_lists_the_identities(tmp_path):
     store.close()
     written = tomllib.loads((tmp_path / "plan.toml").read_text())["provenance"]["identities"]
     assert written == stamps and set(written["methods"]) == {"innovation"}
+
+
+def test_a_code_identity_follows_edits_of_the_plugin_and_of_what_it_imports_only(tmp_path, monkeypatch):
+    """In one process too: an edit of the module or of a module it imports changes the
+    identity; an edit of a module it does not import does not."""
+    import importlib
+
+    from bench.identity import code_identity
+    pkg = tmp_path / "idpkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "_helpers.py").write_text("SCALE = 1\n")
+    (pkg / "other.py").write_text("X = 1\n")
+    (pkg / "mine.py").write_text("import numpy as np\n\n\ndef f():\n    from ._helpers import SCALE\n"
+                                 "    return np.ones(2) * SCALE\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    importlib.import_module("idpkg.mine")
+    first = code_identity("idpkg.mine")
+    assert [m for m, _ in first.modules] == ["idpkg", "idpkg._helpers", "idpkg.mine"] and not first.distribution
+    (pkg / "other.py").write_text("X = 22\n")
+    assert code_identity("idpkg.mine") == first
+    (pkg / "_helpers.py").write_text("SCALE = 22\n")
+    assert code_identity("idpkg.mine").hash != first.hash
