@@ -10,7 +10,8 @@ reports/NAME``).
 Every fault ends with one line on stderr (``error: WHERE: PROBLEM``), never a
 traceback, and an exit code (:data:`EXIT_CODES`): 2 for bad input (before anything
 is written), 3 when the machine refuses (file system, disk, store), 4 when another
-bench holds the run folder, 130 on Ctrl-C.
+bench holds the run folder, 6 when a run's folder holds failed units (after a summary of
+them on stderr), 130 on Ctrl-C.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ EXIT_ENVIRONMENT = 3
 EXIT_IN_USE = 4
 EXIT_INTERRUPTED = 130
 EXIT_REGRESSION = 5     # bench compare --fail-on-regression: a metric got significantly worse
+EXIT_FAILED_UNITS = 6   # bench run: some (unit, method config) runs failed (bench.failures)
 
 EXIT_CODES = f"""exit codes:
   0    done
@@ -47,6 +49,9 @@ EXIT_CODES = f"""exit codes:
        resumes once the cause is fixed
   {EXIT_IN_USE}    the run folder is in use by another bench run or report
   {EXIT_REGRESSION}    bench compare --fail-on-regression: a method config got significantly worse
+  {EXIT_FAILED_UNITS}    bench run: the run folder holds failed (unit, method config) runs; the report
+       is written, stderr ends with each failing config and its first cause
+       (bench report DIR --tracebacks prints the tracebacks)
   {EXIT_INTERRUPTED}  interrupted (Ctrl-C); the same command resumes
 """
 
@@ -108,6 +113,8 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="rebuild CSV, figures, report.md and recording from results.sqlite")
     rep.add_argument("dir")
     rep.add_argument("--no-record", action="store_true", help="do not rewrite recording.rrd")
+    rep.add_argument("--tracebacks", action="store_true",
+                     help="print the stored traceback of every failed run instead (writes nothing)")
     cmp = sub.add_parser("compare", help="differences between two run folders, with intervals "
                                          "(paired when they share trials)")
     cmp.add_argument("run_a", metavar="RUN_A", help="run folder A (e.g. before a change)")
@@ -151,7 +158,8 @@ def _load_plan(args):
     if args.preset:
         source = f"preset {args.preset}"
         try:
-            return parse_sweep_text(presets()[args.preset].read_bytes(), source, allow_large=args.yes)
+            preset = presets()[args.preset]
+            return parse_sweep_text(preset.read_bytes(), source, allow_large=args.yes, base=Path(str(preset)).parent)
         except ConfigError as err:
             raise ConfigError(f"{source}: {err.field}" if err.field else source, err.problem) from None
     try:
@@ -282,14 +290,36 @@ def _run_locked(args, plan, out_dir: Path, command: str) -> int:
             viewer.close()
     try:
         store.close()
-        write_plan_toml(out_dir / "plan.toml", plan, command)
+        write_plan_toml(out_dir / "plan.toml", plan, command, store.stamps)
         report = build_outputs(out_dir, recording=not args.no_record, on_phase=progress.phase)
     except KeyboardInterrupt:
         return _interrupted(out_dir, command, *_stored_units(plan, out_dir))
     finally:
         progress.close()
     print(f"wrote {report}")
-    return 0
+    return _failures_exit(out_dir, command)
+
+
+def _failures_exit(out_dir: Path, command: str) -> int:
+    """0, or after a summary of the stored failures on stderr, :data:`EXIT_FAILED_UNITS`."""
+    from bench.failures import failed, summary_lines
+    from bench.store import Store
+    store = Store(out_dir / "results.sqlite")
+    try:
+        runs = store.runs()
+    finally:
+        store.close()
+    lines = summary_lines(runs)
+    if not lines:
+        return 0
+    print(f"failed: {len(failed(runs))} (unit, method config) runs of {len(lines)} method configs "
+          "(the rest of the report stands):", file=sys.stderr)
+    for line in lines:
+        print(one_line(line), file=sys.stderr)
+    print(f"tracebacks: bench report {shlex.quote(str(out_dir))} --tracebacks; after a fix: {command} "
+          "(a changed plugin re-runs by itself; --retry-failed re-runs the failures of unchanged code)",
+          file=sys.stderr)
+    return EXIT_FAILED_UNITS
 
 
 def cmd_report(args) -> int:
@@ -297,6 +327,8 @@ def cmd_report(args) -> int:
     from bench.progress import Progress
     from bench.report import build_outputs
     out_dir = Path(args.dir)
+    if args.tracebacks:
+        return _print_tracebacks(out_dir)
     progress = Progress(quiet=True)       # `bench report` stays one line on error (its tests, its users)
     with runfolder.open_for_report(out_dir), _store_errors(out_dir):
         try:
@@ -304,6 +336,23 @@ def cmd_report(args) -> int:
         finally:
             progress.close()
     print(f"wrote {report}")
+    return 0
+
+
+def _print_tracebacks(out_dir: Path) -> int:
+    """``bench report DIR --tracebacks``: the stored tracebacks, read-only."""
+    from bench import runfolder
+    from bench.escapes import escape_controls
+    from bench.failures import traceback_text
+    from bench.store import Store
+    if not (out_dir / runfolder.STORE).is_file():
+        raise ConfigError("", f"{out_dir} has no {runfolder.STORE} (not a bench run folder)")
+    runfolder.check_store(out_dir / runfolder.STORE, need_plan=True)
+    store = Store(out_dir / runfolder.STORE)
+    try:
+        print(escape_controls(traceback_text(store.runs())), end="")    # plugin text: no terminal escapes
+    finally:
+        store.close()
     return 0
 
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 import re
 import dataclasses
 import tomllib
@@ -38,7 +39,7 @@ from typing import Any, Mapping
 
 from bench import feasibility, registry
 from bench.errors import ConfigError
-from bench.params import as_float, build_params, field_types, is_tuple_field, params_as_dict, show
+from bench.params import PATH, as_float, build_params, field_types, is_tuple_field, params_as_dict, show
 from bench.rng import stable_key
 
 TOP_KEYS = {"name", "description", "scenario", "scenarios", "trials", "seed", "snr_db", "chunk",
@@ -90,8 +91,11 @@ class ComponentConfig:
 
     @property
     def key(self) -> int:
-        """Stable integer identity, from the name and *all* resolved params."""
-        return stable_key([self.name, params_as_dict(self.params)])
+        """Stable integer identity, from the name and *all* resolved params (a data file
+        by its name: the random streams do not depend on the folder the data lives in)."""
+        values = {k: os.path.basename(v) if _is_path(self.params, k) else v
+                  for k, v in params_as_dict(self.params).items()}
+        return stable_key([self.name, values])
 
 
 @dataclass(frozen=True)
@@ -213,6 +217,17 @@ def _format_value(v: Any) -> str:
     return str(v)
 
 
+def _label_value(params: Any, key: str) -> str:
+    """How a label writes parameter ``key``: a data file by its name alone (its folder
+    depends on where the sweep lives; the label must not)."""
+    value = getattr(params, key)
+    return os.path.basename(value) if _is_path(params, key) else _format_value(value)
+
+
+def _is_path(params: Any, key: str) -> bool:
+    return next(f for f in dataclasses.fields(params) if f.name == key).metadata.get("kind") == PATH
+
+
 def _merge_scenario_grid(configs: tuple[ComponentConfig, ...], axes: tuple[str, ...] = ()) -> dict[str, Any]:
     """Scenario params of the plan: resolved values, lists where a grid varies.
 
@@ -328,7 +343,7 @@ def _grid_axes(params_cls: type, values: Mapping[str, Any], field: str) -> list[
 
 
 def _expand(name: str, params_cls: type, values: Mapping[str, Any], field: str, *,
-            identity: str = "explicit") -> list[ComponentConfig]:
+            identity: str = "explicit", base: str | None = None) -> list[ComponentConfig]:
     """One config per grid point. ``identity`` says which parameters name a config:
     ``"explicit"`` every parameter the sweep set (methods), ``"grid"`` only the
     grid axes (scenarios: a single scenario config is just its name)."""
@@ -339,11 +354,11 @@ def _expand(name: str, params_cls: type, values: Mapping[str, Any], field: str, 
     configs = []
     for combo in itertools.product(*axes) if axes else [()]:
         try:
-            params = build_params(params_cls, dict(combo))
+            params = build_params(params_cls, dict(combo), base)
         except ConfigError as err:
             raise err.within(field) from None
         named = [k for (k, _), axis in zip(combo, axes) if identity == "explicit" or len(axis) > 1]
-        inner = ",".join(f"{k}={_format_value(getattr(params, k))}" for k in named)
+        inner = ",".join(f"{k}={_label_value(params, k)}" for k in named)
         configs.append(ComponentConfig(name, params, f"{name}[{inner}]" if inner else name, inner))
     return configs
 
@@ -385,7 +400,7 @@ def _label_problem(name: str, label: str, params: Any, *, bare_means_defaults: b
     for part in _split_top_level(inner):        # free text ("dp-tbd[prewhiten]") says nothing checkable
         key, eq, text = (x.strip() for x in part.partition("="))
         if eq and key in fields:
-            actual = _format_value(getattr(params, key))
+            actual = _label_value(params, key)
             if text != actual:
                 return f"{label!r} says {key}={text}, but this config has {key}={actual}"[:300]
     return None
@@ -400,7 +415,7 @@ def _params_text_of_label(name: str, label: str) -> str:
     return label
 
 
-def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]
+def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...], base: str | None = None
                    ) -> tuple[tuple[ComponentConfig, ...], tuple[str, ...], tuple[tuple[dict, str], ...]]:
     """The method configs, the sweep field (``methods[i]``) each comes from, and
     the ``optional = true`` entries skipped because their method is unavailable
@@ -430,7 +445,7 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]
             raise ConfigError(f"{field}.name", f"method {cls.name!r} ({cls.task}) cannot run on "
                                                f"any scenario of the sweep: {names}")
         params = _expect_table(entry.get("params", {}), f"{field}.params")
-        expanded = _expand(cls.name, cls.Params, params, f"{field}.params")
+        expanded = _expand(cls.name, cls.Params, params, f"{field}.params", base=base)
         if "label" in entry:
             label = entry["label"]
             if not isinstance(label, str) or not LABEL_PATTERN.match(label):
@@ -458,10 +473,10 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...]
 
 
 def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, ...], trials: int,
-                      identity: str, label: Any = None) -> list[ScenarioConfig]:
+                      identity: str, label: Any = None, base: str | None = None) -> list[ScenarioConfig]:
     cls = registry.get_scenario(name, f"{field}.name" if field != "scenario_params" else "scenario")
     table = _expect_table(params, field)
-    expanded = _expand(cls.name, cls.Params, table, field, identity=identity)
+    expanded = _expand(cls.name, cls.Params, table, field, identity=identity, base=base)
     if label is not None:
         if not isinstance(label, str) or not LABEL_PATTERN.match(label):
             raise ConfigError(field.replace(".params", ".label"), "expected letters, digits, spaces or "
@@ -480,7 +495,7 @@ def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, .
             for c in expanded]
 
 
-def _parse_scenarios(data: Mapping[str, Any], trials: int
+def _parse_scenarios(data: Mapping[str, Any], trials: int, base: str | None = None
                      ) -> tuple[str, tuple[ScenarioConfig, ...], tuple[str, ...]]:
     """``(scenario name or "", configs, the sweep field of each config's params)`` from
     either scenario form."""
@@ -509,7 +524,7 @@ def _parse_scenarios(data: Mapping[str, Any], trials: int
             n = _expect_int(entry.get("trials", trials), f"{field}.trials", 1, 10_000_000)
             identity = "explicit" if names.count(entry["name"]) > 1 else "grid"
             added = _scenario_configs(entry["name"], entry.get("params", {}), f"{field}.params", snr, n,
-                                      identity, entry.get("label"))
+                                      identity, entry.get("label"), base)
             configs += added
             fields += [f"{field}.params"] * len(added)
         seen: set[str] = set()
@@ -525,7 +540,7 @@ def _parse_scenarios(data: Mapping[str, Any], trials: int
     if not isinstance(data["scenario"], str):
         raise ConfigError("scenario", f"expected a scenario name, got {data['scenario']!r}"[:200])
     configs = _scenario_configs(data["scenario"], data.get("scenario_params", {}), "scenario_params",
-                                _parse_snr(data["snr_db"]), trials, "grid")
+                                _parse_snr(data["snr_db"]), trials, "grid", base=base)
     return configs[0].name, tuple(configs), ("scenario_params",) * len(configs)
 
 
@@ -547,8 +562,11 @@ def _parse_calibration(value: Any) -> CalibrationConfig:
     return CalibrationConfig(pfa, mode, h0, float(chance_pd))
 
 
-def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large: bool = False) -> Plan:
-    """Validate a parsed sweep mapping and resolve it into a :class:`Plan`."""
+def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large: bool = False,
+                base: str | os.PathLike | None = None) -> Plan:
+    """Validate a parsed sweep mapping and resolve it into a :class:`Plan`. ``base``: the
+    folder of the sweep file, from which its data paths (``kind="path"`` parameters) are
+    read and made absolute; None: they are kept as written (a resolved plan)."""
     _reject_unknown(data, TOP_KEYS, "")
     for key in ("name", "methods"):
         if key not in data:
@@ -561,11 +579,12 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     if not isinstance(description, str):
         raise ConfigError("description", f"expected a string, got {description!r}"[:200])
     trials = _expect_int(data.get("trials", 100), "trials", 1, 10_000_000)
-    scenario, scenarios, scenario_fields = _parse_scenarios(data, trials)
+    base = None if base is None else os.path.abspath(base)
+    scenario, scenarios, scenario_fields = _parse_scenarios(data, trials, base)
     seed = _expect_int(data.get("seed", 0), "seed", 0, 2**63 - 1)
     chunk = _expect_int(data.get("chunk", 50), "chunk", 1, 1_000_000)
     snr_db = _parse_snr(data["snr_db"]) if "snr_db" in data else scenarios[0].snr_db
-    methods, method_fields, skipped = _parse_methods(data["methods"], scenarios)
+    methods, method_fields, skipped = _parse_methods(data["methods"], scenarios, base)
     method_tasks = tuple(registry.get_method(m.name).task for m in methods)
     calibration = _parse_calibration(data.get("calibration", {}))
     for i, (m, task) in enumerate(zip(methods, method_tasks)):
@@ -573,6 +592,11 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
         if calibration.mode not in modes:
             raise ConfigError("calibration.mode", f"{calibration.mode!r} does not apply to {m.label!r} ({task}); "
                                                   f"use one of {', '.join(map(repr, modes))}")
+        cls = registry.get_method(m.name)
+        if calibration.mode == "nominal" and registry.get_task(task).calibrated and not cls.has_nominal_threshold():
+            others = ", ".join(repr(x) for x in modes if x != "nominal")
+            raise ConfigError("calibration.mode", f"'nominal' needs an analytic threshold and {m.label!r} has none "
+                                                  f"(it is calibrated on null trials): use {others}")
     record = _expect_table(data.get("record", {}), "record")
     _reject_unknown(record, {"trials", "timeline_snr_db"}, "record")
     record_trials = _expect_int(record.get("trials", 1), "record.trials", 0, 1000)
@@ -630,10 +654,11 @@ def load_sweep(path: str | Path, *, allow_large: bool = False) -> Plan:
             raw = f.read(MAX_SWEEP_BYTES + 1)      # bounded: never a huge file (or a pipe) in memory
     except OSError as exc:
         raise ConfigError("", f"cannot read the file ({exc.strerror or exc})") from None
-    return parse_sweep_text(raw, str(path), allow_large=allow_large)
+    return parse_sweep_text(raw, str(path), allow_large=allow_large, base=path.parent)
 
 
-def parse_sweep_text(raw: bytes, source: str, *, allow_large: bool = False) -> Plan:
+def parse_sweep_text(raw: bytes, source: str, *, allow_large: bool = False,
+                     base: str | os.PathLike | None = None) -> Plan:
     if len(raw) > MAX_SWEEP_BYTES:
         raise ConfigError("", f"more than {MAX_SWEEP_BYTES:,} bytes; a sweep file is at most that "
                               "(a grid axis that long would not run anyway)")
@@ -649,4 +674,4 @@ def parse_sweep_text(raw: bytes, source: str, *, allow_large: bool = False) -> P
         raise ConfigError("", f"invalid TOML: {str(exc).split(';')[0]}") from None
     except RecursionError:
         raise ConfigError("", "invalid TOML: nested too deeply") from None
-    return parse_sweep(data, source, allow_large=allow_large)
+    return parse_sweep(data, source, allow_large=allow_large, base=base)

@@ -22,11 +22,15 @@ detector is compared at the same false-alarm rate.
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
+
+from bench.params import PATH
 
 MANEUVER_DETECTION = "maneuver-detection"
 TRACKING = "tracking"
@@ -246,6 +250,15 @@ class Component:
     def default_params(cls):
         return cls.Params()
 
+    def data_files(self, params) -> list[Path]:
+        """The data files a config with ``params`` reads: their content is part of the
+        config's identity, so editing one re-runs the results that read it
+        (:mod:`bench.identity`). The default: the values of the parameters declared
+        ``param(..., kind="path")`` (a sweep resolves them from its own folder), "" left
+        out. Override it when the files follow from the parameters otherwise."""
+        return [Path(getattr(params, f.name)) for f in dataclasses.fields(params)
+                if f.metadata.get("kind") == PATH and getattr(params, f.name)]
+
 
 class Scenario(Component):
     """Supplies batches of trials. Subclasses implement :meth:`generate`.
@@ -323,9 +336,23 @@ class Method(Component):
         raise NotImplementedError
 
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
-        """The method's own analytic threshold for per-step false-alarm rate
-        ``pfa`` (detectors) or per-scene rate (TBD)."""
-        raise NotImplementedError
+        """The method's own analytic threshold for the false-alarm rate ``pfa`` of its
+        task (per step for detectors, per scene for TBD, per cell for CFAR).
+
+        The contract (checked by ``tests/test_conformance.py``): optional. A method that
+        has an analytic threshold overrides this and returns a finite number; one
+        calibrated empirically (on null trials: ``empirical``, ``gumbel``) does not
+        override it, and this default returns NaN, which means "none" everywhere (the
+        report leaves the nominal columns empty). A sweep asking for ``nominal``
+        calibration of a method that does not override it is refused at validation
+        (:meth:`has_nominal_threshold`); an override may still return NaN for a config
+        that has none, whose calibration then fails (and its evaluation units with it)."""
+        return float("nan")
+
+    @classmethod
+    def has_nominal_threshold(cls) -> bool:
+        """Whether the method declares an analytic threshold (overrides :meth:`nominal_threshold`)."""
+        return cls.nominal_threshold is not Method.nominal_threshold
 
     def reference_run(self, batch: Batch, params) -> Any:
         """The same output as :meth:`run` by the straightforward implementation

@@ -9,6 +9,10 @@ Each kind has its exit code (README, 'Commands'; ``bench --help``):
   system, disk full, file-size limit, I/O error); nothing is half-written, and the
   same command resumes once the cause is fixed;
 * :class:`FolderInUse`, exit 4: another ``bench`` holds the run folder's lock.
+
+Not an error kind: ``bench run`` exits 6 (``bench.cli.EXIT_FAILED_UNITS``) when the run
+folder holds failed (unit, method config) runs, after writing the report and one line
+per failing config on stderr (:mod:`bench.failures`).
 """
 
 from __future__ import annotations

@@ -29,24 +29,33 @@ from __future__ import annotations
 import dataclasses
 import math
 import operator
+import os
 import typing
 from typing import Any, Mapping
 
 from bench.errors import ConfigError
 
+#: the ``kind`` of a parameter that names a data file
+PATH = "path"
+
 
 def param(default: Any, doc: str, *, ge=None, gt=None, le=None, lt=None,
           choices: tuple | None = None, min_len: int | None = None,
-          max_len: int | None = None, why: str | None = None) -> Any:
+          max_len: int | None = None, why: str | None = None, kind: str | None = None) -> Any:
     """A dataclass field with documentation and range checks.
 
     ``ge``/``gt``/``le``/``lt`` bound numbers (and each element of a tuple of
     numbers); ``choices`` restricts strings; ``min_len``/``max_len`` bound the
     length of a tuple; ``why`` says why the bounds are where they are (shown by
-    ``bench list -v``).
+    ``bench list -v``). ``kind="path"`` (a ``str`` field): a data file the
+    component reads; a sweep's relative path is read from the sweep file's folder
+    (:func:`resolve_path`), "" means none, and the file's content is part of the
+    config's identity (:mod:`bench.identity`).
     """
+    if kind not in (None, PATH):
+        raise TypeError(f"param kind {kind!r}: expected None or {PATH!r}")
     meta = {"doc": doc, "ge": ge, "gt": gt, "le": le, "lt": lt,
-            "choices": choices, "min_len": min_len, "max_len": max_len, "why": why}
+            "choices": choices, "min_len": min_len, "max_len": max_len, "why": why, "kind": kind}
     if isinstance(default, list):
         default = tuple(default)
     return dataclasses.field(default=default, metadata=meta)
@@ -168,10 +177,24 @@ def is_tuple_field(cls: type, name: str) -> bool:
     return typing.get_origin(field_types(cls)[name]) is tuple
 
 
-def build_params(cls: type, values: Mapping[str, Any] | None):
+def resolve_path(value: str, base: str | os.PathLike) -> str:
+    """A ``kind="path"`` value of a sweep read from folder ``base``: absolute (a relative
+    path is taken from ``base``, never from the working directory), and an existing file."""
+    if not value:
+        return value
+    path = os.path.normpath(os.path.join(base, os.path.expanduser(value)))
+    if not os.path.isfile(path):
+        where = "" if os.path.isabs(os.path.expanduser(value)) else f" (relative to the sweep file's folder {base})"
+        raise ConfigError("", f"no such file: {path}{where}")
+    return path
+
+
+def build_params(cls: type, values: Mapping[str, Any] | None, base: str | os.PathLike | None = None):
     """Instantiate the params dataclass ``cls`` from a user mapping.
 
-    Unknown names and bad values raise ConfigError naming the field.
+    Unknown names and bad values raise ConfigError naming the field. ``base``: the
+    folder of the sweep file, from which the ``kind="path"`` values are resolved
+    (:func:`resolve_path`); None: taken as given (an already resolved plan).
     """
     values = dict(values or {})
     types = field_types(cls)
@@ -183,6 +206,8 @@ def build_params(cls: type, values: Mapping[str, Any] | None):
             raise ConfigError(str(name), f"unknown parameter (known: {known})")
         try:
             kwargs[name] = check_value(types[name], value, fields[name].metadata)
+            if base is not None and fields[name].metadata.get("kind") == PATH:
+                kwargs[name] = resolve_path(kwargs[name], base)
         except ConfigError as err:
             raise ConfigError(f"{name}{err.field}" if err.field.startswith("[") else name,
                               err.problem) from None
@@ -191,6 +216,39 @@ def build_params(cls: type, values: Mapping[str, Any] | None):
     if callable(validate):
         validate()
     return instance
+
+
+_SCALARS = (bool, int, float, str)
+
+
+def declaration_problem(cls: type) -> str | None:
+    """Why the params dataclass ``cls`` breaks the project's convention, naming the
+    parameter (None if it keeps it): every field a supported type with a default its own
+    checks accept, every number bounded on both sides with a reason (``why``). Checked
+    when a plugin registers (:mod:`bench.registry`), so a sweep can never run a value
+    the plugin did not bound."""
+    types = field_types(cls)
+    for f in dataclasses.fields(cls):
+        tp, meta = types[f.name], f.metadata
+        elem = typing.get_args(tp)[0] if typing.get_origin(tp) is tuple else tp
+        if elem not in _SCALARS:
+            return f"parameter {f.name!r}: type {_type_name(tp)} is not supported (bool, int, float, str or a " \
+                   "tuple of one of them)"
+        lower, upper = (any(meta.get(k) is not None for k in pair) for pair in (("ge", "gt"), ("le", "lt")))
+        if elem in (int, float) and not (lower and upper):
+            return f"parameter {f.name!r} is not bounded on both sides (declare it with param(..., ge= or gt=, " \
+                   "le= or lt=, why=...))"
+        if elem in (int, float) and not meta.get("why"):
+            return f"parameter {f.name!r}: its bounds give no reason (param(..., why=...))"
+        if meta.get("kind") == PATH and tp is not str:
+            return f"parameter {f.name!r}: a path is a str, not a {_type_name(tp)}"
+        if f.default is dataclasses.MISSING:
+            return f"parameter {f.name!r} has no default"
+        try:
+            check_value(tp, f.default, meta)
+        except ConfigError as err:
+            return f"parameter {f.name!r}: its default {show(f.default)} breaks its own declaration: {err.problem}"
+    return None
 
 
 def params_as_dict(params: Any) -> dict[str, Any]:

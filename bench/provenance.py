@@ -10,7 +10,7 @@ from pathlib import Path
 def _versions() -> dict[str, str]:
     import importlib.metadata as md
     out = {"python": platform.python_version()}
-    for pkg in ("radar-maneuver-bench", "numpy", "scipy", "pandas", "filterpy", "rerun-sdk", "matplotlib"):
+    for pkg in ("radar-maneuver-bench", "numpy", "scipy", "numba", "pandas", "filterpy", "rerun-sdk", "matplotlib"):
         try:
             out[pkg] = md.version(pkg)
         except md.PackageNotFoundError:

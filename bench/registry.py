@@ -91,8 +91,15 @@ def _register(table: dict, cls: type, kind: str) -> type:
 
 
 def _check_params(cls: type, kind: str) -> None:
+    """Params a dataclass that keeps the parameter convention (bench.params.declaration_problem)."""
+    from bench.params import declaration_problem
+
+    name = getattr(cls, "name", cls.__qualname__)
     if not dataclasses.is_dataclass(getattr(cls, "Params", None)):
-        raise PluginError(f"{kind} {cls.name!r}: Params is not a dataclass", cls.name)
+        raise PluginError(f"{kind} {name!r}: Params is not a dataclass", name)
+    problem = declaration_problem(cls.Params)
+    if problem:
+        raise PluginError(f"{kind} {name!r}: {problem}", name)
 
 
 def register_method(cls: type[Method]) -> type[Method]:

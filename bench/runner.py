@@ -30,11 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import registry, tomlw
+from bench import failures, registry, tomlw
 from bench.calibration import EQUAL_CHANCE_PD, CalibrationResult, calibrate
 from bench.config import Plan, snr_key
 from bench.executors import (STOP_SIGNALS, SerialExecutor, UnitFailure, error_text, in_worker, make_executor,
                              restore_handler)
+from bench.identity import PREVIOUS, set_aside_changed
 from bench.progress import Progress
 from bench.provenance import provenance
 from bench.recording.record import TrialRecord
@@ -121,12 +122,12 @@ def unit_methods(work: UnitTask) -> list:
     return [mc for mc in methods if work.methods is None or mc.label in work.methods]
 
 
-def failed_result(work: UnitTask, cause: str) -> UnitResult:
+def failed_result(work: UnitTask, cause: str, trace: str | None = None) -> UnitResult:
     """``work``'s unit with every method config it runs failed for ``cause`` (stored like any
-    result: a re-run skips it, ``--retry-failed`` runs it again)."""
+    result, with the traceback ``trace`` if any: a re-run skips it, ``--retry-failed`` runs it again)."""
     unit = work.unit
     return UnitResult(unit.key, unit.phase, unit.scenario_label, unit.snr_db, unit.trial_start, unit.n, 0.0,
-                      runs=[MethodRun(mc.label, 0.0, error=cause) for mc in unit_methods(work)])
+                      runs=[MethodRun(mc.label, 0.0, error=cause, traceback=trace) for mc in unit_methods(work)])
 
 
 def _let_through(exc: BaseException) -> bool:
@@ -173,8 +174,10 @@ def execute_unit(work: UnitTask) -> UnitResult:
     rng = TrialRNG(plan.seed, domain, sc.key, range(unit.trial_start, unit.trial_start + unit.n))
     methods = unit_methods(work)
     t0 = time.perf_counter()
+    scenario_cls = None
     try:
-        batch = registry.get_scenario(sc.name)().generate(sc.params, unit.snr_db, unit.n, rng)
+        scenario_cls = registry.get_scenario(sc.name)
+        batch = scenario_cls().generate(sc.params, unit.snr_db, unit.n, rng)
         realised = batch.scene.realised_snr_db
         common = {"trial": np.asarray(batch.trials, np.int64), "seed": rng.seed_values(),
                   "realised_snr_db": np.asarray(np.full(unit.n, np.nan) if realised is None else realised, float)}
@@ -183,7 +186,8 @@ def execute_unit(work: UnitTask) -> UnitResult:
     except BaseException as exc:  # noqa: BLE001 - the scenario's failure: every method config's on this unit
         if _let_through(exc):
             raise
-        return failed_result(work, f"the scenario failed to generate the unit: {error_text(exc)}")
+        cause, trace = failures.describe(exc, scenario_cls)
+        return failed_result(work, f"the scenario failed to generate the unit: {cause}", trace)
     result = UnitResult(unit.key, unit.phase, sc.label, unit.snr_db, unit.trial_start, unit.n,
                         time.perf_counter() - t0)
     result.common = common
@@ -214,7 +218,7 @@ def execute_unit(work: UnitTask) -> UnitResult:
         except BaseException as exc:  # noqa: BLE001 - one method's failure never stops the others
             if _let_through(exc):
                 raise
-            run.error = error_text(exc)
+            run.error, run.traceback = failures.describe(exc, method_cls)
         run.seconds = time.perf_counter() - t1
         result.runs.append(run)
     tasks = list(dict.fromkeys(_task_of(mc) for mc in methods))
@@ -398,6 +402,7 @@ def clear_run_folder(out_dir: Path) -> None:
     for name in RUN_FILES:
         (out_dir / name).unlink(missing_ok=True)
     shutil.rmtree(out_dir / "figures", ignore_errors=True)
+    shutil.rmtree(out_dir / PREVIOUS, ignore_errors=True)
 
 
 def _capped_workers(workers: int, to_run: int, quiet: bool) -> int:
@@ -445,8 +450,10 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
             store.bind_plan(plan.fingerprint(), plan_record)
             # before the first unit: a report of a run stopped short says it is incomplete
             store.set_meta("units_total", str(total))
+            changed = set_aside_changed(store, plan, out_dir, quiet)     # code or data changed: re-run those
             done = store.done_units()
             failed = store.failed_runs() if retry_failed else {}
+            failed = {u: failed.get(u, set()) | changed.get(u, set()) for u in {*failed, *changed}}
             cal_tasks = [UnitTask(plan, u) for u in cal_units if u.key not in done] \
                 + retry_tasks(plan, cal_units, failed)
             to_run = len(cal_tasks) + sum(u.key not in done for u in eval_units) \
@@ -512,10 +519,11 @@ def plan_record(plan: Plan, command: str) -> dict:
     }
 
 
-def write_plan_toml(path: Path, plan: Plan, command: str) -> None:
-    """The resolved sweep, re-runnable as a sweep file, with provenance."""
+def write_plan_toml(path: Path, plan: Plan, command: str, identities: dict | None = None) -> None:
+    """The resolved sweep, re-runnable as a sweep file, with provenance: the identities
+    (config label -> short hash, ``Store.stamps``) the results were computed with."""
     body = {**plan.to_dict(), "provenance": {"command": command, "fingerprint": plan.fingerprint(),
-                                             **provenance()}}
+                                             **provenance(), "identities": identities}}
     text = "# Resolved plan written by bench; `bench run plan.toml` reproduces the results.\n" + tomlw.dumps(body)
     from bench.runfolder import write_text      # whole, a unique temporary name, listed in the manifest
     write_text(path, text)

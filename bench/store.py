@@ -9,9 +9,14 @@ Arrays are stored as ``.npy``/``.npz`` bytes (never pickle).
 
 Tables
 ------
-meta        key/value: plan fingerprint, the plan as JSON, creation time
-units       one row per finished unit (phase, scenario, SNR, trial range, timing)
-runs        one row per (unit, method config): seconds and error (NULL if fine)
+meta        key/value: plan fingerprint, the plan as JSON, creation time, the current
+            identities of the configs (JSON)
+units       one row per finished unit (phase, scenario, SNR, trial range, timing) and the
+            identity of its scenario config (NULL: stored by a bench that recorded none)
+runs        one row per (unit, method config): seconds, error and traceback (NULL if
+            fine), the identity of the method config
+identities  each identity a run of this folder recorded, described (JSON: code, modules,
+            data files, library versions; :mod:`bench.identity`)
 metrics     per (unit, method config): the per-trial metric columns (npz)
 null_stats  per (calibration unit, method config): null-hypothesis statistic
             values used for calibration (npy) and the nominal threshold
@@ -39,10 +44,11 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS units (
     key TEXT PRIMARY KEY, phase TEXT NOT NULL, scenario TEXT NOT NULL, snr_db REAL,
     trial_start INTEGER NOT NULL, n INTEGER NOT NULL, generate_seconds REAL NOT NULL,
-    finished REAL NOT NULL);
+    finished REAL NOT NULL, identity TEXT);
 CREATE TABLE IF NOT EXISTS runs (
     unit TEXT NOT NULL, method TEXT NOT NULL, seconds REAL NOT NULL, error TEXT,
-    PRIMARY KEY (unit, method));
+    identity TEXT, traceback TEXT, PRIMARY KEY (unit, method));
+CREATE TABLE IF NOT EXISTS identities (identity TEXT PRIMARY KEY, description TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS metrics (
     unit TEXT NOT NULL, method TEXT NOT NULL, data BLOB NOT NULL, PRIMARY KEY (unit, method));
 CREATE TABLE IF NOT EXISTS null_stats (
@@ -53,6 +59,11 @@ CREATE TABLE IF NOT EXISTS records (
 """
 
 
+#: (table, column, type) added since the first stores: an earlier store gets them, NULL
+MIGRATIONS = (("null_stats", "cells", "BLOB"), ("units", "identity", "TEXT"), ("runs", "identity", "TEXT"),
+              ("runs", "traceback", "TEXT"))
+
+
 @dataclass
 class MethodRun:
     """What one method config produced on one unit."""
@@ -60,6 +71,7 @@ class MethodRun:
     label: str
     seconds: float
     error: str | None = None
+    traceback: str | None = None                   # the failure's full traceback
     metrics: dict[str, np.ndarray] | None = None   # evaluation units: per-trial columns
     null_values: np.ndarray | None = None          # calibration units: null statistic values
     null_peaks: np.ndarray | None = None           # calibration units: per-trial window peaks
@@ -135,6 +147,8 @@ class Store:
 
     def __init__(self, path: str | Path, *, read_only: bool = False):
         self.path = Path(path)
+        #: the identities units and runs are stamped with as they are saved (use_identities)
+        self.stamps: dict[str, dict[str, str]] = {"scenarios": {}, "methods": {}}
         if read_only:       # bench compare: reads, and creates or changes no file (works on read-only media)
             from bench.runfolder import read_only_uri
             try:
@@ -151,9 +165,10 @@ class Store:
                 for statement in SCHEMA.split(";"):
                     if statement.strip():
                         self.db.execute(statement)
-                columns = {row[1] for row in self.db.execute("PRAGMA table_info(null_stats)")}
-                if "cells" not in columns:      # a store written before per-cell statistics existed
-                    self.db.execute("ALTER TABLE null_stats ADD COLUMN cells BLOB")
+                for table, column, kind in MIGRATIONS:      # columns a store of an earlier bench lacks
+                    columns = {row[1] for row in self.db.execute(f"PRAGMA table_info({table})")}
+                    if column not in columns:
+                        self.db.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
         except sqlite3.Error as exc:
             self.db.close()
             raise store_fault(self.path, exc) from None
@@ -199,6 +214,72 @@ class Store:
             raise ConfigError("", f"{self.path} holds no plan (not a bench run folder?)")
         return json.loads(text)
 
+    # ---------------------------------------------------------------- identities
+    def use_identities(self, described: dict[str, dict[str, dict]]) -> None:
+        """Stamp what is saved from now on with ``described`` (:func:`bench.identity.plan_identities`),
+        and keep each identity's description."""
+        self.stamps = {kind: {label: d["identity"] for label, d in table.items()} for kind, table in described.items()}
+        with self._write():
+            for table in described.values():
+                for d in table.values():
+                    self.db.execute("INSERT OR IGNORE INTO identities VALUES (?, ?)",
+                                    (d["identity"], json.dumps(d, sort_keys=True)))
+            self.db.execute("INSERT OR REPLACE INTO meta VALUES ('identities', ?)", (json.dumps(self.stamps),))
+
+    def described(self, identity: str) -> dict | None:
+        row = self.db.execute("SELECT description FROM identities WHERE identity=?", (identity,)).fetchone()
+        return None if row is None else json.loads(row[0])
+
+    def stale(self) -> tuple[list[str], dict[str, set[str]]]:
+        """What no longer matches :attr:`stamps`: the units whose scenario config's identity
+        changed (or was never recorded), and per other unit the method configs whose run's did."""
+        units = [key for key, scenario, identity in self.db.execute("SELECT key, scenario, identity FROM units")
+                 if identity is None or identity != self.stamps["scenarios"].get(scenario, identity)]
+        gone = set(units)
+        runs: dict[str, set[str]] = {}
+        for unit, method, identity in self.db.execute("SELECT unit, method, identity FROM runs"):
+            if unit not in gone and (identity is None or identity != self.stamps["methods"].get(method, identity)):
+                runs.setdefault(unit, set()).add(method)
+        return units, runs
+
+    def set_aside(self, units: list[str], runs: dict[str, set[str]], previous: "Store") -> None:
+        """Move the results of ``units`` (whole) and ``runs`` (unit -> method configs) into the
+        store ``previous``, emptied first: it then holds the state they replace, with this
+        store's plan, so ``bench compare`` can compare the two (docs/architecture.md,
+        'Identities'). ``previous`` is written and committed before they leave this store:
+        a crash in between leaves them here, and the next run sets them aside again."""
+        for key in ("fingerprint", "plan", "created", "snr_definition", "units_total"):
+            value = self.meta(key)
+            if value is not None:
+                previous.set_meta(key, value)
+        pairs = [(u, m) for u in units for (m,) in self.db.execute("SELECT method FROM runs WHERE unit=?", (u,))]
+        pairs += [(u, m) for u, methods in runs.items() for m in sorted(methods)]
+        with previous._write():
+            for table in ("units", "runs", "metrics", "null_stats", "records", "identities"):
+                previous.db.execute(f"DELETE FROM {table}")
+            for u in dict.fromkeys(u for u, _ in pairs):
+                self._copy_rows(previous, "units", "key=?", (u,))
+            for u, m in pairs:
+                for table in ("runs", "metrics", "null_stats"):
+                    self._copy_rows(previous, table, "unit=? AND method=?", (u, m))
+            for (identity,) in self.db.execute("SELECT DISTINCT identity FROM runs UNION SELECT identity FROM units"):
+                self._copy_rows(previous, "identities", "identity=?", (identity,))
+        with self._write():
+            for u, m in pairs:
+                for table in ("runs", "metrics", "null_stats"):
+                    self.db.execute(f"DELETE FROM {table} WHERE unit=? AND method=?", (u, m))
+            for u in units:
+                self.db.execute("DELETE FROM units WHERE key=?", (u,))
+                self.db.execute("DELETE FROM records WHERE unit=?", (u,))
+
+    def _copy_rows(self, other: "Store", table: str, where: str, args: tuple) -> None:
+        """The rows of ``table`` matching ``where`` into the same table of ``other``, column by
+        name (an earlier store's migrated columns come in another order)."""
+        cursor = self.db.execute(f"SELECT * FROM {table} WHERE {where}", args)
+        names = [c[0] for c in cursor.description]
+        marks = ",".join("?" * len(names))
+        other.db.executemany(f"INSERT OR REPLACE INTO {table} ({','.join(names)}) VALUES ({marks})", cursor.fetchall())
+
     # ---------------------------------------------------------------- units
     def done_units(self) -> set[str]:
         return {r[0] for r in self.db.execute("SELECT key FROM units")}
@@ -207,17 +288,19 @@ class Store:
         """Store one finished unit in a single transaction; returns whether anything was written.
 
         A unit is stored once: a second result for a stored unit (a unit dask ran
-        again after losing a worker, or a re-run with ``--retry-failed``) only
-        replaces the runs of method configs that *failed* in the stored result;
+        again after losing a worker, a re-run with ``--retry-failed``, or of method
+        configs whose code changed) only replaces the runs of method configs that
+        *failed* in the stored result, and adds those it lacks (:meth:`set_aside`);
         everything else of it is ignored, so nothing is counted twice. The check and the
         write are one transaction, so two writers never both insert a unit.
         """
         with self._write():
             if self.db.execute("SELECT 1 FROM units WHERE key=?", (r.key,)).fetchone() is not None:
                 return self._replace_failed_runs(r)
-            self.db.execute("INSERT INTO units VALUES (?,?,?,?,?,?,?,?)",
+            self.db.execute("INSERT INTO units (key, phase, scenario, snr_db, trial_start, n, generate_seconds, "
+                            "finished, identity) VALUES (?,?,?,?,?,?,?,?,?)",
                             (r.key, r.phase, r.scenario, r.snr_db, r.trial_start, r.n,
-                             r.generate_seconds, time.time()))
+                             r.generate_seconds, time.time(), self.stamps["scenarios"].get(r.scenario)))
             self._insert_runs(r, r.runs)
             for trial, blob in r.records:
                 self.db.execute("INSERT INTO records VALUES (?,?,?)", (r.key, trial, blob))
@@ -232,10 +315,10 @@ class Store:
 
     def _replace_failed_runs(self, r: UnitResult) -> bool:
         """Within the caller's transaction: swap the stored failed runs of unit ``r.key``
-        for the runs of ``r`` (the other method configs' results stay untouched)."""
-        failed = {m for (m,) in self.db.execute("SELECT method FROM runs WHERE unit=? AND error IS NOT NULL",
-                                                (r.key,))}
-        runs = [run for run in r.runs if run.label in failed]
+        for the runs of ``r``, and add the runs it lacks (set aside when their code
+        changed, :meth:`set_aside`); the other method configs' results stay untouched."""
+        stored = dict(self.db.execute("SELECT method, error IS NOT NULL FROM runs WHERE unit=?", (r.key,)))
+        runs = [run for run in r.runs if stored.get(run.label, True)]
         if not runs:
             return False
         for run in runs:
@@ -252,7 +335,9 @@ class Store:
 
     def _insert_runs(self, r: UnitResult, runs: list[MethodRun]) -> None:
         for run in runs:
-            self.db.execute("INSERT INTO runs VALUES (?,?,?,?)", (r.key, run.label, run.seconds, run.error))
+            self.db.execute("INSERT INTO runs (unit, method, seconds, error, identity, traceback) VALUES (?,?,?,?,?,?)",
+                            (r.key, run.label, run.seconds, run.error, self.stamps["methods"].get(run.label),
+                             run.traceback))
             if run.metrics is not None:
                 cols = {**r.common, **run.metrics}
                 self.db.execute("INSERT INTO metrics VALUES (?,?,?)",
@@ -270,7 +355,7 @@ class Store:
 
     def runs(self) -> pd.DataFrame:
         return pd.read_sql_query(
-            "SELECT runs.unit, runs.method, runs.seconds, runs.error, units.phase, units.scenario, "
+            "SELECT runs.unit, runs.method, runs.seconds, runs.error, runs.traceback, units.phase, units.scenario, "
             "units.snr_db, units.n FROM runs JOIN units ON runs.unit = units.key ORDER BY runs.unit, runs.method",
             self.db)
 

@@ -190,11 +190,9 @@ class DpTbd(Method):
         K, H, W = shape
         return K * H * W + 24 * H * W + 4 * n * H * W + (4 * n * K * H * W if params.prewhiten else 0)
 
-    def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
-        """NaN: the score is a maximum over all cells and paths of a scene,
-        whose null law has no closed form; calibrate on null scenes
-        (``empirical``, or ``gumbel`` for small Pfa)."""
-        return float("nan")
+    # No nominal_threshold (bench.core.Method: NaN, none): the score is a maximum over all
+    # cells and paths of a scene, whose null law has no closed form; calibrate on null
+    # scenes (``empirical``, or ``gumbel`` for small Pfa).
 
 
 def prewhiten(z: np.ndarray, batch: Batch) -> np.ndarray:
@@ -585,8 +583,6 @@ class DpTbdMf(Method):
         volumes = 4 if params.likelihood == "along-track" else 2
         return max(K, 3) * D * H * W + (4 * volumes + 1) * D * H * W + 32 * H * W + 4 * n * H * W
 
-    def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
-        """NaN: the score is a maximum over all cells and paths of a scene,
-        whose null law has no closed form; calibrate on null scenes
-        (``empirical``, or ``gumbel`` for small Pfa)."""
-        return float("nan")
+    # No nominal_threshold (bench.core.Method: NaN, none): the score is a maximum over all
+    # cells and paths of a scene, whose null law has no closed form; calibrate on null
+    # scenes (``empirical``, or ``gumbel`` for small Pfa).

@@ -8,10 +8,11 @@
 Imports inside functions count too.
 """
 
-import ast
 from pathlib import Path
 
 import pytest
+
+from bench.identity import imported_names
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("bench", "methods", "models", "scenarios")
@@ -27,18 +28,7 @@ FORBIDDEN = {
 def imported_modules(path: Path, package: str) -> set[str]:
     """Absolute dotted names a module of ``package`` imports (``from a.b import c``:
     ``a.b`` and ``a.b.c``, since ``c`` may be a module)."""
-    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
-    names = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            names.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:                              # relative: stays in its own package
-                base = f"{package}.{base}" if base else package
-            names.add(base)
-            names.update(f"{base}.{alias.name}" for alias in node.names)
-    return names
+    return imported_names(path.read_text(encoding="utf-8"), f"{package}.{path.stem}")
 
 
 def modules(package: str) -> list[Path]:

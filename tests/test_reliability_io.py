@@ -355,9 +355,10 @@ def test_the_unit_check_and_its_insert_are_one_transaction(tmp_path):
     go.set()
     assert started.wait(10)
     time.sleep(0.2)                          # B now waits for A's lock (before the fix: had already checked)
-    a.db.execute("INSERT INTO units VALUES (?,?,?,?,?,?,?,?)",
-                 ("evaluation/s/+0/000000000+2", "evaluation", "s", 0.0, 0, 2, 0.1, 0.0))
-    a.db.execute("INSERT INTO runs VALUES (?,?,?,?)", ("evaluation/s/+0/000000000+2", "m", 0.1, None))
+    a.db.execute("INSERT INTO units (key, phase, scenario, snr_db, trial_start, n, generate_seconds, finished) "
+                 "VALUES (?,?,?,?,?,?,?,?)", ("evaluation/s/+0/000000000+2", "evaluation", "s", 0.0, 0, 2, 0.1, 0.0))
+    a.db.execute("INSERT INTO runs (unit, method, seconds, error) VALUES (?,?,?,?)",
+                 ("evaluation/s/+0/000000000+2", "m", 0.1, None))
     a.db.commit()
     thread.join(30)
     assert result == [False, 1], result      # B saw A's unit and stored nothing twice

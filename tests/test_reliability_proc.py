@@ -162,7 +162,7 @@ def test_a_dying_or_exiting_plugin_fails_its_units_and_the_run_completes(hostile
     assert _bench(hostile, "run", sweep, "--out", clean, "--workers", 2, "--quiet", HOSTILE_OFF="1").returncode == 0
 
     first = _bench(hostile, "run", sweep, "--out", run, "--workers", 1, "--quiet")
-    assert first.returncode == 0 and "Traceback" not in first.stderr, first.stderr
+    assert first.returncode == 6 and "Traceback" not in first.stderr, first.stderr
     _only_the_culprits_failed(run, clean, "worker process died: it exited with code 3")
 
     again = _bench(hostile, "run", sweep, "--out", run, "--workers", 2, "--quiet", "--retry-failed", HOSTILE_OFF="1")
@@ -245,7 +245,7 @@ def test_a_unit_past_its_time_limit_fails_and_its_worker_is_replaced(hostile, tm
     marker = uuid.uuid4().hex
     run = _bench(hostile, "run", sweep, "--out", tmp_path / "run", "--workers", 8, "--no-record",
                  **{MARKER: marker})
-    assert run.returncode == 0, run.stderr                           # the method sleeps an hour: it was stopped
+    assert run.returncode == 6, run.stderr                           # the method sleeps an hour: it was stopped
     # 2 calibration + 2 evaluation units: 4 workers, said in one line
     assert "4 units to run: starting 4 workers (--workers 8)" in run.stderr.splitlines(), run.stderr
     with sqlite3.connect(tmp_path / "run" / "results.sqlite") as con:

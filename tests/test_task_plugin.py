@@ -105,7 +105,7 @@ class Bumps(Scenario):
 
     @dataclass(frozen=True)
     class Params:
-        steps: int = param(20, "steps per trial", ge=2)
+        steps: int = param(20, "steps per trial", ge=2, le=10_000, why="a bump needs two steps; a test stays small")
 
     def generate(self, params, snr_db, n, rng):
         k = params.steps

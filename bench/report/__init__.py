@@ -315,7 +315,33 @@ def _section_provenance(record: dict, store: Store, prov: dict) -> str:
         rows.append(["wall time of the units in the last `bench run` (before report and recording)",
                      f"{float(wall):.1f} s"])
     rows += [[text(k), text(v)] for k, v in prov.items()]
-    return _section("provenance", _table(["", ""], rows))
+    return _section("provenance", "\n\n".join([_table(["", ""], rows), *_identities_text(record, store)]))
+
+
+def _identities_text(record: dict, store: Store) -> list[str]:
+    """The identity of each config (docs/architecture.md, 'Identities'): what its stored
+    results were computed by, and the identities the last run replaced (kept in previous/)."""
+    import json
+    stamps = json.loads(store.meta("identities") or "null")
+    if stamps is None:
+        return ["Code and data identities: not recorded (stored by an earlier bench)."]
+    replaced = json.loads(store.meta("replaced") or '{"scenarios": {}, "methods": {}}')
+    rows, versions = [], {}
+    for kind, configs in (("scenarios", record["scenarios"]), ("methods", record["methods"])):
+        for config in configs:
+            label = config["label"]
+            identity = stamps[kind].get(label, "")
+            d = store.described(identity) or {}
+            versions = d.get("versions", versions)
+            data = ", ".join(f"{text(Path(p).name)} {code(h)}" for p, h in d.get("data", {}).items()) or "–"
+            source = code(d.get("code", "?")) + (f" ({text(d['distribution'])})" if d.get("distribution") else "")
+            old = ", ".join(code(x) for x in replaced.get(kind, {}).get(label, [])) or "–"
+            rows.append([code(label), kind[:-1], code(identity), source, data, old])
+    lines = ", ".join(f"{text(k)} {text(v)}" for k, v in versions.items())
+    return [f"Code and data identities ({lines}): a stored result is re-computed when its config's identity "
+            "changes; the results the last run replaced are in `previous/` "
+            "(`bench compare DIR/previous DIR`).",
+            _table(["config", "kind", "identity", "code", "data files", "replaced (previous/)"], rows)]
 
 
 def _section_recording(n: int, out_dir: Path, tasks: list) -> str:
