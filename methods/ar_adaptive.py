@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.stats
 
+from bench.batched import inner, matmul, matvec
 from bench.core import TRACKING, Batch, Method, TrackingOutput
 from bench.errors import ConfigError
 from bench.params import param
@@ -51,11 +52,11 @@ def ar_coefficients(M: int, N: int, P: np.ndarray | None = None) -> np.ndarray:
     e0[0] = 1.0
     if P is None:
         return V @ np.linalg.solve(V.T @ V, e0)
-    ridge = COEFFICIENT_RIDGE * np.einsum("nii->n", P) / M
+    ridge = COEFFICIENT_RIDGE * sum(P[:, i, i] for i in range(M)) / M
     Pr = P + ridge[:, None, None] * np.eye(M)
     PiV = np.linalg.solve(Pr, np.broadcast_to(V, (len(P), M, N + 1)))          # (n, M, N+1)
-    lam = np.linalg.solve(V.T @ PiV, np.broadcast_to(e0[:, None], (len(P), N + 1, 1)))
-    return (PiV @ lam)[..., 0]
+    lam = np.linalg.solve(matmul(V.T, PiV), np.broadcast_to(e0[:, None], (len(P), N + 1, 1)))
+    return matmul(PiV, lam)[..., 0]
 
 
 def companion(a: np.ndarray) -> np.ndarray:
@@ -192,8 +193,8 @@ def _latched_mode(high, in_high, run, x, P, acc_row, accel_nis, chiW, k):
     normalised squared acceleration estimates, sum a_j^2 / var(a_j), is below the
     chi^2(W) quantile at level alpha (the acceleration is not significant)."""
     W = accel_nis.shape[1]
-    acc = x @ acc_row
-    var = np.einsum("i,nij,j->n", acc_row, P, acc_row)
+    acc = inner(x, acc_row)
+    var = inner(matvec(P, acc_row), acc_row)
     accel_nis[:, k % W] = acc ** 2 / np.maximum(var, 1e-300)
     run = np.where(high, run + 1, 0)
     back = high & (run >= W) & (accel_nis.sum(axis=1) < chiW)
@@ -374,11 +375,11 @@ def _assemble(batch: Batch, model: KinematicModel, params, axes: list[ARFilterRe
     D P D', block diagonal over axes), and the traces."""
     n, K, D = batch.n, batch.steps, model.dims
     Dm = kinematic_map(params.state_dim, model.dt_s)
-    estimate = np.concatenate([res.x_post @ Dm.T for res in axes], axis=-1)
+    estimate = np.concatenate([matvec(Dm, res.x_post) for res in axes], axis=-1)
     covariance = np.zeros((n, K, 3 * D, 3 * D))
     floor = OUTPUT_COVARIANCE_FLOOR * model.noise_std_m ** 2 * np.eye(params.state_dim)
     for j, res in enumerate(axes):
-        covariance[:, :, 3 * j:3 * j + 3, 3 * j:3 * j + 3] = Dm @ (res.P_post + floor) @ Dm.T
+        covariance[:, :, 3 * j:3 * j + 3, 3 * j:3 * j + 3] = matmul(matmul(Dm, res.P_post + floor), Dm.T)
     traces = {"mode": np.any([res.high for res in axes], axis=0).astype(float),
               "switch": np.any([res.switch for res in axes], axis=0).astype(float),
               "q_k": np.mean([res.q for res in axes], axis=0),

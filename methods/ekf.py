@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bench.batched import inner, matmul, matvec
 from bench.core import TRACKING, Batch, Method, TrackingOutput
 from bench.params import param
 from bench.registry import register_method
@@ -62,19 +63,19 @@ def ekf_filter(z: np.ndarray, model: GlintModel, R: np.ndarray) -> EKFResult:
         out.x_prior[:, k] = x
         H = np.zeros((n, m, d))
         H[:, :, :3] = measurement_jacobian(x[:, :3], sensor)
-        PHt = P @ H.transpose(0, 2, 1)                               # (n, d, m)
-        S = H @ PHt + R
+        PHt = matmul(P, H.transpose(0, 2, 1))                        # (n, d, m)
+        S = matmul(H, PHt) + R
         gain = np.linalg.solve(S, PHt.transpose(0, 2, 1)).transpose(0, 2, 1)   # P H' S^-1
         nu = measurement_residual(z[:, k], measure(x[:, :3], sensor))
         out.nu[:, k] = nu
-        out.nis[:, k] = np.einsum("ni,ni->n", nu, np.linalg.solve(S, nu[..., None])[..., 0])
-        x = x + np.einsum("nij,nj->ni", gain, nu)
-        I_KH = eye - gain @ H
-        P = I_KH @ P @ I_KH.transpose(0, 2, 1) + gain @ R @ gain.transpose(0, 2, 1)
+        out.nis[:, k] = inner(nu, np.linalg.solve(S, nu[..., None])[..., 0])
+        x = x + matvec(gain, nu)
+        I_KH = eye - matmul(gain, H)
+        P = matmul(matmul(I_KH, P), I_KH.transpose(0, 2, 1)) + matmul(matmul(gain, R), gain.transpose(0, 2, 1))
         P = 0.5 * (P + P.transpose(0, 2, 1))
         out.x_post[:, k], out.P_post[:, k] = x, P
-        x = x @ F.T + Bu
-        P = F @ P @ F.T + Q
+        x = matvec(F, x) + Bu
+        P = matmul(matmul(F, P), F.T) + Q
     return out
 
 

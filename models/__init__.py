@@ -19,3 +19,5 @@ The models a scenario hands to methods are frozen dataclasses with typed,
 documented fields, validated when built (docs/architecture.md, 'Scenes').
 Models import neither :mod:`methods` nor :mod:`scenarios`; of the harness, only its public field checks (:mod:`bench.core`).
 """
+
+import bench  # noqa: E402,F401 - the portable target (bench/__init__.py) before numpy or numba is imported

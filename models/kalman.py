@@ -33,6 +33,7 @@ import numba
 import numpy as np
 import scipy.linalg
 
+from bench.batched import inner, matvec
 from bench.core import require, require_arrays
 
 
@@ -199,9 +200,9 @@ def kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray,
     x = np.broadcast_to(np.asarray(x0, dtype=float), (n, model.dim_x)).copy()
     for k in range(steps):
         x_prior[:, k] = x
-        nu[:, k] = z[:, k] - x @ H.T
-        x_post[:, k] = x + nu[:, k] @ K[k].T
-        x = x_post[:, k] @ F.T
+        nu[:, k] = z[:, k] - matvec(H, x)
+        x_post[:, k] = x + matvec(K[k], nu[:, k])
+        x = matvec(F, x_post[:, k])
     return KalmanResult(x_prior=x_prior, x_post=x_post, nu=nu, P_prior=P_prior,
                         P_post=P_post, S=S, gain=K)
 
@@ -209,8 +210,8 @@ def kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray,
 def whiten(nu: np.ndarray, S: np.ndarray):
     """``(whitened, nis)``: L^-1 nu with S = L L' per step, and nu' S^-1 nu."""
     L_inv = np.linalg.inv(np.linalg.cholesky(S))          # (K, m, m)
-    whitened = np.einsum("kij,nkj->nki", L_inv, nu)
-    nis = np.sum(whitened ** 2, axis=-1)
+    whitened = matvec(L_inv, nu)
+    nis = inner(whitened, whitened)
     return whitened, nis
 
 

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bench.batched import matvec
 from bench.core import MANEUVER_DETECTION, Batch, Scenario
 from bench.errors import ConfigError
 from bench.params import param
@@ -245,7 +246,7 @@ class CvTurnCv(Scenario):
         track = self._tracks(p, onset, turn=not null)
         truth = track + self._process_noise(p, sigma_w, w)
         z = truth[..., POSITION_INDEX] + sigma_w * v
-        x0 = truth[:, 0] + e @ np.linalg.cholesky(P0).T
+        x0 = truth[:, 0] + matvec(np.linalg.cholesky(P0), e)
 
         scene = DetectionScene(
             onset_step=None if null else onset, null_onset_step=onset,
@@ -283,10 +284,10 @@ class CvTurnCv(Scenario):
         if not p.process_noise:
             return noise
         F = cv_model(p.dt_s, 1.0, p.tracking_index).F
-        Gw = (p.tracking_index * sigma_w / p.dt_s ** 2) * w @ dwna_gain(p.dt_s).T
+        Gw = matvec(dwna_gain(p.dt_s), (p.tracking_index * sigma_w / p.dt_s ** 2) * w)
         noise[:, 0] = Gw[:, 0]
         for k in range(1, p.steps):
-            noise[:, k] = noise[:, k - 1] @ F.T + Gw[:, k]
+            noise[:, k] = matvec(F, noise[:, k - 1]) + Gw[:, k]
         return noise
 
     @staticmethod

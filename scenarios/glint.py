@@ -8,6 +8,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from bench.batched import matvec
 from bench.core import TRACKING, Batch, Scenario
 from bench.errors import ConfigError
 from bench.params import param
@@ -316,14 +317,14 @@ class Glint(Scenario):
         eta_all = p.eta_ref() * model.noise_scale
 
         truth = np.empty((n, K, 6))
-        x = model.x0 + e0 @ np.linalg.cholesky(model.P0).T
+        x = model.x0 + matvec(np.linalg.cholesky(model.P0), e0)
         if p.process_noise_los_m_s2:                            # (n, K, 3)
-            drive = u + w @ model.noise_factor.T
+            drive = u + matvec(model.noise_factor, w)
         else:
             drive = u + p.process_noise_m_s2 * w
         for k in range(K):
             truth[:, k] = x
-            x = x @ F.T + drive[:, k] @ G.T
+            x = matvec(F, x) + matvec(G, drive[:, k])
 
         outlier = sel < p.epsilon                               # (n, K, 3)
         if p.glint_model == "mixture":

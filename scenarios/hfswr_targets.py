@@ -9,6 +9,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from bench.batched import matvec
 from bench.core import Batch, Scenario
 from bench.errors import ConfigError
 from bench.params import param
@@ -295,16 +296,16 @@ def _trajectories(params, d, region) -> np.ndarray:
     F = cv_transition(params.scan_period_s)
     F_inv = cv_transition(-params.scan_period_s)
     G = cv_gain(params.scan_period_s)
-    w = params.accel_std_m_s2 * d["accel"] @ G.T                          # (n, K, T, 4): G w_k
+    w = matvec(G, params.accel_std_m_s2 * d["accel"])                         # (n, K, T, 4): G w_k
     first, end, anchor = _lifetimes(params, d)
     x = np.empty((*anchor.shape[:1], K, anchor.shape[1], 4))
     start = _anchor_states(params, d, region)
     for k in range(K):                                                   # forward from each anchor
-        prev = x[:, k - 1] @ F.T + w[:, k - 1] if k else start
+        prev = matvec(F, x[:, k - 1]) + w[:, k - 1] if k else start
         x[:, k] = np.where((k > anchor)[..., None], prev, start)
         _clip_speed(x[:, k], params.speed_bounds_m_s)
     for k in range(K - 2, -1, -1):                                       # backward before each anchor
-        back = (x[:, k + 1] - w[:, k]) @ F_inv.T
+        back = matvec(F_inv, x[:, k + 1] - w[:, k])
         _clip_speed(back, params.speed_bounds_m_s)
         x[:, k] = np.where((k < anchor)[..., None], back, x[:, k])
     scans = np.arange(K)[None, :, None]

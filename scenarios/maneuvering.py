@@ -9,6 +9,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from bench.batched import matvec
 from bench.core import TRACKING, Batch, Scenario
 from bench.errors import ConfigError
 from bench.params import param
@@ -245,7 +246,7 @@ class Maneuvering(Scenario):
         x = init
         for k in range(K):                                  # over time; trials and axes batched
             truth[:, k] = x
-            x = x @ F.T + w[:, k] @ L.T
+            x = matvec(F, x) + matvec(L, w[:, k])
         return truth.reshape(n, K, 3 * D)
 
     def _maneuver_truth(self, p, null: bool, n: int) -> tuple[np.ndarray, np.ndarray]:

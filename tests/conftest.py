@@ -5,6 +5,7 @@ writes must write under ``tmp_path``/``tmp_path_factory``, which are per worker.
 session-scoped fixture runs once per worker process.
 """
 
+import bench  # noqa: F401 - first: the portable target (bench/__init__.py) precedes numpy's import
 import os
 import shutil
 import subprocess

@@ -102,3 +102,29 @@ def test_scenario_batches_carry_the_scene_of_each_task(scenario):
         with pytest.raises(dataclasses.FrozenInstanceError):
             batch.scene.snr_definition = "changed"
         assert not hasattr(batch, "meta")
+
+
+@pytest.mark.parametrize("scenario, method", PAIRS)
+def test_a_trials_numbers_do_not_depend_on_its_batch(scenario, method):
+    """A trial's output and metrics are bit-identical in a batch of three and alone
+    (docs/architecture.md, 'Portable numbers'); ``tests/property/test_chunk_invariance.py``
+    checks the same through the CSVs of whole runs."""
+    cls, scls = registry.get_method(method), registry.get_scenario(scenario)
+    task = get_task(cls.task)
+    for snr in (None, 10.0) if task.calibrated else (10.0,):
+        batch = _batch(scenario, snr)
+        alone = scls().generate(_params(scls), snr, 1, TrialRNG(3, 0, 11, [batch.trials[1]]))
+        out, out_alone = cls().run(batch, cls.Params()), cls().run(alone, cls.Params())
+        for name, value in _arrays(out).items():
+            if value.ndim and value.shape[0] == batch.n:
+                _equal_on_common_extent(value[1], _arrays(out_alone)[name][0], name)
+        if snr is not None:
+            metrics, metrics_alone = task.trial_metrics(batch, out, 1.0), task.trial_metrics(alone, out_alone, 1.0)
+            for name, value in metrics.items():
+                _equal_on_common_extent(np.asarray(value)[1], np.asarray(metrics_alone[name])[0], name)
+
+
+def _equal_on_common_extent(a: np.ndarray, b: np.ndarray, name: str) -> None:
+    """Equal where both are defined: a batch pads to its largest trial (plots, tracks)."""
+    common = tuple(slice(0, min(x, y)) for x, y in zip(np.shape(a), np.shape(b)))
+    np.testing.assert_array_equal(np.asarray(a)[common], np.asarray(b)[common], err_msg=name)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from bench.batched import inner
 from bench.metrics import (binomial_interval, bootstrap_mean_interval, bootstrap_statistic_interval, by_cell,
                            clustered_rate_interval, mean_realised_snr, per_step_rmse, series_key,
                            time_averaged_rmse)
@@ -38,7 +39,7 @@ def tracking_trial_metrics(estimate: np.ndarray, truth: np.ndarray, *, position_
     out = {"rmse": np.sqrt(pos_sq.mean(axis=1)), "final_error_m": pos_err[:, -1],
            "diverged": (pos_err > divergence_bound_m).any(axis=1), "sq_err_position": pos_sq}
     if covariance is not None:
-        nees = np.einsum("nki,nki->nk", err, np.linalg.solve(covariance, err[..., None])[..., 0])
+        nees = inner(err, np.linalg.solve(covariance, err[..., None])[..., 0])
         out["nees_mean"], out["nees"] = nees.mean(axis=1), nees
     else:
         out["nees_mean"] = np.full(len(err), np.nan)
