@@ -11,16 +11,14 @@ import os
 
 __version__ = "0.1.0"
 
-#: The one instruction set every number is computed for (docs/architecture.md, 'Portable
-#: numbers'): x86-64-v2 (SSE4.2, no AVX/FMA), NumPy 2's own baseline. Numba compiles every
-#: kernel for it, whatever the host (numba re-reads these variables at each compilation, and
-#: its cache is keyed on the target, so a kernel cached for another target is recompiled).
-PORTABLE_CPU = "x86-64-v2"
+#: What keeps a number independent of the x86-64 machine (docs/architecture.md, 'Portable
+#: numbers'). NumPy's AVX2 / AVX-512 loops of exp, log, log10, expm1, log1p, power, arctan2
+#: and tanh round differently in the last bit from its baseline (x86-64-v2) loops: they are
+#: disabled, read at numpy's import. Numba needs no pin: it compiles without fast-math, so
+#: LLVM neither contracts multiply-adds nor reorders sums, whatever the host's vector width
+#: (every method's output was bit-identical compiled for the host, AVX-512, and for
+#: x86-64-v2), while pinning x86-64-v2 cost the TBD kernels 1.2-2.8x.
 PORTABLE_ENVIRONMENT = {
-    "NUMBA_CPU_NAME": PORTABLE_CPU,
-    "NUMBA_CPU_FEATURES": "",                   # the CPU name's own features, not the host's
-    # NumPy's AVX2 / AVX-512 loops of exp, log, log10, expm1, log1p, power, arctan2 and tanh
-    # round differently in the last bit from its baseline loops; read at numpy's import.
     "NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR",
 }
 
