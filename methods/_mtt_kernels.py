@@ -6,9 +6,10 @@ After the HFSWR tracking chapter ("目标检测与跟踪方法 (Target detection
 tracking methods), 海洋遥感技术应用"), section 2(2) (航迹管理, track
 management). One scan k of one trial:
 
-1. **Predict** every live track: the UKF of :mod:`models.ukf` (``jpda-ukf``)
-   or an EKF (``gnn-ekf``: x⁻ = F x, P⁻ = F P F' + Q, H = ∂h/∂x at x⁻,
-   ẑ = h(x⁻), S = H P⁻ H' + R, P_xz = P⁻ H'), giving ẑ_t, S_t, P_xz per track.
+1. **Predict** every live track: the UKF of :mod:`models.ukf` (``jpda-ukf``'s
+   default) or an EKF (``gnn-ekf``'s default; the ``filter`` parameter:
+   x⁻ = F x, P⁻ = F P F' + Q, H = ∂h/∂x at x⁻, ẑ = h(x⁻), S = H P⁻ H' + R,
+   P_xz = P⁻ H'), giving ẑ_t, S_t, P_xz per track.
 2. **Gate** (eq. 6.72, the ellipsoidal validation region): plot z_i is
    validated for track t when ν' S_t⁻¹ ν ≤ γ, ν = z_i − ẑ_t (azimuth
    wrapped), γ the χ²(3) quantile of the gate probability P_G.
@@ -27,7 +28,10 @@ management). One scan k of one trial:
 4. **Manage**: a tentative track counts its hits over the N frames after its
    two initial plots (frames 3 … N + 2, "从第三次扫描开始, 采用 M/N 逻辑") and
    is confirmed at frame N + 2 with at least M hits, else dropped (early, as
-   soon as M hits are out of reach: the same tracks are confirmed). A track
+   soon as M hits are out of reach: the same tracks are confirmed); our
+   variant ``confirmation = "kth-plot"`` (Stone Soup's
+   ``MultiMeasurementInitiator``) confirms on the (M + 2)-th plot with no
+   frame deadline and drops after N − M + 1 consecutive misses. A track
    ends (status 3) when ① M_t of its last N_t frames had no plot (confirmed
    tracks), ② its position uncertainty, the square root of the largest
    eigenvalue of its (x, y) covariance, exceeds a bound, or ③ its speed
@@ -82,6 +86,7 @@ from models.ukf import (
 
 EMPTY, TENTATIVE, CONFIRMED, TERMINATED = 0, 1, 2, 3
 UKF, EKF = 0, 1
+CONFIRM_AT_FRAME_N_PLUS_2, CONFIRM_ON_KTH_PLOT = 0, 1     # TrackerParams' confirmation rules
 AZIMUTH = 1                       # the angle component of a plot [range, azimuth, radial velocity]
 
 # cfg (float64) entries
@@ -89,8 +94,8 @@ C_DT, C_LOG_PD, C_LOG_MISS, C_LOG_LAMBDA, C_GAMMA, C_VMIN, C_VMAX, C_INIT_SIGMAS
     C_MAX_SPEED, C_SX, C_SY, C_SIG_R, C_SIG_AZ, C_ZETA = range(15)
 N_CFG = 15
 # icfg (int64) entries
-I_CONFIRM_M, I_CONFIRM_N, I_TERM_M, I_TERM_N, I_MAX_CLUSTER, I_FILTER, I_SPEED_PRIOR = range(7)
-N_ICFG = 7
+I_CONFIRM_M, I_CONFIRM_N, I_TERM_M, I_TERM_N, I_MAX_CLUSTER, I_FILTER, I_SPEED_PRIOR, I_CONFIRM_RULE = range(8)
+N_ICFG = 8
 # counters (int64) entries: the trace of a trial
 K_HEADS, K_NEXT_ID, K_PDA_CLUSTERS, K_EXACT_CLUSTERS, K_DROPPED, K_SLOTS, K_LARGEST_CLUSTER, K_BAD_COV, \
     K_CONFIRMED, K_END_MISSES, K_END_COVARIANCE, K_END_SPEED = range(12)
@@ -451,8 +456,34 @@ def position_std(P):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
+def mn_rule(hits, frames, M, N):  # pragma: no cover - compiled
+    """The chapter's step ⑤: (confirm, drop) of a tentative track with ``hits``
+    in its first ``frames`` of the N frames 3 … N + 2; confirmed at frame N + 2
+    with M hits, dropped there otherwise or as soon as M is out of reach."""
+    if hits >= M and frames == N:
+        return True, False
+    return False, hits + (N - frames) < M or frames >= N
+
+
+@numba.njit(cache=True)
+def kth_plot_rule(hits, miss_history, M, N):  # pragma: no cover - compiled
+    """Our variant (``confirmation = "kth-plot"``, the rule of Stone Soup's
+    ``MultiMeasurementInitiator`` with ``min_points = M + 2`` and an
+    ``UpdateTimeStepsDeleter`` of N − M + 1 steps): (confirm, drop) of a
+    tentative track, confirmed on its (M + 2)-th plot (the two initial plots
+    and M hits) whenever it comes, dropped after N − M + 1 consecutive misses
+    (bit 0 of ``miss_history`` is this frame)."""
+    if hits >= M:
+        return True, False
+    run = N - M + 1
+    window = (1 << run) - 1
+    return False, (miss_history & window) == window
+
+
+@numba.njit(cache=True)
 def manage(tab, cfg, icfg):  # pragma: no cover - compiled
-    """Step 4: M/N confirmation of tentative tracks, the three termination rules."""
+    """Step 4: confirmation of tentative tracks (:func:`mn_rule`, or our
+    :func:`kth_plot_rule`), the three termination rules."""
     M, N = icfg[I_CONFIRM_M], icfg[I_CONFIRM_N]
     term_mask = (1 << icfg[I_TERM_N]) - 1
     for s in range(tab.status.shape[0]):
@@ -463,10 +494,14 @@ def manage(tab, cfg, icfg):  # pragma: no cover - compiled
         if st == TENTATIVE:
             tab.mn_frames[s] += 1
             tab.mn_hits[s] += 1 if tab.hit[s] else 0
-            if tab.mn_hits[s] >= M and tab.mn_frames[s] == N:
+            if icfg[I_CONFIRM_RULE] == CONFIRM_ON_KTH_PLOT:
+                confirm, drop = kth_plot_rule(tab.mn_hits[s], tab.miss_history[s], M, N)
+            else:
+                confirm, drop = mn_rule(tab.mn_hits[s], tab.mn_frames[s], M, N)
+            if confirm:
                 tab.status[s] = CONFIRMED
                 tab.counters[K_CONFIRMED] += 1
-            elif tab.mn_hits[s] + (N - tab.mn_frames[s]) < M or tab.mn_frames[s] >= N:
+            elif drop:
                 tab.status[s] = TERMINATED
             continue                                        # the termination rules are for confirmed tracks
         if _popcount(tab.miss_history[s] & term_mask) >= icfg[I_TERM_M]:      # rule ①

@@ -82,6 +82,39 @@ class TrackerParams:
             raise ConfigError("terminate_m", f"M_t = {self.terminate_m} is larger than N_t = {self.terminate_n}")
 
 
+def _filter_param(default: str):
+    return param(default, "the filter of every track: ukf (models/ukf.py, the chapter's) or ekf (H = dh/dx "
+                          "at the prediction); the other one than the method's name is our ablation",
+                 choices=tuple(FILTERS))
+
+
+#: the ``filter`` parameter's kernel codes
+FILTERS = {"ukf": kern.UKF, "ekf": kern.EKF}
+#: the ``confirmation`` parameter's kernel codes
+CONFIRMATIONS = {"frame-n+2": kern.CONFIRM_AT_FRAME_N_PLUS_2, "kth-plot": kern.CONFIRM_ON_KTH_PLOT}
+
+
+@dataclass(frozen=True)
+class OwnTrackerParams(TrackerParams):
+    """:class:`TrackerParams` and the options of our compiled trackers alone
+    (``jpda-ukf``, ``gnn-ekf``; the Stone Soup peer has its own initiator)."""
+
+    confirmation: str = param("frame-n+2", "frame-n+2: M hits in frames 3 .. N + 2, confirmed at frame N + 2 "
+                              "(the chapter's step 5); kth-plot: confirmed on the (M + 2)-th plot with no frame "
+                              "deadline, dropped after N - M + 1 consecutive misses (ours, the rule of Stone "
+                              "Soup's MultiMeasurementInitiator)", choices=tuple(CONFIRMATIONS))
+
+
+@dataclass(frozen=True)
+class UkfTrackerParams(OwnTrackerParams):
+    filter: str = _filter_param("ukf")
+
+
+@dataclass(frozen=True)
+class EkfTrackerParams(OwnTrackerParams):
+    filter: str = _filter_param("ekf")
+
+
 def scene_of(batch: Batch) -> MultiTargetScene:
     scene = batch.scene
     if not isinstance(scene, MultiTargetScene):
@@ -105,7 +138,8 @@ class TrackerModels:
     gamma: float
 
 
-def tracker_models(scene: MultiTargetScene, params, filter_kind: int) -> TrackerModels:
+def tracker_models(scene: MultiTargetScene, params, filter_kind: int,
+                   confirm_rule: int = kern.CONFIRM_AT_FRAME_N_PLUS_2) -> TrackerModels:
     T = float(scene.scan_period_s)
     sig = np.asarray(scene.measurement_std, float)
     Wm, Wc, zeta = merwe_weights(4, params.alpha, params.beta, params.kappa)
@@ -130,6 +164,7 @@ def tracker_models(scene: MultiTargetScene, params, filter_kind: int) -> Tracker
     icfg[kern.I_MAX_CLUSTER] = params.max_cluster_size
     icfg[kern.I_FILTER] = filter_kind
     icfg[kern.I_SPEED_PRIOR] = params.initial_velocity == "two-point+speed-prior"
+    icfg[kern.I_CONFIRM_RULE] = confirm_rule
     return TrackerModels(F=cv_transition(T), Q=cv_process_noise(T, scene.accel_std_m_s2), R=np.diag(sig ** 2),
                          Wm=Wm, Wc=Wc, cfg=cfg, icfg=icfg, gamma=gamma)
 

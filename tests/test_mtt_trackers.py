@@ -19,8 +19,15 @@ from hypothesis import strategies as st
 
 from methods import _mtt_kernels as kern
 from methods._jpda import jpda_marginals
-from methods._track_management import TrackerParams, TrialBuffers, tracker_models
-from methods.multitarget import gnn_assignment
+from methods._track_management import (
+    CONFIRMATIONS,
+    EkfTrackerParams,
+    TrackerParams,
+    TrialBuffers,
+    UkfTrackerParams,
+    tracker_models,
+)
+from methods.multitarget import GnnEkf, JpdaUkf, gnn_assignment
 from models.hfswr import measure, measure_jacobian, measurement_residual, plot_to_cartesian
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=8)
@@ -50,7 +57,7 @@ def _target(seed, K, T=60.0, accel=0.01):
 
 
 def _run_jpda(z, n_plots, scene, params, capacity=16):
-    models = tracker_models(scene, params, kern.UKF)
+    models = tracker_models(scene, params, kern.UKF, CONFIRMATIONS[getattr(params, "confirmation", "frame-n+2")])
     tab = kern.new_table(capacity, z.shape[1])
     buf = TrialBuffers.empty(z.shape[0], capacity)
     kern.jpda_trial(z, n_plots, models.F, models.Q, models.R, models.Wm, models.Wc, models.cfg, models.icfg,
@@ -211,6 +218,74 @@ def test_mn_confirms_a_true_target_at_frame_n_plus_2(M, N):
     assert status[0] == kern.EMPTY
     assert np.all(status[1:N + 1] == kern.TENTATIVE)
     assert np.all(status[N + 1:] == kern.CONFIRMED)
+
+
+@pytest.mark.parametrize("M, N", [(1, 1), (2, 3), (3, 3), (3, 5), (4, 6)])
+def test_kth_plot_confirms_a_true_target_on_its_m_plus_2_th_plot(M, N):
+    """Pd = 1, no clutter, ``confirmation = "kth-plot"``: the initial track at
+    frame 2, confirmed with its (M + 2)-th plot at frame M + 2 whatever N."""
+    K = N + 4
+    _, z = _target(7, K)
+    params = UkfTrackerParams(confirm_m=M, confirm_n=N, gate_probability=0.999999, confirmation="kth-plot")
+    buf, _ = _run_jpda(z[:, None, :], np.ones(K, np.int64), _scene(), params)
+    status = buf.status[:, 0]
+    assert status[0] == kern.EMPTY
+    assert np.all(status[1:M + 1] == kern.TENTATIVE)
+    assert np.all(status[M + 1:] == kern.CONFIRMED)
+
+
+def _first_decision(rule, hits, M, N):
+    """(frame after the initial plots, confirmed?) at which ``rule`` first
+    decides on the hit sequence ``hits``, or None; the rules see what
+    ``kern.manage`` gives them (hits so far, frames so far, miss history)."""
+    n_hits, history = 0, 0
+    for frame, hit in enumerate(hits, start=1):
+        n_hits += hit
+        history = (history << 1) | (1 - hit)
+        confirm, drop = (kern.mn_rule(n_hits, frame, M, N) if rule == "frame-n+2"
+                         else kern.kth_plot_rule(n_hits, history, M, N))
+        if confirm or drop:
+            return frame, confirm
+    return None
+
+
+@pytest.mark.parametrize("M, N", [(1, 1), (1, 3), (2, 3), (3, 5), (2, 6)])
+def test_confirmation_rules_against_their_definitions(M, N):
+    """Every hit sequence of N + 3 frames: frame-n+2 decides by frame N and
+    confirms exactly with M hits in the first N frames; kth-plot confirms on
+    the M-th hit unless N − M + 1 misses in a row came first (then drops), so
+    it confirms every sequence frame-n+2 confirms, no later."""
+    run = N - M + 1
+    for hits in itertools.product((0, 1), repeat=N + 3):
+        frame, confirmed = _first_decision("frame-n+2", hits, M, N)
+        assert frame <= N and confirmed == (sum(hits[:N]) >= M)
+        if confirmed:
+            assert frame == N
+        text = "".join(map(str, hits))
+        mth_hit = [i for i, h in enumerate(hits) if h][M - 1] + 1 if sum(hits) >= M else None
+        missed_run = text.find("0" * run) + run if "0" * run in text else None
+        expected = (None if mth_hit is None and missed_run is None else
+                    (mth_hit, True) if missed_run is None or (mth_hit is not None and mth_hit < missed_run)
+                    else (missed_run, False))
+        assert _first_decision("kth-plot", hits, M, N) == expected
+        if confirmed:
+            assert expected[1] and expected[0] <= frame
+
+
+def test_the_filter_is_a_parameter_of_both_trackers_with_each_method_s_default():
+    """JPDA-EKF and GNN-UKF (our ablation) run through the methods: each
+    method's default filter is its name's, and the crossed filter changes the
+    estimates yet still follows the lone target."""
+    assert JpdaUkf.Params().filter == "ukf" and GnnEkf.Params().filter == "ekf"
+    batch, truth = _peer_batch()
+    for method, params, crossed in ((JpdaUkf(), UkfTrackerParams, "ekf"), (GnnEkf(), EkfTrackerParams, "ukf")):
+        base = method.run(batch, params(gate_probability=0.999))
+        other = method.run(batch, params(gate_probability=0.999, filter=crossed))
+        confirmed = other.status[0, -1] == kern.CONFIRMED
+        assert confirmed.sum() == 1
+        assert not np.allclose(base.state[0, -1][confirmed], other.state[0, -1][confirmed], rtol=0, atol=1e-6)
+        err = np.linalg.norm(other.state[0, -1][confirmed][0, [0, 2]] - truth[-1, [0, 2]])
+        assert err < 3 * 100e3 * SIGMA[1]
 
 
 def test_compiled_measurement_model_equals_models_hfswr():
