@@ -389,7 +389,13 @@ def _crossing_difference(q: dict, t: Tables) -> Value:
 
 
 def _ratio(a: Value, b: Value) -> Value:
-    return Value(a.value / b.value, a.low / b.high, a.high / b.low)
+    """a / b for a positive denominator (b.low > 0), with the conservative interval: the
+    extremes of a's ends over b's ends (a may be of either sign); NaN ends where b's
+    interval reaches 0, where the ratio is unbounded."""
+    if not b.low > 0:
+        return Value(a.value / b.value, np.nan, np.nan)
+    ends = [a.low / b.low, a.low / b.high, a.high / b.low, a.high / b.high]
+    return Value(a.value / b.value, min(ends), max(ends))
 
 
 def quantity(q: dict, t: Tables) -> Value:

@@ -36,7 +36,7 @@ def optional_methods() -> set[str]:
 
 def summary_digest(summary_csv: Path) -> str:
     """SHA-256 of the canonical serialisation of ``summary_csv``'s numbers."""
-    summary = pd.read_csv(summary_csv, float_precision="round_trip")
+    summary = pd.read_csv(summary_csv)           # the default parser round-trips floats exactly (pandas 3)
     summary = summary[~summary.method.isin(optional_methods())].sort_values(ROW_KEYS, kind="stable")
     numeric = sorted(c for c in summary.select_dtypes("number").columns if not c.startswith("seconds"))
     digest = hashlib.sha256()

@@ -256,6 +256,12 @@ def test_difference_ratio_and_scale():
     r = _verdict(_claim({"kind": "ratio", "a": pd_at(2), "b": pd_at(1), "scale": 100}, unit="%", expect="between",
                         min=150, max=250), _tables(summary))
     assert np.allclose([r.value, r.low, r.high], [180, 85 / 0.55, 95 / 0.45]) and r.verdict == "reproduces"
+    gain = {"kind": "difference", "a": pd_at(1), "b": pd_at(0)}            # 0.3 [0.2, 0.4]
+    loss = {"kind": "difference", "a": pd_at(0), "b": pd_at(1)}            # -0.3 [-0.4, -0.2]
+    r = _verdict(_claim({"kind": "ratio", "a": loss, "b": gain}), _tables(summary))
+    assert np.allclose([r.value, r.low, r.high], [-1, -0.4 / 0.2, -0.2 / 0.4])   # a negative numerator's ends
+    r = _verdict(_claim({"kind": "ratio", "a": gain, "b": loss}), _tables(summary))
+    assert r.value == -1 and np.isnan(r.low) and np.isnan(r.high)         # no bound where b may be <= 0
 
 
 def test_templates_read_every_claim_and_named_quantity():
