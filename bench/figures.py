@@ -40,18 +40,20 @@ def _curves(summary: pd.DataFrame, x: str = "snr_db"):
 
 
 def pd_vs_snr(summary: pd.DataFrame, path: Path, pfa: float, title: str,
-              chance: dict[str, float] | None = None) -> Path:
-    """Pd against SNR per method config, with the 95% Wilson band and, dotted,
-    the chance detection rate measured on null trials."""
+              chance: dict[str, float] | None = None, column: str = "pd",
+              ylabel: str = "probability of detection $P_D$") -> Path:
+    """Pd (the summary's ``column``, default ``pd``) against SNR per method config, with
+    its 95% band (``column`` + ``_low``/``_high``) and, dotted, the chance level of
+    that Pd measured on null trials (``chance``: config -> level)."""
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
     for color, style, label, g in _curves(summary):
-        ax.plot(g.snr_db, g.pd, style, color=color, ms=4, lw=1.5, label=label, mfc="none")
-        ax.fill_between(g.snr_db, g.pd_low, g.pd_high, color=color, alpha=0.18, lw=0)
+        ax.plot(g.snr_db, g[column], style, color=color, ms=4, lw=1.5, label=label, mfc="none")
+        ax.fill_between(g.snr_db, g[f"{column}_low"], g[f"{column}_high"], color=color, alpha=0.18, lw=0)
         level = (chance or {}).get(label, np.nan)
         if np.isfinite(level):
             ax.axhline(level, color=color, lw=1, ls=":", alpha=0.8)
     ax.axhline(0.5, color="0.6", lw=0.8, ls=":")
-    ax.set(xlabel="SNR (dB)", ylabel="probability of detection $P_D$", ylim=(-0.02, 1.02),
+    ax.set(xlabel="SNR (dB)", ylabel=ylabel, ylim=(-0.02, 1.02),
            title=f"{title}: $P_D$ vs SNR at $P_{{FA}}$ = {pfa:g} (95% bands)")
     ax.grid(alpha=0.3)
     _legend_outside(ax)

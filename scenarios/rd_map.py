@@ -13,6 +13,7 @@ number here is ours (bench/presets/cfar.md, "Paper vs ours").
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 
@@ -47,7 +48,11 @@ class RdMap(Scenario):
       peak clutter-to-noise ratio ``bragg_cnr_db`` at the first range cell
       falling linearly in dB to ``bragg_cnr_far_db`` at the last (sea clutter
       weakens with range like the targets); the negative line
-      ``bragg_asymmetry_db`` below the positive one.
+      ``bragg_asymmetry_db`` below the positive one. ``bragg_scale_db``
+      scales both lines' power after the regions and targets are laid out
+      at the strength above: the clutter's strength varies, its shape, the
+      region labels and the target cells do not (the chapter's OS-CFAR
+      "weak against strong clutter" with nothing else changed).
     * **Ionospheric interference** (``interference``): a band of
       ``interference_range_cells`` range cells from ``interference_range_start``,
       spread over Doppler as a Gaussian of std ``interference_doppler_bins``
@@ -120,6 +125,11 @@ class RdMap(Scenario):
                                         ge=-30.0, le=80.0, why="as bragg_cnr_db")
         bragg_asymmetry_db: float = param(6.0, "how much weaker the negative line is than the positive (dB)",
                                           ge=0.0, le=40.0, why="0 is symmetric; 40 dB removes the weaker line")
+        bragg_scale_db: float = param(0.0, "scale of the Bragg lines' power (dB), applied after the regions and "
+                                           "targets are laid out at bragg_cnr_db..bragg_cnr_far_db (the layout "
+                                           "stays that of scale 0)", ge=-60.0, le=40.0,
+                                      why="-60 dB removes any line; +40 dB puts even the far line far above "
+                                          "the noise")
         interference: bool = param(True, "ionospheric interference band on/off")
         interference_inr_db: float = param(15.0, "peak interference-to-noise ratio of the band (dB)",
                                            ge=-30.0, le=80.0, why="as bragg_cnr_db")
@@ -248,7 +258,8 @@ def scene_layout(p) -> Layout:
     cells, paired, shortfall = place_targets(labels, REGION_NAMES, per_region=p.targets_per_region, pairs=p.pairs,
                                              pair_offset=tuple(p.pair_offset_cells), spacing=p.target_spacing_cells,
                                              margin=p.margin_cells, seed=p.layout_seed)
-    power = parts.total
+    # the strength varies after the layout is fixed (bragg_scale_db)
+    power = dataclasses.replace(parts, bragg=parts.bragg * 10.0 ** (p.bragg_scale_db / 10.0)).total
     for a in (power, labels, cells, paired):
         a.setflags(write=False)
     return Layout(power, labels, cells, paired, shortfall)

@@ -52,6 +52,8 @@ def test_maneuver_detection_preset_smoke(bench_cli, tmp_path):
     section = report.split("## Pd under three definitions", 1)[1].split("\n## ", 1)[0]
     assert all(f"`{c}`" in section for c in summary.config.unique())
     assert summary.pd_step.notna().all() and summary.pd_equal_chance.notna().all()
+    assert "![per-step average Pd vs SNR](figures/pd_step_vs_snr.png)" in section     # the paper's Figs. 3-4
+    assert (tmp_path / "out" / "figures" / "pd_step_vs_snr.png").stat().st_size > 0
     assert "at 5.0 dB" in report.split("## One trial over time", 1)[1]    # the paper's Fig. 2 level (dB to 0.1)
 
 

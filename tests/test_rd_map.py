@@ -113,6 +113,20 @@ def test_edge_sides_split_the_edge_band_at_the_step_with_targets_on_each_side():
     assert not np.any(labels == REGION_NAMES.index("clutter-edge"))
 
 
+def test_bragg_scale_varies_the_lines_strength_with_the_layout_held_fixed():
+    """``bragg_scale_db`` multiplies the Bragg lines' power and nothing else: the region
+    labels and the target cells are those of scale 0, even where the scaled lines fall
+    below the labelling level (the layout is not re-derived from the weaker lines)."""
+    strong = make(10.0, n=1, interference=False, clutter_edge=False).scene
+    weak = make(10.0, n=1, interference=False, clutter_edge=False, bragg_scale_db=-20.0).scene
+    np.testing.assert_array_equal(weak.region_labels, strong.region_labels)
+    np.testing.assert_array_equal(weak.target_cells, strong.target_cells)
+    # noise power = 1 + Bragg power: the Bragg part scales by 10^(-20/10)
+    np.testing.assert_allclose(weak.noise_power - 1.0, 0.01 * (strong.noise_power - 1.0), rtol=1e-12, atol=1e-15)
+    bragg = strong.region_labels == REGION_NAMES.index("bragg")
+    assert (weak.noise_power[0][bragg] - 1.0).min() < 10 ** (REGION_LEVEL_DB / 10)   # some now below the level
+
+
 def test_swerling1_target_cells_are_exponential_with_mean_signal_plus_noise():
     """Swerling 1 in complex Gaussian noise: z / N ~ Exp(1 + S); the mean over
     400 maps x T targets lies within 5 standard errors of 1 + S."""

@@ -29,7 +29,9 @@ def sections(ctx: ReportContext) -> list[str]:
     chance = {c.method: c.chance_pd for c in ctx.calibrations}
     floors = {k: v for k, v in chance.items() if np.isfinite(v)}
     return [_section_detection(summary, ctx.fig_dir, ctx.title, ctx.pfa, chance, floors),
-            _section_ranking(summary, floors), _section_pd_definitions(summary, ctx.chance_pd, floors),
+            _section_ranking(summary, floors),
+            _section_pd_definitions(summary, ctx.chance_pd, floors, ctx.fig_dir, ctx.title, ctx.pfa,
+                                    {c.method: c.used_pfa for c in ctx.calibrations}),
             _section_roc(ctx.store, ctx.trials, summary, ctx.fig_dir, ctx.title, ctx.pfa)
             if getattr(ctx.task, "has_roc", False) else ""]
 
@@ -89,10 +91,16 @@ PD_DEFINITIONS = (("pd", "any alarm in the window"), ("pd_step", "per-step avera
                   ("pd_equal_chance", "equal chance Pd"))
 
 
-def _section_pd_definitions(summary: pd.DataFrame, chance_pd: float, floors: dict[str, float]) -> str:
-    """SNR at Pd = 0.5 and the rank of every config under each Pd definition."""
+def _section_pd_definitions(summary: pd.DataFrame, chance_pd: float, floors: dict[str, float], fig_dir: Path,
+                            title: str, pfa: float, step_chance: dict[str, float]) -> str:
+    """SNR at Pd = 0.5 and the rank of every config under each Pd definition, and the
+    per-step average Pd against SNR (the cumulant paper's Figs. 3-4, Song, Ji & Gao 2004;
+    ``step_chance``: config -> measured per-step Pfa of its threshold, that Pd's level
+    without a maneuver)."""
     if summary.empty or summary.pd_step.isna().all():
         return ""
+    figures.pd_vs_snr(summary, fig_dir / "pd_step_vs_snr.png", pfa, f"{title}, per-step average", step_chance,
+                      column="pd_step", ylabel="per-step average $P_D$ over the window")
     cells, ranks = {}, {}
     for column, _ in PD_DEFINITIONS:
         s = snr50(summary, column, crossing_floors(column, floors, chance_pd))
@@ -114,6 +122,9 @@ def _section_pd_definitions(summary: pd.DataFrame, chance_pd: float, floors: dic
         "to step (a single-step test gets about one chance per step, see the chance Pd above); the other two "
         "do not.",
         table(["config"] + [name for _, name in PD_DEFINITIONS], rows),
+        "Per-step average Pd against SNR per config, with its 95% bootstrap band over trials; dotted, each "
+        "config's per-step Pfa measured on null trials (this Pd's level without a maneuver).",
+        "![per-step average Pd vs SNR](figures/pd_step_vs_snr.png)",
     ])
 
 
