@@ -171,7 +171,7 @@ def ar_adaptive_filter(z: np.ndarray, dt: float, R: float, x0: np.ndarray, P0: n
         x, P, nu, S = upd.x, upd.P, upd.nu[:, 0], upd.S[:, 0, 0]
         if k >= M:                                      # the lags before step 0 are all measured
             excess[:, k % W] = nu ** 2 - S + q          # nu^2 - (H F P F' H' + R)
-            if k >= M + W - 1:
+            if k >= M + W - 1 and params.state_noise == "matching":
                 q = matched_noise(excess)
         if params.switching == "latched":
             in_high, high_run = _latched_mode(high, in_high, high_run, x, P, acc_row, accel_nis, chiW, k)
@@ -274,6 +274,17 @@ class ARAdaptive(Method):
     until the window holds W of them. Q_k is estimated at every step,
     whichever order filtered it ("在整个滤波的过程中").
 
+    **The ablation of the adaptive Q** (ours, not the patent's):
+    ``state_noise = "fixed"`` keeps Q_k = Q₀ e_0 e_0' at every step, Q₀
+    being ``q0_m2``, the patent's own initial value of step (1). Everything
+    else (coefficients, χ² switch, switch back, W for the latched rule) is
+    unchanged, so the paired difference between ``state_noise = "matching"``
+    and ``"fixed"`` at the same Q₀ is the effect of the covariance matching
+    alone; the fixed value is a parameter rather than, say, the CV filter's
+    Q because the AR state has no velocity for a CV Q to act on (Q₀ is the
+    variance added to the new position per step; the CV filter's
+    σ_a² T⁴/4 on the position is its analogue).
+
     **Step (4), the χ² switching rule.** At every tested step the low-order
     prediction's innovation ν_k with S_k = e_0' P_k|k−1 e_0 + R gives
     ε_k = ν_k² / S_k, χ²(1) under a matched model; the step is a maneuver
@@ -334,6 +345,9 @@ class ARAdaptive(Method):
         switching: str = param("per-step", "per-step: each step starts from the low order (the patent's "
                                "flow chart); latched: high order until the acceleration is insignificant",
                                choices=("per-step", "latched"))
+        state_noise: str = param("matching", "matching: Q_k by sliding-window covariance matching over W steps "
+                                 "(the patent's); fixed: Q_k = Q0 at every step, no adaptation (our ablation)",
+                                 choices=("matching", "fixed"))
 
         def validate(self) -> None:
             if self.order_high <= self.order_low:
@@ -437,7 +451,7 @@ def reference_filter(z: np.ndarray, dt: float, R: float, x0: np.ndarray, P0: np.
             kf.update(np.array([z[b, k]]))
             if k >= M:
                 samples.append(float(kf.y[0] ** 2 - kf.S[0, 0] + q))
-                if len(samples) >= W:
+                if len(samples) >= W and params.state_noise == "matching":
                     q = max(float(np.mean(samples[-W:])), 0.0)
             if params.switching == "latched":
                 acc = float(acc_row @ kf.x)

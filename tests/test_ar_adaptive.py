@@ -15,7 +15,8 @@ def _batch(n=6, snr=0.0, **params):
 
 
 @pytest.mark.parametrize("config", [{}, {"coefficients": "min-norm"}, {"switching": "latched", "coefficients": "min-norm"},
-                                    {"order_low": 0, "order_high": 3, "state_dim": 5}])
+                                    {"order_low": 0, "order_high": 3, "state_dim": 5},
+                                    {"state_noise": "fixed", "switching": "latched"}])
 @pytest.mark.parametrize("dims", [1, 2])
 def test_batched_equals_the_filterpy_reference(config, dims):
     cls = registry.get_method("ar-adaptive")
@@ -39,6 +40,19 @@ def test_switches_at_the_maneuver_and_q_grows_with_it():
     assert np.mean(first <= 3) > 0.9
     q = out.traces["q_k"]
     assert np.median(q[:, onset + 5:onset + 15]) > 10 * np.median(q[:, 15:onset])
+
+
+def test_fixed_state_noise_holds_q0_and_only_q_changes():
+    """state_noise = "fixed" keeps Q_k = Q0 at every step; with W beyond the run's length
+    the matching never starts either, so the two settings give the same track."""
+    cls = registry.get_method("ar-adaptive")
+    batch = _batch(n=8, snr=10.0)
+    fixed = cls().run(batch, build_params(cls.Params, {"state_noise": "fixed", "q0_m2": 4.0}))
+    assert np.all(fixed.traces["q_k"] == 4.0)
+    matching = cls().run(batch, build_params(cls.Params, {"q0_m2": 4.0}))
+    assert np.any(matching.traces["q_k"] != 4.0)
+    never = cls().run(batch, build_params(cls.Params, {"q0_m2": 4.0, "window": 100}))
+    np.testing.assert_array_equal(never.estimate, fixed.estimate)
 
 
 def test_refuses_too_few_steps_and_bad_orders():
