@@ -34,7 +34,7 @@ from bench.core import Batch, Scene, has_shape, require, require_arrays
 from bench.recording.blueprint import Views
 from bench.recording.layout import TrialLayout
 from bench.recording.record import MethodTrace, TrialRecord
-from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, time_series
+from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_covariance, time_series
 from bench.tasks.multitarget_metrics import (MEANS, SCENE_COLUMNS, multitarget_steps, multitarget_trial_metrics,
                                              summarise_multitarget)
 
@@ -166,6 +166,7 @@ def check_multitarget_output(out, batch: Batch) -> MultiTargetOutput:
             raise OutputError(f"position_covariance has shape {cov.shape}, expected ({n}, {K}, {J}, 2, 2)")
         if np.any(~np.isfinite(cov[occupied])):
             raise OutputError("position_covariance has non-finite values in occupied slots")
+        check_covariance("position_covariance", cov[occupied], where="occupied slots")
     _check_unique_ids(ids)
     return out
 

@@ -1,0 +1,422 @@
+"""Issue 30, points 3 and 4d: impossible outputs are a method's failure, parameters that
+cannot work are refused up front, the documented bounds are the enforced ones, and
+validation is bounded in time and memory.
+
+Every refusal is met as in ``tests/test_reliability_validation.py``: exit code 2, one
+line naming the field, nothing written.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import math
+import re
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench import registry
+from bench.cli import main
+from bench.core import TrackingOutput
+from bench.errors import ConfigError
+from bench.listing import plugin_listing
+from bench.params import build_params
+from bench.rng import TrialRNG
+from bench.tasks.base import COVARIANCE_TOLERANCE, OutputError, check_covariance
+
+registry.discover()
+
+
+# ======================================================================= impossible outputs
+
+def _batch(scenario: str, n: int = 3, snr_db: float | None = 10.0):
+    S = registry.get_scenario(scenario)
+    return S().generate(build_params(S.Params, S.small_params), snr_db, n, TrialRNG(1, 0, 1, range(n)))
+
+
+def _tracking_output(batch, **over) -> TrackingOutput:
+    n, K, d = batch.truth.shape
+    out = TrackingOutput(estimate=batch.truth.copy(), covariance=np.broadcast_to(np.eye(d), (n, K, d, d)).copy(),
+                         traces={"mode": np.zeros((n, K)), "switch": np.zeros((n, K)), "q_k": np.ones((n, K))})
+    for name, value in over.items():
+        if name in out.traces:
+            out.traces[name] = value
+        else:
+            setattr(out, name, value)
+    return out
+
+
+def test_a_covariance_of_minus_100_identity_is_the_methods_failure():
+    """The issue's case: NEES -3 was published; now the output is refused with its cause."""
+    batch = _batch("glint")
+    n, K, d = batch.truth.shape
+    task = registry.get_task("tracking")
+    task.check_output(_tracking_output(batch), batch)                  # the identity is a covariance
+    with pytest.raises(OutputError, match=rf"covariance is not a covariance .* at {n * K} of {n * K} .*"
+                                          r"smallest eigenvalue -100"):
+        task.check_output(_tracking_output(batch, covariance=-100.0 * np.broadcast_to(np.eye(d), (n, K, d, d))),
+                          batch)
+
+
+@pytest.mark.parametrize("make, says", [
+    (lambda P: P * np.r_[1.0, -1.0, 1.0, 1.0, 1.0, 1.0][:, None], "not a covariance"),        # asymmetric
+    (lambda P: P - 2.0 * np.eye(6) * P[..., :1, :1], "smallest eigenvalue"),                  # indefinite
+    (lambda P: np.where(np.eye(6, dtype=bool), -P, P), "smallest eigenvalue -"),               # negative variances
+], ids=["asymmetric", "indefinite", "negative-variance"])
+def test_covariances_that_are_not_symmetric_psd_are_refused_at_one_step(make, says):
+    batch = _batch("glint")
+    out = _tracking_output(batch)
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(6, 6))
+    out.covariance[1, 2] = make(A @ A.T + np.eye(6))
+    with pytest.raises(OutputError, match=rf"{says}.*") as err:
+        registry.get_task("tracking").check_output(out, batch)
+    assert " at 1 of " in str(err.value)
+
+
+def test_the_tolerance_is_relative_to_each_components_variance():
+    """Components in metres and radians side by side: a covariance is judged at unit
+    variances, so rounding at 1e-12 of either scale passes and 1e-5 does not."""
+    scales = np.array([1e6, 1e-6])
+    P = np.array([[1.0, 0.999], [0.999, 1.0]]) * np.outer(scales, scales)
+    check_covariance("P", P[None])
+    for off, ok in ((1e-12, True), (COVARIANCE_TOLERANCE / 2, True), (1e-5, False)):
+        Q = P.copy()
+        Q[0, 1] += off * scales[0] * scales[1]                     # asymmetric by `off` at unit variances
+        if ok:
+            check_covariance("P", Q[None])
+        else:
+            with pytest.raises(OutputError, match="largest asymmetry 1e-05"):
+                check_covariance("P", Q[None])
+    singular = np.array([[1.0, 1.0], [1.0, 1.0]]) - np.array([[0.0, 0.0], [0.0, COVARIANCE_TOLERANCE / 2]])
+    check_covariance("P", singular[None])                           # PSD within the tolerance
+    with pytest.raises(OutputError):
+        check_covariance("P", (singular - np.diag([0.0, 4 * COVARIANCE_TOLERANCE]))[None])
+    check_covariance("P", np.zeros((4, 3, 3)))                       # a zero covariance is PSD
+
+
+@pytest.mark.parametrize("trace, value, says", [
+    ("mode", 1.5, r"traces\['mode'\] has .* outside \[0, 1\]"),
+    ("switch", -1.0, r"traces\['switch'\] has .* outside \[0, 1\]"),
+    ("q_k", -1e-3, r"traces\['q_k'\] has .* outside >= 0"),
+    ("mode", np.nan, r"traces\['mode'\] has 1 non-finite"),
+])
+def test_scored_traces_outside_their_range_are_refused(trace, value, says):
+    batch = _batch("maneuvering-1d")
+    out = _tracking_output(batch)
+    out.traces[trace] = out.traces[trace].copy()
+    out.traces[trace][0, 3] = value
+    with pytest.raises(OutputError, match=says):
+        registry.get_task("tracking").check_output(out, batch)
+
+
+def test_a_multitarget_gate_covariance_must_be_a_covariance():
+    from bench.tasks.multitarget import MultiTargetOutput
+    batch = _batch("hfswr-targets", n=2)
+    n, K = batch.n, batch.steps
+    state = np.full((n, K, 1, 4), np.nan)
+    ids = np.full((n, K, 1), -1)
+    status = np.zeros((n, K, 1), np.int8)
+    state[:, 0, 0], ids[:, 0, 0], status[:, 0, 0] = 0.0, 0, 2
+    cov = np.zeros((n, K, 1, 2, 2))
+    cov[:, 0, 0] = np.eye(2)
+    task = registry.get_task("multi-target")
+    task.check_output(MultiTargetOutput(state, ids, status, cov), batch)
+    cov[:, 5, 0] = -np.eye(2)                          # an empty slot: never looked at
+    task.check_output(MultiTargetOutput(state, ids, status, cov), batch)
+    cov[1, 0, 0] = [[1.0, 2.0], [2.0, 1.0]]
+    with pytest.raises(OutputError, match="position_covariance is not a covariance .* at 1 of 2 occupied slots"):
+        task.check_output(MultiTargetOutput(state, ids, status, cov), batch)
+
+
+def test_a_cfar_significance_below_zero_is_an_impossible_probability():
+    from bench.tasks.cells import CellDetectionOutput
+    batch = _batch("rd-map", n=2)
+    stat = np.zeros((2, *batch.scene.shape), np.float32)
+    task = registry.get_task("cell-detection")
+    task.check_output(CellDetectionOutput(stat), batch)
+    stat[1, 3, 4] = -0.5
+    with pytest.raises(OutputError, match=r"statistic has 1 values outside >= -1e-12 \(-log10 of a false-alarm "
+                                          r"probability\), e.g. -0.5"):
+        task.check_output(CellDetectionOutput(stat), batch)
+
+
+def test_every_builtin_output_passes_the_checks():
+    """The checks refuse nothing a built-in produces (conformance runs each on its small
+    instance; here at the default sizes, where adaptive covariances drift furthest)."""
+    for name, method in registry.methods().items():
+        if method.task not in ("tracking", "multi-target"):
+            continue
+        for sname, scenario in registry.scenarios().items():
+            if method.serves(sname, scenario.tasks):
+                batch = scenario().generate(build_params(scenario.Params, {}), 0.0, 4, TrialRNG(2, 0, 1, range(4)))
+                registry.get_task(method.task).check_output(method().run(batch, method.Params()), batch)
+
+
+IMPOSSIBLE_TRACKER = '''
+import numpy as np
+from dataclasses import dataclass
+
+from bench.core import TRACKING, Method, TrackingOutput
+
+
+class NegativeCovariance(Method):
+    """Returns the truth with covariance -100 I (an impossible output)."""
+
+    name = "negative-covariance"
+    task = TRACKING
+
+    @dataclass(frozen=True)
+    class Params:
+        pass
+
+    def run(self, batch, params):
+        n, K, d = batch.truth.shape
+        return TrackingOutput(estimate=batch.truth.copy(),
+                              covariance=-100.0 * np.broadcast_to(np.eye(d), (n, K, d, d)))
+'''
+
+
+def install_plugin(site: Path, package: str, module: str, entry_points: str) -> dict:
+    """A plugin distribution under ``site`` (what ``pip install`` leaves: a package and a
+    ``.dist-info`` with its entry points); the environment that has it on PYTHONPATH."""
+    import os
+    (site / package).mkdir(parents=True)
+    (site / package / "__init__.py").write_text(module)
+    info = site / f"{package}-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {package}\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(entry_points)
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), *filter(None, [os.environ.get("PYTHONPATH")])])}
+
+
+IMPOSSIBLE_SWEEP = """
+name = "impossible"
+scenario = "glint"
+trials = 2
+seed = 1
+snr_db = [0]
+chunk = 2
+scenario_params = { steps = 20 }
+
+[[methods]]
+name = "ekf"
+
+[[methods]]
+name = "negative-covariance"
+
+[record]
+trials = 0
+"""
+
+
+@pytest.fixture(scope="module")
+def impossible_run(tmp_path_factory):
+    """A run of the EKF beside a plugin tracker whose covariance is -100 I; (folder, the
+    environment with the plugin)."""
+    import subprocess
+    import sys
+    root = tmp_path_factory.mktemp("impossible")
+    env = install_plugin(root / "site", "impossible_plugin", IMPOSSIBLE_TRACKER,
+                         "[bench.methods]\nnegative-covariance = impossible_plugin:NegativeCovariance\n")
+    (root / "sweep.toml").write_text(IMPOSSIBLE_SWEEP)
+    proc = subprocess.run([sys.executable, "-m", "bench", "run", str(root / "sweep.toml"), "--out", str(root / "run"),
+                           "--quiet", "--workers", "1", "--no-record"], env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    return root / "run", env
+
+
+def test_an_impossible_output_is_a_failure_in_the_run_never_a_published_nees(impossible_run):
+    """In a run: the config is listed as failed with the cause and the method named; no
+    NEES of it reaches summary.csv (NEES -3 was published)."""
+    import pandas as pd
+    run, _ = impossible_run
+    with sqlite3.connect(run / "results.sqlite") as db:
+        errors = dict(db.execute("SELECT method, error FROM runs WHERE error IS NOT NULL").fetchall())
+    assert set(errors) == {"negative-covariance"}
+    assert "covariance is not a covariance" in errors["negative-covariance"]
+    summary = pd.read_csv(run / "summary.csv")
+    assert "negative-covariance" not in set(summary.config)
+    assert (summary.nees_mean > 0).all()
+    report = (run / "report.md").read_text()
+    failures = report[report.index("## Failures"):]
+    assert "negative-covariance" in failures and "covariance is not a covariance" in failures
+
+
+# ======================================================================= parameters that cannot work
+
+@pytest.mark.parametrize("transition, prior, says", [
+    ((1, 0, 0, 1), (1, 0), "mode CA is never reached from the initial probabilities"),
+    ((0.5, 0.5, 0, 1), (1, 0), "mode CV is never reached again once in mode CA"),
+    ((1, 0, 0, 1), (0.5, 0.5), "mode CA is never reached again once in mode CV"),
+    ((0.9, 0.1, 0, 1), (0.5, 0.5), "mode CV is never reached again once in mode CA"),
+    ((0.9, 0.2, 0.1, 0.9), (0.5, 0.5), "each row must sum to 1"),
+], ids=["identity", "absorbing-ca", "identity-even-prior", "absorbing", "not-stochastic"])
+def test_imm_transitions_that_cannot_work_are_refused_up_front(transition, prior, says):
+    from tests.test_reliability_validation import refused, sweep, toml
+    data = sweep(scenarios=[{"name": "maneuvering-1d", "params": {"steps": 60}}],
+                 methods=[{"name": "imm-cv-ca", "params": {"transition": list(transition),
+                                                            "initial_probabilities": list(prior)}}])
+    del data["scenario"], data["scenario_params"]
+    refused(toml(data), "methods[0].params.transition: ", says)
+
+
+@pytest.mark.parametrize("transition, prior", [((0.95, 0.05, 0.05, 0.95), (0.9, 0.1)), ((0, 1, 1, 0), (0.5, 0.5)),
+                                               ((0.5, 0.5, 1, 0), (1, 0))])
+def test_imm_transitions_accepted_run_to_finite_estimates(transition, prior):
+    """Every accepted chain is irreducible: the absorbing ones gave 1149 NaN of 1200 values."""
+    method = registry.get_method("imm-cv-ca")
+    batch = _batch("maneuvering-1d", n=8)
+    out = method().run(batch, build_params(method.Params, {"transition": transition,
+                                                           "initial_probabilities": prior}))
+    registry.get_task("tracking").check_output(out, batch)
+
+
+# ------------------------------------------------------------------ documented bounds == enforced ones
+
+#: ``bench list -v`` prints each bound as ``[>= 2 and <= 12: why]`` after the doc.
+_BOUNDS = re.compile(r"\[((?:[<>]=? -?[\d.e+-]+)(?: and [<>]=? -?[\d.e+-]+)*)[:\]]")
+_PARAM_LINE = re.compile(r"^      (\w+) \(([^,]+), default .*?\): (.*)$")
+
+
+def listed_bounds() -> list[tuple[str, str, str, str, str, float]]:
+    """(kind, plugin, field, type, operator, value) of every bound ``bench list -v`` prints."""
+    rows, kind, plugin = [], None, None
+    for line in plugin_listing(verbose=True).splitlines():
+        if line in ("scenarios:", "methods:", "unavailable:", "tasks:"):
+            kind = line[:-1]
+            continue
+        if kind in ("scenarios", "methods") and (m := re.match(r"^  (\S+)\s", line)):
+            plugin = m.group(1)
+        elif kind in ("scenarios", "methods") and (m := _PARAM_LINE.match(line)):
+            found = _BOUNDS.findall(m.group(3))
+            for part in (found[-1].split(" and ") if found else []):
+                op, value = part.split(" ")
+                rows.append((kind, plugin, m.group(1), m.group(2), op, value))
+    return rows
+
+
+#: The other values under which a bound holds where another field constrains it (a
+#: cross-field check: the bound itself is reached, with these companions). Keyed by
+#: (plugin, field, bound as printed).
+COMPANIONS = {
+    ("cv-turn-cv", "steps", "2"): {"onset_step": 1, "turn_steps": 1, "warmup_steps": 0, "detect_window_steps": 1},
+    ("cv-turn-cv", "onset_step", "1"): {"warmup_steps": 0},
+    ("cv-turn-cv", "onset_step", "9999"): {"steps": 10000, "turn_steps": 1, "detect_window_steps": 1},
+    ("cv-turn-cv", "warmup_steps", "9998"): {"steps": 10000, "onset_step": 9999, "turn_steps": 1,
+                                             "detect_window_steps": 1},
+    **{("cv-turn-cv", f, v): {"steps": 10000, "onset_step": 1, "turn_steps": 1, "warmup_steps": 0,
+                              "detect_window_steps": 1}
+       for f, v in (("turn_steps", "9999"), ("detect_window_steps", "9999"), ("onset_jitter_steps", "9998"))},
+    ("glint", "initial_range_m", "10.0"): {"initial_range_std_m": 1.0},
+    ("glint", "initial_range_std_m", "100000.0"): {"initial_range_m": 1e6},
+    ("glint", "process_noise_los_m_s2", "0.0"): {"process_noise_los_m_s2": (0.0, 0.0, 0.0)},
+    ("glint", "process_noise_los_m_s2", "100.0"): {"process_noise_los_m_s2": (100.0, 100.0, 100.0)},
+    ("glint", "initial_angle_std_rad", "1e-06"): {"initial_angle_std_rad": (1e-6, 1e-6)},
+    ("glint", "initial_angle_std_rad", "0.1"): {"initial_angle_std_rad": (0.1, 0.1)},
+    ("hfswr-targets", "targets", "1"): {"crossing": False},
+    ("hfswr-targets", "crossing_targets", "100"): {"targets": 100},
+    ("maneuvering-1d", "steps", "2"): {"dt_s": 100.0},
+    ("maneuvering-1d", "dt_s", "0.001"): {"maneuver_start_s": 0.0},
+    ("maneuvering-1d", "maneuver_start_s", "1000000.0"): {"profile": "singer"},
+    ("ar-adaptive", "order_low", "5"): {"order_high": 6, "state_dim": 7},
+    ("ar-adaptive", "order_high", "1"): {"order_low": 0},
+    ("ar-adaptive", "order_high", "6"): {"state_dim": 7},
+    ("current-statistical", "accel_std_floor_m_s2", "1000.0"): {"a_max_m_s2": 1000.0},
+    ("imm-cv-ca", "transition", "0.0"): {"transition": (0.0, 1.0, 0.5, 0.5)},
+    ("imm-cv-ca", "transition", "1.0"): {"transition": (0.0, 1.0, 0.5, 0.5)},
+    ("imm-cv-ca", "initial_probabilities", "0.0"): {"initial_probabilities": (0.0, 1.0)},
+    ("imm-cv-ca", "initial_probabilities", "1.0"): {"initial_probabilities": (1.0, 0.0)},
+    ("innovation", "delta", "0.999"): {"window": 1},
+    **{(m, f, v): c for m in ("gnn-ekf", "jpda-ukf", "stonesoup-jpda") for f, v, c in (
+        ("confirm_m", "20", {"confirm_n": 20}), ("confirm_n", "1", {"confirm_m": 1}),
+        ("terminate_m", "60", {"terminate_n": 60}), ("terminate_n", "1", {"terminate_m": 1}))},
+    **{(m, f, v): c for m in ("os-cfar", "region-adaptive") for f, v, c in (
+        ("reference_range", "1", {"k_range": 1}), ("reference_doppler", "1", {"k_doppler": 1}),
+        ("k_range", "512", {"reference_range": 256}), ("k_doppler", "512", {"reference_doppler": 256}))},
+    ("wavelet", "levels", "1"): {"coarsest": 1},
+    ("wavelet", "coarsest", "8"): {"levels": 8},
+    ("tbd-grid", "cells", "8"): {"frames": 4, "cell_m": 1e5},
+    ("tbd-grid", "frames", "2"): {"noise": "white"},
+    ("tbd-grid", "frames", "1000"): {"cell_m": 1e5},
+    ("tbd-grid", "frame_period_s", "100.0"): {"cell_m": 1e5},
+    ("tbd-grid", "cell_m", "1.0"): {"frame_period_s": 1e-3},
+}
+
+
+def _plugin(kind: str, name: str):
+    return (registry.get_scenario if kind == "scenarios" else registry.get_method)(name)
+
+
+def _number(tp: str, text: str):
+    return int(text) if "int" in tp else float(text)
+
+
+def _beyond(op: str, value, is_int: bool):
+    """The nearest value on the wrong side of ``op value`` (``>``/``<``: the bound itself)."""
+    if op in (">", "<"):
+        return value
+    if is_int:
+        return value - 1 if op == ">=" else value + 1
+    return math.nextafter(value, -math.inf if op == ">=" else math.inf)
+
+
+def _with(cls, field: str, value, lower: bool, companions: dict):
+    """``{field: value}`` with the companions; in a tuple field the value replaces the
+    default's first element for a lower bound, its last for an upper one ([min, max] pairs)."""
+    default = getattr(cls.Params(), field)
+    if isinstance(default, tuple):
+        value = (value,) if not default else (value, *default[1:]) if lower else (*default[:-1], value)
+    return {field: value} | companions
+
+
+@pytest.mark.parametrize("kind, plugin, field, tp, op, text", listed_bounds(),
+                         ids=lambda x: str(x) if not isinstance(x, str) or len(x) < 30 else x[:30])
+def test_every_listed_bound_is_the_enforced_one(kind, plugin, field, tp, op, text):
+    """``bench list -v`` prints each bound; at it the value is accepted (with the
+    companions a cross-field check needs, :data:`COMPANIONS`), just beyond it refused
+    naming the field. state_dim = 2 of ar-adaptive was listed as allowed and refused."""
+    cls = _plugin(kind, plugin)
+    is_int = "int" in tp
+    value = _number(tp, text)
+    companions = COMPANIONS.get((plugin, field, text), {})
+    if op in (">=", "<="):
+        values = _with(cls, field, value, op == ">=", companions)
+        try:
+            build_params(cls.Params, values)
+        except ConfigError as err:
+            pytest.fail(f"{plugin}.{field} = {values[field]!r} (listed {op} {text}) refused: {err}")
+    beyond = _beyond(op, value, is_int)
+    values = _with(cls, field, beyond, op[0] == ">", {k: v for k, v in companions.items() if k != field})
+    with pytest.raises(ConfigError) as err:
+        build_params(cls.Params, values)
+    assert err.value.field.split("[")[0] == field and "expected" in err.value.problem, err.value
+
+
+def test_the_listing_holds_every_numeric_bound():
+    """The parse above misses nothing: every declared ge/gt/le/lt appears in the listing."""
+    listed = {(p, f, op) for _, p, f, _, op, _ in listed_bounds()}
+    declared = set()
+    for table in (registry.scenarios(), registry.methods()):
+        for name, cls in table.items():
+            for f in dataclasses.fields(cls.Params):
+                for key, op in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")):
+                    if f.metadata.get(key) is not None:
+                        declared.add((name, f.name, op))
+    assert declared == listed
+
+
+def test_ar_adaptive_state_dim_three_runs_and_two_is_refused_as_listed():
+    cls = registry.get_method("ar-adaptive")
+    assert "state_dim (int, default 4): state dimension M: the number of lagged positions [>= 3 and <= 12" \
+        in plugin_listing(verbose=True)
+    batch = _batch("maneuvering-1d")
+    out = cls().run(batch, build_params(cls.Params, {"state_dim": 3}))
+    registry.get_task("tracking").check_output(out, batch)
+    with pytest.raises(ConfigError, match="state_dim: expected int >= 3, got 2"):
+        build_params(cls.Params, {"state_dim": 2, "order_high": 1, "order_low": 0})
