@@ -145,16 +145,15 @@ def test_a_cfar_significance_below_zero_is_an_impossible_probability():
         task.check_output(CellDetectionOutput(stat), batch)
 
 
-def test_every_builtin_output_passes_the_checks():
-    """The checks refuse nothing a built-in produces (conformance runs each on its small
-    instance; here at the default sizes, where adaptive covariances drift furthest)."""
-    for name, method in registry.methods().items():
-        if method.task not in ("tracking", "multi-target"):
-            continue
-        for sname, scenario in registry.scenarios().items():
-            if method.serves(sname, scenario.tasks):
-                batch = scenario().generate(build_params(scenario.Params, {}), 0.0, 4, TrialRNG(2, 0, 1, range(4)))
-                registry.get_task(method.task).check_output(method().run(batch, method.Params()), batch)
+def test_the_adaptive_trackers_covariances_pass_at_the_default_scene():
+    """The checks refuse nothing a built-in produces: conformance runs every method on its
+    small instance through ``check_output``; here the adaptive trackers, whose covariances
+    drift furthest from symmetric (~1e-11), on their default 100-step scene."""
+    scenario = registry.get_scenario("maneuvering-1d")
+    batch = scenario().generate(scenario.Params(), 0.0, 4, TrialRNG(2, 0, 1, range(4)))
+    for name in ("ar-adaptive", "imm-cv-ca", "vd-filter", "current-statistical"):
+        method = registry.get_method(name)
+        registry.get_task("tracking").check_output(method().run(batch, method.Params()), batch)
 
 
 IMPOSSIBLE_TRACKER = '''
@@ -346,6 +345,13 @@ COMPANIONS = {
     ("tbd-grid", "frames", "1000"): {"cell_m": 1e5},
     ("tbd-grid", "frame_period_s", "100.0"): {"cell_m": 1e5},
     ("tbd-grid", "cell_m", "1.0"): {"frame_period_s": 1e-3},
+    ("rd-map", "range_cells", "16"): {"interference_range_start": 0, "edge_range_cell": 8, "margin_cells": 0},
+    ("rd-map", "doppler_cells", "16"): {"bragg_offset_bins": 4, "margin_cells": 0},
+    ("rd-map", "bragg_offset_bins", "8191"): {"doppler_cells": 16384},
+    ("rd-map", "interference_range_start", "4095"): {"range_cells": 4096, "interference_range_cells": 1},
+    ("rd-map", "interference_range_cells", "4096"): {"range_cells": 4096, "interference_range_start": 0},
+    ("rd-map", "edge_range_cell", "4095"): {"range_cells": 4096},
+    ("rd-map", "margin_cells", "2047"): {"range_cells": 4096, "doppler_cells": 16384},
 }
 
 
@@ -420,3 +426,121 @@ def test_ar_adaptive_state_dim_three_runs_and_two_is_refused_as_listed():
     registry.get_task("tracking").check_output(out, batch)
     with pytest.raises(ConfigError, match="state_dim: expected int >= 3, got 2"):
         build_params(cls.Params, {"state_dim": 2, "order_high": 1, "order_low": 0})
+
+
+# ======================================================================= 4d: validation bounded
+
+def _old_place_targets(labels, names, *, per_region, pairs, pair_offset, spacing, margin, seed):
+    """The straightforward layout search (a Python loop over every candidate, a distance
+    test against every placed target): the oracle of :func:`models.rd_map.place_targets`."""
+    def far_enough(cell, placed):
+        return not placed or int(np.abs(np.asarray(placed) - cell).max(axis=1).min()) >= spacing
+    R, D = labels.shape
+    rng = np.random.default_rng(seed)
+    inside = np.zeros(labels.shape, bool)
+    inside[margin:R - margin, margin:D - margin] = True
+    placed, paired, missing = [], [], []
+    present = [k for k in range(len(names)) if np.any(labels == k)]
+    for k in sorted(present, key=lambda k: int(np.count_nonzero(labels == k))):
+        candidates = np.argwhere((labels == k) & inside)
+        got = 0
+        for cell in candidates[rng.permutation(len(candidates))]:
+            if got == per_region:
+                break
+            if far_enough(cell, placed):
+                placed.append(cell)
+                paired.append(False)
+                got += 1
+        if got < per_region:
+            missing.append(f"{per_region - got} of {per_region} targets in region {names[k]!r}")
+    home, offset = names.index("homogeneous"), np.asarray(pair_offset, np.int64)
+    candidates = np.argwhere((labels == home) & inside)
+    got = 0
+    for cell in candidates[rng.permutation(len(candidates))]:
+        if got == pairs:
+            break
+        mate = cell + offset
+        if not (margin <= mate[0] < R - margin and margin <= mate[1] < D - margin) or labels[tuple(mate)] != home:
+            continue
+        if far_enough(cell, placed) and far_enough(mate, placed):
+            placed += [cell, mate]
+            paired += [True, True]
+            got += 1
+    if got < pairs:
+        missing.append(f"{pairs - got} of {pairs} pairs in region 'homogeneous'")
+    return np.asarray(placed, np.int64).reshape(-1, 2), np.asarray(paired, bool), "; ".join(missing)
+
+
+@pytest.mark.parametrize("chunks", [(4096, 1 << 20), (2, 8)], ids=["as-run", "tiny-chunks"])
+def test_the_vectorised_layout_search_places_every_target_where_the_loop_did(chunks, monkeypatch):
+    """The same cells, flags and shortfall as the loop it replaces, on random label maps
+    (tiny chunks: the growth and the early stop on maps this small)."""
+    import models.rd_map as rd
+    monkeypatch.setattr(rd, "_SCAN_CHUNK", chunks[0])
+    monkeypatch.setattr(rd, "_SCAN_CHUNK_MAX", chunks[1])
+    names = ("homogeneous", "bragg", "interference", "clutter-edge")
+    rng = np.random.default_rng(0)
+    for case in range(150):
+        R, D = (int(x) for x in rng.integers(16, 64, 2))
+        labels = rng.integers(0, 4, (R, D)).astype(np.int8)
+        if case % 3 == 0:
+            labels[:] = 0
+            labels[:R // 3] = 1
+        offset = (int(rng.integers(-3, 4)), int(rng.integers(1, 4)))
+        kw = dict(per_region=int(rng.integers(0, 6)), pairs=int(rng.integers(0, 5)), pair_offset=offset,
+                  spacing=int(rng.integers(1, 40)), margin=int(rng.integers(0, 6)), seed=int(rng.integers(0, 100)))
+        new, old = rd.place_targets(labels, names, **kw), _old_place_targets(labels, names, **kw)
+        assert np.array_equal(new[0], old[0]) and np.array_equal(new[1], old[1]) and new[2] == old[2], (case, kw)
+
+
+HUGE_MAP = {"range_cells": 4096, "doppler_cells": 16384, "targets_per_region": 64, "pairs": 32,
+            "target_spacing_cells": 4096}
+
+
+def test_a_huge_map_above_the_memory_limit_is_refused_before_any_layout_search(monkeypatch):
+    """The issue's case ran > 420 s and reached 4.4 GB before the memory check: now the
+    memory check comes first and the layout is never built."""
+    import models.rd_map as rd
+    from tests.test_reliability_validation import refused, sweep, toml
+
+    def no_layout(*args, **kwargs):
+        raise AssertionError("the layout was searched before the memory check")
+    monkeypatch.setattr(rd, "background_power", no_layout)
+    monkeypatch.setattr(rd, "place_targets", no_layout)
+    import scenarios.rd_map as scenario
+    monkeypatch.setattr(scenario, "background_power", no_layout)
+    monkeypatch.setattr(scenario, "place_targets", no_layout)
+    scenario.scene_layout.cache_clear()
+    data = sweep(scenarios=[{"name": "rd-map", "params": HUGE_MAP}], methods=[{"name": "ca-cfar"}],
+                 max_unit_memory_gb=2.0, chunk=1)
+    del data["scenario"], data["scenario_params"]
+    refused(toml(data), "scenarios[0].params: a unit of 1 trials of 'rd-map'", "max_unit_memory_gb = 2")
+
+
+def test_a_large_map_without_room_is_refused_in_one_pass(tmp_path):
+    """8 M cells whose targets cannot fit: the loop examined every candidate against every
+    placed target (minutes); the refusal now comes from one pass. A hang guard, not a
+    timing: 60 s is ten times what the pass takes on a loaded machine."""
+    import signal
+    from tests.test_reliability_validation import refused, sweep, toml
+
+    def hung(*_):
+        raise TimeoutError("the layout search still runs after 60 s")
+    previous = signal.signal(signal.SIGALRM, hung)
+    signal.alarm(60)
+    try:
+        data = sweep(scenarios=[{"name": "rd-map", "params": HUGE_MAP | {"range_cells": 512}}],
+                     methods=[{"name": "ca-cfar"}], chunk=1, trials=1)
+        del data["scenario"], data["scenario_params"]
+        refused(toml(data), "scenarios[0].params.targets_per_region: no room for every target: ",
+                "32 of 32 pairs in region 'homogeneous'")
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def test_the_memory_estimate_of_a_map_counts_its_layout():
+    from models.rd_map import LAYOUT_BYTES_PER_CELL
+    S = registry.get_scenario("rd-map")
+    p = build_params(S.Params, HUGE_MAP)
+    assert S().unit_memory_bytes(p, 2) == (48 + LAYOUT_BYTES_PER_CELL) * 4096 * 16384
