@@ -177,6 +177,20 @@ class NegativeCovariance(Method):
         n, K, d = batch.truth.shape
         return TrackingOutput(estimate=batch.truth.copy(),
                               covariance=-100.0 * np.broadcast_to(np.eye(d), (n, K, d, d)))
+
+
+class HugeEstimate(Method):
+    """Estimates 1e308 everywhere: finite, so an output to score (and to draw), however wrong."""
+
+    name = "huge-estimate"
+    task = TRACKING
+
+    @dataclass(frozen=True)
+    class Params:
+        pass
+
+    def run(self, batch, params):
+        return TrackingOutput(estimate=np.full(batch.truth.shape, 1e308))
 '''
 
 
@@ -208,8 +222,11 @@ name = "ekf"
 [[methods]]
 name = "negative-covariance"
 
+[[methods]]
+name = "huge-estimate"
+
 [record]
-trials = 0
+trials = 1
 """
 
 
@@ -221,12 +238,14 @@ def impossible_run(tmp_path_factory):
     import sys
     root = tmp_path_factory.mktemp("impossible")
     env = install_plugin(root / "site", "impossible_plugin", IMPOSSIBLE_TRACKER,
-                         "[bench.methods]\nnegative-covariance = impossible_plugin:NegativeCovariance\n")
+                         "[bench.methods]\nnegative-covariance = impossible_plugin:NegativeCovariance\n"
+                         "huge-estimate = impossible_plugin:HugeEstimate\n")
     (root / "sweep.toml").write_text(IMPOSSIBLE_SWEEP)
     proc = subprocess.run([sys.executable, "-m", "bench", "run", str(root / "sweep.toml"), "--out", str(root / "run"),
-                           "--quiet", "--workers", "1", "--no-record"], env=env, capture_output=True, text=True,
+                           "--quiet", "--workers", "1"], env=env, capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
+    (root / "stderr.txt").write_text(proc.stderr)
     return root / "run", env
 
 
@@ -237,7 +256,7 @@ def test_an_impossible_output_is_a_failure_in_the_run_never_a_published_nees(imp
     run, _ = impossible_run
     with sqlite3.connect(run / "results.sqlite") as db:
         errors = dict(db.execute("SELECT method, error FROM runs WHERE error IS NOT NULL").fetchall())
-    assert set(errors) == {"negative-covariance"}
+    assert set(errors) == {"negative-covariance", "huge-estimate"}
     assert "covariance is not a covariance" in errors["negative-covariance"]
     summary = pd.read_csv(run / "summary.csv")
     assert "negative-covariance" not in set(summary.config)
@@ -544,3 +563,149 @@ def test_the_memory_estimate_of_a_map_counts_its_layout():
     S = registry.get_scenario("rd-map")
     p = build_params(S.Params, HUGE_MAP)
     assert S().unit_memory_bytes(p, 2) == (48 + LAYOUT_BYTES_PER_CELL) * 4096 * 16384
+
+
+# ======================================================================= 5: undefined and degenerate numbers
+
+NO_TARGETS = """
+name = "no-targets"
+scenario = "rd-map"
+trials = 4
+seed = 1
+snr_db = [10]
+chunk = 4
+
+[scenario_params]
+range_cells = 48
+doppler_cells = 96
+bragg_offset_bins = 14
+interference_range_start = 16
+interference_range_cells = 8
+interference_doppler_bins = 20.0
+edge_range_cell = 34
+edge_band_cells = 4
+targets_per_region = 0
+pairs = 0
+
+[[methods]]
+name = "ca-cfar"
+
+[[methods]]
+name = "region-adaptive"
+
+[calibration]
+pfa = 0.01
+mode = "nominal"
+h0_trials = 10
+
+[record]
+trials = 0
+"""
+
+
+def _run(tmp_path: Path, text: str, *extra: str) -> tuple[Path, str]:
+    (tmp_path / "sweep.toml").write_text(text)
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        code = main(["run", str(tmp_path / "sweep.toml"), "--out", str(tmp_path / "run"), "--quiet", "--workers", "1",
+                     *extra])
+    assert code == 0, err.getvalue()
+    return tmp_path / "run", err.getvalue()
+
+
+def test_pd_on_a_map_without_targets_is_said_to_be_undefined_never_ranked(tmp_path):
+    """Was: ranks 1 and 2 and "tie: ca-cfar leads region-adaptive by – [–, –]"."""
+    run, _ = _run(tmp_path, NO_TARGETS, "--no-record")
+    report = (run / "report.md").read_text()
+    glance = report[report.index("## Results at a glance"):report.index("## What was run")]
+    assert "not defined on this scene (no targets): no config is ranked." in glance
+    assert "**tie**:" not in glance and "leads" not in glance and "| 1 " not in glance
+    assert "– [–, –]" not in report
+    assert "which detector wins where" not in report
+    pairs = report[report.index("## Paired comparisons"):]
+    assert "| not defined |" in pairs and "| **tie** |" not in pairs.split("##")[1]
+
+
+def test_a_collapsed_interval_and_a_negative_zero_are_printed_as_what_they_are():
+    from bench.markdown import fmt
+    from bench.metrics import bootstrap_mean_ci, paired_difference
+    from bench.report.render import _interval
+    assert fmt(-0.0) == "0" and fmt(0.0) == "0" and fmt(-1e-20) == "-1.00e-20"
+    equal = bootstrap_mean_ci(np.full(6, 1 / 6), np.zeros(6))
+    assert _interval(*equal) == "all trials equal: 0.167"                   # was 0.167 [0.167, 0.167]
+    same = paired_difference(np.ones(6), np.ones(6), np.zeros(6))
+    assert same == (0.0, 0.0, 0.0) and _interval(*(-x for x in same), signed=True) == "0 on every trial"
+    assert _interval(0.1, 0.1, 0.1, signed=True) == "+0.1 on every trial"
+    assert _interval(np.nan, np.nan, np.nan) == "–"
+
+
+def test_float_noise_in_a_paired_difference_is_zero_not_a_significant_margin():
+    """Means of means of 0/1 differences over three levels: 9.25e-18 where the exact value
+    is 0 (the issue's [-0.1, 5.55e-18]: an end above 0 by float noise reads as a gain)."""
+    from bench.metrics import paired_difference
+    a = np.array([0, 1, 0, 1, 0, 0, 0, 0, 1, 1, 0, 1, 1, 1, 1, 1, 0, 0], float)
+    b = np.array([1, 0, 1, 1, 1, 1, 0, 0, 0, 0, 1, 0, 1, 0, 0, 1, 1, 0], float)
+    strata = np.repeat(np.arange(3), 6)
+    assert (b - a)[strata == 0].sum() + (b - a)[strata == 1].sum() + (b - a)[strata == 2].sum() == 0
+    mean, low, high = paired_difference(a, b, strata)
+    assert mean == 0.0 and not math.copysign(1.0, mean) < 0
+    assert low < 0 < high
+
+
+def test_the_glance_of_configs_equal_on_every_trial_is_a_tie_said_plainly():
+    """Was "ekf leads … by -0 [-0, -0]"."""
+    import pandas as pd
+    from bench.report.glance import comparisons_frame, glance
+    from bench.report.render import glance_markdown
+    task = registry.get_task("tracking")
+    trials = pd.DataFrame({"scenario": "glint", "config": ["ekf"] * 4 + ["viterbi"] * 4, "snr_db": 0.0,
+                           "trial": list(range(4)) * 2, "rmse": [2.0, 3.0, 4.0, 5.0] * 2})
+    task_of = {"ekf": task, "viterbi": task}
+    text = glance_markdown(glance(trials, task_of, comparisons_frame(trials, task_of), {}))
+    assert "**tie**: `ekf` and `viterbi` are equal on every trial." in text
+    assert "-0" not in text
+
+
+def test_a_tracker_estimate_of_1e308_is_a_failure_and_warns_nothing(impossible_run):
+    """Was a NumPy overflow warning from the recording (and the metrics) on the terminal."""
+    run, _ = impossible_run
+    with sqlite3.connect(run / "results.sqlite") as db:
+        error = db.execute("SELECT error FROM runs WHERE method = 'huge-estimate'").fetchone()[0]
+    assert "estimate has" in error and "outside [-1e+150, 1e+150]" in error
+    assert "Warning" not in (run.parent / "stderr.txt").read_text()
+
+
+def test_a_position_a_float32_cannot_hold_is_drawn_as_a_gap_without_a_warning():
+    import warnings
+    from bench.recording.draw import north_up
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        xy = north_up(np.array([[1.0, 2.0], [1e100, -3.0], [4.0, -1e40]]))
+    assert xy.dtype == np.float32 and xy[0].tolist() == [1.0, -2.0]
+    assert np.isnan(xy[1, 0]) and xy[1, 1] == 3.0 and np.isnan(xy[2, 1])
+
+
+def _every_task_sweep() -> str:
+    """Every scenario at its small size, with every method that serves it: all the tasks'
+    summary columns at once (the frame pandas warned about), a recorded trial."""
+    from bench import tomlw
+    scenarios = [{"name": name, "params": dict(cls.small_params)} for name, cls in registry.scenarios().items()]
+    methods = [{"name": name} for name, cls in registry.methods().items()
+               if name in ("innovation", "ekf", "cv-kf", "dp-tbd", "ca-cfar", "os-cfar", "gnn-ekf")]
+    return tomlw.dumps({"name": "every-task", "trials": 2, "seed": 3, "snr_db": [10.0], "chunk": 2,
+                        "scenarios": scenarios, "methods": methods,
+                        "calibration": {"pfa": 0.05, "mode": "empirical", "h0_trials": 10}, "record": {"trials": 1}})
+
+
+def test_no_library_warning_reaches_the_terminal_on_a_normal_run(tmp_path):
+    """Five pandas PerformanceWarning blocks came on every run and report (a summary frame
+    fragmented into a block per column); Python's default filters, as a user has them."""
+    import os
+    import subprocess
+    import sys
+    (tmp_path / "sweep.toml").write_text(_every_task_sweep())
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
+    proc = subprocess.run([sys.executable, "-m", "bench", "run", "sweep.toml", "--out", "run", "--workers", "1"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr                      # `bench report` builds the same way
+    assert "Warning" not in proc.stderr and "warn" not in proc.stderr.lower(), proc.stderr

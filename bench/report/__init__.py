@@ -119,12 +119,19 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
         rows = (summary.scenario == c.scenario) & (summary.config == c.method)
         if rows.any():
             task_of[c.method].apply_calibration(summary, trials, c)
+    # The tasks' parts and the calibrations' in-place writes leave pandas' column blocks
+    # split: one block again (a frame of 100+ blocks makes every later operation slow, and
+    # pandas says so on the user's terminal). For the same reason, columns are taken with
+    # .loc and converted one by one: drop() and astype({...}) split every column (pandas 3).
+    summary = summary.copy()
     ev = runs[(runs.phase == "evaluation") & runs.error.isna()]
     speed = ev.groupby(["scenario", "method", "snr_db"]).agg(s=("seconds", "sum"), n=("n", "sum"))
     speed = (speed.s / speed.n).rename("seconds_per_trial").reset_index().rename(columns={"method": "config"})
-    summary = summary.drop(columns="seconds_per_trial").astype({"scenario": str, "config": str, "snr_db": float})
-    summary = summary.merge(speed.astype({"scenario": str, "config": str, "snr_db": float}),
-                            on=["scenario", "config", "snr_db"], how="left")
+    keys = {"scenario": str, "config": str, "snr_db": float}
+    summary = summary.loc[:, summary.columns != "seconds_per_trial"]
+    summary = summary.assign(**{k: summary[k].astype(t) for k, t in keys.items()})
+    summary = summary.merge(speed.assign(**{k: speed[k].astype(t) for k, t in keys.items()}), on=list(keys),
+                            how="left")
     order = {m["label"]: i for i, m in enumerate(record["methods"])}
     summary = summary.assign(_s=summary.scenario.map(_scenario_order(record)), _o=summary.config.map(order))
     summary = summary.sort_values(["_s", "_o", "snr_db"])

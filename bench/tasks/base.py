@@ -47,8 +47,8 @@ from bench.recording.blueprint import Views
 from bench.recording.layout import TrialLayout
 from bench.recording.record import MethodTrace, TrialRecord
 
-__all__ = ["COVARIANCE_TOLERANCE", "OutputError", "RecordedScene", "ReportContext", "Task", "Views",
-           "check_covariance", "check_finite", "check_range", "time_series"]
+__all__ = ["COVARIANCE_TOLERANCE", "MAX_ESTIMATE", "OutputError", "RecordedScene", "ReportContext", "Task", "Views",
+           "check_covariance", "check_estimate", "check_finite", "check_range", "time_series"]
 
 
 class OutputError(RuntimeError):
@@ -163,6 +163,17 @@ def check_range(name: str, a: np.ndarray, low: float, high: float = np.inf, what
                           f"e.g. {worst:.6g}")
 
 
+#: The largest magnitude of a state estimate: the square of anything beyond overflows
+#: float64, so no error, RMSE, GOSPA or NEES of it can be computed (a diverged filter).
+MAX_ESTIMATE = 1e150
+
+
+def check_estimate(name: str, a: np.ndarray) -> None:
+    """OutputError unless every (finite) value of the state estimate ``a`` is within
+    :data:`MAX_ESTIMATE` in magnitude."""
+    check_range(name, a, -MAX_ESTIMATE, MAX_ESTIMATE, "beyond it a squared error overflows float64")
+
+
 def time_series(batch: Batch) -> dict[str, np.ndarray]:
     """The step times as a series, so per-step tables carry time in seconds."""
     return {"t_s": np.broadcast_to(np.asarray(batch.t, float), (batch.n, batch.steps))}
@@ -210,6 +221,9 @@ class Task:
     ranking_label: ClassVar[str] = ""
     #: whether ``ranking_metric`` is a 0/1 indicator (paired comparisons add McNemar's exact test)
     ranking_binary: ClassVar[bool] = False
+    #: why no trial of a scene has ``ranking_metric`` when none has (the glance says so instead
+    #: of ranking), e.g. "no targets"
+    ranking_undefined: ClassVar[str] = "no trial has a value"
     #: the summary.csv column (with ``_low``/``_high``) drawn against SNR in report.html's
     #: interactive figure and crossed at 0.5 for "SNR at Pd = 0.5"; "": none
     curve_column: ClassVar[str] = ""

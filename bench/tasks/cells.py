@@ -166,6 +166,7 @@ class CellDetectionTask(Task):
     ranking_metric = "hit_fraction"
     ranking_higher_is_better = True
     ranking_label = "fraction of a map's targets detected"
+    ranking_undefined = "no targets"
     curve_column = "pd"
     recording_charts = (("pd", "Pd"), ("false_alarms_per_map", "false alarms per map"))
     informative_column = "pd"

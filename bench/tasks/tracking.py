@@ -33,8 +33,8 @@ from bench.recording.blueprint import Views
 from bench.recording.draw import log_static_points, log_track, north_up
 from bench.recording.layout import TrialLayout
 from bench.recording.record import MethodTrace, TrialRecord, check_shape
-from bench.tasks.base import (OutputError, RecordedScene, ReportContext, Task, check_covariance, check_finite,
-                              check_range, time_series)
+from bench.tasks.base import (OutputError, RecordedScene, ReportContext, Task, check_covariance, check_estimate,
+                              check_finite, check_range, time_series)
 from bench.tasks.tracking_metrics import (SWITCH_TRACES, maneuver_trial_metrics, summarise_tracking,
                                           tracking_steps, tracking_trial_metrics)
 
@@ -182,6 +182,7 @@ class TrackingTask(Task):
         if not isinstance(out, TrackingOutput):
             raise OutputError(f"expected a TrackingOutput, got {type(out).__name__}")
         check_finite("estimate", np.asarray(out.estimate, float), batch.truth.shape)
+        check_estimate("estimate", out.estimate)
         if out.covariance is not None:
             d = batch.truth.shape[-1]
             check_finite("covariance", np.asarray(out.covariance, float), (*batch.truth.shape[:2], d, d))
