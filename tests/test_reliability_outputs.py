@@ -266,6 +266,23 @@ def test_an_impossible_output_is_a_failure_in_the_run_never_a_published_nees(imp
     assert "negative-covariance" in failures and "covariance is not a covariance" in failures
 
 
+def test_the_report_of_a_run_whose_plugins_are_not_installed_names_them_and_the_store(impossible_run, tmp_path):
+    """Was "methods[1].name: unknown method ..." naming no file (exit 2 all the same)."""
+    import shutil
+    import subprocess
+    import sys
+    run = tmp_path / "run"
+    shutil.copytree(impossible_run[0], run)
+    from tests.test_reliability_store import _tree
+    before = _tree(run)
+    proc = subprocess.run([sys.executable, "-m", "bench", "report", str(run)], capture_output=True, text=True,
+                          timeout=300)                                # this environment lacks the plugin
+    assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1, proc.stderr
+    assert proc.stderr.startswith(f"error: {run / 'results.sqlite'}: the run was made with plugins not installed "
+                                  "here: method 'negative-covariance', method 'huge-estimate'; install them")
+    assert _tree(run) == before
+
+
 # ======================================================================= parameters that cannot work
 
 @pytest.mark.parametrize("transition, prior, says", [

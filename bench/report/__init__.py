@@ -98,6 +98,24 @@ def trials_frame(store: Store, record: dict) -> tuple[pd.DataFrame, dict]:
     return df[TRIAL_KEYS + rest].reset_index(drop=True), series
 
 
+def require_plugins(record: dict, db: Path) -> None:
+    """Rebuilding the report needs every task, scenario and method the stored plan ran:
+    one line naming the store and what is not installed here (with the reason ``bench
+    list`` gives, when the plugin is there but failed to load)."""
+    missing = []
+    for kind, known, names in (
+            ("task", registry.tasks(), [m["task"] for m in record["methods"]]),
+            ("scenario", registry.scenarios(), [s["name"] for s in record["scenarios"]]),
+            ("method", registry.methods(), [m["name"] for m in record["methods"]])):
+        for name in dict.fromkeys(names):
+            if name not in known:
+                reason = registry.unavailable_reason(name)
+                missing.append(f"{kind} {name!r}" + (f" ({reason})" if reason else ""))
+    if missing:
+        raise ConfigError(str(db), f"the run was made with plugins not installed here: {', '.join(missing)}; "
+                                   "install them to rebuild its report"[:600])
+
+
 def _task_of(record: dict) -> dict:
     """Method config label -> its task (bench.tasks), from the stored plan."""
     return {m["label"]: registry.get_task(m["task"]) for m in record["methods"]}
@@ -383,6 +401,7 @@ def _recording_summary(summary: pd.DataFrame, tasks) -> pd.DataFrame:
 def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     runfolder.folder_for(out_dir / "figures")     # refuses a linked figures/ before anything is written
     record = store.plan()
+    require_plugins(record, store.path)
     sweep = record["sweep"]
     runs, units = store.runs(), store.units()
     task_of = _task_of(record)
