@@ -43,7 +43,7 @@ EXIT_CODES = f"""exit codes:
        a bench store, a run of another sweep, a symbolic link inside the run folder);
        nothing is written
   {EXIT_ENVIRONMENT}    the machine refused: permission denied, read-only file system, disk full,
-       file-size limit, I/O error; nothing is half-written, and the same command
+       file-size limit, I/O error, out of memory; nothing is half-written, and the same command
        resumes once the cause is fixed
   {EXIT_IN_USE}    the run folder is in use by another bench run or report
   {EXIT_REGRESSION}    bench compare --fail-on-regression: a method config got significantly worse
