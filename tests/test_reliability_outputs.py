@@ -254,7 +254,7 @@ def test_an_impossible_output_is_a_failure_in_the_run_never_a_published_nees(imp
     NEES of it reaches summary.csv (NEES -3 was published)."""
     import pandas as pd
     run, _ = impossible_run
-    with sqlite3.connect(run / "results.sqlite") as db:
+    with contextlib.closing(sqlite3.connect(run / "results.sqlite")) as db:
         errors = dict(db.execute("SELECT method, error FROM runs WHERE error IS NOT NULL").fetchall())
     assert set(errors) == {"negative-covariance", "huge-estimate"}
     assert "covariance is not a covariance" in errors["negative-covariance"]
@@ -686,7 +686,7 @@ def test_the_glance_of_configs_equal_on_every_trial_is_a_tie_said_plainly():
 def test_a_tracker_estimate_of_1e308_is_a_failure_and_warns_nothing(impossible_run):
     """Was a NumPy overflow warning from the recording (and the metrics) on the terminal."""
     run, _ = impossible_run
-    with sqlite3.connect(run / "results.sqlite") as db:
+    with contextlib.closing(sqlite3.connect(run / "results.sqlite")) as db:
         error = db.execute("SELECT error FROM runs WHERE method = 'huge-estimate'").fetchone()[0]
     assert "estimate has" in error and "outside [-1e+150, 1e+150]" in error
     assert "Warning" not in (run.parent / "stderr.txt").read_text()
