@@ -26,7 +26,7 @@ import traceback
 from pathlib import Path
 
 from bench import __version__
-from bench.errors import ConfigError, Fault, os_fault, unknown_name
+from bench.errors import ConfigError, Fault, is_out_of_memory, os_fault, unknown_name
 from bench.listing import plugin_listing, preset_descriptions, presets
 
 EXIT_BUG = 1
@@ -45,7 +45,7 @@ EXIT_CODES = f"""exit codes:
        a bench store, a run of another sweep, a symbolic link inside the run folder);
        nothing is written
   {EXIT_ENVIRONMENT}    the machine refused: permission denied, read-only file system, disk full,
-       file-size limit, I/O error; nothing is half-written, and the same command
+       file-size limit, I/O error, out of memory; nothing is half-written, and the same command
        resumes once the cause is fixed
   {EXIT_IN_USE}    the run folder is in use by another bench run or report
   {EXIT_REGRESSION}    bench compare --fail-on-regression: a method config got significantly worse
@@ -246,8 +246,9 @@ def cmd_run(args) -> int:
     try:
         with runfolder.writing(out_dir), _store_errors(out_dir):
             return _run_locked(args, plan, out_dir, command)
-    except (ConfigError, Fault, OSError, sqlite3.Error):
-        if created:
+    except BaseException as exc:
+        refused = isinstance(exc, (ConfigError, Fault, OSError, sqlite3.Error, MemoryError)) or is_out_of_memory(exc)
+        if created and refused:
             runfolder.discard_new(out_dir)      # a folder this command made, if it holds no result
         raise
     finally:
@@ -422,13 +423,16 @@ def main(argv: list[str] | None = None) -> int:
     except sqlite3.Error as err:
         _error(f"results store: {err}")
         return EXIT_ENVIRONMENT
-    except MemoryError:
-        _error("out of memory")
+    except MemoryError as err:
+        _error(f"out of memory{f': {err}' if str(err) else ''}")
         return EXIT_ENVIRONMENT
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except Exception as exc:               # a bug: one line still, the traceback on request
+        if is_out_of_memory(exc):          # e.g. an import whose library could not be mapped
+            _error(f"out of memory: {type(exc).__name__}: {exc}"[:400])
+            return EXIT_ENVIRONMENT
         if os.environ.get("BENCH_TRACEBACK"):
             raise
         frames = traceback.extract_tb(exc.__traceback__)

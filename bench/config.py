@@ -619,6 +619,7 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     if idle:
         raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0]!r}")
     feasibility.check_unit_memory(plan, scenario_fields)
+    feasibility.check_scenario_configs(plan, scenario_fields)
     if plan.trial_runs > LARGE_SWEEP_TRIAL_RUNS and not allow_large:
         raise ConfigError("trials", f"the sweep asks for {plan.trial_runs:,} trial-runs "
                                     f"(trials x SNR levels x configs); pass --yes to run it anyway")

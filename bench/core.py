@@ -301,6 +301,13 @@ class Scenario(Component):
         ``max_unit_memory_gb``. None (the default): not estimated."""
         return None
 
+    def check_config(self, params) -> None:
+        """The checks of a config that cost work in proportion to its size (e.g. whether
+        its targets fit on its map): raise ``ConfigError`` naming the field. Run once
+        per scenario config after the memory check (:meth:`unit_memory_bytes`), so they
+        only ever run on a config whose units fit; ``Params.validate`` keeps to checks
+        that cost nothing. The default: none."""
+
 
 class Method(Component):
     """A detector, tracker or TBD algorithm. Subclasses implement :meth:`run`.

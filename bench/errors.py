@@ -13,6 +13,9 @@ Each kind has its exit code (README, 'Commands'; ``bench --help``):
 Not an error kind: ``bench run`` exits 6 (``bench.cli.EXIT_FAILED_UNITS``) when the run
 folder holds failed (unit, method config) runs, after writing the report and one line
 per failing config on stderr (:mod:`bench.failures`).
+
+Out of memory (:func:`is_out_of_memory`: a MemoryError, or an import that could not map
+its library) is exit 3 too, wherever it strikes.
 """
 
 from __future__ import annotations
@@ -105,3 +108,23 @@ def os_fault(exc: OSError, path: str | os.PathLike | None = None, doing: str = "
     if exc.errno in _BAD_PATH_ERRNOS:
         return ConfigError(where, problem)
     return Fault(where, problem)
+
+
+#: What the dynamic loader and the C libraries say when a mapping or an allocation is
+#: refused (``ulimit -v``, a full machine): an import that failed for lack of memory.
+_OUT_OF_MEMORY_TEXT = ("failed to map segment from shared object", "cannot allocate memory", "out of memory")
+
+
+def is_out_of_memory(exc: BaseException) -> bool:
+    """Whether ``exc`` (or what caused it) is the machine refusing memory: a MemoryError,
+    an ENOMEM, or an ImportError of a shared library that could not be mapped. Such a
+    failure is exit 3 wherever it strikes, never a plugin's bug nor an unknown name."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, MemoryError) or (isinstance(exc, OSError) and exc.errno == errno.ENOMEM):
+            return True
+        if isinstance(exc, (ImportError, OSError)) and any(t in str(exc).lower() for t in _OUT_OF_MEMORY_TEXT):
+            return True
+        exc = exc.__cause__ or exc.__context__
+    return False

@@ -5,10 +5,12 @@ scenario config's SNR levels are checked by the scenario
 (:meth:`~bench.core.Scenario.check_snr`), every (method config, scenario
 config) pair by the method (:meth:`~bench.core.Method.check_scenario`: a
 pair it refuses is skipped, a method config it refuses everywhere is an
-error), and every unit's memory is estimated from the plugins' declared array sizes
-(``unit_memory_bytes``) against ``max_unit_memory_gb`` — so a sweep that
-would fail, hang or swap on every unit is refused in one line before anything
-is written (docs/architecture.md, 'Run folders and faults').
+error), every unit's memory is estimated from the plugins' declared array sizes
+(``unit_memory_bytes``) against ``max_unit_memory_gb``, and only then are the
+checks that cost work in proportion to a config's size run (the scenario's
+``check_config``) — so a sweep that would fail, hang or swap on every unit is
+refused in one line, in seconds, before anything is written (docs/architecture.md,
+'Run folders and faults').
 """
 
 from __future__ import annotations
@@ -100,6 +102,16 @@ def unit_memory_bytes(plan: Plan, scenario: ScenarioConfig, n: int, calibration:
         if need > worst:
             worst, label = need, m.label
     return int(batch) + int(worst), label
+
+
+def check_scenario_configs(plan: Plan, scenario_fields: tuple[str, ...]) -> None:
+    """Every scenario config by its scenario's :meth:`~bench.core.Scenario.check_config`:
+    the checks whose cost grows with the config, run after :func:`check_unit_memory`."""
+    for s, field in zip(plan.scenarios, scenario_fields):
+        try:
+            registry.get_scenario(s.name)().check_config(s.params)
+        except ConfigError as err:
+            raise err.within(field) from None
 
 
 def check_unit_memory(plan: Plan, scenario_fields: tuple[str, ...]) -> None:

@@ -26,7 +26,9 @@ def fmt(x, digits: int = 3) -> str:
     if isinstance(x, (int, np.integer)):
         return str(x)
     ax = abs(x)
-    return f"{x:.{digits}g}" if (ax >= 1e-3 or ax == 0) else f"{x:.2e}"
+    if ax == 0:
+        return "0"                      # never "-0": a negative zero is a zero
+    return f"{x:.{digits}g}" if ax >= 1e-3 else f"{x:.2e}"
 
 
 def fmt_interval(mid, low, high, digits: int = 3) -> str:

@@ -241,7 +241,19 @@ def bootstrap_mean_ci(values, strata, level: float = CONFIDENCE,
         return (np.nan, np.nan, np.nan)
     reps = _stratified_means(values, strata, resamples, np.random.default_rng(BOOTSTRAP_SEED))
     alpha = (1 - level) / 2
-    return stratified_mean(values, strata), float(np.quantile(reps, alpha)), float(np.quantile(reps, 1 - alpha))
+    noise = FLOAT_NOISE * float(np.abs(values).max())
+    return tuple(_snap(x, noise) for x in (stratified_mean(values, strata), np.quantile(reps, alpha),
+                                           np.quantile(reps, 1 - alpha)))
+
+
+#: Means of means of values of magnitude v are exact to about n eps v over n values: a
+#: mean within FLOAT_NOISE v of 0 is 0 (the 5.55e-18 upper end of a paired interval of
+#: equal trials read as a significant gain), and so is a negative zero.
+FLOAT_NOISE = 1e-10
+
+
+def _snap(x, noise: float) -> float:
+    return 0.0 if abs(float(x)) <= noise else float(x)
 
 
 def paired_difference(a, b, strata, level: float = CONFIDENCE,

@@ -37,7 +37,7 @@ import traceback
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from bench.errors import ConfigError, unknown_name
+from bench.errors import ConfigError, is_out_of_memory, unknown_name
 
 if TYPE_CHECKING:  # pragma: no cover - typing only; bench.core (NumPy) is imported on discovery
     from bench.core import Method, Scenario
@@ -138,9 +138,13 @@ def register_task(cls: type) -> type:
 
 
 def _failure(exc: BaseException) -> None:
-    """Let a Ctrl-C through; anything else a plugin raises is its own failure."""
+    """Let a Ctrl-C and the machine's lack of memory through (an import that could not map
+    its library is no unavailable plugin: exit 3, never "unknown method"); anything else a
+    plugin raises is its own failure."""
     if isinstance(exc, KeyboardInterrupt):
         raise exc
+    if is_out_of_memory(exc):
+        raise MemoryError(f"out of memory while importing plugins ({_last_line(exc)})") from exc
 
 
 def _unavailable(source: str, exc: BaseException, name: str = "") -> None:

@@ -26,6 +26,7 @@ import contextlib
 import contextvars
 import errno
 import fcntl
+import json
 import os
 import re
 import secrets
@@ -343,6 +344,7 @@ def check_store(db: Path, *, need_plan: bool = False) -> None:
             if not tables <= store_tables() or not {"meta", "units"} <= tables:
                 raise refuse(f"tables {', '.join(sorted(tables)) or 'none'}")
             keys = {r[0] for r in con.execute("SELECT key FROM meta")}
+            plan = con.execute("SELECT value FROM meta WHERE key='plan'").fetchone()
         finally:
             con.close()
     except sqlite3.Error as exc:
@@ -352,6 +354,19 @@ def check_store(db: Path, *, need_plan: bool = False) -> None:
         raise Fault(str(db), f"cannot read the store: {exc}") from None
     if need_plan and "plan" not in keys:
         raise refuse("it holds no plan")
+    if plan is not None:
+        _check_plan_json(db, plan[0])
+
+
+def _check_plan_json(db: Path, text) -> None:
+    """A stored plan that is not a JSON object is a damaged store (exit 2, every command)."""
+    from bench.store import damaged
+    try:
+        ok = isinstance(json.loads(text), dict)
+    except (TypeError, ValueError) as exc:
+        raise damaged(db, f"the stored plan is not valid JSON: {exc}"[:300]) from None
+    if not ok:
+        raise damaged(db, "the stored plan is not a JSON object")
 
 
 # ------------------------------------------------------------------ the folder
@@ -502,12 +517,15 @@ def open_for_run(root: Path, *, fresh: bool, what: str = "bench run") -> RunLock
             if os.path.islink(root / entry.rstrip("/")):
                 raise _link_error(root / entry.rstrip("/"))
         if fresh and kind == "run":
+            if os.path.lexists(root / STORE) and not os.path.isfile(root / STORE):
+                check_store(root / STORE)       # a folder where the store goes: --fresh removes no folder
             clear(root)
         else:
             try:
                 check_store(root / STORE)
             except ConfigError as err:
-                if STORE in (read_manifest(root) or []) and not os.path.islink(root / STORE):
+                if STORE in (read_manifest(root) or []) and os.path.isfile(root / STORE) \
+                        and not os.path.islink(root / STORE):         # what --fresh removes
                     raise ConfigError(err.field, err.problem.replace(
                         "move it away, or choose another folder",
                         "--fresh discards it (with what the run wrote), or move it away")) from None

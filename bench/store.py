@@ -30,6 +30,7 @@ import io
 import json
 import sqlite3
 import time
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
@@ -141,6 +142,12 @@ def store_fault(path: str | Path, exc: sqlite3.Error) -> ConfigError | Fault:
     return Fault(str(path), f"store failed: {exc}{hint}")
 
 
+def damaged(path: str | Path, why: str) -> ConfigError:
+    """The one-line error for a bench store whose content is damaged (exit 2); the advice
+    is the one ``bench run`` rewrites into "--fresh discards it" where --fresh can."""
+    return ConfigError(str(path), f"damaged bench results store ({why}); move it away, or choose another folder")
+
+
 class Store:
     """Writes are transactions (``BEGIN IMMEDIATE``: a check and the write that depends
     on it see one state of the store, whoever else writes)."""
@@ -212,7 +219,17 @@ class Store:
         text = self.meta("plan")
         if text is None:
             raise ConfigError("", f"{self.path} holds no plan (not a bench run folder?)")
-        return json.loads(text)
+        with self._decoding("the stored plan"):
+            return json.loads(text)
+
+    @contextlib.contextmanager
+    def _decoding(self, what: str):
+        """Stored content that does not decode (the plan's JSON, an array's bytes) is a
+        damaged store: one line naming the file, exit 2 (:func:`damaged`)."""
+        try:
+            yield
+        except (ValueError, KeyError, EOFError, OSError, zipfile.BadZipFile) as exc:
+            raise damaged(self.path, f"{what} cannot be read: {type(exc).__name__}: {exc}"[:300]) from None
 
     # ---------------------------------------------------------------- identities
     def use_identities(self, described: dict[str, dict[str, dict]]) -> None:
@@ -365,7 +382,9 @@ class Store:
              "FROM metrics JOIN units ON metrics.unit = units.key ORDER BY units.scenario, "
              "metrics.method, units.snr_db, units.trial_start")
         for unit, method, scenario, snr, blob in self.db.execute(q):
-            yield unit, method, scenario, snr, bytes_to_columns(blob)
+            with self._decoding(f"the metrics of {method!r} on unit {unit!r}"):
+                columns = bytes_to_columns(blob)
+            yield unit, method, scenario, snr, columns
 
     def null_values(self, scenario: str, method: str) -> tuple[np.ndarray, np.ndarray | None, float | None]:
         """Pooled null statistic values of a method config (in unit order), its
@@ -375,8 +394,10 @@ class Store:
                                "ORDER BY unit", (scenario, method)).fetchall()
         if not rows:
             return np.empty(0), None, None
-        values = np.concatenate([bytes_to_array(r[0]) for r in rows])
-        peaks = None if any(r[1] is None for r in rows) else np.concatenate([bytes_to_array(r[1]) for r in rows])
+        with self._decoding(f"the null values of {method!r} on {scenario!r}"):
+            values = np.concatenate([bytes_to_array(r[0]) for r in rows])
+            peaks = None if any(r[1] is None for r in rows) else \
+                np.concatenate([bytes_to_array(r[1]) for r in rows])
         return values, peaks, rows[0][2]
 
     def null_cells(self, scenario: str, method: str) -> np.ndarray | None:
@@ -387,7 +408,8 @@ class Store:
                                (scenario, method)).fetchall()
         if not rows or any(r[0] is None for r in rows):
             return None
-        return np.concatenate([bytes_to_array(r[0]) for r in rows])
+        with self._decoding(f"the null cell statistics of {method!r} on {scenario!r}"):
+            return np.concatenate([bytes_to_array(r[0]) for r in rows])
 
     def null_trial_lengths(self, scenario: str, method: str) -> np.ndarray:
         """How many of :meth:`null_values` each null trial contributed, in the same
@@ -396,8 +418,9 @@ class Store:
         rows = self.db.execute("SELECT null_stats.data, units.n FROM null_stats JOIN units ON "
                                "null_stats.unit = units.key WHERE null_stats.scenario=? AND "
                                "null_stats.method=? ORDER BY null_stats.unit", (scenario, method)).fetchall()
-        return np.concatenate([np.full(n, bytes_to_array(data).size // n, dtype=np.int64)
-                               for data, n in rows]) if rows else np.empty(0, np.int64)
+        with self._decoding(f"the null values of {method!r} on {scenario!r}"):
+            return np.concatenate([np.full(n, bytes_to_array(data).size // n, dtype=np.int64)
+                                   for data, n in rows]) if rows else np.empty(0, np.int64)
 
     def records(self) -> list[bytes]:
         q = ("SELECT records.data FROM records JOIN units ON records.unit = units.key "

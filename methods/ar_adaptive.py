@@ -330,9 +330,9 @@ class ARAdaptive(Method):
                              why="0 (a noise-free polynomial) up to (100 km)^2")
         window: int = param(10, "sliding window W of the covariance matching (steps)", ge=1, le=1000,
                             why="one innovation at least; at most 1000 steps of memory per trial")
-        state_dim: int = param(4, "state dimension M: the number of lagged positions", ge=2,
-                               le=MAX_STATE_DIM, why="two lags for a first-order model; at most 12 (the "
-                               "coefficient solve loses precision beyond)")
+        state_dim: int = param(4, "state dimension M: the number of lagged positions", ge=3,
+                               le=MAX_STATE_DIM, why="three lags: the acceleration estimate needs three; at "
+                               "most 12 (the coefficient solve loses precision beyond)")
         order_low: int = param(1, "polynomial order N of the low-order (quiet) AR model", ge=0,
                                le=MAX_ORDER - 1, why="0 (constant position) to one below the highest")
         order_high: int = param(2, "polynomial order N of the high-order (maneuver) AR model", ge=1,
@@ -355,8 +355,6 @@ class ARAdaptive(Method):
             if self.order_high > self.state_dim - 1:
                 raise ConfigError("order_high", f"an order-{self.order_high} predictor needs state_dim >= "
                                   f"{self.order_high + 1}, got {self.state_dim}")
-            if self.state_dim < 3:
-                raise ConfigError("state_dim", "expected >= 3: the acceleration estimate needs three lags")
 
     def run(self, batch: Batch, params) -> TrackingOutput:
         model = kinematic_model_of(batch.scene)

@@ -58,6 +58,27 @@ def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
         return np.squeeze(top, axis) + np.log(np.sum(np.exp(a - top), axis=axis))
 
 
+def unreachable_mode(transition: np.ndarray, mu0: np.ndarray, names) -> str | None:
+    """Why an IMM with this Markov chain fails, or None. Every mode must be reachable at
+    the first step (c_bar = mu0 M > 0) and from every mode (the chain irreducible): once the
+    data drive a mode's probability to zero (it underflows), a mode reachable only from it
+    has c_bar_j = 0, its mixing weights omega_ij = M_ij mu_i / c_bar_j are 0/0 and the
+    estimate turns NaN at every later step (an absorbing mode, or an identity matrix)."""
+    M = np.asarray(transition, float) > 0
+    first = np.asarray(mu0, float) @ np.asarray(transition, float) > 0
+    if not first.all():
+        return f"mode {names[int(np.argmin(first))]} is never reached from the initial probabilities"
+    reach = M.copy()
+    for _ in range(len(M)):                                 # transitive closure: k steps for r modes
+        reach |= (reach.astype(int) @ M.astype(int)) > 0
+    for i, row in enumerate(reach):
+        if not row.all():
+            j = int(np.argmin(row))
+            return f"mode {names[j]} is never reached again once in mode {names[i]} (no path of non-zero " \
+                   f"transitions; the filter's mixing weights are 0/0 once a mode's probability underflows)"
+    return None
+
+
 def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: np.ndarray, z: np.ndarray,
                x0: np.ndarray, P0: np.ndarray) -> IMMResult:
     """The IMM of Blom & Bar-Shalom (1988), in FilterPy's ``IMMEstimator`` order
@@ -161,8 +182,10 @@ class IMMCVCA(KinematicTracker):
                 raise ConfigError("transition", f"each row must sum to 1, got row sums {rows.tolist()}")
             if not np.isclose(sum(self.initial_probabilities), 1.0, atol=1e-9):
                 raise ConfigError("initial_probabilities", "must sum to 1")
-            if not (np.asarray(self.initial_probabilities) @ np.reshape(self.transition, (2, 2)) > 0).all():
-                raise ConfigError("transition", "a mode can never be reached from the initial probabilities")
+            problem = unreachable_mode(np.reshape(self.transition, (2, 2)), np.asarray(self.initial_probabilities),
+                                       ("CV", "CA"))
+            if problem:
+                raise ConfigError("transition", problem)
 
     @staticmethod
     def modes(model: KinematicModel, params) -> list[LinearGaussianModel]:

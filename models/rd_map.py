@@ -104,8 +104,66 @@ def label_regions(parts: BackgroundParts, names: tuple[str, ...], edge: RegionLe
     return labels
 
 
-def _far_enough(cell: np.ndarray, placed: list, spacing: int) -> bool:
-    return not placed or int(np.abs(np.asarray(placed) - cell).max(axis=1).min()) >= spacing
+#: bytes a cell of the map costs while its layout is built (:func:`background_power`'s
+#: float64 components and their sum, the labels, :func:`place_targets`' candidate indices
+#: and their shuffle): the scenario adds it to a unit's memory estimate
+LAYOUT_BYTES_PER_CELL = 72
+
+#: candidates examined at once by :func:`place_targets` (grown while none is free)
+_SCAN_CHUNK = 4096
+_SCAN_CHUNK_MAX = 1 << 20
+
+
+def _block(blocked: np.ndarray, cell: int, spacing: int) -> None:
+    """Mark every cell closer than ``spacing`` (Chebyshev) to the flat ``cell``."""
+    r, d = divmod(int(cell), blocked.shape[1])
+    blocked[max(r - spacing + 1, 0):r + spacing, max(d - spacing + 1, 0):d + spacing] = True
+
+
+def _take_free(candidates: np.ndarray, order: np.ndarray, want: int, blocked: np.ndarray, spacing: int,
+               any_free, mate_of=None) -> list[tuple[int, ...]]:
+    """Walk ``candidates[order]`` (flat cells) and take, in that order, each cell that is
+    not ``blocked`` (nor its mate, ``mate_of(cells) -> (mates, usable)``), blocking around
+    what it takes, until ``want`` are taken: the first-fit of a Python loop over the
+    candidates with a distance test against every placed target, vectorised over chunks
+    of candidates. After a long run of blocked candidates it asks ``any_free()`` (one
+    sequential pass over the map) whether any is left and stops if none is (a candidate
+    passed over was blocked and stays so): a map with no room costs a pass, not minutes."""
+    flat = blocked.reshape(-1)
+    taken: list[tuple[int, ...]] = []
+    start, chunk, asked = 0, _SCAN_CHUNK, False
+    while len(taken) < want and start < len(order):
+        if chunk == _SCAN_CHUNK_MAX and not asked:
+            asked = True
+            if not any_free():
+                break
+        cells = candidates[order[start:start + chunk]]
+        free = ~flat[cells]
+        mates = None
+        if mate_of is not None:
+            mates, usable = mate_of(cells)
+            free &= usable & ~flat[mates]
+        hit = np.flatnonzero(free)
+        if hit.size == 0:
+            start += len(cells)
+            chunk = min(2 * chunk, _SCAN_CHUNK_MAX)
+            continue
+        first = int(hit[0])
+        pick = (int(cells[first]),) if mates is None else (int(cells[first]), int(mates[first]))
+        for cell in pick:
+            _block(blocked, cell, spacing)
+        taken.append(pick)
+        start, chunk, asked = start + first + 1, _SCAN_CHUNK, False
+    return taken
+
+
+def _shifted(mask: np.ndarray, dr: int, dd: int) -> np.ndarray:
+    """out[r, d] = mask[r + dr, d + dd], False outside the map."""
+    R, D = mask.shape
+    out = np.zeros_like(mask)
+    out[max(-dr, 0):R - max(dr, 0), max(-dd, 0):D - max(dd, 0)] = \
+        mask[max(dr, 0):R - max(-dr, 0), max(dd, 0):D - max(-dd, 0)]
+    return out
 
 
 def place_targets(labels: np.ndarray, names: tuple[str, ...], *, per_region: int, pairs: int,
@@ -116,46 +174,47 @@ def place_targets(labels: np.ndarray, names: tuple[str, ...], *, per_region: int
     region (second target at ``pair_offset`` from the first, also
     homogeneous). Targets that are not partners are at least ``spacing``
     apart (Chebyshev), every target at least ``margin`` from the border.
-    Candidates are each region's cells in a shuffle of ``seed``. Returns the
-    (T, 2) cells, the (T,) paired flags and what could not be placed ("" if
-    nothing)."""
+    Candidates are each region's cells in a shuffle of ``seed``, taken first
+    fit (:func:`_take_free`). Returns the (T, 2) cells, the (T,) paired flags
+    and what could not be placed ("" if nothing)."""
     R, D = labels.shape
     rng = np.random.default_rng(seed)
     inside = np.zeros(labels.shape, bool)
     inside[margin:R - margin, margin:D - margin] = True
+    blocked = np.zeros(labels.shape, bool)
     placed: list = []
     paired: list = []
     missing = []
     present = [k for k in range(len(names)) if np.any(labels == k)]
     for k in sorted(present, key=lambda k: int(np.count_nonzero(labels == k))):
-        candidates = np.argwhere((labels == k) & inside)
-        got = 0
-        for cell in candidates[rng.permutation(len(candidates))]:
-            if got == per_region:
-                break
-            if _far_enough(cell, placed, spacing):
-                placed.append(cell)
-                paired.append(False)
-                got += 1
-        if got < per_region:
-            missing.append(f"{per_region - got} of {per_region} targets in region {names[k]!r}")
+        region = (labels == k) & inside
+        candidates = np.flatnonzero(region)
+        got = _take_free(candidates, rng.permutation(len(candidates)), per_region, blocked, spacing,
+                         lambda: bool((region & ~blocked).any()))
+        placed += [cell for cell, in got]
+        paired += [False] * len(got)
+        if len(got) < per_region:
+            missing.append(f"{per_region - len(got)} of {per_region} targets in region {names[k]!r}")
     home = names.index("homogeneous")
-    offset = np.asarray(pair_offset, np.int64)
-    candidates = np.argwhere((labels == home) & inside)
-    got = 0
-    for cell in candidates[rng.permutation(len(candidates))]:
-        if got == pairs:
-            break
-        mate = cell + offset
-        if not (margin <= mate[0] < R - margin and margin <= mate[1] < D - margin) or labels[tuple(mate)] != home:
-            continue
-        if _far_enough(cell, placed, spacing) and _far_enough(mate, placed, spacing):
-            placed += [cell, mate]
-            paired += [True, True]
-            got += 1
-    if got < pairs:
-        missing.append(f"{pairs - got} of {pairs} pairs in region 'homogeneous'")
-    cells = np.asarray(placed, np.int64).reshape(-1, 2)
+    dr, dd = (int(x) for x in pair_offset)
+
+    def mate_of(cells):
+        r, d = np.divmod(cells, D)
+        r, d = r + dr, d + dd
+        usable = (margin <= r) & (r < R - margin) & (margin <= d) & (d < D - margin)
+        mates = np.where(usable, r * D + d, cells)
+        usable &= labels.reshape(-1)[mates] == home
+        return mates, usable
+
+    region = (labels == home) & inside
+    candidates = np.flatnonzero(region)
+    got = _take_free(candidates, rng.permutation(len(candidates)), pairs, blocked, spacing,
+                     lambda: bool((region & ~blocked & _shifted(region & ~blocked, dr, dd)).any()), mate_of)
+    placed += [cell for pair in got for cell in pair]
+    paired += [True] * (2 * len(got))
+    if len(got) < pairs:
+        missing.append(f"{pairs - len(got)} of {pairs} pairs in region 'homogeneous'")
+    cells = np.stack(np.divmod(np.asarray(placed, np.int64), D), axis=-1).reshape(-1, 2)
     return cells, np.asarray(paired, bool), "; ".join(missing)
 
 

@@ -178,10 +178,12 @@ class CvTurnCv(Scenario):
         dt_s: float = param(1.0, "sampling interval T (s)", ge=1e-3, le=100.0,
                             why="radar revisit times, 1 ms to 100 s; the filter's Q grows as T^4 "
                                 "and sigma_a as T^-2, and stays well conditioned within")
-        onset_step: int = param(80, "first step moved by the turn (step index)", ge=1, le=MAX_STEPS,
-                                why="after step 0 and within the steps (checked against them)")
-        turn_steps: int = param(40, "duration of the turn (steps)", ge=1, le=MAX_STEPS,
-                                why="one step at least, within the steps (checked against them)")
+        onset_step: int = param(80, "first step moved by the turn (step index)", ge=1, le=MAX_STEPS - 1,
+                                why="after step 0, with a turn step after it within the steps (checked "
+                                    "against them)")
+        turn_steps: int = param(40, "duration of the turn (steps)", ge=1, le=MAX_STEPS - 1,
+                                why="one step at least, within the steps after the onset (checked against "
+                                    "them)")
         speed_m_s: float = param(200.0, "target speed (m/s)", ge=0.1, le=10_000.0,
                                  why="a walking target to Mach 30; the SNR sets the noise relative "
                                      "to the maneuver, so the speed only sets the scale")
@@ -201,14 +203,14 @@ class CvTurnCv(Scenario):
             "filter); false: deterministic track (filter Q then over-estimated)")
         detect_window_steps: int = param(
             40, "a detection counts if the first alarm at or after onset comes "
-            "within this many steps", ge=1, le=MAX_STEPS,
-            why="one step at least, within the steps (checked against them)")
+            "within this many steps", ge=1, le=MAX_STEPS - 1,
+            why="one step at least, within the steps after the onset (checked against them)")
         warmup_steps: int = param(10, "steps ignored before false alarms are counted", ge=0,
-                                  le=MAX_STEPS, why="before the onset (checked against it)")
+                                  le=MAX_STEPS - 2, why="before the onset (checked against it)")
         onset_jitter_steps: int = param(
             0, "each trial's onset is drawn uniformly from onset_step .. onset_step + this "
             "(steps), from the trial's own stream; 0: every trial starts the turn at onset_step",
-            ge=0, le=MAX_STEPS, why="within the steps (checked against them)")
+            ge=0, le=MAX_STEPS - 2, why="within the steps, before a turn step (checked against them)")
 
         @property
         def last_onset(self) -> int:

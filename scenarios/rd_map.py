@@ -24,7 +24,8 @@ from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_scenario
 from bench.tasks.cells import CELL_DETECTION, REGION_NAMES, MapScene
-from models.rd_map import RegionLevels, background_power, label_regions, place_targets, target_cell_power
+from models.rd_map import (LAYOUT_BYTES_PER_CELL, RegionLevels, background_power, label_regions, place_targets,
+                           target_cell_power)
 
 SNR_DEFINITION = (
     "SNR = 10 log10(S / N) per target: S its mean power in its cell (over the Swerling draw for Swerling 1), "
@@ -160,8 +161,9 @@ class RdMap(Scenario):
         target_spacing_cells: int = param(20, "least Chebyshev distance between targets that are not a pair "
                                               "(cells)", ge=1, le=4096,
                                           why="1 cell allows neighbours; the room is checked")
-        margin_cells: int = param(10, "least distance of a target from the map's border (cells)", ge=0, le=2048,
-                                  why="0 allows border cells; at most half the largest map")
+        margin_cells: int = param(10, "least distance of a target from the map's border (cells)", ge=0, le=2047,
+                                  why="0 allows border cells; less than half the largest map (checked "
+                                      "against the map)")
         swerling: int = param(1, "target fluctuation: 0 (non-fluctuating) or 1 (Swerling 1)", ge=0, le=1,
                               why="the two cases the task's ideal detector has in closed form")
         fa_guard_cells: int = param(1, "false alarms are not counted within this many cells (range and "
@@ -186,18 +188,24 @@ class RdMap(Scenario):
             if 2 * self.margin_cells >= min(self.range_cells, self.doppler_cells):
                 raise ConfigError("margin_cells", "the margins leave no cell for targets: 2 x margin_cells must be "
                                   f"< min(range_cells, doppler_cells) = {min(self.range_cells, self.doppler_cells)}")
-            layout = scene_layout(self)
-            if layout.shortfall:
-                raise ConfigError("targets_per_region", f"no room for every target: {layout.shortfall}")
+    def check_config(self, params) -> None:
+        """Every target has a cell: a search over the map's cells, run after the sweep's
+        memory check (a map of 4096 x 16384 cells takes seconds and GBs)."""
+        layout = scene_layout(params)
+        if layout.shortfall:
+            raise ConfigError("targets_per_region", f"no room for every target: {layout.shortfall}")
 
     def unit_memory_bytes(self, params, n: int) -> int:
-        """The float64 draws and the float32 map and noise power: about 24 bytes a cell a map."""
-        return 24 * n * params.range_cells * params.doppler_cells
+        """The float64 draws and the float32 map and noise power: about 24 bytes a cell a map;
+        and once, the layout's construction (:data:`models.rd_map.LAYOUT_BYTES_PER_CELL`)."""
+        return (24 * n + LAYOUT_BYTES_PER_CELL) * params.range_cells * params.doppler_cells
 
     def generate(self, params, snr_db: float | None, n: int, rng) -> Batch:
         p = params
         R, D = p.range_cells, p.doppler_cells
         layout = scene_layout(p)
+        if layout.shortfall:                # a config that skipped the sweep's check_config
+            raise ConfigError("targets_per_region", f"no room for every target: {layout.shortfall}")
         T = len(layout.cells)
         # Draw first, in a fixed order, so every SNR level and the null share the noise.
         unit_noise = rng.exponential((R, D))                       # (n, R, D) Exp(1)

@@ -331,8 +331,8 @@ class TbdGrid(Scenario):
         ar_coefficients: tuple[float, ...] = param(
             (-2.0, 1.7, -0.64), "AR coefficients (a1, ..., aP) of v_k + a1 v_(k-1) + ... + aP v_(k-P) "
             "= w_k (dimensionless); must be stationary. Default: the paper's (-2, 1.7, 0.64) with the "
-            "sign of a3 flipped (the printed set is explosive)", ge=-70.0, le=70.0, min_len=1, max_len=8,
-            why="AR(1) to AR(8); a stationary AR(8) has coefficients of at most C(8, 4) = 70 in "
+            "sign of a3 flipped (the printed set is explosive)", gt=-70.0, lt=70.0, min_len=1, max_len=8,
+            why="AR(1) to AR(8); a stationary AR(8) has coefficients of less than C(8, 4) = 70 in "
                 "magnitude, and stationarity itself is checked")
         amplitude: str = param("constant", "target amplitude model: 'constant' (non-fluctuating) or "
                                            "'swerling1' (independent Rayleigh amplitude per frame, "

@@ -154,7 +154,7 @@ def test_same_trial_same_map_whatever_the_batch():
 ])
 def test_bad_configs_name_the_field(values, field):
     with pytest.raises(ConfigError) as err:
-        build_params(RdMap.Params, {**SMALL, **values})
+        RdMap().check_config(build_params(RdMap.Params, {**SMALL, **values}))   # the room: after the memory check
     assert field in str(err.value)
 
 

@@ -58,9 +58,17 @@ def indexes(steps: np.ndarray, t: np.ndarray) -> list:
     ]
 
 
+#: the largest magnitude a float32 position holds (Rerun draws positions in float32)
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
 def north_up(xy: np.ndarray) -> np.ndarray:
-    """Negate y: 2D views draw +y downwards, radar plots have north up."""
-    return np.column_stack([xy[:, 0], -xy[:, 1]]).astype(np.float32)
+    """Negate y: 2D views draw +y downwards, radar plots have north up. A coordinate a
+    float32 cannot hold (a diverged estimate) is NaN, a gap in the drawing, rather than an
+    overflow to inf."""
+    xy = np.asarray(xy, np.float64)
+    drawable = np.where(np.abs(xy) <= _FLOAT32_MAX, xy, np.nan)
+    return np.column_stack([drawable[:, 0], -drawable[:, 1]]).astype(np.float32)
 
 
 def log_series(stream, path: str, t: np.ndarray, steps: np.ndarray, values: np.ndarray, style) -> None:

@@ -94,6 +94,24 @@ def trials_frame(store: Store, record: dict) -> tuple[pd.DataFrame, dict]:
     return df[TRIAL_KEYS + rest].reset_index(drop=True), series
 
 
+def require_plugins(record: dict, db: Path) -> None:
+    """Rebuilding the report needs every task, scenario and method the stored plan ran:
+    one line naming the store and what is not installed here (with the reason ``bench
+    list`` gives, when the plugin is there but failed to load)."""
+    missing = []
+    for kind, known, names in (
+            ("task", registry.tasks(), [m["task"] for m in record["methods"]]),
+            ("scenario", registry.scenarios(), [s["name"] for s in record["scenarios"]]),
+            ("method", registry.methods(), [m["name"] for m in record["methods"]])):
+        for name in dict.fromkeys(names):
+            if name not in known:
+                reason = registry.unavailable_reason(name)
+                missing.append(f"{kind} {name!r}" + (f" ({reason})" if reason else ""))
+    if missing:
+        raise ConfigError(str(db), f"the run was made with plugins not installed here: {', '.join(missing)}; "
+                                   "install them to rebuild its report"[:600])
+
+
 def _task_of(record: dict) -> dict:
     """Method config label -> its task (bench.tasks), from the stored plan."""
     return {m["label"]: registry.get_task(m["task"]) for m in record["methods"]}
@@ -115,12 +133,19 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
         rows = (summary.scenario == c.scenario) & (summary.config == c.method)
         if rows.any():
             task_of[c.method].apply_calibration(summary, trials, c)
+    # The tasks' parts and the calibrations' in-place writes leave pandas' column blocks
+    # split: one block again (a frame of 100+ blocks makes every later operation slow, and
+    # pandas says so on the user's terminal). For the same reason, columns are taken with
+    # .loc and converted one by one: drop() and astype({...}) split every column (pandas 3).
+    summary = summary.copy()
     ev = runs[(runs.phase == "evaluation") & runs.error.isna()]
     speed = ev.groupby(["scenario", "method", "snr_db"]).agg(s=("seconds", "sum"), n=("n", "sum"))
     speed = (speed.s / speed.n).rename("seconds_per_trial").reset_index().rename(columns={"method": "config"})
-    summary = summary.drop(columns="seconds_per_trial").astype({"scenario": str, "config": str, "snr_db": float})
-    summary = summary.merge(speed.astype({"scenario": str, "config": str, "snr_db": float}),
-                            on=["scenario", "config", "snr_db"], how="left")
+    keys = {"scenario": str, "config": str, "snr_db": float}
+    summary = summary.loc[:, summary.columns != "seconds_per_trial"]
+    summary = summary.assign(**{k: summary[k].astype(t) for k, t in keys.items()})
+    summary = summary.merge(speed.assign(**{k: speed[k].astype(t) for k, t in keys.items()}), on=list(keys),
+                            how="left")
     order = {m["label"]: i for i, m in enumerate(record["methods"])}
     summary = summary.assign(_s=summary.scenario.map(_scenario_order(record)), _o=summary.config.map(order))
     summary = summary.sort_values(["_s", "_o", "snr_db"])
@@ -428,6 +453,7 @@ def _recording_summary(summary: pd.DataFrame, tasks) -> pd.DataFrame:
 def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     runfolder.folder_for(out_dir / "figures")     # refuses a linked figures/ before anything is written
     record = store.plan()
+    require_plugins(record, store.path)
     sweep = record["sweep"]
     runs, units = store.runs(), store.units()
     task_of = _task_of(record)

@@ -142,9 +142,11 @@ def glance(trials: pd.DataFrame, task_of: dict, comparisons: pd.DataFrame, chanc
                    for config, (mean, low, high) in means.items()]
         sign = -1.0 if task.ranking_higher_is_better else 1.0
         ranking.sort(key=lambda r: sign * r["mean"] if np.isfinite(r["mean"]) else np.inf)
+        ranked = sum(np.isfinite(r["mean"]) for r in ranking)     # a config without a value is never ranked
         entry = {"scenario": scenario, "task": task, "ranking": ranking, "levels": int(g.snr_db.nunique()),
-                 "winner": ranking[0]["config"], "runner_up": None, "margin": None, "equal_chance": bool(fair)}
-        if len(ranking) > 1:
+                 "winner": ranking[0]["config"], "runner_up": None, "margin": None, "equal_chance": bool(fair),
+                 "undefined": "" if ranked else task.ranking_undefined}
+        if ranked > 1:
             a, b = ranking[0]["config"], ranking[1]["config"]
             pick = comparisons[(comparisons.scenario == scenario) & (comparisons.task == task.name)
                                & (comparisons.metric == metric) & comparisons.snr_db.isna()]

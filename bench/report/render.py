@@ -56,7 +56,14 @@ def section_macro(name: str):
 
 
 def _interval(mid, low, high, signed: bool = False) -> str:
+    """``mid [low, high]``; an interval that collapsed (every trial equal, in each SNR level,
+    so the bootstrap has nothing to resample) says so rather than posing as a precise one:
+    "all trials equal: 0.167", or for a difference "+0.1 on every trial"."""
     f = (lambda x: ("+" if signed and np.isfinite(x) and x > 0 else "") + fmt(x))
+    if not (np.isfinite(mid) or np.isfinite(low) or np.isfinite(high)):
+        return "–"
+    if np.isfinite(low) and low == high:
+        return f"{f(mid)} on every trial" if signed else f"all trials equal: {f(mid)}"
     return f"{f(mid)} [{f(low)}, {f(high)}]"
 
 
@@ -76,16 +83,25 @@ def glance_markdown(entries: list[dict]) -> str:
         header = ["rank", "config", f"{label} [95% CI]"] + \
             ([f"{task.ranking_label} (any alarm) [95% CI]"] if g["equal_chance"] else []) + \
             ([f"chance Pd{' (any alarm)' if g['equal_chance'] else ''}"] if show_chance else [])
-        rows = [[str(i), code(r["config"]), _interval(r["mean"], r["low"], r["high"])] +
+        rows = [[str(i) if np.isfinite(r["mean"]) else "–", code(r["config"]), _interval(r["mean"], r["low"], r["high"])] +
                 ([_interval(*r["secondary"])] if g["equal_chance"] else []) +
                 ([fmt(r["chance"])] if show_chance else []) for i, r in enumerate(g["ranking"], start=1)]
         margin = g["margin"]
         if margin is not None:
             margin = {"text": _interval(margin["difference"], margin["low"], margin["high"], signed=True),
-                      "tie": margin["tie"], "p": _p(margin["mcnemar_p"]), "enough": margin["enough"]}
+                      "tie": margin["tie"], "p": _p(margin["mcnemar_p"]), "enough": margin["enough"],
+                      "same": margin["low"] == margin["high"] == 0}
         view.append({**g, "margin": margin, "label": label, "table": table(header, rows)})
     return render("glance.md.j2", entries=view, any_binary=any(g["task"].ranking_binary for g in entries),
                   any_equal_chance=any(g["equal_chance"] for g in entries))
+
+
+def _better(r) -> str:
+    """The *better* cell of a comparison row: the config, a tie, or no comparison at all
+    (no trial where both have the metric: it is not defined on the scene)."""
+    if r.n_pairs == 0:
+        return "not defined"
+    return "**tie**" if r.better == "tie" else code(r.better)
 
 
 #: Above this many pairs, a scenario config's comparison table is folded (<details>).
@@ -108,7 +124,7 @@ def comparisons_markdown(comparisons: pd.DataFrame, task_of: dict) -> str:
         rows = [[code(r.config_a), code(r.config_b), fmt(r.mean_a), fmt(r.mean_b),
                  _interval(r.difference, r.difference_low, r.difference_high, signed=True)] +
                 ([str(int(r.only_a)), str(int(r.only_b)), _p(r.mcnemar_p)] if binary else []) +
-                ["**tie**" if r.better == "tie" else code(r.better)] for r in g.itertuples()]
+                [_better(r)] for r in g.itertuples()]
         label = task.equal_chance_label if fair else task.ranking_label
         blocks.append({"caption": f"{sentence_case(task.noun)} on {code(scenario)}: {label} "
                                   f"({'higher' if task.ranking_higher_is_better else 'lower'} is better).",

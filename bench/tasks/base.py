@@ -47,7 +47,8 @@ from bench.recording.blueprint import Views
 from bench.recording.layout import TrialLayout
 from bench.recording.record import MethodTrace, TrialRecord
 
-__all__ = ["OutputError", "RecordedScene", "ReportContext", "Task", "Views", "check_finite", "time_series"]
+__all__ = ["COVARIANCE_TOLERANCE", "MAX_ESTIMATE", "OutputError", "RecordedScene", "ReportContext", "Task", "Views",
+           "check_covariance", "check_estimate", "check_finite", "check_range", "time_series"]
 
 
 class OutputError(RuntimeError):
@@ -108,6 +109,71 @@ def check_finite(name: str, a: np.ndarray, shape: tuple) -> None:
         raise OutputError(f"{name} has {bad} non-finite values")
 
 
+#: How far a covariance may be from symmetric positive semi-definite and still be taken as
+#: one, on the scale of the matrix scaled to unit variances (D^-1/2 P D^-1/2, D its
+#: diagonal; entries in [-1, 1]): its largest asymmetry, and the shift t such that
+#: D^-1/2 P D^-1/2 + t I must have a Cholesky factor (eigenvalues >= -t). Rounding costs
+#: ~1e-15 a step; the adaptive trackers' covariances drift to ~1e-11 asymmetric; 1e-6
+#: leaves that room and still refuses any covariance that could turn a NEES negative.
+COVARIANCE_TOLERANCE = 1e-6
+
+
+def check_covariance(name: str, cov: np.ndarray, where: str = "steps") -> None:
+    """OutputError unless every matrix of the finite stack ``cov`` (..., d, d) is symmetric
+    positive semi-definite within :data:`COVARIANCE_TOLERANCE` at unit variances (a zero or
+    negative variance is left unscaled, so it shows as such): one batched Cholesky of
+    P + t D = D^1/2 (D^-1/2 P D^-1/2 + t I) D^1/2 over the leading (trial, step, ...) axes.
+    The eigenvalues are computed only to say how bad a refused stack is (``eigvalsh``
+    costs ten Cholesky factorisations)."""
+    cov = np.asarray(cov, float)
+    if cov.size == 0:
+        return
+    d = cov.shape[-1]
+    var = np.diagonal(cov, axis1=-2, axis2=-1)
+    unit_var = np.where(var > 0, var, 1.0)
+    asymmetry = (np.abs(cov - np.swapaxes(cov, -1, -2)) / np.sqrt(unit_var[..., :, None] * unit_var[..., None, :])
+                 ).max(axis=(-2, -1))
+    shifted = cov.reshape(*cov.shape[:-2], d * d).copy()
+    shifted[..., ::d + 1] += COVARIANCE_TOLERANCE * unit_var
+    try:
+        np.linalg.cholesky(shifted.reshape(cov.shape))
+        if asymmetry.max() <= COVARIANCE_TOLERANCE:
+            return
+    except np.linalg.LinAlgError:
+        pass
+    scale = np.sqrt(unit_var)
+    unit = cov / (scale[..., :, None] * scale[..., None, :])
+    smallest = np.linalg.eigvalsh(0.5 * (unit + np.swapaxes(unit, -1, -2)))[..., 0]
+    count = int(np.count_nonzero((asymmetry > COVARIANCE_TOLERANCE) | (smallest < -COVARIANCE_TOLERANCE)))
+    raise OutputError(f"{name} is not a covariance (symmetric positive semi-definite within "
+                      f"{COVARIANCE_TOLERANCE:g} at unit variances) at {max(count, 1)} of {smallest.size} {where}: "
+                      f"smallest eigenvalue {smallest.min():.3g}, largest asymmetry {asymmetry.max():.3g}")
+
+
+def check_range(name: str, a: np.ndarray, low: float, high: float = np.inf, what: str = "") -> None:
+    """OutputError unless every value of ``a`` lies in [low, high] (``what``: what the
+    values are, e.g. "a probability"; NaN is left to :func:`check_finite`)."""
+    a = np.asarray(a, float)
+    out = (a < low) | (a > high)
+    count = int(np.count_nonzero(out))
+    if count:
+        span = f"[{low:g}, {high:g}]" if np.isfinite(high) else f">= {low:g}"
+        worst = a[out][np.argmax(np.abs(a[out] - np.clip(a[out], low, high)))]
+        raise OutputError(f"{name} has {count} values outside {span}{' (' + what + ')' if what else ''}, "
+                          f"e.g. {worst:.6g}")
+
+
+#: The largest magnitude of a state estimate: the square of anything beyond overflows
+#: float64, so no error, RMSE, GOSPA or NEES of it can be computed (a diverged filter).
+MAX_ESTIMATE = 1e150
+
+
+def check_estimate(name: str, a: np.ndarray) -> None:
+    """OutputError unless every (finite) value of the state estimate ``a`` is within
+    :data:`MAX_ESTIMATE` in magnitude."""
+    check_range(name, a, -MAX_ESTIMATE, MAX_ESTIMATE, "beyond it a squared error overflows float64")
+
+
 def time_series(batch: Batch) -> dict[str, np.ndarray]:
     """The step times as a series, so per-step tables carry time in seconds."""
     return {"t_s": np.broadcast_to(np.asarray(batch.t, float), (batch.n, batch.steps))}
@@ -162,6 +228,9 @@ class Task:
     equal_chance_metric: ClassVar[str] = ""
     #: how the report names its mean ("Pd at equal chance Pd")
     equal_chance_label: ClassVar[str] = ""
+    #: why no trial of a scene has ``ranking_metric`` when none has (the glance says so instead
+    #: of ranking), e.g. "no targets"
+    ranking_undefined: ClassVar[str] = "no trial has a value"
     #: the summary.csv column (with ``_low``/``_high``) drawn against SNR in report.html's
     #: interactive figure and crossed at 0.5 for "SNR at Pd = 0.5"; "": none
     curve_column: ClassVar[str] = ""

@@ -44,7 +44,7 @@ import pandas as pd
 from bench.calibration import cell_order_statistics
 from bench.core import Batch, Scene, has_shape, require
 from bench.recording.record import MethodTrace
-from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite
+from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, check_range
 from bench.tasks.cells_metrics import REGION_NAMES, SUMMARY_COLUMNS, cell_trial_metrics, summarise_cells
 
 __all__ = ["CELL_DETECTION", "REGION_NAMES", "CellDetectionOutput", "CellDetectionTask", "MapScene"]
@@ -166,6 +166,7 @@ class CellDetectionTask(Task):
     ranking_metric = "hit_fraction"
     ranking_higher_is_better = True
     ranking_label = "fraction of a map's targets detected"
+    ranking_undefined = "no targets"
     curve_column = "pd"
     recording_charts = (("pd", "Pd"), ("false_alarms_per_map", "false alarms per map"))
     informative_column = "pd"
@@ -180,6 +181,8 @@ class CellDetectionTask(Task):
             raise OutputError(f"expected a CellDetectionOutput, got {type(out).__name__}")
         shape = (batch.n, *batch.scene.shape)
         check_finite("statistic", np.asarray(out.statistic), shape)
+        # -log10 of a probability is >= 0; a probability of 1 may round to 1 + 1e-16
+        check_range("statistic", out.statistic, -1e-12, what="-log10 of a false-alarm probability")
         if out.noise_estimate is not None:
             check_finite("noise_estimate", np.asarray(out.noise_estimate), shape)
         return out

@@ -202,6 +202,8 @@ def _threshold_mode(cals: list, sc: str) -> str:
 
 
 def _section_winners(scene: pd.DataFrame, scene_trials: pd.DataFrame, sc: str, snr: float, mode: str) -> str:
+    if not _present(scene):                 # no targets: Pd is not defined, nothing to win ("no targets" above)
+        return ""
     at = _at(scene, snr)
     rows = []
     for group in _present(scene):

@@ -34,7 +34,8 @@ from bench.core import Batch, Scene, has_shape, require, require_arrays
 from bench.recording.blueprint import Views
 from bench.recording.layout import TrialLayout
 from bench.recording.record import MethodTrace, TrialRecord
-from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, time_series
+from bench.tasks.base import (OutputError, RecordedScene, ReportContext, Task, check_covariance, check_estimate,
+                              time_series)
 from bench.tasks.multitarget_metrics import (MEANS, SCENE_COLUMNS, multitarget_steps, multitarget_trial_metrics,
                                              summarise_multitarget)
 
@@ -160,12 +161,14 @@ def check_multitarget_output(out, batch: Batch) -> MultiTargetOutput:
     if np.any(~np.isfinite(state[occupied])):
         raise OutputError(f"state has {int(np.count_nonzero(~np.isfinite(state[occupied])))} non-finite values "
                           "in occupied slots")
+    check_estimate("state", state[occupied])
     if out.position_covariance is not None:
         cov = np.asarray(out.position_covariance)
         if cov.shape != (n, K, J, 2, 2):
             raise OutputError(f"position_covariance has shape {cov.shape}, expected ({n}, {K}, {J}, 2, 2)")
         if np.any(~np.isfinite(cov[occupied])):
             raise OutputError("position_covariance has non-finite values in occupied slots")
+        check_covariance("position_covariance", cov[occupied], where="occupied slots")
     _check_unique_ids(ids)
     return out
 

@@ -33,13 +33,20 @@ from bench.recording.blueprint import Views
 from bench.recording.draw import log_static_points, log_track, north_up
 from bench.recording.layout import TrialLayout
 from bench.recording.record import MethodTrace, TrialRecord, check_shape
-from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, time_series
+from bench.tasks.base import (OutputError, RecordedScene, ReportContext, Task, check_covariance, check_estimate,
+                              check_finite, check_range, time_series)
 from bench.tasks.tracking_metrics import (SWITCH_TRACES, maneuver_trial_metrics, summarise_tracking,
                                           tracking_steps, tracking_trial_metrics)
 
 __all__ = ["TrackingScene", "TrackingTask", "method_trace", "scene"]
 
 _GLINT_COLOR = (255, 40, 90)
+
+#: The traces the metrics score (:data:`~bench.tasks.tracking_metrics.SWITCH_TRACES`) and the
+#: values they can take: a value outside is an impossible output, the method's failure.
+SCORED_TRACES = {"mode": (0.0, 1.0, "the maneuver mode's probability, or 1 where it is in use"),
+                 "switch": (0.0, 1.0, "a switch decision, 0 or 1"),
+                 "q_k": (0.0, np.inf, "a noise variance")}
 
 
 def _labels(value) -> bool:
@@ -175,9 +182,15 @@ class TrackingTask(Task):
         if not isinstance(out, TrackingOutput):
             raise OutputError(f"expected a TrackingOutput, got {type(out).__name__}")
         check_finite("estimate", np.asarray(out.estimate, float), batch.truth.shape)
+        check_estimate("estimate", out.estimate)
         if out.covariance is not None:
             d = batch.truth.shape[-1]
             check_finite("covariance", np.asarray(out.covariance, float), (*batch.truth.shape[:2], d, d))
+            check_covariance("covariance", out.covariance, where="(trial, step) pairs")
+        for name, (low, high, what) in SCORED_TRACES.items():
+            if name in out.traces:
+                check_finite(f"traces[{name!r}]", np.asarray(out.traces[name], float), batch.truth.shape[:2])
+                check_range(f"traces[{name!r}]", out.traces[name], low, high, what)
         return out
 
     def labels(self, batch: Batch) -> list[str]:
