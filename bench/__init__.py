@@ -27,8 +27,11 @@ def _portable_target() -> None:
     """Set :data:`PORTABLE_ENVIRONMENT` for this process and its workers. It must precede
     numpy's import: ``models``, ``methods`` and ``scenarios`` import ``bench`` first, the
     command line and the workers start here; a host process that imported numpy before
-    ``bench`` computes with numpy's host loops (``portable_numpy`` says whether it did)."""
-    os.environ.update(PORTABLE_ENVIRONMENT)
+    ``bench`` computes with numpy's host loops (``portable_numpy`` says whether it did).
+    ``BENCH_PORTABLE=0`` leaves numpy's host loops on: only to measure what portability
+    costs (numbers may then differ between machines in the last bits)."""
+    if os.environ.get("BENCH_PORTABLE", "1") != "0":
+        os.environ.update(PORTABLE_ENVIRONMENT)
 
 
 def portable_numpy() -> bool:
