@@ -142,7 +142,8 @@ def test_cfar_preset_smoke(bench_cli, tmp_path):
     bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 1, check=True)
     summary = pd.read_csv(tmp_path / "out" / "summary.csv")
     assert set(summary.method) == {"ca-cfar", "os-cfar", "regression-cfar", "region-adaptive"}
-    assert set(summary.scenario) == {"rd-map-mixed", "rd-map-homogeneous"}
+    assert set(summary.scenario) == {"rd-map-mixed", "rd-map-homogeneous", "rd-map-edge", "rd-map-bragg-strong",
+                                     "rd-map-bragg-weak"}
     report = (tmp_path / "out" / "report.md").read_text()
     assert "which detector wins where" in report and "CFAR loss" in report
     assert "None: every method config ran on every unit." in report.split("## Failures")[1], "a config failed"

@@ -244,7 +244,7 @@ def impossible_run(tmp_path_factory):
     proc = subprocess.run([sys.executable, "-m", "bench", "run", str(root / "sweep.toml"), "--out", str(root / "run"),
                            "--quiet", "--workers", "1"], env=env, capture_output=True, text=True,
                           timeout=300)
-    assert proc.returncode == 0, proc.stderr
+    assert proc.returncode == 6, proc.stderr                      # failed units: exit 6
     (root / "stderr.txt").write_text(proc.stderr)
     return root / "run", env
 
