@@ -55,8 +55,21 @@ def run_quick(out: Path) -> Path:
     return out / "summary.csv"
 
 
-def committed_digest() -> str:
-    return DIGEST_FILE.read_text().split()[0]
+#: the libraries whose versions the digest holds for (a new release may move a last bit by
+#: design: their versions are part of a result's identity, docs/architecture.md 'Identities')
+LIBRARIES = ("numpy", "scipy", "numba")
+
+
+def library_versions() -> str:
+    """``numpy=X scipy=Y numba=Z`` of this environment."""
+    from importlib.metadata import version
+    return " ".join(f"{name}={version(name)}" for name in LIBRARIES)
+
+
+def committed_digest() -> tuple[str, str]:
+    """The committed digest and the library versions it was computed with."""
+    digest, _, versions = DIGEST_FILE.read_text().strip().partition(" ")
+    return digest, versions
 
 
 def main(argv=None) -> int:
@@ -66,7 +79,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         digest = summary_digest(run_quick(Path(tmp) / "quick"))
     if args.update:
-        DIGEST_FILE.write_text(digest + "\n")
+        DIGEST_FILE.write_text(f"{digest} {library_versions()}\n")
     print(digest)
     return 0
 

@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 import bench
-from tests.quick_hash import committed_digest, run_quick, summary_digest
+from tests.quick_hash import committed_digest, library_versions, run_quick, summary_digest
 
 
 def test_the_portable_target_precedes_numpy():
@@ -27,7 +27,11 @@ def test_the_digest_ignores_timing_and_sees_a_last_bit(tmp_path):
 
 @pytest.mark.slow
 def test_quick_preset_summary_matches_the_committed_digest(tmp_path):
+    committed, versions = committed_digest()
+    if versions != library_versions():
+        pytest.skip(f"the digest holds for {versions}, this environment has {library_versions()}: "
+                    "a library release may move a last bit; python -m tests.quick_hash --update after checking")
     digest = summary_digest(run_quick(tmp_path / "quick"))
-    assert digest == committed_digest(), (
+    assert digest == committed, (
         "the quick preset's summary differs from tests/quick_summary.sha256: a number moved (this machine, "
         "or a change); if the change is meant, update it with: python -m tests.quick_hash --update")
