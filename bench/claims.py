@@ -471,7 +471,7 @@ def verdict(c: Claim, v: Value | None) -> tuple[str, str]:
         if low - c.tolerance <= c.value <= high + c.tolerance:
             return REPRODUCES, ""
         side = "below" if c.value < low - c.tolerance else "above"
-        return DOES_NOT, (f"the paper's {unit(c.value)} lies {side} our interval"
+        return DOES_NOT, (f"the claimed {unit(c.value)} lies {side} our interval"
                           + (f" widened by its tolerance {unit(c.tolerance)}" if c.tolerance else ""))
     if c.min <= low and high <= c.max:
         return REPRODUCES, ""
@@ -593,7 +593,9 @@ def _paper_cell(c: Claim) -> str:
     words = f"“{c.original}”" if c.original else ""
     if c.english:
         words += f" ({c.english})" if words else c.english
-    paper = f" (paper: {_number_text(c.value, c.unit)}{' ' + c.unit if c.unit else ''})" \
+    # the value a claim is tested against: the paper's number, or our reading of its words
+    # (e.g. an ideal detector's Pd); "claimed", since the paper need not print it
+    paper = f" (claimed: {_number_text(c.value, c.unit)}{' ' + c.unit if c.unit else ''})" \
         if c.expect == "value" else ""
     return f"{c.where}: {words}{paper}" if words else f"{c.where}{paper}"
 
