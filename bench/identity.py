@@ -71,8 +71,8 @@ def _module_file(name: str) -> Path | None:
     if origin is None:
         try:
             spec = importlib.util.find_spec(name)
-        except (ImportError, ValueError, AttributeError):
-            return None
+        except Exception:       # noqa: BLE001 - finding "a.b.c" imports a.b, which may fail (a plugin's
+            return None         # missing extra raises PluginError): c is then a name in it, not a module
         origin = spec.origin if spec is not None else None
     return Path(origin).resolve() if origin and origin.endswith(".py") else None
 
