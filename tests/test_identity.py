@@ -421,3 +421,15 @@ def test_a_code_identity_follows_edits_of_the_plugin_and_of_what_it_imports_only
     assert code_identity("idpkg.mine") == first
     (pkg / "_helpers.py").write_text("SCALE = 22\n")
     assert code_identity("idpkg.mine").hash != first.hash
+
+
+def test_a_name_in_a_module_that_fails_to_import_is_not_a_module(tmp_path, monkeypatch):
+    """``from methods.stonesoup_peer import X`` scanned in a module whose peer lacks its extra:
+    locating ``methods.stonesoup_peer.X`` imports the peer, which raises; the scan must go on."""
+    from bench import identity
+    (tmp_path / "brokenpkg").mkdir()
+    (tmp_path / "brokenpkg" / "__init__.py").write_text("")
+    (tmp_path / "brokenpkg" / "peer.py").write_text("raise RuntimeError('needs an extra')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert identity._module_file("brokenpkg.peer.Name") is None
+    assert identity._module_file("brokenpkg.peer") == (tmp_path / "brokenpkg" / "peer.py").resolve()
