@@ -126,5 +126,9 @@ def is_out_of_memory(exc: BaseException) -> bool:
             return True
         if isinstance(exc, (ImportError, OSError)) and any(t in str(exc).lower() for t in _OUT_OF_MEMORY_TEXT):
             return True
+        # an extension module whose allocation failed during import returned NULL without
+        # setting MemoryError: CPython then raises this SystemError (seen under ulimit -v)
+        if isinstance(exc, SystemError) and "error return without exception set" in str(exc):
+            return True
         exc = exc.__cause__ or exc.__context__
     return False

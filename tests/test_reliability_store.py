@@ -180,6 +180,8 @@ def test_out_of_memory_is_recognised_through_its_causes():
     assert is_out_of_memory(MemoryError())
     assert is_out_of_memory(OSError(errno.ENOMEM, "Cannot allocate memory"))
     assert is_out_of_memory(ImportError("x.so: failed to map segment from shared object"))
+    assert is_out_of_memory(SystemError("<built-in function x> returned NULL without setting an exception")) is False
+    assert is_out_of_memory(SystemError("error return without exception set"))     # a failed allocation in C
     try:
         try:
             raise MemoryError
