@@ -109,8 +109,16 @@ class Scene:
     position_index: tuple[int, ...] = (0, 1)
     #: (n, K, 2) measurements in the plane (m), for recordings; None: the first two components of ``z``
     measurements_xy: np.ndarray | None = None
+    #: (n, K) bool: the steps each trial has. Padding after a shorter trial and gaps in a
+    #: recorded track are False: their measurements are NaN and every tracker, metric and
+    #: recording skips them (docs/architecture.md, 'Ragged batches'). None: every step of
+    #: every trial.
+    valid_steps: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        require(self, "valid_steps", self.valid_steps is None
+                or (isinstance(self.valid_steps, np.ndarray) and self.valid_steps.ndim == 2
+                    and self.valid_steps.dtype == bool), "None or an (n, K) bool array")
         require(self, "snr_definition", isinstance(self.snr_definition, str), "a str")
         require(self, "realised_snr_db", self.realised_snr_db is None
                 or has_shape(self.realised_snr_db, (None,), "fiu"), "None or an (n,) float array")
@@ -137,6 +145,8 @@ class Scene:
         require(self, "position_index", max(self.position_index) < d, f"indices < {d}, the state size")
         require(self, "measurements_xy", self.measurements_xy is None
                 or self.measurements_xy.shape == (n, K, 2), f"shape ({n}, {K}, 2)")
+        require(self, "valid_steps", self.valid_steps is None or self.valid_steps.shape == (n, K),
+                f"shape ({n}, {K})")
 
 
 @dataclass
