@@ -30,6 +30,32 @@ from models.ukf import merwe_weights
 LAMBDA_FLOOR = 1e-300
 
 
+def gate_probability_param():
+    """The ``gate_probability`` field every Stone Soup or own tracker here shares."""
+    return param(0.99, "P_G: probability that a target's plot falls in the track's "
+                       "validation gate (eq. 6.72; gamma = chi2(3) quantile)",
+                 ge=0.5, le=0.999999, why="a gate that misses half the target's plots is "
+                                          "useless; 1 - 1e-6 keeps the gate finite")
+
+
+def alpha_param():
+    """The UKF's ``alpha`` field (:mod:`models.ukf`), shared by every UKF tracker here."""
+    return param(0.5, "UKF sigma-point spread alpha (Stone Soup's default)", ge=0.01, le=1.0,
+                 why="the scaled unscented transform's range is (0, 1]; below 0.01 the central weight "
+                     "passes -10^4 and the moment sums cancel in float64")
+
+
+def beta_param():
+    return param(2.0, "UKF prior-knowledge weight beta (2: optimal for a Gaussian)", ge=0.0, le=10.0,
+                 why="non-negative; larger values only inflate the central covariance weight")
+
+
+def kappa_param():
+    return param(-1.0, "UKF secondary scale kappa (3 - n = -1 for the 4-state CV model, Stone "
+                       "Soup's default)", ge=-3.0, le=10.0,
+                 why="n + kappa > 0 for n = 4 keeps the sigma points real")
+
+
 @dataclass(frozen=True)
 class TrackerParams:
     """The parameters every multi-target tracker here shares."""
@@ -49,10 +75,7 @@ class TrackerParams:
     max_speed_m_s: float = param(40.0, "termination rule 3: a track ends when its speed exceeds this "
                                        "impossible v_max (m/s)", gt=0.0, le=1e4,
                                  why="positive; 10 km/s is beyond any surface target")
-    gate_probability: float = param(0.99, "P_G: probability that a target's plot falls in the track's "
-                                          "validation gate (eq. 6.72; gamma = chi2(3) quantile)",
-                                    ge=0.5, le=0.999999, why="a gate that misses half the target's plots is "
-                                                             "useless; 1 - 1e-6 keeps the gate finite")
+    gate_probability: float = gate_probability_param()
     init_gate_sigmas: float = param(3.0, "initiation gate: noise margin g in v_min T - g sigma_d <= d <= "
                                          "v_max T + g sigma_d (standard deviations)", ge=0.0, le=10.0,
                                     why="0: speed bounds alone; beyond 10 sigma the gate holds the whole scene")
@@ -60,14 +83,9 @@ class TrackerParams:
                                   "differencing (the chapter's initialisation); two-point+speed-prior: "
                                   "fused with a N(0, v_max^2) prior per axis (ours)",
                                   choices=("two-point", "two-point+speed-prior"))
-    alpha: float = param(0.5, "UKF sigma-point spread alpha (Stone Soup's default)", ge=0.01, le=1.0,
-                         why="the scaled unscented transform's range is (0, 1]; below 0.01 the central weight "
-                             "passes -10^4 and the moment sums cancel in float64")
-    beta: float = param(2.0, "UKF prior-knowledge weight beta (2: optimal for a Gaussian)", ge=0.0, le=10.0,
-                        why="non-negative; larger values only inflate the central covariance weight")
-    kappa: float = param(-1.0, "UKF secondary scale kappa (3 - n = -1 for the 4-state CV model, Stone "
-                               "Soup's default)", ge=-3.0, le=10.0,
-                         why="n + kappa > 0 for n = 4 keeps the sigma points real")
+    alpha: float = alpha_param()
+    beta: float = beta_param()
+    kappa: float = kappa_param()
     max_cluster_size: int = param(49, "exact JPDA up to clusters of tracks x plots this large; larger "
                                       "clusters use per-track PDA (counted in the trace)", ge=1, le=64,
                                   why="a fully connected 8 x 8 cluster has 1.4 million joint events")
@@ -80,6 +98,15 @@ class TrackerParams:
             raise ConfigError("confirm_m", f"M = {self.confirm_m} is larger than N = {self.confirm_n}")
         if self.terminate_m > self.terminate_n:
             raise ConfigError("terminate_m", f"M_t = {self.terminate_m} is larger than N_t = {self.terminate_n}")
+
+
+def check_speed_bound(params, scenario_params) -> str | None:
+    """Termination rule 3 must not end true tracks: ``max_speed_m_s`` above the targets' top speed."""
+    bounds = getattr(scenario_params, "speed_bounds_m_s", None)
+    if bounds is not None and params.max_speed_m_s <= max(bounds):
+        return (f"max_speed_m_s = {params.max_speed_m_s:g} (termination rule 3) is not above the "
+                f"targets' top speed {max(bounds):g} m/s: every true track would end")
+    return None
 
 
 def _filter_param(default: str):

@@ -19,6 +19,7 @@ from methods._track_management import (
     TrialBuffers,
     UkfTrackerParams,
     assemble,
+    check_speed_bound,
     scene_of,
     trace_of,
     tracker_models,
@@ -37,11 +38,7 @@ class _MultiTargetTracker(Method):
     last_trace: dict[str, np.ndarray] | None = None
 
     def check_scenario(self, params, scenario_params) -> str | None:
-        bounds = getattr(scenario_params, "speed_bounds_m_s", None)
-        if bounds is not None and params.max_speed_m_s <= max(bounds):
-            return (f"max_speed_m_s = {params.max_speed_m_s:g} (termination rule 3) is not above the "
-                    f"targets' top speed {max(bounds):g} m/s: every true track would end")
-        return None
+        return check_speed_bound(params, scenario_params)
 
     def run(self, batch: Batch, params) -> MultiTargetOutput:
         scene = scene_of(batch)

@@ -45,6 +45,7 @@ from methods._track_management import (
     TrackerParams,
     TrialBuffers,
     assemble,
+    check_speed_bound,
     scene_of,
     tracker_models,
 )
@@ -97,8 +98,38 @@ class HFSWRMeasurement(NonLinearGaussianMeasurement, ReversibleModel):
         return StateVector([px, vr * np.sin(az), py, vr * np.cos(az)])
 
 
+def ukf_parts(scene, F, Q, R, params):
+    """Stone Soup's measurement model, UKF predictor and updater for the scene's
+    models (F, Q, R of :mod:`models.hfswr`) and the parameters' α, β, κ."""
+    transition = HFSWRTransition(F=F, Q=Q)
+    measurement = HFSWRMeasurement(ndim_state=4, mapping=(0, 2), noise_covar=R,
+                                   sensor_xy=np.asarray(scene.sensor_xy, float))
+    ukf = dict(alpha=params.alpha, beta=params.beta, kappa=params.kappa)
+    return measurement, UnscentedKalmanPredictor(transition, **ukf), UnscentedKalmanUpdater(measurement, **ukf)
+
+
+class StoneSoupPeer(Method):
+    """What the Stone Soup peers share: one trial at a time in Python objects
+    (:meth:`_trial`), the trials' buffers assembled as ``jpda-ukf``'s are."""
+
+    task = MULTI_TARGET
+
+    def run(self, batch: Batch, params) -> MultiTargetOutput:
+        scene = scene_of(batch)
+        n, K = batch.z.shape[:2]
+        trials, slots = [], []
+        for i in range(n):
+            buf, used = self._trial(batch.z[i], scene.n_plots[i], scene, params, K)
+            trials.append(buf)
+            slots.append(used)
+        return assemble(trials, slots)
+
+    def _trial(self, z, n_plots, scene, params, K) -> tuple[TrialBuffers, int]:
+        raise NotImplementedError
+
+
 @register_method
-class StoneSoupJpda(Method):
+class StoneSoupJpda(StoneSoupPeer):
     """Stone Soup's JPDA with UnscentedKalmanUpdater and MultiMeasurementInitiator (peer of jpda-ukf; extra [peers]).
 
     The same models and parameters as ``jpda-ukf`` (:mod:`methods.multitarget`):
@@ -133,32 +164,14 @@ class StoneSoupJpda(Method):
     """
 
     name = "stonesoup-jpda"
-    task = MULTI_TARGET
     Params = TrackerParams
 
     def check_scenario(self, params, scenario_params) -> str | None:
-        from methods.multitarget import JpdaUkf
-
-        return JpdaUkf().check_scenario(params, scenario_params)
-
-    def run(self, batch: Batch, params) -> MultiTargetOutput:
-        scene = scene_of(batch)
-        n, K = batch.z.shape[:2]
-        trials, slots = [], []
-        for i in range(n):
-            buf, used = self._trial(batch.z[i], scene.n_plots[i], scene, params, K)
-            trials.append(buf)
-            slots.append(used)
-        return assemble(trials, slots)
+        return check_speed_bound(params, scenario_params)
 
     def _components(self, scene, params):
         models = tracker_models(scene, params, kern.UKF)
-        transition = HFSWRTransition(F=models.F, Q=models.Q)
-        measurement = HFSWRMeasurement(ndim_state=4, mapping=(0, 2), noise_covar=models.R,
-                                       sensor_xy=np.asarray(scene.sensor_xy, float))
-        ukf = dict(alpha=params.alpha, beta=params.beta, kappa=params.kappa)
-        predictor = UnscentedKalmanPredictor(transition, **ukf)
-        updater = UnscentedKalmanUpdater(measurement, **ukf)
+        measurement, predictor, updater = ukf_parts(scene, models.F, models.Q, models.R, params)
         jpda = JPDA(PDAHypothesiser(predictor, updater, clutter_spatial_density=max(scene.clutter_density,
                                                                                      LAMBDA_FLOOR),
                                     prob_detect=scene.pd, prob_gate=params.gate_probability))
@@ -240,7 +253,9 @@ class _Slots:
         self.id_of: dict = {}
         self.used = 0
 
-    def record(self, buf: TrialBuffers, k: int, track, status: int) -> None:
+    def record(self, buf: TrialBuffers, k: int, track, status: int, state=None) -> None:
+        """Write ``state`` (default: the track's last) of the track keyed ``track`` at scan k."""
+        state = track if state is None else state
         if track not in self.slot_of:
             taken = set(self.slot_of.values())
             free = next((s for s in range(self.capacity) if s not in taken), None)
@@ -250,7 +265,7 @@ class _Slots:
             self.id_of.setdefault(track, len(self.id_of))
             self.used = max(self.used, free + 1)
         s = self.slot_of[track]
-        sv, P = np.asarray(track.state_vector, float)[:, 0], np.asarray(track.covar, float)
+        sv, P = np.asarray(state.state_vector, float)[:, 0], np.asarray(state.covar, float)
         buf.state[k, s] = sv
         buf.track_id[k, s] = self.id_of[track]
         buf.status[k, s] = status
