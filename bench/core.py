@@ -342,6 +342,13 @@ class Method(Component):
     reference_name: ClassVar[str | None] = None
     #: ``bench perf``: trials the (slow) reference runs on, at most the method's; None: as many
     reference_trials: ClassVar[int | None] = None
+    #: ``bench perf``: parts of :meth:`reference_run` also timed apart, name -> what the part is
+    #: (one phrase; e.g. a peer's track initiator, for a row of its filter and association alone);
+    #: :meth:`reference_run` then leaves the CPU seconds it spent in each in
+    #: :attr:`reference_part_seconds`, and the report adds a row for the reference less each part
+    reference_parts: ClassVar[dict[str, str]] = {}
+    #: CPU seconds of each of :attr:`reference_parts` in the last :meth:`reference_run`
+    reference_part_seconds: dict[str, float] | None = None
     #: ``bench perf``: size name (or ``"*"`` for every size) -> {measure: goal}, measures
     #: ``speedup`` (at least), ``<unit>_per_second`` of a :meth:`work` unit (at least),
     #: ``seconds_per_trial`` (at most)

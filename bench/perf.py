@@ -2,25 +2,30 @@
 
 For each method and each named size of its scenario (``Scenario.perf_sizes``:
 ``name -> (scenario params, trials)``), one batch is generated and the method
-runs on it after a warm-up on one trial (so JIT compilation is not timed); the
-best of a few repetitions is kept. In the same run, the method's *reference
-implementation* (``Method.reference_run``, when ``Method.reference_name`` is
-set; e.g. the straightforward SciPy DP-TBD, or a Kalman-innovation detector
-on innovations from a per-trial ``filterpy`` loop) runs on the same kind of
-batch, on at most ``Method.reference_trials`` trials.
+runs on it after a warm-up on one trial (so JIT compilation is not timed). In the
+same process, the method's *reference implementation* (``Method.reference_run``,
+when ``Method.reference_name`` is set; e.g. the straightforward SciPy DP-TBD, or
+a Kalman-innovation detector on innovations from a per-trial ``filterpy`` loop)
+runs on the first ``Method.reference_trials`` trials of the same batch after its
+own warm-up; the two are timed in :data:`ROUNDS` interleaved rounds (method,
+then reference, so a burst of load on the machine hits both) and each keeps its
+minimum. Times are the CPU time of the measuring thread (``time.thread_time``),
+not wall time, so other processes on a shared machine cost little; the load
+average is recorded with the machine. A reference may time parts of itself
+apart (``Method.reference_parts``, e.g. a peer tracker's initiator): each part
+gets a second row, the reference less that part, against the same method time.
 
 Each measurement runs in a fresh process, so ``peak_rss_mb`` (the process's
 maximum resident set size, including the interpreter, the libraries and the
-batch) is the method's alone, and runs single-threaded (:data:`ONE_CORE`: numba,
-OpenMP, MKL and OpenBLAS held to one thread), so every rate is per core. The
-reference is timed like the method (best of a few repetitions after a warm-up).
-Every method counts its work in its own unit (``Method.work(batch, params) ->
-(unit, count)``: trials by default, cells of a CFAR map, DP state transitions),
-reported as ``<unit>_per_second`` beside ``trials_per_second``, and methods may
-declare ``Method.perf_targets`` (``speedup``, ``<unit>_per_second``,
-``seconds_per_trial``), which the report shows against the measurements. The
-plugin protocol (:mod:`bench.core`) gives every one of these a default, read
-here as "not provided".
+batch, read before the reference first runs) is the method's alone, and runs
+single-threaded (:data:`ONE_CORE`: numba, OpenMP, MKL and OpenBLAS held to one
+thread), so every rate is per core. Every method counts its work in its own unit
+(``Method.work(batch, params) -> (unit, count)``: trials by default, cells of a
+CFAR map, DP state transitions), reported as ``<unit>_per_second`` beside
+``trials_per_second``, and methods may declare ``Method.perf_targets``
+(``speedup``, ``<unit>_per_second``, ``seconds_per_trial``), which the report
+shows against the measurements. The plugin protocol (:mod:`bench.core`) gives
+every one of these a default, read here as "not provided".
 
 Scene generation is measured too, in its own table: for every (scenario,
 size) of the measured methods, ``Scenario.generate`` of that many trials
@@ -60,6 +65,8 @@ PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "trials_per_sec
 SCENE_COLUMNS = ["scenario", "size", "trials", "seconds_per_trial", "peak_rss_mb"]
 SEED = 20261121
 REPEATS = 3
+#: interleaved rounds of a method and its reference (each keeps its minimum)
+ROUNDS = 5
 #: the environment of a measuring process: one thread per library, so a rate is per core
 ONE_CORE = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
 
@@ -71,7 +78,7 @@ class Job:
     size: str
     scenario_params: dict
     trials: int
-    reference: bool          # time the reference implementation instead of the method
+    reference_trials: int    # trials of the batch the reference runs on; 0: the method alone
 
 
 @dataclass(frozen=True)
@@ -104,35 +111,45 @@ def reference_of(method):
     return method.reference_name, method.reference_run
 
 
-def _timed(fn, repeats: int) -> float:
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
+def _cpu_seconds(fn) -> float:
+    """CPU time of the calling thread spent in ``fn()`` (one thread: :data:`ONE_CORE`)."""
+    t0 = time.thread_time()
+    fn()
+    return time.thread_time() - t0
 
 
 def measure(job: Job) -> dict:
-    """Run in a fresh process: seconds per trial (best of REPEATS), peak RSS."""
+    """Run in a fresh process: CPU seconds per trial of the method and of its
+    reference (min over :data:`ROUNDS` interleaved rounds, each after a one-trial
+    warm-up), of the reference less each of its parts, and the peak RSS."""
     registry.discover()
     method = registry.get_method(job.method)()
     params = method.Params()
-    warm = _batch(job, 1)
     batch = _batch(job, job.trials)
-    out = {"name": None, "work_unit": None, "work_per_trial": None}
-    if job.reference:
-        ref = reference_of(method)
-        if ref is None:
-            return {**out, "seconds_per_trial": np.nan, "peak_rss_mb": np.nan}
-        out["name"], fn = ref
+    unit, count = method.work(batch, params)
+    out = {"name": None, "work_unit": unit, "work_per_trial": float(count) / job.trials,
+           "reference_seconds_per_trial": np.nan, "parts": {}}
+    method.run(_batch(job, 1), params)
+    best = {"method": _cpu_seconds(lambda: method.run(batch, params))}
+    out["peak_rss_mb"] = _peak_rss_mb()                  # before the reference adds its own
+    ref = reference_of(method) if job.reference_trials else None
+    if ref is not None:
+        out["name"], reference_run = ref
+        ref_batch = _batch(job, job.reference_trials)
+        reference_run(_batch(job, 1), params)
+        parts: dict[str, float] = {}
+        for _ in range(ROUNDS):
+            seconds = _cpu_seconds(lambda: reference_run(ref_batch, params))
+            best["reference"] = min(best.get("reference", np.inf), seconds)
+            for part, spent in (method.reference_part_seconds or {}).items():
+                parts[part] = min(parts.get(part, np.inf), seconds - spent)
+            best["method"] = min(best["method"], _cpu_seconds(lambda: method.run(batch, params)))
+        out["reference_seconds_per_trial"] = best["reference"] / job.reference_trials
+        out["parts"] = {part: seconds / job.reference_trials for part, seconds in parts.items()}
     else:
-        fn = method.run
-        out["work_unit"], count = method.work(batch, params)
-        out["work_per_trial"] = float(count) / job.trials
-    fn(warm, params)
-    seconds = _timed(lambda: fn(batch, params), REPEATS)
-    return {**out, "seconds_per_trial": seconds / job.trials, "peak_rss_mb": _peak_rss_mb()}
+        for _ in range(ROUNDS - 1):
+            best["method"] = min(best["method"], _cpu_seconds(lambda: method.run(batch, params)))
+    return {**out, "seconds_per_trial": best["method"] / job.trials}
 
 
 def measure_scene(job: SceneJob) -> dict:
@@ -207,8 +224,9 @@ def check_sizes(methods: list[str] | None, sizes: list[str] | None) -> None:
             raise ConfigError("--sizes", f"unknown size {size!r} (known: {', '.join(known) or 'none'})")
 
 
-def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> list[tuple[Job, int]]:
-    """(job, reference trials) for every method x its scenario's sizes."""
+def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> list[Job]:
+    """A job for every method x its scenario's sizes, with the trials its reference runs on
+    (0 when it declares none)."""
     check_sizes(methods, sizes)
     out = []
     for name, cls in registry.methods().items():
@@ -219,7 +237,8 @@ def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> li
             if sizes and size not in sizes:
                 continue
             ref_trials = trials if cls.reference_trials is None else max(1, min(trials, cls.reference_trials))
-            out.append((Job(name, scenario.name, size, dict(params), int(trials), False), ref_trials))
+            out.append(Job(name, scenario.name, size, dict(params), int(trials),
+                           ref_trials if cls.reference_name is not None else 0))
     return out
 
 
@@ -244,19 +263,24 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
              progress=print) -> Path:
     rows, extra = [], []
     planned = jobs(methods, sizes)
-    for job, ref_trials in planned:
+    for job in planned:
         progress(f"perf: {job.method} at {job.size} ({job.trials} trials)")
         m = _in_fresh_process(job)
-        r = _in_fresh_process(Job(job.method, job.scenario, job.size, job.scenario_params, ref_trials, True))
-        speedup = r["seconds_per_trial"] / m["seconds_per_trial"] if np.isfinite(r["seconds_per_trial"]) else np.nan
-        rows.append({"method": job.method, "size": job.size, "trials": job.trials,
-                     "seconds_per_trial": m["seconds_per_trial"], "trials_per_second": 1.0 / m["seconds_per_trial"],
-                     "reference": r["name"] or "", "reference_seconds_per_trial": r["seconds_per_trial"],
-                     "speedup": speedup, "peak_rss_mb": m["peak_rss_mb"],
-                     f"{m['work_unit']}_per_second": m["work_per_trial"] / m["seconds_per_trial"]})
-        extra.append({"scenario": job.scenario, "params": job.scenario_params, "reference_trials": ref_trials,
-                      "targets": registry.get_method(job.method).perf_targets})
-    scenes = measure_scenes([job for job, _ in planned], progress)
+        cls = registry.get_method(job.method)
+        info = {"scenario": job.scenario, "params": job.scenario_params, "reference_trials": job.reference_trials,
+                "targets": cls.perf_targets}
+        references = [(m["name"] or "", m["reference_seconds_per_trial"])]
+        references += [(f"{m['name']}, less its {cls.reference_parts[part]} (timed apart)", seconds)
+                       for part, seconds in m["parts"].items()]
+        for name, seconds in references:
+            rows.append({"method": job.method, "size": job.size, "trials": job.trials,
+                         "seconds_per_trial": m["seconds_per_trial"], "trials_per_second": 1.0 / m["seconds_per_trial"],
+                         "reference": name, "reference_seconds_per_trial": seconds,
+                         "speedup": seconds / m["seconds_per_trial"] if np.isfinite(seconds) else np.nan,
+                         "peak_rss_mb": m["peak_rss_mb"],
+                         f"{m['work_unit']}_per_second": m["work_per_trial"] / m["seconds_per_trial"]})
+            extra.append(info)
+    scenes = measure_scenes(planned, progress)
     scaling, sweep = None, ""
     if executors:
         plan = scaling_plan()
@@ -389,11 +413,14 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
                      else f"{row['reference_seconds_per_trial'] * 1e3:.3g} ({info['reference_trials']} trials)",
                      fmt(row["speedup"]), f"{row['peak_rss_mb']:.0f}", _target_text(targets, row)])
     parts = ["# Performance", "Written by `bench perf`; `perf.csv` holds the same numbers. One core per "
-             "measurement (a fresh process, numba, OpenMP, MKL and OpenBLAS held to one thread), best of 3 "
-             "runs after a one-trial warm-up (JIT compilation is not timed); the reference likewise, on its "
-             "trials, in a separate fresh process. Rates are per core: trials per second, and each method's "
-             "own work unit per second (`Method.work`: cells of a CFAR map, DP state transitions). Peak RSS "
-             "is the whole measuring process's (interpreter and libraries included).",
+             "measurement (a fresh process, numba, OpenMP, MKL and OpenBLAS held to one thread); times are "
+             f"the CPU time of that thread, the minimum over {ROUNDS} rounds in which the method and its "
+             "reference (on the reference's trials, same process) run in turn, each after a one-trial "
+             "warm-up (JIT compilation is not timed). A reference timed with a part apart (a peer tracker's "
+             "initiator) has a second row: the reference less that part. Rates are per core: trials per "
+             "second, and each method's own work unit per second (`Method.work`: cells of a CFAR map, DP "
+             "state transitions). Peak RSS is the whole measuring process's (interpreter and libraries "
+             "included) before the reference runs.",
              table(["method", "size", "trials", "ms per trial",
                     *(f"{rate.removesuffix('_per_second')}/s per core" for rate in rates), "reference",
                     "reference ms per trial", "speed-up", "peak RSS (MB)", "targets"], rows),
@@ -409,8 +436,10 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
                   "Target for Dask: ≥ 0.8·N on N local workers.",
                   table(["executor", "workers", "seconds", "speed-up", "speed-up / workers", "error"], srows)]
     prov = provenance()
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     parts.append("## Machine\n\n" + table(["", ""], [["CPU count", os.cpu_count()], ["platform", platform.platform()],
-                                                    ["python", platform.python_version()]] +
+                                                    ["python", platform.python_version()],
+                                                    ["load average (1, 5, 15 min) at the end", load]] +
                                           [[k, v] for k, v in prov.items()]))
     from bench.runfolder import write_text
     return write_text(out_dir / "report.md", "\n\n".join(parts) + "\n")

@@ -96,6 +96,9 @@ class JpdaUkf(_MultiTargetTracker):
     Params = UkfTrackerParams
     reference_name = "Stone Soup JPDA + UnscentedKalmanUpdater + MultiMeasurementInitiator (stonesoup-jpda)"
     reference_trials = 2
+    #: the peer's initiator timed apart: a second ``bench perf`` row of its JPDA + UKF alone
+    #: against our whole tracker (initiation included), so the speed-up is not an initiator's
+    reference_parts: ClassVar[dict] = {"initiation": "MultiMeasurementInitiator (track initiation)"}
     #: the issue's goal: at least 20 times the Stone Soup peer's throughput
     perf_targets: ClassVar[dict] = {"*": {"speedup": 20.0}}
 
@@ -105,10 +108,14 @@ class JpdaUkf(_MultiTargetTracker):
 
     def reference_run(self, batch: Batch, params) -> MultiTargetOutput:
         """The Stone Soup peer on the same batch with the same parameters
-        (``bench perf``'s baseline; :mod:`methods.stonesoup_peer`)."""
+        (``bench perf``'s baseline; :mod:`methods.stonesoup_peer`), the CPU
+        seconds of its initiator in :attr:`reference_part_seconds`."""
         from methods.stonesoup_peer import StoneSoupJpda
 
-        return StoneSoupJpda().run(batch, params)
+        peer = StoneSoupJpda()
+        out = peer.run(batch, params)
+        self.reference_part_seconds = {"initiation": peer.initiation_seconds}
+        return out
 
 
 @register_method

@@ -51,9 +51,9 @@ def test_each_method_is_timed_on_a_scenario_it_accepts(monkeypatch):
             return "not this one" if type(scenario_params) is tracking[0].Params else None
 
     monkeypatch.setitem(registry._METHODS, RefusesTheFirst.name, RefusesTheFirst)
-    picked = {job.scenario for job, _ in jobs([RefusesTheFirst.name])}
+    picked = {job.scenario for job in jobs([RefusesTheFirst.name])}
     assert picked == {tracking[1].name} != {refused_name}
-    for job, _ in jobs():
+    for job in jobs():
         cls = registry.get_method(job.method)
         scenario = registry.get_scenario(job.scenario)
         assert cls.serves(scenario.name, scenario.tasks)

@@ -164,10 +164,12 @@ def test_multi_target_preset_smoke(bench_cli, tmp_path):
     summary = pd.read_csv(tmp_path / "out" / "summary.csv")
     report = (tmp_path / "out" / "report.md").read_text()
     peers = "stonesoup-jpda" in registry.methods()
-    assert set(summary.method) == {"jpda-ukf", "gnn-ekf"} | ({"stonesoup-jpda"} if peers else set())
+    assert ("stonesoup-gmphd" in registry.methods()) == peers                  # one extra for both
+    assert set(summary.method) == {"jpda-ukf", "gnn-ekf"} | ({"stonesoup-jpda", "stonesoup-gmphd"} if peers else set())
     assert summary.scenario.nunique() == 5 and summary.gospa_mean.notna().all()
     assert "## Multi-target tracking: paired comparison" in report
-    assert ("`stonesoup-jpda` (stonesoup-jpda): needs the \\[peers\\] extra" in report) != peers   # Markdown-escaped
+    for peer in ("stonesoup-jpda", "stonesoup-gmphd"):                       # Markdown-escaped
+        assert (f"`{peer}` ({peer}): needs the \\[peers\\] extra" in report) != peers
 
 
 @pytest.mark.slow

@@ -1,0 +1,73 @@
+"""The Stone Soup peers (``[peers]`` extra): unavailable with the reason without it; the
+GM-PHD peer finds the targets of a clean scene; ``bench perf`` times the JPDA peer's
+initiator apart."""
+
+import importlib
+import sys
+
+import numpy as np
+import pytest
+
+from bench import registry
+from bench.params import build_params
+from bench.registry import PluginError
+from bench.rng import TrialRNG
+
+PEERS = {"methods.stonesoup_peer": "stonesoup-jpda", "methods.stonesoup_gmphd": "stonesoup-gmphd"}
+
+
+@pytest.mark.parametrize("module, name", PEERS.items())
+def test_a_peer_without_the_extra_is_unavailable_with_the_reason(monkeypatch, module, name):
+    """Stone Soup failing to import (None in ``sys.modules`` makes ``import`` raise
+    ImportError) makes the peer's module raise the registry's PluginError naming
+    the method and the extra: ``bench list`` shows it unavailable, a sweep with
+    ``optional = true`` skips it with that line."""
+    for loaded in [m for m in sys.modules if m == "stonesoup" or m.startswith("stonesoup.")] + list(PEERS):
+        monkeypatch.delitem(sys.modules, loaded, raising=False)
+    monkeypatch.setitem(sys.modules, "stonesoup", None)
+    with pytest.raises(PluginError, match=r'needs the \[peers\] extra \(pip install -e "\.\[peers\]"\)') as err:
+        importlib.import_module(module)
+    assert err.value.name == name
+
+
+def _clean_scene(seed: int):
+    cls = registry.get_scenario("hfswr-targets")
+    params = build_params(cls.Params, {"detection": "fixed", "pd": 0.95, "clutter_per_scan": 0.0, "scans": 30,
+                                       "targets": 3, "crossing": False})
+    return cls().generate(params, 15.0, 1, TrialRNG(seed, 0, 1, range(1)))
+
+
+def test_gmphd_finds_the_targets_of_a_clean_scene():
+    """3 ships, Pd 0.95, no clutter, 30 scans (seed fixed). A tracker reporting nothing
+    scores GOSPA = c sqrt(T_k / 2) at a scan with T_k targets (each one missed costs
+    c^2 / 2); the GM-PHD peer must score under half of that on average: every target
+    found on most scans, within a few km (its errors: the cross-range noise r sigma_az
+    ~ 1.7 km of one plot before filtering, a scan missed at each missed detection,
+    whose weight (1 - Pd) w falls below the extraction threshold, and 2-3 scans to
+    build up a new target's weight). Nothing is false in a clean scene."""
+    pytest.importorskip("stonesoup")
+    method = registry.get_method("stonesoup-gmphd")
+    task = registry.get_task("multi-target")
+    batch = _clean_scene(1)
+    metrics = task.trial_metrics(batch, method().run(batch, method.Params()), 1.0)
+    present = np.isfinite(batch.truth[0, :, :, 0]).sum(axis=1)
+    empty_tracker = batch.scene.gospa_cutoff_m * np.sqrt(present / 2.0)
+    assert present.sum() > 40                                         # the scene holds targets to find
+    assert np.mean(metrics["gospa"][0]) < 0.5 * np.mean(empty_tracker)
+    assert np.sum(metrics["gospa_missed"][0]) < 0.25 * present.sum()
+    assert np.sum(metrics["gospa_false"][0]) == 0
+
+
+def test_the_jpda_reference_times_its_initiator_apart():
+    """``jpda-ukf``'s reference (the Stone Soup JPDA peer) leaves its initiator's CPU
+    seconds for ``bench perf``'s second row: positive, and less than the whole run's."""
+    pytest.importorskip("stonesoup")
+    import time
+
+    method = registry.get_method("jpda-ukf")()
+    assert set(method.reference_parts) == {"initiation"}
+    batch = _clean_scene(2)
+    t0 = time.thread_time()
+    method.reference_run(batch, method.Params())
+    whole = time.thread_time() - t0
+    assert 0.0 < method.reference_part_seconds["initiation"] < whole
