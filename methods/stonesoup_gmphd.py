@@ -121,6 +121,12 @@ class StoneSoupGmPhd(StoneSoupPeer):
     name = "stonesoup-gmphd"
     Params = GmPhdParams
 
+    def check_scenario(self, params, scenario_params) -> str | None:
+        if params.cardinality == "lcc" and getattr(scenario_params, "clutter_per_scan", None) == 0:
+            return ("cardinality = 'lcc' needs clutter: Stone Soup's LCCUpdater divides by the clutter "
+                    "count's mean and variance, 0 without clutter")
+        return None
+
     def _components(self, scene, params):
         T = float(scene.scan_period_s)
         R = np.diag(np.asarray(scene.measurement_std, float) ** 2)

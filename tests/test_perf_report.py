@@ -9,9 +9,9 @@ from bench.perf import PERF_COLUMNS, SCENE_COLUMNS, Job, scene_jobs, write_repor
 
 
 def test_scene_jobs_one_per_scenario_size():
-    jobs = [Job("dp-tbd", "tbd-grid", "small", {"cells": 100}, 20, False),
-            Job("dp-tbd-mf", "tbd-grid", "small", {"cells": 100}, 20, False),
-            Job("dp-tbd", "tbd-grid", "paper", {}, 4, False)]
+    jobs = [Job("dp-tbd", "tbd-grid", "small", {"cells": 100}, 20, 0),
+            Job("dp-tbd-mf", "tbd-grid", "small", {"cells": 100}, 20, 0),
+            Job("dp-tbd", "tbd-grid", "paper", {}, 4, 0)]
     assert [(j.scenario, j.size, j.trials) for j in scene_jobs(jobs)] == \
         [("tbd-grid", "small", 20), ("tbd-grid", "paper", 4)]
 
@@ -93,3 +93,50 @@ def test_perf_csv_has_a_rate_column_per_work_unit(tmp_path):
     assert written["cells_per_second"].tolist()[0] == 4.6e7 and written["cells_per_second"].isna().tolist()[1:] \
         == [True, True]
     assert written["transitions_per_second"].notna().tolist() == [False, True, False]
+
+
+def _burn(seconds: float) -> float:
+    """Spend ``seconds`` of this thread's CPU time; return what was spent."""
+    import time
+
+    t0 = time.thread_time()
+    while time.thread_time() - t0 < seconds:
+        pass
+    return time.thread_time() - t0
+
+
+def test_a_reference_part_timed_apart_gets_a_second_row(monkeypatch, tmp_path):
+    """A reference declaring ``reference_parts`` gets two rows against the same method time:
+    the whole reference, and the reference less the CPU seconds it reported for the part."""
+    from dataclasses import dataclass
+
+    from bench import perf
+    from bench.core import TRACKING, Method
+
+    registry.discover()
+
+    class WithAPart(Method):
+        name, task = "with-a-part", TRACKING
+        reference_name = "a loop"
+        reference_parts = {"setup": "its set-up"}
+
+        @dataclass(frozen=True)
+        class Params:
+            pass
+
+        def run(self, batch, params):
+            _burn(1e-3)
+
+        def reference_run(self, batch, params):
+            self.reference_part_seconds = {"setup": _burn(6e-3)}
+            _burn(3e-3)
+
+    monkeypatch.setitem(registry._METHODS, WithAPart.name, WithAPart)
+    monkeypatch.setattr(perf, "_in_fresh_process", perf.measure)          # in this process: no spawn
+    monkeypatch.setattr(perf, "measure_scenes", lambda jobs, progress: pd.DataFrame(columns=SCENE_COLUMNS))
+    perf.run_perf(tmp_path, methods=[WithAPart.name], progress=lambda _: None)
+    rows = pd.read_csv(tmp_path / "perf.csv")
+    assert rows.reference.tolist() == ["a loop", "a loop, less its its set-up (timed apart)"]
+    assert rows.seconds_per_trial.nunique() == 1                          # one method time, two references
+    whole, less = rows.reference_seconds_per_trial * perf.jobs([WithAPart.name])[0].reference_trials   # per call
+    assert 6e-3 <= whole - less < whole and less >= 3e-3
