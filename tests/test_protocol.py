@@ -21,6 +21,7 @@ def test_a_declared_reference_is_implemented_and_an_implemented_one_declared(nam
     overrides = cls.reference_run is not Method.reference_run
     assert overrides == (cls.reference_name is not None), name
     assert cls.reference_trials is None or cls.reference_trials >= 1
+    assert not cls.reference_parts or cls.reference_name is not None, name     # parts of a declared reference
     for size, targets in cls.perf_targets.items():
         for measure in targets:
             assert measure in {"speedup", "seconds_per_trial"} or measure.endswith("_per_second"), (name, size)
@@ -37,6 +38,7 @@ def test_scenario_perf_sizes_are_valid_params(cls):
 
 def test_defaults_mean_not_provided():
     assert Method.reference_name is None and Method.reference_trials is None and Method.perf_targets == {}
+    assert Method.reference_parts == {} and Method.reference_part_seconds is None
     assert Method().work(SimpleNamespace(n=7), None) == ("trials", 7.0)
     assert reference_of(Method()) is None
     assert Scenario.small_params == {} and Scenario.perf_sizes == {"default": ({}, 100)}
