@@ -270,7 +270,7 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
         info = {"scenario": job.scenario, "params": job.scenario_params, "reference_trials": job.reference_trials,
                 "targets": cls.perf_targets}
         references = [(m["name"] or "", m["reference_seconds_per_trial"])]
-        references += [(f"{m['name']}, less its {cls.reference_parts[part]} (timed apart)", seconds)
+        references += [(f"{m['name']}, without its {cls.reference_parts[part]} (timed apart)", seconds)
                        for part, seconds in m["parts"].items()]
         for name, seconds in references:
             rows.append({"method": job.method, "size": job.size, "trials": job.trials,

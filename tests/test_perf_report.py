@@ -118,7 +118,7 @@ def test_a_reference_part_timed_apart_gets_a_second_row(monkeypatch, tmp_path):
     class WithAPart(Method):
         name, task = "with-a-part", TRACKING
         reference_name = "a loop"
-        reference_parts = {"setup": "its set-up"}
+        reference_parts = {"setup": "set-up"}
 
         @dataclass(frozen=True)
         class Params:
@@ -136,7 +136,7 @@ def test_a_reference_part_timed_apart_gets_a_second_row(monkeypatch, tmp_path):
     monkeypatch.setattr(perf, "measure_scenes", lambda jobs, progress: pd.DataFrame(columns=SCENE_COLUMNS))
     perf.run_perf(tmp_path, methods=[WithAPart.name], progress=lambda _: None)
     rows = pd.read_csv(tmp_path / "perf.csv")
-    assert rows.reference.tolist() == ["a loop", "a loop, less its its set-up (timed apart)"]
+    assert rows.reference.tolist() == ["a loop", "a loop, without its set-up (timed apart)"]
     assert rows.seconds_per_trial.nunique() == 1                          # one method time, two references
     whole, less = rows.reference_seconds_per_trial * perf.jobs([WithAPart.name])[0].reference_trials   # per call
     assert 6e-3 <= whole - less < whole and less >= 3e-3
