@@ -16,7 +16,7 @@ import pytest
 
 from bench import registry
 from bench.cli import build_parser
-from bench.docs import main, published, subcommands
+from bench.docs import main, pages, published, subcommands
 from bench.markdown import code, text
 
 REPO = Path(__file__).resolve().parents[1]
@@ -46,6 +46,18 @@ def test_every_plugin_has_a_page_with_every_parameter(site, kind):
             assert (field.metadata.get("why") or "") in plain
         index = (site / kind / "index.md").read_text(encoding="utf-8")
         assert f"[{code(name)}]({name}.md)" in index
+
+
+def test_a_plugin_registered_later_has_its_page(monkeypatch):
+    """Pages come from the registry when the site is built: a method registered now (as an
+    entry point's would be) has its page and its place in the navigation, no edit elsewhere."""
+    monkeypatch.setattr(registry, "_METHODS", dict(registry.methods()))
+    base = registry.get_method("cv-kf")
+    registry.register_method(type("Probe", (base,), {"name": "docs-probe", "__doc__": "A probe.\n\n    x_k = F x_(k-1)"}))
+    generated, nav = pages(REPO)
+    assert "x_k = F x_(k-1)" in generated["methods/docs-probe.md"]
+    assert {"docs-probe": "methods/docs-probe.md"} in next(s["Methods"] for s in nav if "Methods" in s)
+    assert "[`docs-probe`](../methods/docs-probe.md)" in generated[f"tasks/{base.task}.md"]
 
 
 def test_every_task_page_lists_its_methods(site):
