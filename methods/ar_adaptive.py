@@ -318,7 +318,8 @@ class ARAdaptive(Method):
 
     name = "ar-adaptive"
     task = TRACKING
-    scenarios = ("maneuvering-1d",)
+    needs = frozenset({"kinematic-model"})
+    handles = frozenset({"valid-step-masks"})
     reference_name = "per-trial filterpy KalmanFilter loop with the same switching and Q_k"
     reference_trials = 20
     perf_targets = {"*": {"speedup": 50.0}}

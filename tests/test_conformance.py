@@ -1,5 +1,6 @@
-"""Every registered method on every compatible scenario: shapes, no NaN, determinism;
-every scenario's batch carries the scene type of each of its tasks."""
+"""Every registered method on every scenario that provides what it needs (its small
+instance; :mod:`bench.capabilities`): shapes, no NaN, determinism; every scenario's
+batch carries the scene type of each of its tasks."""
 
 import dataclasses
 
@@ -7,6 +8,7 @@ import numpy as np
 import pytest
 
 from bench import registry
+from bench.capabilities import CAPABILITIES, fits
 from bench.core import Scene
 from bench.params import build_params
 from bench.rng import TrialRNG
@@ -15,7 +17,7 @@ from bench.registry import get_task
 
 
 PAIRS = [(s, m) for s, scls in registry.scenarios().items() for m, mcls in registry.methods().items()
-         if mcls.serves(s, scls.tasks)]
+         if fits(mcls, scls, build_params(scls.Params, scls.small_params))]
 
 
 def test_every_method_has_a_scenario_and_nothing_is_unavailable():
@@ -25,6 +27,17 @@ def test_every_method_has_a_scenario_and_nothing_is_unavailable():
     assert broken == []
     runnable = {m for _, m in PAIRS}
     assert runnable == set(registry.methods())
+
+
+def test_built_in_capabilities_are_named_in_the_vocabulary():
+    """Every capability a built-in plugin needs, handles or provides is one of
+    :data:`bench.capabilities.CAPABILITIES` (a misspelt name would pair nothing)."""
+    used = set()
+    for cls in registry.methods().values():
+        used |= set(cls.needs) | set(cls.handles)
+    for cls in registry.scenarios().values():
+        used |= set(cls.provides) | set(cls().requires(build_params(cls.Params, cls.small_params)))
+    assert used and used <= set(CAPABILITIES)
 
 
 def _params(cls):
