@@ -177,7 +177,7 @@ def covariance_sequence(model: LinearGaussianModel, P0: np.ndarray, steps: int):
 
 
 def kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray,
-                  P0: np.ndarray) -> KalmanResult:
+                  P0: np.ndarray, valid: np.ndarray | None = None) -> KalmanResult:
     """Run the filter on ``n`` trials of ``K`` measurements at once.
 
     Convention: ``x0`` (n, d) and ``P0`` (d, d) are the *prior* of step 0,
@@ -187,8 +187,12 @@ def kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray,
     stationary from step 0.
 
     z : (n, K, m) measurements; ``x0`` may also be a single (d,) shared by
-    all trials. Returns a :class:`KalmanResult`.
+    all trials. ``valid`` (n, K) bool: the steps each trial has (a ragged batch,
+    ``Scene.valid_steps``; None: every step), see :func:`masked_kalman_filter`.
+    Returns a :class:`KalmanResult`.
     """
+    if valid is not None:
+        return masked_kalman_filter(model, z, x0, P0, valid)
     z = np.asarray(z, dtype=float)
     n, steps, _ = z.shape
     F, H = model.F, model.H
@@ -205,6 +209,34 @@ def kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray,
         x = matvec(F, x_post[:, k])
     return KalmanResult(x_prior=x_prior, x_post=x_post, nu=nu, P_prior=P_prior,
                         P_post=P_post, S=S, gain=K)
+
+
+def masked_kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray,
+                         valid: np.ndarray) -> KalmanResult:
+    """:func:`kalman_filter` on a ragged batch (docs/architecture.md, 'Ragged batches'):
+    at a step trial i does not have (``valid[i, k]`` False; its measurement may be NaN)
+    the filter predicts only, x_k|k = x_k|k-1 and P_k|k = P_k|k-1, with nu NaN and a
+    zero gain. Which steps update differs per trial, so the covariances carry the trial
+    axis: P_prior, P_post (n, K, d, d), S (n, K, m, m), gain (n, K, d, m). The per-trial
+    steps of :func:`update_batched` and :func:`predict_batched`: a trial's numbers do
+    not depend on the others of its batch."""
+    z = np.asarray(z, dtype=float)
+    valid = np.asarray(valid, dtype=bool)
+    n, steps, m = z.shape
+    d = model.dim_x
+    x = np.broadcast_to(np.asarray(x0, dtype=float), (n, d)).copy()
+    P = np.broadcast_to(np.asarray(P0, dtype=float), (n, d, d)).copy()
+    x_prior, x_post = np.empty((n, steps, d)), np.empty((n, steps, d))
+    P_prior, P_post = np.empty((n, steps, d, d)), np.empty((n, steps, d, d))
+    nu, S, gain = np.empty((n, steps, m)), np.empty((n, steps, m, m)), np.zeros((n, steps, d, m))
+    for k in range(steps):
+        x_prior[:, k], P_prior[:, k] = x, P
+        upd = update_where(x, P, z[:, k], model.H, model.R, valid[:, k])
+        nu[:, k], S[:, k] = upd.nu, upd.S
+        gain[valid[:, k], k] = np.swapaxes(np.linalg.solve(upd.S[valid[:, k]], (model.H @ P)[valid[:, k]]), -1, -2)
+        x_post[:, k], P_post[:, k] = upd.x, upd.P
+        x, P = predict_batched(upd.x, upd.P, model.F, model.Q)
+    return KalmanResult(x_prior=x_prior, x_post=x_post, nu=nu, P_prior=P_prior, P_post=P_post, S=S, gain=gain)
 
 
 def whiten(nu: np.ndarray, S: np.ndarray):
@@ -471,6 +503,24 @@ def update_batched(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R
     x_new, P_new, nu = x_new.reshape(x.shape), P_new.reshape(P.shape), nu.reshape(z.shape)
     S, nis, log_likelihood = S.reshape(*lead, m, m), nis.reshape(lead), log_likelihood.reshape(lead)
     return BatchedUpdate(x=x_new, P=P_new, nu=nu, S=S, nis=nis, log_likelihood=log_likelihood)
+
+
+def update_where(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray,
+                 valid: np.ndarray | None) -> BatchedUpdate:
+    """:func:`update_batched` where ``valid`` (broadcast over the leading axes of ``x``)
+    is True; elsewhere a step the trial does not have (a ragged batch): the state and
+    covariance pass through (predict only), nu and the NIS are NaN and the
+    log-likelihood 0 (no measurement, no evidence for any mode). S is H P H' + R
+    either way. ``valid`` None: every trial, :func:`update_batched` itself."""
+    if valid is None:
+        return update_batched(x, P, z, H, R)
+    lead = x.shape[:-1]
+    valid = np.broadcast_to(np.asarray(valid, dtype=bool), lead)
+    z = np.where(valid[..., None], np.broadcast_to(z, (*lead, z.shape[-1])), 0.0)    # no NaN in the kernel
+    upd = update_batched(x, P, z, H, R)
+    return BatchedUpdate(x=np.where(valid[..., None], upd.x, x), P=np.where(valid[..., None, None], upd.P, P),
+                         nu=np.where(valid[..., None], upd.nu, np.nan), S=upd.S,
+                         nis=np.where(valid, upd.nis, np.nan), log_likelihood=np.where(valid, upd.log_likelihood, 0.0))
 
 
 def filterpy_track(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
