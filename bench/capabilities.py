@@ -59,6 +59,17 @@ def missing(method_cls, scenario_cls, scenario_params=None) -> str | None:
     return None
 
 
+def check_batch(method_cls, batch) -> None:
+    """A ValueError unless ``method_cls`` handles what ``batch`` holds: a ragged batch
+    (``scene.valid_steps`` set) from a scenario config that did not declare it in
+    ``requires`` reaches only a method that handles ``valid-step-masks`` (the unit's
+    failure for the others, not NaN estimates)."""
+    if batch.scene.valid_steps is not None and VALID_STEP_MASKS not in method_cls.handles:
+        raise ValueError(f"the batch is ragged (scene.valid_steps is set) and {method_cls.name!r} does not handle "
+                         f"{VALID_STEP_MASKS}; the scenario's requires(params) should say so, so the sweep "
+                         f"refuses the pair")
+
+
 def fits(method_cls, scenario_cls, scenario_params=None) -> bool:
     """Whether ``method_cls`` runs on a config of ``scenario_cls`` (:func:`missing` is None)."""
     return missing(method_cls, scenario_cls, scenario_params) is None
