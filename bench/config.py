@@ -490,6 +490,16 @@ def _check_runs_somewhere(cls, scenarios: tuple[ScenarioConfig, ...], field: str
     raise ConfigError(field, f"{problem}{where}"[:400])
 
 
+def _why_idle(plan: Plan, scenario: ScenarioConfig) -> str:
+    """': ' and what the first method config of its task lacks on ``scenario``, if one does."""
+    for m in plan.methods:
+        problem = capabilities.missing(registry.get_method(m.name), registry.get_scenario(scenario.name),
+                                       scenario.params)
+        if problem and registry.get_method(m.name).task in scenario.tasks:
+            return f": {problem}"
+    return ""
+
+
 def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, ...], trials: int,
                       identity: str, label: Any = None, base: str | None = None) -> list[ScenarioConfig]:
     cls = registry.get_scenario(name, f"{field}.name" if field != "scenario_params" else "scenario")
@@ -633,9 +643,10 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
                 skipped)
     feasibility.check_snr_levels(plan, scenario_fields)
     plan = dataclasses.replace(plan, skipped=feasibility.check_pairs(plan, method_fields))
-    idle = [s.label for s in scenarios if not plan.pairs(s)]
+    idle = [s for s in scenarios if not plan.pairs(s)]
     if idle:
-        raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0]!r}")
+        raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0].label!r}"
+                                     f"{_why_idle(plan, idle[0])}"[:400])
     feasibility.check_unit_memory(plan, scenario_fields)
     feasibility.check_scenario_configs(plan, scenario_fields)
     if plan.trial_runs > LARGE_SWEEP_TRIAL_RUNS and not allow_large:

@@ -226,3 +226,14 @@ def test_a_ragged_batch_from_an_undeclared_config_fails_the_methods_that_do_not_
     check_batch(Unmasked, _batch(z, None, 1))
     with pytest.raises(ValueError, match="cv-kf-unmasked.*valid-step-masks"):
         check_batch(Unmasked, _batch(z, valid, 1))
+
+
+def test_a_ragged_config_no_method_of_the_sweep_handles_is_refused_naming_why(tmp_path, monkeypatch):
+    cls = load(tmp_path)
+    monkeypatch.setitem(registry._SCENARIOS, cls.name, cls)
+    monkeypatch.setitem(registry._METHODS, Unmasked.name, Unmasked)
+    data = _sweep({"steps": 30}, Unmasked.name)
+    data["scenarios"].append({"name": "cv-replay", "label": "ragged", "params": {"steps": 30, "gap_probability": 0.1}})
+    with pytest.raises(ConfigError) as err:
+        parse_sweep(data, "t")
+    assert err.value.field == "methods" and "'ragged'" in str(err.value) and VALID_STEP_MASKS in str(err.value)
