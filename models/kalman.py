@@ -216,27 +216,16 @@ def masked_kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarr
     """:func:`kalman_filter` on a ragged batch (docs/architecture.md, 'Ragged batches'):
     at a step trial i does not have (``valid[i, k]`` False; its measurement may be NaN)
     the filter predicts only, x_k|k = x_k|k-1 and P_k|k = P_k|k-1, with nu NaN and a
-    zero gain. Which steps update differs per trial, so the covariances carry the trial
-    axis: P_prior, P_post (n, K, d, d), S (n, K, m, m), gain (n, K, d, m). The per-trial
-    steps of :func:`update_batched` and :func:`predict_batched`: a trial's numbers do
-    not depend on the others of its batch."""
-    z = np.asarray(z, dtype=float)
-    valid = np.asarray(valid, dtype=bool)
-    n, steps, m = z.shape
-    d = model.dim_x
-    x = np.broadcast_to(np.asarray(x0, dtype=float), (n, d)).copy()
-    P = np.broadcast_to(np.asarray(P0, dtype=float), (n, d, d)).copy()
-    x_prior, x_post = np.empty((n, steps, d)), np.empty((n, steps, d))
-    P_prior, P_post = np.empty((n, steps, d, d)), np.empty((n, steps, d, d))
-    nu, S, gain = np.empty((n, steps, m)), np.empty((n, steps, m, m)), np.zeros((n, steps, d, m))
-    for k in range(steps):
-        x_prior[:, k], P_prior[:, k] = x, P
-        upd = update_where(x, P, z[:, k], model.H, model.R, valid[:, k])
-        nu[:, k], S[:, k] = upd.nu, upd.S
-        gain[valid[:, k], k] = np.swapaxes(np.linalg.solve(upd.S[valid[:, k]], (model.H @ P)[valid[:, k]]), -1, -2)
-        x_post[:, k], P_post[:, k] = upd.x, upd.P
-        x, P = predict_batched(upd.x, upd.P, model.F, model.Q)
-    return KalmanResult(x_prior=x_prior, x_post=x_post, nu=nu, P_prior=P_prior, P_post=P_post, S=S, gain=gain)
+    zero gain (S is still H P_k|k-1 H' + R). Which steps update differs per trial, so the
+    covariances carry the trial axis: P_prior, P_post (n, K, d, d), S (n, K, m, m), gain
+    (n, K, d, m). One compiled loop over trials and steps (:func:`_masked_kernel`) on the
+    per-trial steps below: a trial's numbers do not depend on the others of its batch."""
+    z = np.ascontiguousarray(z, dtype=float)
+    x0 = np.broadcast_to(np.asarray(x0, dtype=float), (z.shape[0], model.dim_x))
+    arrays = _masked_kernel(z, np.ascontiguousarray(valid, dtype=bool), np.ascontiguousarray(x0),
+                            np.ascontiguousarray(P0, dtype=float), *(np.ascontiguousarray(A, dtype=float)
+                                                                     for A in (model.F, model.H, model.Q, model.R)))
+    return KalmanResult(*arrays)
 
 
 def whiten(nu: np.ndarray, S: np.ndarray):
@@ -427,6 +416,33 @@ def update_one(x, P, z, H, R, x_out, P_out, nu, S, scratch):
 def update_scratch(d, m):
     """Scratch arrays of :func:`update_one`: P H', gain, I - K H, (I - K H) P, S^-1."""
     return np.empty((d, m)), np.empty((d, m)), np.empty((d, d)), np.empty((d, d)), np.empty((m, m))
+
+
+@numba.njit(cache=True)
+def _masked_kernel(z, valid, x0, P0, F, H, Q, R):
+    """:func:`masked_kalman_filter`, trial by trial and step by step: returns x_prior,
+    x_post (n, K, d), nu (n, K, m), P_prior, P_post (n, K, d, d), S (n, K, m, m) and
+    the gain (n, K, d, m), in :class:`KalmanResult`'s order."""
+    n, K, m = z.shape
+    d = x0.shape[1]
+    x_prior, x_post, nu = np.empty((n, K, d)), np.empty((n, K, d)), np.full((n, K, m), np.nan)
+    P_prior, P_post = np.empty((n, K, d, d)), np.empty((n, K, d, d))
+    S, gain = np.empty((n, K, m, m)), np.zeros((n, K, d, m))
+    x, P, FP, zero_u = np.empty(d), np.empty((d, d)), np.empty((d, d)), np.zeros(d)
+    z_zero = np.zeros(m)
+    scratch = update_scratch(d, m)
+    for i in range(n):
+        x[:], P[:, :] = x0[i], P0
+        for k in range(K):
+            x_prior[i, k], P_prior[i, k] = x, P
+            if valid[i, k]:
+                update_one(x, P, z[i, k], H, R, x_post[i, k], P_post[i, k], nu[i, k], S[i, k], scratch)
+                gain[i, k] = scratch[1]
+            else:                                       # predict only; S = H P H' + R all the same
+                update_one(x, P, z_zero, H, R, x_post[i, k], P_post[i, k], nu[i, k], S[i, k], scratch)
+                x_post[i, k], P_post[i, k], nu[i, k] = x, P, np.nan
+            predict_one(x_post[i, k], P_post[i, k], F, Q, zero_u, x, P, FP)
+    return x_prior, x_post, nu, P_prior, P_post, S, gain
 
 
 @numba.njit(cache=True)
