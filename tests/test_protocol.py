@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from bench import registry
+from bench.capabilities import fits
 from bench.core import Method, Scenario
 from bench.params import build_params
 from bench.perf import reference_of, scaling_plan
@@ -74,11 +75,9 @@ def test_work_is_a_unit_and_a_positive_count(name, cls):
     """``Method.work`` on the small instance of each scenario the method serves: a plural
     unit name and a positive count (``bench perf`` reports ``<unit>_per_second``)."""
     for scenario in registry.scenarios().values():
-        if not cls.serves(scenario.name, scenario.tasks):
-            continue
         params = build_params(scenario.Params, scenario.small_params)
         method_params = cls.Params()
-        if cls().check_scenario(method_params, params) is not None:
+        if not fits(cls, scenario, params) or cls().check_scenario(method_params, params) is not None:
             continue
         batch = scenario().generate(params, float(scenario.perf_snr_db), 2, TrialRNG(1, 0, 0, range(2)))
         unit, count = cls().work(batch, method_params)

@@ -17,6 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from bench import registry, tomlw
+from bench.capabilities import fits
 from tests.conftest import run_bench
 
 TRIALS = 6
@@ -29,7 +30,7 @@ def _scenarios_by_task() -> dict[str, dict[str, list[str]]]:
     registry.discover()
     out: dict[str, dict[str, list[str]]] = {}
     for s, scls in registry.scenarios().items():
-        methods = [m for m, mcls in registry.methods().items() if mcls.serves(s, scls.tasks)]
+        methods = [m for m, mcls in registry.methods().items() if fits(mcls, scls)]
         out.setdefault(scls.tasks[0], {})[s] = methods
     return out
 
