@@ -165,17 +165,18 @@ def component_page(kind: str, cls: type, page: str, facts: list[tuple[str, str]]
 def plugin_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Preset], reports: set[str]) -> None:
     """The task, method and scenario pages, and an index of each kind."""
     from bench import registry
+    from bench.capabilities import fits
 
     methods, scenarios, tasks = registry.methods(), registry.scenarios(), registry.tasks()
     for name, cls in methods.items():
         page = f"methods/{name}.md"
         facts = [("task", links([cls.task], "tasks", page) + f": {text(tasks[cls.task].summary())}"),
-                 ("runs on", links([s for s, c in scenarios.items() if cls.serves(s, c.tasks)], "scenarios", page)),
+                 ("runs on", links([s for s, c in scenarios.items() if fits(cls, c)], "scenarios", page)),
                  ("presets", preset_links([p for p in all_presets if name in p.methods], reports, page))]
         pages[page] = component_page("method", cls, page, facts, perf_rows(root, "perf.csv", "method", name, page))
     for name, cls in scenarios.items():
         page = f"scenarios/{name}.md"
-        runners = [m for m, c in methods.items() if c.serves(name, cls.tasks)]
+        runners = [m for m, c in methods.items() if fits(c, cls)]
         facts = [("tasks", links(cls.tasks, "tasks", page)), ("methods", links(runners, "methods", page)),
                  ("small instance", code(cls.small_params) if cls.small_params else "the defaults"),
                  ("presets", preset_links([p for p in all_presets if name in p.scenarios], reports, page))]
