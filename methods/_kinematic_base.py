@@ -35,7 +35,7 @@ class KinematicTracker(Method):
     """Base of the trackers of kinematic scenes (``maneuvering-1d``)."""
 
     task = TRACKING
-    scenarios = ("maneuvering-1d",)
+    scenarios = ("maneuvering-1d", "recorded-tracks")
     reference_trials: ClassVar[int | None] = 20
     #: the issue's goal: 50 times the per-trial filterpy loop
     perf_targets: ClassVar[dict] = {"*": {"speedup": 50.0}}

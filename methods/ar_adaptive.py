@@ -318,7 +318,7 @@ class ARAdaptive(Method):
 
     name = "ar-adaptive"
     task = TRACKING
-    scenarios = ("maneuvering-1d",)
+    scenarios = ("maneuvering-1d", "recorded-tracks")
     reference_name = "per-trial filterpy KalmanFilter loop with the same switching and Q_k"
     reference_trials = 20
     perf_targets = {"*": {"speedup": 50.0}}
