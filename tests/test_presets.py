@@ -10,6 +10,7 @@ import pytest
 from bench import registry, tomlw
 from bench.config import parse_sweep
 from bench.listing import presets
+from tests.conftest import parse_sweep_or_skip
 
 PRESETS = sorted(presets())
 
@@ -20,7 +21,7 @@ def _preset(name: str) -> dict:
 
 @pytest.mark.parametrize("name", PRESETS)
 def test_preset_is_a_valid_sweep(name):
-    plan = parse_sweep(_preset(name), f"preset {name}")
+    plan = parse_sweep_or_skip(_preset(name), f"preset {name}")
     assert plan.name == name
 
 
@@ -191,3 +192,25 @@ def test_ar_tracking_preset_at_reduced_size(bench_cli, tmp_path):
     report = (out / "report.md").read_text()
     assert "### Paired differences against the first method config" in report
     assert re.search(r"\|\s*`default`\s*\|\s*0\s*\|\s*`vd-filter`\s*\|", report)
+
+
+@pytest.mark.slow
+def test_real_trajectories_preset_at_reduced_size(bench_cli, tmp_path):
+    """The real-aircraft preset through the CLI at reduced trials (needs the [data] extra):
+    every tracker and detector on both scenario configs, a trial in the plane (the claims
+    table is a preset's own: a reduced copy is a sweep file, without it)."""
+    parse_sweep_or_skip(_preset("real-trajectories"), "preset real-trajectories")
+    sweep = _preset("real-trajectories")
+    sweep.update(trials=8, chunk=8, snr_db=[0, 10])
+    sweep["calibration"]["h0_trials"] = 100
+    path = tmp_path / "real.toml"
+    path.write_text(tomlw.dumps(sweep))
+    bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 2, check=True)
+    out = tmp_path / "out"
+    summary = pd.read_csv(out / "summary.csv")
+    assert set(summary.scenario) == {"calibration", "mixed"}
+    assert {"imm-cv-ca", "ar-adaptive", "innovation[window=1]", "cumulant[window=16]"} <= set(summary.config)
+    assert summary[summary.method == "cv-kf"].rmse_maneuver.notna().all()
+    report = (out / "report.md").read_text()
+    assert "## Tracking: one trial in the plane" in report
+    assert (out / "figures" / "tracking_trial_plane_calibration.png").exists()
