@@ -123,7 +123,7 @@ def checked_tracks(table: pd.DataFrame, where: str) -> pd.DataFrame:
         raise ConfigError("path", f"{where}: no rows")
     values = {}
     for c in columns[1:] + ([ALTITUDE] if not planar and ALTITUDE in table else []):
-        col = pd.to_numeric(table[c], errors="coerce").to_numpy(float)
+        col = _numbers(table[c])
         bad = ~np.isfinite(col)
         if bad.any():
             row = int(np.argmax(bad))
@@ -138,6 +138,15 @@ def checked_tracks(table: pd.DataFrame, where: str) -> pd.DataFrame:
         east, north = _local_plane(tracks, values[GEODETIC[0]], values[GEODETIC[1]],
                                    values.get(ALTITUDE, np.zeros(len(tracks))))
     return pd.DataFrame({TRACK: tracks, TIME: values[TIME], "east": east, "north": north})
+
+
+def _numbers(column: pd.Series) -> np.ndarray:
+    """A column as floats, NaN where not a number; timestamps (a Parquet file's datetime
+    column) as seconds since the Unix epoch."""
+    if pd.api.types.is_datetime64_any_dtype(column):
+        seconds = (column.dt.tz_localize("UTC") if column.dt.tz is None else column) - EPOCH
+        return seconds.dt.total_seconds().to_numpy(float)
+    return pd.to_numeric(column, errors="coerce").to_numpy(float)
 
 
 def _check_times(tracks: np.ndarray, t: np.ndarray, where: str) -> None:
@@ -271,7 +280,7 @@ class RecordedTracks(Scenario):
 
     **Source**: ``path``, a CSV (or Parquet, with pyarrow) of one row per recorded
     point: ``track`` (an id), ``time_s`` (s, increasing within a track, rows grouped
-    by track), and either ``x_m``, ``y_m`` (planar metres) or ``latitude``,
+    by track; in Parquet also a timestamp column), and either ``x_m``, ``y_m`` (planar metres) or ``latitude``,
     ``longitude`` (degrees, WGS-84) with an optional ``altitude_m`` (m above the
     ellipsoid, 0 if absent), converted to east/north metres in the tangent plane
     at each track's first point (:mod:`models.geodesy`). A relative path is read

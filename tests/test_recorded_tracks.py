@@ -5,6 +5,8 @@ nothing written). The traffic samples are tried only where the package is instal
 
 import importlib.util
 import os
+import re
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -236,6 +238,18 @@ def test_a_path_via_dotdot_or_a_symlink_is_read_and_left_unchanged(tmp_path, csv
     assert (csv.read_bytes(), csv.stat().st_mtime_ns) == before
 
 
+def test_a_parquet_file_with_timestamps_reads_as_the_csv(tmp_path, csv):
+    """The same tracks as Parquet, their times as UTC timestamps: the same truth."""
+    pytest.importorskip("pyarrow", reason="Parquet needs pyarrow")
+    table = tracks_table()
+    table["time_s"] = pd.Timestamp("2026-01-01", tz="UTC") + pd.to_timedelta(table["time_s"], unit="s")
+    path = tmp_path / "tracks.parquet"
+    table.to_parquet(path)
+    from_csv, from_parquet = generate(params_for(csv), 0.0), generate(params_for(path), 0.0)
+    # float64 seconds since 1970 resolve 0.2 us: 20 um at 100 m/s
+    np.testing.assert_allclose(from_parquet.truth, from_csv.truth, atol=1e-3)
+
+
 def test_too_short_tracks_are_refused(csv):
     with pytest.raises(ConfigError, match="no gap-free span"):
         RecordedTracks().check_config(params_for(csv, steps=400, onset_step=10))
@@ -258,3 +272,18 @@ def test_a_traffic_sample_gives_real_turns():
     accel = np.hypot(batch.truth[..., 2], batch.truth[..., 5])
     assert (accel[:, p.onset_step] >= p.maneuver_threshold_m_s2).all()
     assert all(f.name.endswith(".json.gz") for f in RecordedTracks().data_files(p))
+
+
+@pytest.mark.slow
+def test_the_readme_example_runs_the_builtin_methods_on_a_users_csv(tmp_path):
+    """README, 'Your own recorded tracks': its TOML as printed (fewer trials), a CSV beside
+    it, no harness edit: the trackers and a detector run, and the report draws a trial in the plane."""
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    section = readme.split("## Your own recorded tracks", 1)[1]
+    sweep = re.search(r"```toml\n(.*?)```", section, re.S).group(1)
+    (tmp_path / "my.toml").write_text(sweep + 'trials = 6\n[calibration]\nh0_trials = 50\n[record]\ntrials = 1\n')
+    small_params_on_a_csv(tmp_path)
+    run_bench("run", "my.toml", "--out", "out", "--quiet", cwd=tmp_path, check=True)
+    summary = pd.read_csv(tmp_path / "out" / "summary.csv")
+    assert {"cv-kf", "imm-cv-ca", "innovation"} <= set(summary.config) and summary.n_trials.min() == 6
+    assert (tmp_path / "out" / "figures" / "tracking_trial_plane_recorded-tracks.png").exists()
