@@ -50,6 +50,8 @@ SNR_DEFINITION = (
     "reference and +6 dB halves the noise; the recorded motion does not change along the axis; snr_db=None "
     "is the null: the same noise at 0 dB on segments without a maneuver."
 )
+#: what marks a maneuver (RecordedTracks, 'Maneuvers')
+MANEUVER_MEASURES = ("acceleration", "turn-rate")
 #: the reference filter of the innovation detectors: [x, vx, y, vy] of the [x, vx, ax, y, vy, ay] state
 CV_COMPONENTS = [0, 1, 3, 4]
 
@@ -203,6 +205,21 @@ def _span_states(t: np.ndarray, xy: np.ndarray, dt: float, window: int) -> np.nd
                      for order in range(3)], axis=1)
 
 
+def maneuver_size(states: np.ndarray, measure: str) -> np.ndarray:
+    """(M,) per step: |a| (m/s^2), or the turn rate |v x a| / |v|^2 in deg/s (0 below 1 m/s,
+    where a heading is not defined: a hovering helicopter does not turn)."""
+    (vx, vy), (ax, ay) = states[:, 1].T, states[:, 2].T
+    if measure == "acceleration":
+        return np.hypot(ax, ay)
+    speed_sq = vx * vx + vy * vy
+    rate = np.abs(vx * ay - vy * ax) / np.maximum(speed_sq, 1.0)
+    return np.where(speed_sq >= 1.0, np.rad2deg(rate), 0.0)
+
+
+def maneuver_threshold(p) -> float:
+    return p.maneuver_threshold_m_s2 if p.maneuver_measure == "acceleration" else p.turn_rate_threshold_deg_s
+
+
 def smoothing_steps(p) -> int:
     """The Savitzky-Golay window in steps: ``smoothing_s`` rounded to an odd count, five at least."""
     return max(5, 2 * int(round(p.smoothing_s / p.dt_s / 2.0)) + 1)
@@ -235,8 +252,8 @@ def build_bank(p) -> Bank:
         raise ConfigError("steps", f"{source_text(p)}: no gap-free span (gaps over max_gap_s = {p.max_gap_s:g} s "
                           f"end one) lasts steps x dt_s = {p.steps} x {p.dt_s:g} s")
     states, first = np.concatenate(parts), np.concatenate(boundary)
-    accel = np.hypot(states[:, 2, 0], states[:, 2, 1])
-    maneuvering = _runs_at_least(accel >= p.maneuver_threshold_m_s2, first, p.min_maneuver_steps)
+    maneuvering = _runs_at_least(maneuver_size(states, p.maneuver_measure) >= maneuver_threshold(p), first,
+                                 p.min_maneuver_steps)
     onsets, quiet = _segment_starts(maneuvering, first, p.steps, p.onset_step)
     return Bank(pos=states[:, 0], vel=states[:, 1], acc=states[:, 2], maneuvering=maneuvering,
                 onsets=onsets, quiet=quiet, spans=len(parts))
@@ -305,11 +322,14 @@ class RecordedTracks(Scenario):
     ``("x", "vx", "ax", "y", "vy", "ay")`` with x east and y north
     (:mod:`models.kinematics`). Only the horizontal plane is tracked.
 
-    **Maneuvers** (the onset truth): a step maneuvers when the magnitude of
-    the horizontal acceleration is at least ``maneuver_threshold_m_s2`` (a
-    coordinated turn at rate omega and speed v has |a| = omega v: 3 deg/s at
-    60 m/s is 3.1 m/s^2), in runs of at least ``min_maneuver_steps`` (a shorter
-    run is quiet: a gust, not a maneuver).
+    **Maneuvers** (the onset truth): with ``maneuver_measure = "acceleration"``
+    (the default) a step maneuvers when the magnitude of the horizontal
+    acceleration is at least ``maneuver_threshold_m_s2`` (a turn, a speed
+    change, or both; a coordinated turn at rate omega and speed v has |a| =
+    omega v: 3 deg/s at 60 m/s is 3.1 m/s^2); with ``"turn-rate"`` when the
+    turn rate |v x a| / |v|^2 is at least ``turn_rate_threshold_deg_s`` (turns
+    only; none below 1 m/s). Either in runs of at least ``min_maneuver_steps``
+    (a shorter run is quiet: a gust, not a maneuver).
 
     **Segments**: a trial is a segment of ``steps`` steps inside one span whose
     first ``onset_step`` steps are quiet and whose step ``onset_step`` maneuvers:
@@ -372,6 +392,11 @@ class RecordedTracks(Scenario):
         maneuver_threshold_m_s2: float = param(
             2.0, "a step maneuvers when its horizontal acceleration is at least this (m/s^2)", gt=0.0, le=1000.0,
             why="any positive acceleration up to 100 g")
+        maneuver_measure: str = param("acceleration", "what marks a maneuver: 'acceleration' (horizontal, any "
+                                      "direction) or 'turn-rate' (turns only)", choices=MANEUVER_MEASURES)
+        turn_rate_threshold_deg_s: float = param(
+            1.5, "with maneuver_measure 'turn-rate': a step maneuvers when its turn rate is at least this (deg/s)",
+            gt=0.0, le=360.0, why="any positive rate up to a turn per second")
         min_maneuver_steps: int = param(3, "shorter runs of maneuvering steps count as quiet", ge=1,
                                         le=MAX_STEPS, why="one step at least")
         detect_window_steps: int = param(20, "a detection counts if the first alarm at or after the onset comes "
@@ -426,8 +451,10 @@ class RecordedTracks(Scenario):
         for what, starts in (("with a maneuver onset at step onset_step after quiet steps", bank.onsets),
                              ("quiet throughout (for the detectors' null trials)", bank.quiet)):
             if len(starts) == 0:
-                raise ConfigError("maneuver_threshold_m_s2", f"{source_text(params)}: no segment of {params.steps} "
-                                  f"steps {what} at {params.maneuver_threshold_m_s2:g} m/s^2")
+                field = "maneuver_threshold_m_s2" if params.maneuver_measure == "acceleration" else \
+                    "turn_rate_threshold_deg_s"
+                raise ConfigError(field, f"{source_text(params)}: no segment of {params.steps} steps {what} at "
+                                  f"{field} = {maneuver_threshold(params):g}")
 
     def check_snr(self, params, snr_db: float) -> str | None:
         low = params.noise_std_m * 10.0 ** (-snr_db / 20.0)

@@ -98,6 +98,29 @@ def test_truth_is_the_recorded_motion_with_the_onset_at_onset_step(csv):
     assert np.std(noise) == pytest.approx(50.0 * 10 ** (-0.5), rel=0.15)
 
 
+def test_turn_rate_marks_turns_and_not_speed_changes():
+    """maneuver_size on three states (position, velocity, acceleration per axis): a turn at
+    3 deg/s and 100 m/s, a speed change along the track, a hover (no heading)."""
+    from scenarios.recorded_tracks import maneuver_size
+    turn = [[0, 0], [SPEED, 0], [0, SPEED * TURN]]
+    speeding_up = [[0, 0], [SPEED, 0], [3.0, 0]]
+    hover = [[0, 0], [0.1, 0], [0, 3.0]]
+    states = np.array([turn, speeding_up, hover], float)
+    np.testing.assert_allclose(maneuver_size(states, "acceleration"), [SPEED * TURN, 3.0, 3.0])
+    np.testing.assert_allclose(maneuver_size(states, "turn-rate"), [3.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_the_turn_rate_measure_finds_the_same_turns(csv):
+    p = params_for(csv, maneuver_measure="turn-rate", turn_rate_threshold_deg_s=1.5)
+    batch = generate(p, 10.0)
+    mask = batch.scene.maneuver_mask
+    assert not mask[:, :p.onset_step].any() and mask[:, p.onset_step].all()
+    from scenarios.recorded_tracks import maneuver_size
+    states = batch.truth.reshape(*batch.truth.shape[:2], 2, 3).transpose(0, 1, 3, 2).reshape(-1, 3, 2)
+    rate = maneuver_size(states, "turn-rate").reshape(mask.shape)
+    assert np.median(rate[mask]) == pytest.approx(3.0, rel=0.1)
+
+
 def test_null_trials_are_quiet_segments_with_the_same_draws(csv):
     p = params_for(csv)
     null, alt = generate(p, None), generate(p, 0.0)
