@@ -13,7 +13,7 @@ from bench.core import Scene
 from bench.params import build_params
 from bench.rng import TrialRNG
 from bench.registry import get_task
-
+from tests.test_recorded_tracks import small_params_on_a_csv
 
 
 PAIRS = [(s, m) for s, scls in registry.scenarios().items() for m, mcls in registry.methods().items()
@@ -40,9 +40,19 @@ def test_built_in_capabilities_are_named_in_the_vocabulary():
     assert used and used <= set(CAPABILITIES)
 
 
+#: scenario -> parameters replacing its ``small_params``: a data file this module writes
+#: (recorded-tracks: a CSV, where its small instance reads a sample of the optional extra)
+LOCAL_DATA: dict[str, dict] = {}
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _local_data(tmp_path_factory):
+    LOCAL_DATA["recorded-tracks"] = small_params_on_a_csv(tmp_path_factory.mktemp("data"))
+
+
 def _params(cls):
     """A small instance of the scenario (``small_params``), so the test stays quick."""
-    return build_params(cls.Params, cls.small_params)
+    return build_params(cls.Params, {**cls.small_params, **LOCAL_DATA.get(cls.name, {})})
 
 
 def _batch(scenario, snr_db, seed=3):
