@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 from bench import registry
+from bench.capabilities import fits
 from bench.errors import ConfigError
 from bench.identity import config_identity
 from bench.params import build_params
@@ -156,7 +157,7 @@ def test_builtin_methods_run_on_it(csv, method):
     """The kinematic trackers and the innovation detectors pair with it and give finite
     output; a tracker does not lose the target (its error within ten noise stds)."""
     cls = registry.get_method(method)
-    assert cls.serves("recorded-tracks", RecordedTracks.tasks)
+    assert fits(cls, RecordedTracks)
     batch = generate(params_for(csv), 10.0)
     out = cls().run(batch, cls.Params())
     if cls.task == "tracking":
