@@ -35,7 +35,7 @@ from methods.dp_tbd import (
     scene_shape,
 )
 
-#: the largest particle budget: 10^7 particles of ~20 float64 values take 1.6 GB
+#: the largest particle budget: 10^7 particles take 1.8 GB (:meth:`PfTbd.unit_memory_bytes`)
 MAX_PARTICLES = 10_000_000
 CHAIN_WHY = "a probability; 0 or 1 would make the existence chain deterministic"
 
@@ -147,8 +147,9 @@ class PfTbd(Method):
     class Params:
         particles: int = param(20_000, "particle budget N per trial and frame: N_b births plus N_c "
                                        "continuing particles", ge=10, le=MAX_PARTICLES,
-                               why="at least a few births and survivors; 10^7 particles (about 1.6 GB of "
-                                   "particle state and weights) is beyond any scene here")
+                               why="at least a few births and survivors; 10^7 particles (about 1.8 GB of "
+                                   "particle state and weights, checked against the unit memory limit) is "
+                                   "beyond any scene here")
         birth_fraction: float = param(0.25, "share of the particles that are births each frame: "
                                            "N_b = round(N birth_fraction), at least 1 of each kind",
                                       gt=0.0, lt=1.0, why="both kinds must exist")
@@ -223,13 +224,14 @@ class PfTbd(Method):
         return conditional_llr_problem(scenario_params)
 
     def unit_memory_bytes(self, params, scenario_params, n: int) -> int | None:
-        """The kernel's particle arrays (about 20 float64 values per particle) and its
-        candidate cells (H W int64), for one trial at a time."""
+        """The kernel's particle arrays (state, cells, log-weight and weight of the N
+        particles, state and cells of the N_c survivors: at most 22 8-byte values per
+        particle) and its candidate cells (H W int64), for one trial at a time."""
         shape = scene_shape(scenario_params)
         if shape is None:
             return None
         _, H, W = shape
-        return 160 * params.particles + 8 * H * W
+        return 176 * params.particles + 8 * H * W
 
     # No nominal_threshold (bench.core.Method: NaN, none): the null law of the existence
     # log-odds has no closed form; calibrate on null scenes (``empirical`` or ``gumbel``).
