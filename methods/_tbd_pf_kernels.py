@@ -46,7 +46,6 @@ RESAMPLE_SLOT = 7
 GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 MIX2 = np.uint64(0x94D049BB133111EB)
-MASK64 = (1 << 64) - 1
 #: the codes of the ``birth_proposal`` and ``resampling`` parameters in the kernel
 PROPOSALS = ("measurement", "uniform")
 RESAMPLERS = ("systematic", "stratified")
@@ -68,13 +67,9 @@ def draws(key, k: int, index: np.ndarray, slot: int, P: int) -> np.ndarray:
 
 
 def trial_keys(seed: int, trials) -> np.ndarray:
-    """(n,) uint64 keys: mix64 of (seed * 2^32 + trial + 1), so two seeds or two
-    trials never share a stream prefix (Python integers, exact)."""
-    def mix(x: int) -> int:
-        x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & MASK64
-        x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & MASK64
-        return x ^ (x >> 31)
-    return np.array([mix(((int(seed) << 32) + int(t) + 1) & MASK64) for t in np.asarray(trials)], np.uint64)
+    """(n,) uint64 keys mix64(seed 2^32 + trial + 1): mix64 is a bijection, so distinct
+    (seed, trial) pairs (seed < 2^32, trial < 2^32 - 1) get distinct keys."""
+    return mix64((np.uint64(seed) << np.uint64(32)) + np.asarray(trials, np.uint64) + np.uint64(1))
 
 
 mix64_compiled = numba.njit(cache=True, inline="always")(mix64)
