@@ -63,8 +63,8 @@ def test_tbd_small_preset_runs_through_the_cli(bench_cli, tmp_path):
     bench_cli("run", "--preset", "tbd-small", "--quiet", "--out", tmp_path / "tbd", cwd=tmp_path, check=True)
     out = tmp_path / "tbd"
     summary = pd.read_csv(out / "summary.csv")
-    assert set(summary.method) == {"dp-tbd", "dp-tbd-mf"}
-    assert summary.groupby("config").pd.max().min() == 1.0          # both reach Pd = 1 in the swept range
+    assert set(summary.method) == {"dp-tbd", "dp-tbd-mf", "pf-tbd"}
+    assert summary.groupby("config").pd.max().min() == 1.0          # each reaches Pd = 1 in the swept range
     assert (summary.pfa <= 0.05).all()                              # scene Pfa of the Gumbel threshold
     report = (out / "report.md").read_text()
     assert "## Track-before-detect: null scenes and the scene threshold" in report
@@ -81,7 +81,7 @@ def test_tbd_preset_smoke(bench_cli, tmp_path):
     path = tmp_path / "smoke.toml"
     path.write_text(tomlw.dumps(sweep))
     bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 1, check=True)
-    assert set(pd.read_csv(tmp_path / "out" / "summary.csv").method) == {"dp-tbd", "dp-tbd-mf"}
+    assert set(pd.read_csv(tmp_path / "out" / "summary.csv").method) == {"dp-tbd", "dp-tbd-mf", "pf-tbd"}
 
 
 @pytest.mark.slow
