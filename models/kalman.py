@@ -233,7 +233,7 @@ def reference_innovations(filt: LinearGaussianFilter, z: np.ndarray) -> Innovati
     return _sequence(*filterpy_innovations(filt.model, z, filt.x0, filt.P0))
 
 
-def _filterpy_steps(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
+def filterpy_steps(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
     """Per trial i and step k, a filterpy ``KalmanFilter`` just updated with
     ``z[i, k]`` (it predicts the next step when the caller has read it): yields
     ``(i, k, kf)``. The per-trial loop the references share."""
@@ -258,7 +258,7 @@ def filterpy_innovations(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarr
     (through :func:`reference_innovations`)."""
     steps, m = z.shape[1:]
     nu, S = np.empty_like(z, dtype=float), np.empty((steps, m, m))
-    for i, k, kf in _filterpy_steps(model, z, x0, P0):
+    for i, k, kf in filterpy_steps(model, z, x0, P0):
         nu[i, k], S[k] = kf.y, kf.S
     return nu, S
 
@@ -479,6 +479,6 @@ def filterpy_track(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0
     updated states (n, K, d) and covariances (n, K, d, d)."""
     n, steps = z.shape[:2]
     xs, Ps = np.empty((n, steps, model.dim_x)), np.empty((n, steps, model.dim_x, model.dim_x))
-    for i, k, kf in _filterpy_steps(model, z, x0, P0):
+    for i, k, kf in filterpy_steps(model, z, x0, P0):
         xs[i, k], Ps[i, k] = kf.x, kf.P
     return xs, Ps
