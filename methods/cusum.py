@@ -63,8 +63,10 @@ class Cusum(InnovationDetector):
     mean and the score's mean under the maneuver one wants to see, it trades
     delay against false alarms. g has no closed-form null law, so there is no
     nominal threshold: calibrate empirically (on null trials). ``valid_from`` is
-    the score's (0 for the NIS, M - 1 for the GLR); g starts at zero, so its first
-    steps sit below its stationary level, which the scenario's warm-up skips.
+    the score's (0 for the NIS, M - 1 for the GLR). g starts at zero and reaches its
+    stationary law only after a few times (score spread / (drift - null mean))^2
+    steps, so with a drift close to the null mean its early steps alarm less often
+    than later ones (calibration pools them all); its alarms cluster in few trials.
     """
 
     name = "cusum"

@@ -61,11 +61,14 @@ def signatures(model: LinearGaussianModel, gains: np.ndarray, S: np.ndarray, win
                jump: str) -> Iterator[Signature]:
     """The signature matrices of the reference filter (its gains ``gains`` (K, d, m) and
     innovation covariances ``S`` (K, m, m)), lag by lag for lags 0 .. window - 1, every
-    onset at once. Data-independent: computed once per batch, shared by all trials.
+    onset at once. Data-independent: computed once per batch, shared by all trials. A
+    filter in steady state (gains and S constant over the scene) has signatures that
+    depend on the lag alone: they are computed for one onset and shared by all.
 
     Willsky & Jones (1976), "A generalized likelihood ratio approach to the detection
     and estimation of jumps in linear systems", IEEE Trans. Automatic Control; Bar-Shalom,
-    Li & Kirubarajan (2001), sec. 11.2 (input detection). A jump b with onset theta adds
+    Li & Kirubarajan (2001), sec. 11.3 (input estimation: the innovations as a linear
+measurement of the unknown input). A jump b with onset theta adds
     Psi(t; theta) b = psi(t - theta) b to the measurements (:func:`jump_response`); the
     filter is linear, so it adds G(t; theta) b to the innovation and F(t; theta) b to the
     updated estimate, with F(theta - 1; theta) = 0 and
@@ -79,16 +82,28 @@ def signatures(model: LinearGaussianModel, gains: np.ndarray, S: np.ndarray, win
     F, H = model.F, model.H
     K, m = S.shape[0], model.dim_z
     HF = H @ F
-    S_inv = np.linalg.inv(S)
-    estimate = np.zeros((K, model.dim_x, m))          # F(theta + i - 1; theta), per onset theta
-    info = np.zeros((K, m, m))                        # C(theta + i - 1; theta)
+    steady = _constant(gains) and _constant(S)
+    S_inv = np.linalg.inv(S[:1] if steady else S)
+    onsets = 1 if steady else K                       # steady: one onset stands for all
+    estimate = np.zeros((onsets, model.dim_x, m))     # F(theta + i - 1; theta), per onset theta
+    info = np.zeros((onsets, m, m))                   # C(theta + i - 1; theta)
     for i in range(min(window, K)):
-        onsets = K - i                                # theta = 0 .. K-1-i, step t = theta + i
-        estimate, info = estimate[:onsets], info[:onsets]
+        if steady:
+            at_t = slice(0, 1)                        # the gain of every step
+        else:                                         # theta = 0 .. K-1-i, at steps t = theta + i
+            estimate, info, at_t = estimate[:K - i], info[:K - i], slice(i, None)
         G = jump_response(jump, i) * np.eye(m) - HF @ estimate
-        estimate = F @ estimate + gains[i:] @ G
-        info = info + G.swapaxes(-1, -2) @ S_inv[i:] @ G
-        yield Signature(lag=i, G=G, info_inverse=np.linalg.inv(info))
+        estimate = F @ estimate + gains[at_t] @ G
+        info = info + G.swapaxes(-1, -2) @ S_inv[at_t] @ G
+        shape = (K - i, m, m)
+        yield Signature(lag=i, G=np.broadcast_to(G, shape), info_inverse=np.broadcast_to(np.linalg.inv(info), shape))
+
+
+def _constant(a: np.ndarray) -> bool:
+    """Whether the per-step matrices ``a`` (K, ...) all equal the first to 1e-12 of their
+    largest element (a filter started in steady state: its recursion moves them by
+    rounding only, zeros included)."""
+    return bool(np.max(np.abs(a - a[:1]), initial=0.0) <= 1e-12 * np.max(np.abs(a), initial=0.0))
 
 
 def glr_statistic(nu: np.ndarray, S: np.ndarray, sigs: Iterator[Signature]) -> tuple[np.ndarray, np.ndarray]:
@@ -98,11 +113,11 @@ def glr_statistic(nu: np.ndarray, S: np.ndarray, sigs: Iterator[Signature]) -> t
 
         d(t; theta) = sum_{j=theta..t} G(j; theta)' S_j^-1 nu_j
 
-    (Willsky & Jones 1976; Bar-Shalom, Li & Kirubarajan 2001, sec. 11.2). Under no jump
+    (Willsky & Jones 1976; Bar-Shalom, Li & Kirubarajan 2001, sec. 11.3). Under no jump
     d(t; theta) ~ N(0, C(t; theta)), so each d' C^-1 d ~ chi2(m). Lag by lag, every trial
-    and onset at once; products by :mod:`bench.batched`, so a trial's value does not
-    depend on its batch. The vectors are held as component planes (m, n, K), each a
-    contiguous (n, K) array, so every product is a few whole-plane multiply-adds.
+    and onset at once. The vectors are held as component planes (m, n, K), each a
+    contiguous (n, K) array, and every product is a few whole-plane multiply-adds in
+    index order (as :mod:`bench.batched`), so a trial's value does not depend on its batch.
     """
     n, K, m = nu.shape
     w = np.moveaxis(matvec(np.linalg.inv(S), nu), -1, 0).copy()      # S_j^-1 nu_j, (m, n, K)
@@ -168,7 +183,7 @@ class Glr(InnovationDetector):
     Willsky & Jones (1976), "A generalized likelihood ratio approach to the
     detection and estimation of jumps in linear systems", IEEE Trans. Automatic
     Control; Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to
-    Tracking and Navigation* (2001), sec. 11.2. On the innovations of the
+    Tracking and Navigation* (2001), sec. 11.3. On the innovations of the
     scenario's reference filter (:func:`models.kalman.innovations`), the
     hypothesis "a jump b (one value per measured component) in the target's
     acceleration (``jump = "acceleration"``) or velocity (``"velocity"``) with
@@ -215,10 +230,10 @@ class Glr(InnovationDetector):
 
     @staticmethod
     def signatures(batch: Batch, inn: InnovationSequence, params) -> Iterator[Signature]:
-        """The reference filter's signatures (:func:`signatures`), its gains from the
-        data-independent covariance recursion."""
+        """The reference filter's signatures (:func:`signatures`) from its gains (those
+        of the innovations, else by the data-independent covariance recursion)."""
         filt = reference_filter(batch)
-        gains = covariance_sequence(filt.model, filt.P0, batch.steps)[3]
+        gains = inn.gain if inn.gain is not None else covariance_sequence(filt.model, filt.P0, batch.steps)[3]
         return signatures(filt.model, gains, inn.S, params.window, params.jump)
 
     def reference_run(self, batch: Batch, params) -> DetectionOutput:

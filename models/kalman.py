@@ -124,12 +124,15 @@ class InnovationSequence:
     S        : (K, m, m) innovation covariance, S_k = L_k L_k' (Cholesky)
     whitened : (n, K, m) L_k^-1 nu_k, i.i.d. N(0, I) under a matched model
     nis      : (n, K) normalised innovation squared nu' S^-1 nu ~ chi2(m)
+    gain     : (K, d, m) the filter's gains K_k (shared by all trials), or None where
+               not kept (the filterpy reference)
     """
 
     nu: np.ndarray
     S: np.ndarray
     whitened: np.ndarray
     nis: np.ndarray
+    gain: np.ndarray | None = None
 
 
 def steady_state(model: LinearGaussianModel):
@@ -215,16 +218,16 @@ def whiten(nu: np.ndarray, S: np.ndarray):
     return whitened, nis
 
 
-def _sequence(nu: np.ndarray, S: np.ndarray) -> InnovationSequence:
+def _sequence(nu: np.ndarray, S: np.ndarray, gain: np.ndarray | None = None) -> InnovationSequence:
     whitened, nis = whiten(nu, S)
-    return InnovationSequence(nu=nu, S=S, whitened=whitened, nis=nis)
+    return InnovationSequence(nu=nu, S=S, whitened=whitened, nis=nis, gain=gain)
 
 
 def innovations(filt: LinearGaussianFilter, z: np.ndarray) -> InnovationSequence:
     """Innovations of ``filt`` on measurements ``z`` (n, K, m), all trials at
     once (:func:`kalman_filter`), with their whitened form."""
     result = kalman_filter(filt.model, z, filt.x0, filt.P0)
-    return _sequence(result.nu, result.S)
+    return _sequence(result.nu, result.S, result.gain)
 
 
 def reference_innovations(filt: LinearGaussianFilter, z: np.ndarray) -> InnovationSequence:

@@ -12,8 +12,10 @@ from bench.params import build_params
 from bench.registry import get_method, get_task
 from bench.rng import CALIBRATION, TrialRNG
 from methods.cusum import Cusum, page_cusum, reference_cusum
+from methods import glr as glr_module
 from methods.glr import JUMPS, Glr, glr_statistic, jump_response, reference_glr, signatures
-from models.kalman import LinearGaussianModel, covariance_sequence, filterpy_innovations, kalman_filter
+from models.kalman import (LinearGaussianModel, covariance_sequence, filterpy_innovations, kalman_filter,
+                           steady_state)
 from scenarios.cv_turn_cv import CvTurnCv, cv_model, dwna_gain
 from tests.test_detectors import batch, run  # noqa: F401 - the 10 dB batch fixture, shared
 from tests.test_kalman import random_model
@@ -81,14 +83,17 @@ def test_glr_equals_the_textbook_sums(seed, K, window, jump, cv):
 
 
 @pytest.mark.parametrize("jump", JUMPS)
-def test_signatures_equal_the_filter_on_a_unit_jump(jump):
+@pytest.mark.parametrize("steady", [False, True])
+def test_signatures_equal_the_filter_on_a_unit_jump(jump, steady):
     """G(t; theta) from the recursion = the filter's innovations on the noise-free unit jump,
-    and C(t; theta)^-1 = (sum G' S^-1 G)^-1, at every lag and onset."""
+    and C(t; theta)^-1 = (sum G' S^-1 G)^-1, at every lag and onset: from a prior far from
+    steady state (gains varying) and from the steady state (one onset stands for all)."""
     rng = np.random.default_rng(4)
     model = random_model(rng)
-    P0 = 5.0 * np.eye(4)
+    P0 = steady_state(model)[0] if steady else 5.0 * np.eye(4)
     K, window = 12, 7
     _, _, S, gains = covariance_sequence(model, P0, K)
+    assert glr_module._constant(gains) == steady
     G = brute_force_signatures(model, P0, K, jump)
     lags = list(signatures(model, gains, S, window, jump))
     assert [sig.lag for sig in lags] == list(range(window))
