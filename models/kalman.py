@@ -124,12 +124,15 @@ class InnovationSequence:
     S        : (K, m, m) innovation covariance, S_k = L_k L_k' (Cholesky)
     whitened : (n, K, m) L_k^-1 nu_k, i.i.d. N(0, I) under a matched model
     nis      : (n, K) normalised innovation squared nu' S^-1 nu ~ chi2(m)
+    gain     : (K, d, m) the filter's gains K_k (shared by all trials), or None where
+               not kept (the filterpy reference)
     """
 
     nu: np.ndarray
     S: np.ndarray
     whitened: np.ndarray
     nis: np.ndarray
+    gain: np.ndarray | None = None
 
 
 def steady_state(model: LinearGaussianModel):
@@ -236,16 +239,16 @@ def whiten(nu: np.ndarray, S: np.ndarray):
     return whitened, nis
 
 
-def _sequence(nu: np.ndarray, S: np.ndarray) -> InnovationSequence:
+def _sequence(nu: np.ndarray, S: np.ndarray, gain: np.ndarray | None = None) -> InnovationSequence:
     whitened, nis = whiten(nu, S)
-    return InnovationSequence(nu=nu, S=S, whitened=whitened, nis=nis)
+    return InnovationSequence(nu=nu, S=S, whitened=whitened, nis=nis, gain=gain)
 
 
 def innovations(filt: LinearGaussianFilter, z: np.ndarray) -> InnovationSequence:
     """Innovations of ``filt`` on measurements ``z`` (n, K, m), all trials at
     once (:func:`kalman_filter`), with their whitened form."""
     result = kalman_filter(filt.model, z, filt.x0, filt.P0)
-    return _sequence(result.nu, result.S)
+    return _sequence(result.nu, result.S, result.gain)
 
 
 def reference_innovations(filt: LinearGaussianFilter, z: np.ndarray) -> InnovationSequence:
@@ -254,7 +257,7 @@ def reference_innovations(filt: LinearGaussianFilter, z: np.ndarray) -> Innovati
     return _sequence(*filterpy_innovations(filt.model, z, filt.x0, filt.P0))
 
 
-def _filterpy_steps(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
+def filterpy_steps(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
     """Per trial i and step k, a filterpy ``KalmanFilter`` just updated with
     ``z[i, k]`` (it predicts the next step when the caller has read it): yields
     ``(i, k, kf)``. The per-trial loop the references share."""
@@ -279,7 +282,7 @@ def filterpy_innovations(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarr
     (through :func:`reference_innovations`)."""
     steps, m = z.shape[1:]
     nu, S = np.empty_like(z, dtype=float), np.empty((steps, m, m))
-    for i, k, kf in _filterpy_steps(model, z, x0, P0):
+    for i, k, kf in filterpy_steps(model, z, x0, P0):
         nu[i, k], S[k] = kf.y, kf.S
     return nu, S
 
@@ -545,6 +548,6 @@ def filterpy_track(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0
     updated states (n, K, d) and covariances (n, K, d, d)."""
     n, steps = z.shape[:2]
     xs, Ps = np.empty((n, steps, model.dim_x)), np.empty((n, steps, model.dim_x, model.dim_x))
-    for i, k, kf in _filterpy_steps(model, z, x0, P0):
+    for i, k, kf in filterpy_steps(model, z, x0, P0):
         xs[i, k], Ps[i, k] = kf.x, kf.P
     return xs, Ps

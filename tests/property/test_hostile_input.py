@@ -700,7 +700,8 @@ def test_the_longest_scene_runs_every_detector_at_its_largest_window():
     data["methods"] = [{"name": "cumulant", "params": {"window": steps}},
                        {"name": "innovation", "params": {"window": steps}},
                        {"name": "innovation", "params": {"window": 1, "delta": 0.999}},
-                       {"name": "wavelet", "params": {"levels": 8, "coarsest": 8}}]
+                       {"name": "wavelet", "params": {"levels": 8, "coarsest": 8}},
+                       {"name": "glr", "params": {"window": 1000}}]
     assert run_to_completion(data) == "ran"
 
 
