@@ -34,10 +34,11 @@ import re
 import dataclasses
 import tomllib
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Mapping
 
-from bench import feasibility, registry
+from bench import capabilities, feasibility, registry
 from bench.errors import ConfigError
 from bench.params import PATH, as_float, build_params, field_types, is_tuple_field, params_as_dict, show
 from bench.rng import stable_key
@@ -144,24 +145,27 @@ class Plan:
     #: ``[[methods]]`` entries marked ``optional = true`` whose method is unavailable here
     #: (a missing extra): (the entry as written, why), skipped; the report lists them
     skipped_methods: tuple[tuple[dict, str], ...] = ()
-    #: the scenarios each method config is limited to (``Method.scenarios``; empty: all of its task)
-    method_scenarios: tuple[tuple[str, ...], ...] = ()
     #: (scenario config label, method config label, the method's reason) of the pairs its
     #: ``check_scenario`` refuses while the method config runs on another scenario config
     #: of the sweep: skipped, no units, no rows (:func:`bench.feasibility.check_pairs`)
     skipped: tuple[tuple[str, str, str], ...] = ()
 
     def pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
-        """The method configs that run on ``scenario``: those whose task it serves, limited
-        to the scenarios a method names (``Method.scenarios``), less the skipped pairs."""
+        """The method configs that run on ``scenario``: those whose task it serves and whose
+        capabilities fit (:mod:`bench.capabilities`), less the skipped pairs."""
         return [m for m in self.candidate_pairs(scenario) if (scenario.label, m.label) not in self._skipped_keys]
 
     def candidate_pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
-        """The method configs whose task and scenario names fit ``scenario`` (before
+        """The method configs whose task and capabilities fit ``scenario`` (before
         their ``check_scenario``)."""
-        limits = self.method_scenarios or ((),) * len(self.methods)
-        return [m for m, task, names in zip(self.methods, self.method_tasks, limits)
-                if task in scenario.tasks and (not names or scenario.name in names)]
+        return [m for m in self.methods if (scenario.label, m.label) in self._fitting]
+
+    @cached_property
+    def _fitting(self) -> frozenset[tuple[str, str]]:
+        """(scenario config label, method config label) of the pairs whose task and
+        capabilities fit (:func:`bench.capabilities.fits`)."""
+        return frozenset((s.label, m.label) for s in self.scenarios for m in self.methods
+                         if capabilities.fits(registry.get_method(m.name), registry.get_scenario(s.name), s.params))
 
     @property
     def _skipped_keys(self) -> frozenset[tuple[str, str]]:
@@ -440,10 +444,7 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...], base: str 
             skipped.append(({k: v for k, v in entry.items() if k != "optional"}, reason))
             continue
         cls = registry.get_method(entry["name"], f"{field}.name")
-        if not any(cls.serves(s.name, s.tasks) for s in scenarios):
-            names = ", ".join(sorted({f"{s.name!r} ({'/'.join(s.tasks)})" for s in scenarios}))
-            raise ConfigError(f"{field}.name", f"method {cls.name!r} ({cls.task}) cannot run on "
-                                               f"any scenario of the sweep: {names}")
+        _check_runs_somewhere(cls, scenarios, f"{field}.name")
         params = _expect_table(entry.get("params", {}), f"{field}.params")
         expanded = _expand(cls.name, cls.Params, params, f"{field}.params", base=base)
         if "label" in entry:
@@ -470,6 +471,33 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...], base: str 
     if len(configs) > MAX_CONFIGS:
         raise ConfigError("methods", f"{len(configs)} method configs; at most {MAX_CONFIGS}")
     return tuple(configs), tuple(fields), tuple(skipped)
+
+
+def _check_runs_somewhere(cls, scenarios: tuple[ScenarioConfig, ...], field: str) -> None:
+    """ConfigError naming what is missing unless method ``cls`` runs on some scenario
+    config of the sweep (:func:`bench.capabilities.missing`): the first config of its
+    task that lacks a capability, or the tasks the sweep's scenarios serve."""
+    if any(capabilities.fits(cls, registry.get_scenario(s.name), s.params) for s in scenarios):
+        return
+    same_task = [s for s in scenarios if cls.task in s.tasks]
+    if not same_task:
+        names = ", ".join(sorted({f"{s.name!r} ({'/'.join(s.tasks)})" for s in scenarios}))
+        raise ConfigError(field, f"method {cls.name!r} ({cls.task}) cannot run on any scenario of the sweep: "
+                                 f"{names} (none serves {cls.task})")
+    s = same_task[0]
+    problem = capabilities.missing(cls, registry.get_scenario(s.name), s.params)
+    where = "" if s.label == s.name else f" (config {s.label!r})"
+    raise ConfigError(field, f"{problem}{where}"[:400])
+
+
+def _why_idle(plan: Plan, scenario: ScenarioConfig) -> str:
+    """': ' and what the first method config of its task lacks on ``scenario``, if one does."""
+    for m in plan.methods:
+        problem = capabilities.missing(registry.get_method(m.name), registry.get_scenario(scenario.name),
+                                       scenario.params)
+        if problem and registry.get_method(m.name).task in scenario.tasks:
+            return f": {problem}"
+    return ""
 
 
 def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, ...], trials: int,
@@ -612,12 +640,13 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     axes = tuple(k for k in data.get("scenario_params", {}) if isinstance(k, str)) if scenario else ()
     plan = Plan(name, description, scenario, scenarios, trials, seed, snr_db, chunk,
                 methods, calibration, record_trials, source, method_tasks, timeline_snr_db, unit_timeout_s, axes, memory_gb,
-                skipped, tuple(registry.get_method(m.name).scenarios for m in methods))
+                skipped)
     feasibility.check_snr_levels(plan, scenario_fields)
     plan = dataclasses.replace(plan, skipped=feasibility.check_pairs(plan, method_fields))
-    idle = [s.label for s in scenarios if not plan.pairs(s)]
+    idle = [s for s in scenarios if not plan.pairs(s)]
     if idle:
-        raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0]!r}")
+        raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0].label!r}"
+                                     f"{_why_idle(plan, idle[0])}"[:400])
     feasibility.check_unit_memory(plan, scenario_fields)
     feasibility.check_scenario_configs(plan, scenario_fields)
     if plan.trial_runs > LARGE_SWEEP_TRIAL_RUNS and not allow_large:

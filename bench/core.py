@@ -288,6 +288,9 @@ class Scenario(Component):
     perf_snr_db: ClassVar[float] = 10.0
     #: ``bench perf`` goals for :meth:`generate` alone: size -> {"seconds_per_trial": goal}
     perf_targets: ClassVar[dict] = {}
+    #: the capabilities its scenes provide beyond its tasks' scene types (names of
+    #: :data:`bench.capabilities.CAPABILITIES`); the methods that need them run on it
+    provides: ClassVar[frozenset[str]] = frozenset()
 
     def generate(self, params, snr_db: float | None, n: int, rng) -> Batch:
         """``n`` trials at ``snr_db`` (``None``: the null hypothesis).
@@ -298,6 +301,13 @@ class Scenario(Component):
         (``Task.scene_type``).
         """
         raise NotImplementedError
+
+    def requires(self, params) -> frozenset[str]:
+        """The capabilities a method must handle (``Method.handles``) to run on a config
+        with ``params``: ``valid-step-masks`` when its trials may differ in length or have
+        gaps (:attr:`Scene.valid_steps`); decided from the params alone, at no cost. The
+        default: none (every trial has every step)."""
+        return frozenset()
 
     def check_snr(self, params, snr_db: float) -> str | None:
         """Why this config cannot be generated at ``snr_db`` (one phrase), or None
@@ -335,9 +345,13 @@ class Method(Component):
 
     #: the task this method performs (one of :data:`TASKS`)
     task: ClassVar[str] = ""
-    #: the scenarios it runs on, by name, when it reads a scene model only they provide
-    #: (e.g. a glint model); empty: every scenario of its task
-    scenarios: ClassVar[tuple[str, ...]] = ()
+    #: the capabilities it reads from a scene beyond its task's scene type (names of
+    #: :data:`bench.capabilities.CAPABILITIES`, e.g. a kinematic model): it runs on the
+    #: scenarios that provide them all; empty: every scenario of its task
+    needs: ClassVar[frozenset[str]] = frozenset()
+    #: the capabilities a scenario config may require that it handles (e.g. ragged batches,
+    #: ``valid-step-masks``); empty: none, so it never runs on a config that requires one
+    handles: ClassVar[frozenset[str]] = frozenset()
     #: ``bench perf``: what :meth:`reference_run` is (one phrase); None: no reference implementation
     reference_name: ClassVar[str | None] = None
     #: ``bench perf``: trials the (slow) reference runs on, at most the method's; None: as many
@@ -390,13 +404,6 @@ class Method(Component):
         perf`` divides by the time to report ``<unit>_per_second``. The default:
         ("trials", the batch's trials)."""
         return "trials", float(batch.n)
-
-    @classmethod
-    def serves(cls, scenario_name: str, scenario_tasks) -> bool:
-        """Whether it runs on the scenario of that name and tasks: its task is one of
-        them and, if it names its :attr:`scenarios`, the scenario is one of those. A
-        sweep pairs each method config with the scenario configs it serves."""
-        return cls.task in scenario_tasks and (not cls.scenarios or scenario_name in cls.scenarios)
 
     def check_scenario(self, params, scenario_params) -> str | None:
         """Why this config cannot run on a scenario config with ``scenario_params``

@@ -209,6 +209,30 @@ def mean_estimates(t: np.ndarray, panels: dict[str, tuple[np.ndarray, dict[str, 
     return _save(fig, path)
 
 
+def trial_in_plane(truth_xy: np.ndarray, measurements_xy: np.ndarray | None, estimates: dict[str, np.ndarray],
+                   maneuvering: np.ndarray | None, path: Path, title: str) -> Path:
+    """One trial in the plane (metres, equal scales): the truth (its maneuvering steps
+    thicker, the onset starred), the measurements, each tracker's estimate (K, 2)."""
+    fig, ax = plt.subplots(figsize=(7.5, 6.0))
+    if measurements_xy is not None:
+        ax.plot(measurements_xy[:, 0], measurements_xy[:, 1], ".", color="0.6", ms=3, label="measurements")
+    ax.plot(truth_xy[:, 0], truth_xy[:, 1], "-", color="k", lw=2.0, label="truth")
+    if maneuvering is not None and np.any(maneuvering):
+        inside = np.where(np.asarray(maneuvering, bool), 1.0, np.nan)
+        ax.plot(truth_xy[:, 0] * inside, truth_xy[:, 1] * inside, "-", color="crimson", lw=4.0, alpha=0.5,
+                label="truth, maneuvering")
+        onset = int(np.argmax(maneuvering))
+        ax.plot(*truth_xy[onset], "*", color="crimson", ms=12, label="first maneuvering step")
+    for i, (label, xy) in enumerate(estimates.items()):
+        ax.plot(xy[:, 0], xy[:, 1], STYLES[i % len(STYLES)][1:] or "-", color=f"C{i % 10}", lw=1.2, label=label)
+    ax.plot(*truth_xy[0], "o", color="k", ms=6, mfc="none", label="start")
+    ax.set(xlabel="x (m)", ylabel="y (m)", title=title)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(alpha=0.3)
+    _legend_outside(ax)
+    return _save(fig, path)
+
+
 def gumbel_fits(fits: dict[str, tuple[np.ndarray, float, float, float]], path: Path, pfa: float,
                 title: str) -> Path:
     """Empirical survival function of the null scene scores (steps) against

@@ -167,6 +167,7 @@ def _write_cached(path: Path, text: str) -> None:
 def _render(verbose: bool) -> str:
     """The plugin listing from the registry (imports every plugin)."""
     from bench import registry
+    from bench.capabilities import CAPABILITIES
     from bench.params import describe_params
 
     lines = ["tasks:"]
@@ -177,13 +178,24 @@ def _render(verbose: bool) -> str:
             kind = ", ".join(cls.tasks) if title == "scenarios" else cls.task
             lines.append(f"  {name:<14} {kind:<20} {cls.summary()}")
             if verbose:
+                lines += _capability_lines(cls)
                 lines += [f"      {pname} ({ptype}, default {default!r}): {doc}"
                           for pname, ptype, default, doc in describe_params(cls.Params)]
+    if verbose:
+        lines.append("capabilities:")
+        lines += [f"  {name:<18} {meaning}" for name, meaning in CAPABILITIES.items()]
     missing = registry.unavailable()
     if missing:
         lines.append("unavailable:")
         lines += [f"  {u.source:<14} {u.error}" for u in missing]
     return "\n".join(lines)
+
+
+def _capability_lines(cls) -> list[str]:
+    """A plugin's capabilities as ``bench list -v`` shows them (nothing when it declares none)."""
+    declared = {"provides": getattr(cls, "provides", ()), "needs": getattr(cls, "needs", ()),
+                "handles": getattr(cls, "handles", ())}
+    return [f"      {what}: {', '.join(sorted(names))}" for what, names in declared.items() if names]
 
 
 def plugin_listing(verbose: bool = False) -> str:

@@ -163,17 +163,32 @@ def bootstrap_statistic_interval(samples: np.ndarray, statistic, level: float = 
     return _bootstrap_interval(len(samples), estimate, level, resamples)
 
 
+def mean_over_present(x: np.ndarray, axis: int) -> np.ndarray:
+    """Mean along ``axis``, where NaN marks a value that is not there (a step a trial of a
+    ragged batch does not have; docs/architecture.md, 'Ragged batches'): over the values
+    present, NaN where none is. Without NaN, ``numpy.mean`` itself (the same bits)."""
+    x = np.asarray(x, float)
+    if not np.isnan(x).any():
+        return np.mean(x, axis=axis)
+    count = (~np.isnan(x)).sum(axis=axis)
+    total = np.nansum(x, axis=axis)
+    return np.divide(total, count, out=np.full(np.shape(total), np.nan), where=count > 0)
+
+
 def per_step_rmse(sq_err: np.ndarray) -> np.ndarray:
-    """RMSE per step across trials, from squared errors (..., n, K)."""
-    return np.sqrt(np.mean(sq_err, axis=-2)) if sq_err.shape[-2] else np.full(sq_err.shape[-1:], np.nan)
+    """RMSE per step across trials, from squared errors (..., n, K); NaN marks a step a
+    trial does not have (:func:`mean_over_present`)."""
+    return np.sqrt(mean_over_present(sq_err, axis=-2)) if sq_err.shape[-2] else np.full(sq_err.shape[-1:], np.nan)
 
 
 def time_averaged_rmse(sq_err: np.ndarray):
     """Mean over steps of the per-step RMSE across trials (the papers' "average RMSE"),
-    of squared errors (n, K); of a stack (r, n, K), one per data set (r,)."""
+    of squared errors (n, K); of a stack (r, n, K), one per data set (r,). A ragged
+    batch's steps (NaN where a trial does not have one): each step over the trials that
+    have it, the mean over the steps some trial has."""
     if not sq_err.shape[-2]:
         return float("nan")
-    value = np.mean(per_step_rmse(sq_err), axis=-1)
+    value = mean_over_present(per_step_rmse(sq_err), axis=-1)
     return float(value) if np.ndim(value) == 0 else value
 
 

@@ -267,8 +267,9 @@ def bounds_of(cls: type, name: str) -> dict[str, Any]:
 
 
 def describe_params(cls: type) -> list[tuple[str, str, Any, str]]:
-    """(name, type, default, doc) of each field, for ``bench list`` and docs;
-    the doc ends with the bounds and their reason when declared."""
+    """(name, type, default, doc) of each field, for ``bench list`` and the documentation
+    site (:mod:`bench.docs`); the doc ends with the bounds and their reason, or a string's
+    choices, when declared."""
     types = field_types(cls)
     out = []
     for f in dataclasses.fields(cls):
@@ -277,5 +278,7 @@ def describe_params(cls: type) -> list[tuple[str, str, Any, str]]:
         if bounds:
             why = f.metadata.get("why")
             doc += f" [{bounds}{': ' + why if why else ''}]"
+        if f.metadata.get("choices"):
+            doc += f" [one of {', '.join(map(repr, f.metadata['choices']))}]"
         out.append((f.name, _type_name(types[f.name]), f.default, doc))
     return out

@@ -54,7 +54,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench import registry
+from bench import capabilities, registry
 from bench.errors import ConfigError
 from bench.markdown import code, fmt, table
 from bench.params import build_params
@@ -193,15 +193,18 @@ def _in_fresh_process(job: Job | SceneJob) -> dict:
 
 def perf_sizes_of(method_cls) -> tuple[type | None, dict]:
     """The scenario a method is timed on and its perf sizes the method accepts: the first
-    registered scenario it serves (``Method.serves``) with a size whose resolved params
-    its default config's ``check_scenario`` accepts, and those sizes; (None, {}) if none."""
+    registered scenario it runs on with a size whose resolved params fit its capabilities
+    (:func:`bench.capabilities.fits`) and its default config's ``check_scenario`` accepts,
+    and those sizes; (None, {}) if none."""
     method = method_cls()
     params = build_params(method_cls.Params, {})
     for scenario in registry.scenarios().values():
-        if not method_cls.serves(scenario.name, scenario.tasks):
+        if method_cls.task not in scenario.tasks:
             continue
-        accepted = {size: entry for size, entry in scenario.perf_sizes.items()
-                    if method.check_scenario(params, build_params(scenario.Params, entry[0])) is None}
+        sized = {size: (entry, build_params(scenario.Params, entry[0])) for size, entry in scenario.perf_sizes.items()}
+        accepted = {size: entry for size, (entry, resolved) in sized.items()
+                    if capabilities.fits(method_cls, scenario, resolved)
+                    and method.check_scenario(params, resolved) is None}
         if accepted:
             return scenario, accepted
     return None, {}

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import failures, registry, tomlw
+from bench import capabilities, failures, registry, tomlw
 from bench.calibration import EQUAL_CHANCE_PD, CalibrationResult, calibrate
 from bench.config import Plan, snr_key
 from bench.executors import (STOP_SIGNALS, SerialExecutor, UnitFailure, error_text, in_worker, make_executor,
@@ -162,7 +162,8 @@ def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict, tasks) ->
     rec = TrialRecord(sc.label, unit.snr_db, int(batch.trials[i]), batch.t, truth_xy=_truth_xy(batch, i),
                       measurements_xy=_measurements_xy(batch, i), methods=traces, arrays=scene.arrays,
                       images=scene.images, info=scene.info)
-    return rec.to_bytes()
+    valid = batch.scene.valid_steps
+    return (rec if valid is None else rec.at_steps(valid[i])).to_bytes()
 
 
 def execute_unit(work: UnitTask) -> UnitResult:
@@ -199,6 +200,7 @@ def execute_unit(work: UnitTask) -> UnitResult:
         try:
             task = registry.get_task(method_cls.task)
             task.check_scene(batch)
+            capabilities.check_batch(method_cls, batch)
             method = method_cls()
             if unit.phase == "evaluation" and task.calibrated and work.thresholds.get(mc.label) is None:
                 raise RuntimeError("no threshold: the calibration of this method failed")

@@ -66,6 +66,9 @@ class InnovationDetector(Method):
     """
 
     task = MANEUVER_DETECTION
+    #: the scene's reference filter; a ragged batch (``valid-step-masks``) is not handled: the
+    #: detectors' windows and statistics assume every step of every trial
+    needs = frozenset({"reference-filter"})
     reference_name = "same detector, per-trial filterpy KalmanFilter loop"
     #: the filterpy loop is a Python loop per trial and step: a hundred trials time it well enough
     reference_trials = 100

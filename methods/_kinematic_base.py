@@ -32,10 +32,12 @@ SIGMA_WHY = "from a millimetre per second squared to 100 g"
 
 
 class KinematicTracker(Method):
-    """Base of the trackers of kinematic scenes (``maneuvering-1d``)."""
+    """Base of the trackers of kinematic scenes (those providing ``kinematic-model``,
+    :mod:`bench.capabilities`); every one skips the steps a ragged batch does not have."""
 
     task = TRACKING
-    scenarios = ("maneuvering-1d",)
+    needs = frozenset({"kinematic-model"})
+    handles = frozenset({"valid-step-masks"})
     reference_trials: ClassVar[int | None] = 20
     #: the issue's goal: 50 times the per-trial filterpy loop
     perf_targets: ClassVar[dict] = {"*": {"speedup": 50.0}}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import scipy.stats
@@ -12,7 +13,7 @@ from bench.core import TRACKING, Batch, Method, TrackingOutput
 from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
-from models.kalman import predict_batched, update_batched
+from models.kalman import predict_batched, update_where
 from models.kinematics import KinematicModel, kinematic_model_of
 
 #: the largest state dimension M (lagged positions) and polynomial order N
@@ -127,11 +128,17 @@ class ARFilterResult:
 
 
 def ar_adaptive_filter(z: np.ndarray, dt: float, R: float, x0: np.ndarray, P0: np.ndarray,
-                       params) -> ARFilterResult:
+                       params, valid: np.ndarray | None = None) -> ARFilterResult:
     """The patent's steps (2)-(7) on ``B`` position series ``z`` (B, K) at once
     (see :class:`ARAdaptive`); ``x0`` (3,), ``P0`` (3, 3) the kinematic prior
-    of step 0, R the measurement-noise variance (m^2). Loops over steps only."""
+    of step 0, R the measurement-noise variance (m^2). Loops over steps only.
+    ``valid`` (B, K) bool: the steps each series has (a ragged batch; None: all). At
+    a missing step the filter predicts only (the low order, or the latched high one)
+    and runs no test; the windows (covariance matching, the latched switch back) and
+    the M-step start count the steps a series has."""
     B, K = z.shape
+    valid = np.ones((B, K), bool) if valid is None else np.asarray(valid, bool)
+    seen = np.zeros(B, int)                             # steps each series has had before step k
     M, W = params.state_dim, params.window
     L = lag_map(M, dt)
     x = np.broadcast_to(L @ x0, (B, M)).copy()
@@ -153,13 +160,14 @@ def ar_adaptive_filter(z: np.ndarray, dt: float, R: float, x0: np.ndarray, P0: n
     in_high = np.zeros(B, bool)                         # latched mode
     high_run = np.zeros(B, int)
     for k in range(K):
+        ok = valid[:, k]
         if k == 0:
             xp, Pp, high, switch = x, P, np.zeros(B, bool), np.zeros(B, bool)
         else:
             Q = q[:, None, None] * e0e0
             xp, Pp = predict_batched(x, P, companion(_coefficients(params, params.order_low, P, a_fixed)), Q)
             nis_low = (z[:, k] - xp[:, 0]) ** 2 / (Pp[:, 0, 0] + R)
-            tested = np.full(B, k >= M) if params.switching == "per-step" else (~in_high & (k >= M))
+            tested = ok & (seen >= M) if params.switching == "per-step" else (ok & ~in_high & (seen >= M))
             switch = tested & (nis_low > chi1)
             high = (switch | in_high) if params.switching == "latched" else switch
             out.nis[tested, k] = nis_low[tested]
@@ -167,14 +175,15 @@ def ar_adaptive_filter(z: np.ndarray, dt: float, R: float, x0: np.ndarray, P0: n
             if rows.size:
                 F_high = companion(_coefficients(params, params.order_high, P[rows], a_fixed))
                 xp[rows], Pp[rows] = predict_batched(x[rows], P[rows], F_high, Q[rows])
-        upd = update_batched(xp, Pp, z[:, k, None], H, R_mat)
+        upd = update_where(xp, Pp, z[:, k, None], H, R_mat, ok)
         x, P, nu, S = upd.x, upd.P, upd.nu[:, 0], upd.S[:, 0, 0]
-        if k >= M:                                      # the lags before step 0 are all measured
-            excess[:, k % W] = nu ** 2 - S + q          # nu^2 - (H F P F' H' + R)
-            if k >= M + W - 1 and params.state_noise == "matching":
-                q = matched_noise(excess)
+        matched = ok & (seen >= M)                      # the lags before this step are all measured
+        excess[matched, seen[matched] % W] = (nu ** 2 - S + q)[matched]    # nu^2 - (H F P F' H' + R)
+        if params.state_noise == "matching":
+            q = np.where(matched & (seen >= M + W - 1), matched_noise(excess), q)
         if params.switching == "latched":
-            in_high, high_run = _latched_mode(high, in_high, high_run, x, P, acc_row, accel_nis, chiW, k)
+            in_high, high_run = _latched_mode(high, in_high, high_run, x, P, acc_row, accel_nis, chiW, ok, seen)
+        seen += ok
         out.x_post[:, k], out.P_post[:, k] = x, P
         out.high[:, k], out.switch[:, k], out.q[:, k] = high, switch, q
     return out
@@ -187,17 +196,18 @@ def _coefficients(params, N: int, P: np.ndarray, fixed: dict) -> np.ndarray:
     return np.broadcast_to(fixed[N], (len(P), params.state_dim))
 
 
-def _latched_mode(high, in_high, run, x, P, acc_row, accel_nis, chiW, k):
+def _latched_mode(high, in_high, run, x, P, acc_row, accel_nis, chiW, ok, seen):
     """The switch back of ``switching = "latched"``: once the high-order model has
     filtered W steps in a row, back to the low order when the sum of the last W
     normalised squared acceleration estimates, sum a_j^2 / var(a_j), is below the
-    chi^2(W) quantile at level alpha (the acceleration is not significant)."""
+    chi^2(W) quantile at level alpha (the acceleration is not significant). Only the
+    series with a measurement at this step (``ok``; ``seen``: their earlier ones) move."""
     W = accel_nis.shape[1]
     acc = inner(x, acc_row)
     var = inner(matvec(P, acc_row), acc_row)
-    accel_nis[:, k % W] = acc ** 2 / np.maximum(var, 1e-300)
-    run = np.where(high, run + 1, 0)
-    back = high & (run >= W) & (accel_nis.sum(axis=1) < chiW)
+    accel_nis[ok, seen[ok] % W] = (acc ** 2 / np.maximum(var, 1e-300))[ok]
+    run = np.where(ok, np.where(high, run + 1, 0), run)
+    back = ok & high & (run >= W) & (accel_nis.sum(axis=1) < chiW)
     return high & ~back, np.where(back, 0, run)
 
 
@@ -318,7 +328,8 @@ class ARAdaptive(Method):
 
     name = "ar-adaptive"
     task = TRACKING
-    scenarios = ("maneuvering-1d",)
+    needs = frozenset({"kinematic-model"})
+    handles = frozenset({"valid-step-masks"})
     reference_name = "per-trial filterpy KalmanFilter loop with the same switching and Q_k"
     reference_trials = 20
     perf_targets = {"*": {"speedup": 50.0}}
@@ -358,7 +369,8 @@ class ARAdaptive(Method):
 
     def run(self, batch: Batch, params) -> TrackingOutput:
         model = kinematic_model_of(batch.scene)
-        return _assemble(batch, model, params, _filter_axes(batch, model, params, ar_adaptive_filter))
+        runner = partial(ar_adaptive_filter, valid=batch.scene.valid_steps)
+        return _assemble(batch, model, params, _filter_axes(batch, model, params, runner))
 
     def reference_run(self, batch: Batch, params) -> TrackingOutput:
         """The same tracker by a per-trial, per-step filterpy loop (``bench perf``'s baseline, the tests' oracle)."""

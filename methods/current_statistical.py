@@ -12,7 +12,7 @@ from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
 from methods._kinematic_base import SIGMA_WHY, KinematicTracker, output
-from models.kalman import predict_batched, update_batched
+from models.kalman import predict_batched, update_where
 from models.kinematics import (KinematicModel, current_statistical_input, current_statistical_variance, per_axis,
                                singer)
 
@@ -88,8 +88,9 @@ class CurrentStatistical(KinematicTracker):
         xs, Ps, std = np.empty((n, K, d)), np.empty((n, K, d, d)), np.empty((n, K))
         x = np.broadcast_to(model.x0, (n, d)).copy()
         P = np.broadcast_to(model.P0, (n, d, d)).copy()
+        valid = batch.scene.valid_steps
         for k in range(K):
-            upd = update_batched(x, P, batch.z[:, k], model.H, model.R)
+            upd = update_where(x, P, batch.z[:, k], model.H, model.R, None if valid is None else valid[:, k])
             xs[:, k], Ps[:, k] = upd.x, upd.P
             a_bar = upd.x[:, acc]                                  # (n, dims): the current mean
             var = self._variance(a_bar, params)

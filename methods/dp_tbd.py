@@ -360,6 +360,24 @@ def noise_autocovariance(batch: Batch) -> tuple[float, float, float]:
     return tuple(gamma)
 
 
+def conditional_llr_problem(scenario_params) -> str | None:
+    """Why the conditional LLR (:class:`ConditionalLLR`) cannot be built for a scenario
+    config, or None: for AR noise, the 3 x 3 covariance of frames k, k-1, k-2, as
+    :func:`noise_autocovariance` reads it from the scene (the lags the scene's frames
+    hold, missing ones 0), must be positive definite. Parameters read by name
+    (``noise``, ``ar_coefficients``, ``frames``; unknown: not checked)."""
+    a = tuple(getattr(scenario_params, "ar_coefficients", ()) or ())
+    frames = getattr(scenario_params, "frames", None)
+    if getattr(scenario_params, "noise", None) != "ar" or not a or not isinstance(frames, int):
+        return None
+    gamma = list(ar_autocovariance(a, max(frames - 1, 0))[:3]) + [0.0] * max(0, 3 - frames)
+    try:
+        ConditionalLLR.from_autocovariance(gamma, 1.0)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        return f"{exc} ({frames} frames of AR({len(a)}) noise)"
+    return None
+
+
 @register_method
 class DpTbdMf(Method):
     r"""Multi-frame DP-TBD: (cell, previous cell) state, conditional LLR of the correlated noise plus a turn-angle prior.
@@ -553,21 +571,9 @@ class DpTbdMf(Method):
         return "transitions", float(n * H * W * (2 * q + 1) ** 4 * max(K - 2, 0))
 
     def check_scenario(self, params, scenario_params) -> str | None:
-        """The window radius (:func:`radius_problem`), and for AR noise the 3 x 3
-        covariance of frames k, k-1, k-2 the conditional LLR needs, as
-        :func:`noise_autocovariance` reads it from the scene (the lags the scene's
-        frames hold, missing ones 0): it must be positive definite."""
-        problem = radius_problem(params.max_speed_m_s, scenario_params)
-        a = tuple(getattr(scenario_params, "ar_coefficients", ()) or ())
-        frames = getattr(scenario_params, "frames", None)
-        if problem or getattr(scenario_params, "noise", None) != "ar" or not a or not isinstance(frames, int):
-            return problem
-        gamma = list(ar_autocovariance(a, max(frames - 1, 0))[:3]) + [0.0] * max(0, 3 - frames)
-        try:
-            ConditionalLLR.from_autocovariance(gamma, 1.0)
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            return f"{exc} ({frames} frames of AR({len(a)}) noise)"
-        return None
+        """The window radius (:func:`radius_problem`) and the conditional LLR's
+        covariance (:func:`conditional_llr_problem`)."""
+        return radius_problem(params.max_speed_m_s, scenario_params) or conditional_llr_problem(scenario_params)
 
     def unit_memory_bytes(self, params, scenario_params, n: int) -> int | None:
         """The kernel's int8 back-pointers (K, D, H, W) and float32 merit volumes

@@ -132,7 +132,7 @@ class EKF(Method):
 
     name = "ekf"
     task = TRACKING
-    scenarios = ("glint",)
+    needs = frozenset({"glint-model"})
     reference_name = "per-trial filterpy ExtendedKalmanFilter loop"
     reference_trials = 10
 

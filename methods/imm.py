@@ -4,6 +4,7 @@ CV and a CA mode, batched over trials and modes."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numba
 import numpy as np
@@ -13,7 +14,7 @@ from bench.errors import ConfigError
 from bench.params import param
 from bench.registry import register_method
 from methods._kinematic_base import KinematicTracker, ca_noise_param, cv_ca_modes, cv_noise_param, output
-from models.kalman import LinearGaussianModel, predict_batched, update_batched
+from models.kalman import LinearGaussianModel, predict_batched, update_where
 from models.kinematics import KinematicModel
 
 
@@ -80,7 +81,7 @@ def unreachable_mode(transition: np.ndarray, mu0: np.ndarray, names) -> str | No
 
 
 def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: np.ndarray, z: np.ndarray,
-               x0: np.ndarray, P0: np.ndarray) -> IMMResult:
+               x0: np.ndarray, P0: np.ndarray, valid: np.ndarray | None = None) -> IMMResult:
     """The IMM of Blom & Bar-Shalom (1988), in FilterPy's ``IMMEstimator`` order
     (Bar-Shalom, Li & Kirubarajan 2001, sec. 11.6.6), for all trials and modes at once.
 
@@ -96,7 +97,9 @@ def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: n
         prediction of each mode from (x0_j, P0_j) with its F_j, Q_j.
 
     Step 0 updates every mode from the prior (x0, P0) with c_bar = mu0 M, as
-    ``IMMEstimator`` does when its ``update`` comes first.
+    ``IMMEstimator`` does when its ``update`` comes first. ``valid`` (n, K) bool: the
+    steps each trial has (a ragged batch; None: all); at a missing step every mode
+    predicts only and its likelihood is 1, so mu_j = c_bar_j (:func:`models.kalman.update_where`).
     """
     n, K, _ = z.shape
     r, d = len(models), models[0].dim_x
@@ -109,7 +112,7 @@ def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: n
     with np.errstate(divide="ignore"):                          # a zero transition is log 0 = -inf
         log_M = np.log(M)
     for k in range(K):
-        upd = update_batched(X, P, z[None, :, k], H, R)         # leading axes (r, n)
+        upd = update_where(X, P, z[None, :, k], H, R, None if valid is None else valid[:, k])  # axes (r, n)
         log_mu = log_cbar + upd.log_likelihood.T                # (n, r)
         mu = np.exp(log_mu - _logsumexp(log_mu, axis=1)[:, None])
         xs[:, k], Ps[:, k] = _moments(mu, upd.x, upd.P)
@@ -198,7 +201,7 @@ class IMMCVCA(KinematicTracker):
         return output(res.x, res.P, res.mu[..., 1])
 
     def track(self, batch, model, params):
-        return self._run(imm_filter, batch, model, params)
+        return self._run(partial(imm_filter, valid=batch.scene.valid_steps), batch, model, params)
 
     def reference_track(self, batch, model, params):
         return self._run(filterpy_imm, batch, model, params)

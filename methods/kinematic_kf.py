@@ -36,7 +36,8 @@ class _LinearTracker(KinematicTracker):
         return output(x, P, self.mode)
 
     def track(self, batch: Batch, model: KinematicModel, params) -> TrackingOutput:
-        res = kalman_filter(self.filter_model(model, params), batch.z, *self.prior(model))
+        res = kalman_filter(self.filter_model(model, params), batch.z, *self.prior(model),
+                            valid=batch.scene.valid_steps)
         return self.finish(res.x_post, res.P_post, model, params)
 
     def reference_track(self, batch: Batch, model: KinematicModel, params) -> TrackingOutput:

@@ -97,10 +97,14 @@ def _acceleration_nis_one(x, P, acc, P_aa, P_aa_inv):
 
 
 @numba.njit(cache=True)
-def _vd_kernel(z, x0, P0, F_cv, Q_cv, F_ca, Q_ca, H, R, rho, detect_threshold, window, back_threshold, accel_var):
+def _vd_kernel(z, valid, x0, P0, F_cv, Q_cv, F_ca, Q_ca, H, R, rho, detect_threshold, window, back_threshold,
+               accel_var):
     """The rule of :class:`VariableDimension`, trial by trial and step by step in compiled
-    loops (the switching and the restarts differ per trial). Returns x_k|k (n, K, d),
-    P_k|k (n, K, d, d), the mode, switch and fading-NIS traces (n, K)."""
+    loops (the switching and the restarts differ per trial). ``valid`` (n, K) bool: the
+    steps each trial has; at a missing one the filter predicts only and neither test runs
+    (the mode holds), the re-filtering of a restart skips it, and the back-to-CV test's
+    window is the last s steps the trial has. Returns x_k|k (n, K, d), P_k|k (n, K, d, d),
+    the mode, switch and fading-NIS traces (n, K)."""
     n, K, m = z.shape
     d = x0.shape[0]
     acc = np.arange(2, d, 3)
@@ -112,41 +116,44 @@ def _vd_kernel(z, x0, P0, F_cv, Q_cv, F_ca, Q_ca, H, R, rho, detect_threshold, w
     scratch = update_scratch(d, m)
     for i in range(n):
         x[:], P[:, :] = x0, P0
-        in_ca, eps_bar, ca_steps = False, 0.0, 0
+        in_ca, eps_bar, ca_steps, seen = False, 0.0, 0, -1
         for k in range(K):
-            nis, _ = update_one(x, P, z[i, k], H, R, x_new, P_new, nu, S, scratch)
-            x[:], P[:, :] = x_new, P_new
-            detected = False
-            if not in_ca:
-                eps_bar = rho * eps_bar + nis
-                if eps_bar > detect_threshold:              # restart in CA at k - s and re-filter
-                    start = k - window
-                    if start >= 0:
-                        x[:], P[:, :] = xs[i, start], Ps[i, start]
-                        _restart_into(x, P, acc, accel_var)
-                        predict_one(x, P, F_ca, Q_ca, zero_u, x_new, P_new, FP)
-                        x[:], P[:, :] = x_new, P_new
-                    else:
-                        x[:], P[:, :] = x0, P0
-                        _restart_into(x, P, acc, accel_var)
-                    for j in range(max(start + 1, 0), k + 1):
-                        update_one(x, P, z[i, j], H, R, x_new, P_new, nu, S, scratch)
-                        x[:], P[:, :] = x_new, P_new
-                        if j < k:
+            if valid[i, k]:                                 # else a step the trial does not have: predict only
+                seen += 1                                       # the index of this step among the trial's own
+                nis, _ = update_one(x, P, z[i, k], H, R, x_new, P_new, nu, S, scratch)
+                x[:], P[:, :] = x_new, P_new
+                detected = False
+                if not in_ca:
+                    eps_bar = rho * eps_bar + nis
+                    if eps_bar > detect_threshold:              # restart in CA at k - s and re-filter
+                        start = k - window
+                        if start >= 0:
+                            x[:], P[:, :] = xs[i, start], Ps[i, start]
+                            _restart_into(x, P, acc, accel_var)
                             predict_one(x, P, F_ca, Q_ca, zero_u, x_new, P_new, FP)
                             x[:], P[:, :] = x_new, P_new
-                    in_ca, detected, ca_steps = True, True, 0
-                    switch[i, k] = 1.0
-            if in_ca:
-                q[k] = _acceleration_nis_one(x, P, acc, P_aa, P_aa_inv)
-                if not detected:
-                    ca_steps += 1
-                if ca_steps >= window and q[k - window + 1:k + 1].sum() < back_threshold:
-                    for a in acc:                           # back to CV: the acceleration leaves
-                        x[a] = 0.0
-                        P[a, :] = 0.0
-                        P[:, a] = 0.0
-                    in_ca, eps_bar = False, 0.0
+                        else:
+                            x[:], P[:, :] = x0, P0
+                            _restart_into(x, P, acc, accel_var)
+                        for j in range(max(start + 1, 0), k + 1):
+                            if valid[i, j]:
+                                update_one(x, P, z[i, j], H, R, x_new, P_new, nu, S, scratch)
+                                x[:], P[:, :] = x_new, P_new
+                            if j < k:
+                                predict_one(x, P, F_ca, Q_ca, zero_u, x_new, P_new, FP)
+                                x[:], P[:, :] = x_new, P_new
+                        in_ca, detected, ca_steps = True, True, 0
+                        switch[i, k] = 1.0
+                if in_ca:
+                    q[seen] = _acceleration_nis_one(x, P, acc, P_aa, P_aa_inv)
+                    if not detected:
+                        ca_steps += 1
+                    if ca_steps >= window and q[seen - window + 1:seen + 1].sum() < back_threshold:
+                        for a in acc:                           # back to CV: the acceleration leaves
+                            x[a] = 0.0
+                            P[a, :] = 0.0
+                            P[:, a] = 0.0
+                        in_ca, eps_bar = False, 0.0
             xs[i, k], Ps[i, k] = x, P
             mode_tr[i, k] = 1.0 if in_ca else 0.0
             if not in_ca:
@@ -226,8 +233,10 @@ class VariableDimension(KinematicTracker):
     def track(self, batch: Batch, model: KinematicModel, params) -> TrackingOutput:
         cv_m, ca_m = self.modes(model, params)
         r = VDRules.of(params, model.dims)
+        valid = batch.scene.valid_steps
+        valid = np.ones(batch.z.shape[:2], bool) if valid is None else np.ascontiguousarray(valid)
         xs, Ps, mode, switch, fading = _vd_kernel(
-            np.ascontiguousarray(batch.z, dtype=float), model.x0, model.P0, cv_m.F, cv_m.Q, ca_m.F, ca_m.Q,
+            np.ascontiguousarray(batch.z, dtype=float), valid, model.x0, model.P0, cv_m.F, cv_m.Q, ca_m.F, ca_m.Q,
             model.H, model.R, r.rho, r.detect_threshold, r.window, r.back_threshold, r.accel_init_var)
         return self._output(xs, Ps, mode, switch, fading, np.arange(2, cv_m.dim_x, 3), params)
 

@@ -392,7 +392,7 @@ class Viterbi(Method):
 
     name = "viterbi"
     task = TRACKING
-    scenarios = ("glint",)
+    needs = frozenset({"glint-model"})
 
     @dataclass(frozen=True)
     class Params:

@@ -124,12 +124,15 @@ class InnovationSequence:
     S        : (K, m, m) innovation covariance, S_k = L_k L_k' (Cholesky)
     whitened : (n, K, m) L_k^-1 nu_k, i.i.d. N(0, I) under a matched model
     nis      : (n, K) normalised innovation squared nu' S^-1 nu ~ chi2(m)
+    gain     : (K, d, m) the filter's gains K_k (shared by all trials), or None where
+               not kept (the filterpy reference)
     """
 
     nu: np.ndarray
     S: np.ndarray
     whitened: np.ndarray
     nis: np.ndarray
+    gain: np.ndarray | None = None
 
 
 def steady_state(model: LinearGaussianModel):
@@ -177,7 +180,7 @@ def covariance_sequence(model: LinearGaussianModel, P0: np.ndarray, steps: int):
 
 
 def kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray,
-                  P0: np.ndarray) -> KalmanResult:
+                  P0: np.ndarray, valid: np.ndarray | None = None) -> KalmanResult:
     """Run the filter on ``n`` trials of ``K`` measurements at once.
 
     Convention: ``x0`` (n, d) and ``P0`` (d, d) are the *prior* of step 0,
@@ -187,8 +190,12 @@ def kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray,
     stationary from step 0.
 
     z : (n, K, m) measurements; ``x0`` may also be a single (d,) shared by
-    all trials. Returns a :class:`KalmanResult`.
+    all trials. ``valid`` (n, K) bool: the steps each trial has (a ragged batch,
+    ``Scene.valid_steps``; None: every step), see :func:`masked_kalman_filter`.
+    Returns a :class:`KalmanResult`.
     """
+    if valid is not None:
+        return masked_kalman_filter(model, z, x0, P0, valid)
     z = np.asarray(z, dtype=float)
     n, steps, _ = z.shape
     F, H = model.F, model.H
@@ -207,6 +214,23 @@ def kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray,
                         P_post=P_post, S=S, gain=K)
 
 
+def masked_kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray,
+                         valid: np.ndarray) -> KalmanResult:
+    """:func:`kalman_filter` on a ragged batch (docs/architecture.md, 'Ragged batches'):
+    at a step trial i does not have (``valid[i, k]`` False; its measurement may be NaN)
+    the filter predicts only, x_k|k = x_k|k-1 and P_k|k = P_k|k-1, with nu NaN and a
+    zero gain (S is still H P_k|k-1 H' + R). Which steps update differs per trial, so the
+    covariances carry the trial axis: P_prior, P_post (n, K, d, d), S (n, K, m, m), gain
+    (n, K, d, m). One compiled loop over trials and steps (:func:`_masked_kernel`) on the
+    per-trial steps below: a trial's numbers do not depend on the others of its batch."""
+    z = np.ascontiguousarray(z, dtype=float)
+    x0 = np.broadcast_to(np.asarray(x0, dtype=float), (z.shape[0], model.dim_x))
+    arrays = _masked_kernel(z, np.ascontiguousarray(valid, dtype=bool), np.ascontiguousarray(x0),
+                            np.ascontiguousarray(P0, dtype=float), *(np.ascontiguousarray(A, dtype=float)
+                                                                     for A in (model.F, model.H, model.Q, model.R)))
+    return KalmanResult(*arrays)
+
+
 def whiten(nu: np.ndarray, S: np.ndarray):
     """``(whitened, nis)``: L^-1 nu with S = L L' per step, and nu' S^-1 nu."""
     L_inv = np.linalg.inv(np.linalg.cholesky(S))          # (K, m, m)
@@ -215,16 +239,16 @@ def whiten(nu: np.ndarray, S: np.ndarray):
     return whitened, nis
 
 
-def _sequence(nu: np.ndarray, S: np.ndarray) -> InnovationSequence:
+def _sequence(nu: np.ndarray, S: np.ndarray, gain: np.ndarray | None = None) -> InnovationSequence:
     whitened, nis = whiten(nu, S)
-    return InnovationSequence(nu=nu, S=S, whitened=whitened, nis=nis)
+    return InnovationSequence(nu=nu, S=S, whitened=whitened, nis=nis, gain=gain)
 
 
 def innovations(filt: LinearGaussianFilter, z: np.ndarray) -> InnovationSequence:
     """Innovations of ``filt`` on measurements ``z`` (n, K, m), all trials at
     once (:func:`kalman_filter`), with their whitened form."""
     result = kalman_filter(filt.model, z, filt.x0, filt.P0)
-    return _sequence(result.nu, result.S)
+    return _sequence(result.nu, result.S, result.gain)
 
 
 def reference_innovations(filt: LinearGaussianFilter, z: np.ndarray) -> InnovationSequence:
@@ -233,7 +257,7 @@ def reference_innovations(filt: LinearGaussianFilter, z: np.ndarray) -> Innovati
     return _sequence(*filterpy_innovations(filt.model, z, filt.x0, filt.P0))
 
 
-def _filterpy_steps(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
+def filterpy_steps(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
     """Per trial i and step k, a filterpy ``KalmanFilter`` just updated with
     ``z[i, k]`` (it predicts the next step when the caller has read it): yields
     ``(i, k, kf)``. The per-trial loop the references share."""
@@ -258,7 +282,7 @@ def filterpy_innovations(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarr
     (through :func:`reference_innovations`)."""
     steps, m = z.shape[1:]
     nu, S = np.empty_like(z, dtype=float), np.empty((steps, m, m))
-    for i, k, kf in _filterpy_steps(model, z, x0, P0):
+    for i, k, kf in filterpy_steps(model, z, x0, P0):
         nu[i, k], S[k] = kf.y, kf.S
     return nu, S
 
@@ -398,6 +422,33 @@ def update_scratch(d, m):
 
 
 @numba.njit(cache=True)
+def _masked_kernel(z, valid, x0, P0, F, H, Q, R):
+    """:func:`masked_kalman_filter`, trial by trial and step by step: returns x_prior,
+    x_post (n, K, d), nu (n, K, m), P_prior, P_post (n, K, d, d), S (n, K, m, m) and
+    the gain (n, K, d, m), in :class:`KalmanResult`'s order."""
+    n, K, m = z.shape
+    d = x0.shape[1]
+    x_prior, x_post, nu = np.empty((n, K, d)), np.empty((n, K, d)), np.full((n, K, m), np.nan)
+    P_prior, P_post = np.empty((n, K, d, d)), np.empty((n, K, d, d))
+    S, gain = np.empty((n, K, m, m)), np.zeros((n, K, d, m))
+    x, P, FP, zero_u = np.empty(d), np.empty((d, d)), np.empty((d, d)), np.zeros(d)
+    z_zero = np.zeros(m)
+    scratch = update_scratch(d, m)
+    for i in range(n):
+        x[:], P[:, :] = x0[i], P0
+        for k in range(K):
+            x_prior[i, k], P_prior[i, k] = x, P
+            if valid[i, k]:
+                update_one(x, P, z[i, k], H, R, x_post[i, k], P_post[i, k], nu[i, k], S[i, k], scratch)
+                gain[i, k] = scratch[1]
+            else:                                       # predict only; S = H P H' + R all the same
+                update_one(x, P, z_zero, H, R, x_post[i, k], P_post[i, k], nu[i, k], S[i, k], scratch)
+                x_post[i, k], P_post[i, k], nu[i, k] = x, P, np.nan
+            predict_one(x_post[i, k], P_post[i, k], F, Q, zero_u, x, P, FP)
+    return x_prior, x_post, nu, P_prior, P_post, S, gain
+
+
+@numba.njit(cache=True)
 def _predict_kernel(x, P, F, Q, u):
     """x (n, d), P (n, d, d), F (n, d, d), Q (n, d, d) (any strides), u (n, d)."""
     n, d = x.shape
@@ -473,12 +524,30 @@ def update_batched(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R
     return BatchedUpdate(x=x_new, P=P_new, nu=nu, S=S, nis=nis, log_likelihood=log_likelihood)
 
 
+def update_where(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray,
+                 valid: np.ndarray | None) -> BatchedUpdate:
+    """:func:`update_batched` where ``valid`` (broadcast over the leading axes of ``x``)
+    is True; elsewhere a step the trial does not have (a ragged batch): the state and
+    covariance pass through (predict only), nu and the NIS are NaN and the
+    log-likelihood 0 (no measurement, no evidence for any mode). S is H P H' + R
+    either way. ``valid`` None: every trial, :func:`update_batched` itself."""
+    if valid is None:
+        return update_batched(x, P, z, H, R)
+    lead = x.shape[:-1]
+    valid = np.broadcast_to(np.asarray(valid, dtype=bool), lead)
+    z = np.where(valid[..., None], np.broadcast_to(z, (*lead, z.shape[-1])), 0.0)    # no NaN in the kernel
+    upd = update_batched(x, P, z, H, R)
+    return BatchedUpdate(x=np.where(valid[..., None], upd.x, x), P=np.where(valid[..., None, None], upd.P, P),
+                         nu=np.where(valid[..., None], upd.nu, np.nan), S=upd.S,
+                         nis=np.where(valid, upd.nis, np.nan), log_likelihood=np.where(valid, upd.log_likelihood, 0.0))
+
+
 def filterpy_track(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray):
     """The reference of a time-invariant tracker: per-trial, per-step filterpy
     ``KalmanFilter`` (update, then predict, as :func:`kalman_filter`); returns the
     updated states (n, K, d) and covariances (n, K, d, d)."""
     n, steps = z.shape[:2]
     xs, Ps = np.empty((n, steps, model.dim_x)), np.empty((n, steps, model.dim_x, model.dim_x))
-    for i, k, kf in _filterpy_steps(model, z, x0, P0):
+    for i, k, kf in filterpy_steps(model, z, x0, P0):
         xs[i, k], Ps[i, k] = kf.x, kf.P
     return xs, Ps

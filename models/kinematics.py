@@ -211,5 +211,5 @@ def kinematic_model_of(scene) -> KinematicModel:
     model = getattr(scene, "model", None)
     if not isinstance(model, KinematicModel):
         raise TypeError(f"expected a tracking scene whose model is a models.kinematics.KinematicModel "
-                        f"(scenario maneuvering-1d), got {type(model).__name__}")
+                        f"(a scenario providing kinematic-model), got {type(model).__name__}")
     return model

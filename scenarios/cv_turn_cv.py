@@ -161,6 +161,7 @@ class CvTurnCv(Scenario):
 
     name = "cv-turn-cv"
     tasks = (MANEUVER_DETECTION,)
+    provides = frozenset({"reference-filter"})
     #: ``bench perf`` sizes: name -> (scenario params, trials)
     perf_sizes = {"paper": ({}, 1000)}
 

@@ -180,6 +180,7 @@ class Glint(Scenario):
 
     name = "glint"
     tasks = (TRACKING,)
+    provides = frozenset({"glint-model"})
     #: a small instance for quick conformance tests
     small_params: ClassVar[dict] = {"steps": 60}
     perf_sizes: ClassVar[dict] = {"paper": ({"sensor": "active"}, 50)}

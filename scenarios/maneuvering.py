@@ -105,6 +105,7 @@ class Maneuvering(Scenario):
 
     name = "maneuvering-1d"
     tasks = (TRACKING,)
+    provides = frozenset({"kinematic-model"})
     small_params: ClassVar[dict] = {"steps": 40, "maneuver_start_s": 15.0, "maneuver_duration_s": 10.0}
     perf_sizes: ClassVar[dict] = {"default": ({}, 1000)}
     perf_snr_db: ClassVar[float] = 0.0

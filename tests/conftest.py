@@ -54,6 +54,20 @@ def pytest_xdist_make_scheduler(config, log):
     return ModuleGroups(config, log)
 
 
+def parse_sweep_or_skip(sweep: dict, source: str):
+    """``bench.config.parse_sweep``, or skip the test when the sweep reads data of an optional
+    extra not installed here (its one line says what to install, e.g. the [data] extra's
+    traffic samples for the real-trajectories preset)."""
+    from bench.config import parse_sweep
+    from bench.errors import ConfigError
+    try:
+        return parse_sweep(sweep, source)
+    except ConfigError as err:
+        if "the optional extra: pip install" in err.problem:
+            pytest.skip(f"{source} needs an optional extra: {err.problem}")
+        raise
+
+
 def run_bench(*args, cwd=None, timeout=300, check=False):
     """Drive the CLI as a user would: a subprocess, text output."""
     proc = subprocess.run([sys.executable, "-m", "bench", *map(str, args)], cwd=cwd, capture_output=True,

@@ -1,5 +1,6 @@
-"""Every registered method on every compatible scenario: shapes, no NaN, determinism;
-every scenario's batch carries the scene type of each of its tasks."""
+"""Every registered method on every scenario that provides what it needs (its small
+instance; :mod:`bench.capabilities`): shapes, no NaN, determinism; every scenario's
+batch carries the scene type of each of its tasks."""
 
 import dataclasses
 
@@ -7,15 +8,16 @@ import numpy as np
 import pytest
 
 from bench import registry
+from bench.capabilities import CAPABILITIES, fits, missing
 from bench.core import Scene
 from bench.params import build_params
 from bench.rng import TrialRNG
 from bench.registry import get_task
-
+from tests.test_recorded_tracks import small_params_on_a_csv
 
 
 PAIRS = [(s, m) for s, scls in registry.scenarios().items() for m, mcls in registry.methods().items()
-         if mcls.serves(s, scls.tasks)]
+         if fits(mcls, scls, build_params(scls.Params, scls.small_params))]
 
 
 def test_every_method_has_a_scenario_and_nothing_is_unavailable():
@@ -27,9 +29,30 @@ def test_every_method_has_a_scenario_and_nothing_is_unavailable():
     assert runnable == set(registry.methods())
 
 
+def test_built_in_capabilities_are_named_in_the_vocabulary():
+    """Every capability a built-in plugin needs, handles or provides is one of
+    :data:`bench.capabilities.CAPABILITIES` (a misspelt name would pair nothing)."""
+    used = set()
+    for cls in registry.methods().values():
+        used |= set(cls.needs) | set(cls.handles)
+    for cls in registry.scenarios().values():
+        used |= set(cls.provides) | set(cls().requires(build_params(cls.Params, cls.small_params)))
+    assert used and used <= set(CAPABILITIES)
+
+
+#: scenario -> parameters replacing its ``small_params``: a data file this module writes
+#: (recorded-tracks: a CSV, where its small instance reads a sample of the optional extra)
+LOCAL_DATA: dict[str, dict] = {}
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _local_data(tmp_path_factory):
+    LOCAL_DATA["recorded-tracks"] = small_params_on_a_csv(tmp_path_factory.mktemp("data"))
+
+
 def _params(cls):
     """A small instance of the scenario (``small_params``), so the test stays quick."""
-    return build_params(cls.Params, cls.small_params)
+    return build_params(cls.Params, {**cls.small_params, **LOCAL_DATA.get(cls.name, {})})
 
 
 def _batch(scenario, snr_db, seed=3):
@@ -128,3 +151,34 @@ def _equal_on_common_extent(a: np.ndarray, b: np.ndarray, name: str) -> None:
     """Equal where both are defined: a batch pads to its largest trial (plots, tracks)."""
     common = tuple(slice(0, min(x, y)) for x, y in zip(np.shape(a), np.shape(b)))
     np.testing.assert_array_equal(np.asarray(a)[common], np.asarray(b)[common], err_msg=name)
+
+
+@pytest.fixture(scope="module")
+def outside_scenario(tmp_path_factory):
+    """A tracking scenario from a module on a temporary path (tests/kinematic_plugin.py):
+    it provides ``kinematic-model`` and, ragged, requires ``valid-step-masks``."""
+    from tests.kinematic_plugin import load
+    return load(tmp_path_factory.mktemp("plugin"))
+
+
+@pytest.mark.parametrize("ragged", [{}, {"min_steps": 12, "gap_probability": 0.2}])
+def test_an_outside_scenario_gets_the_trackers_that_need_what_it_provides(outside_scenario, ragged):
+    """With no edit anywhere: every built-in method whose needs the outside scenario
+    provides (and, on a ragged config, that handles its valid-step masks) runs on it
+    and scores finite metrics; the others are refused naming what is missing."""
+    cls = outside_scenario
+    params = build_params(cls.Params, cls.small_params | ragged)
+    paired = {m for m, mcls in registry.methods().items() if fits(mcls, cls, params)}
+    kinematic = {m for m, mcls in registry.methods().items() if "kinematic-model" in mcls.needs}
+    assert kinematic and paired == kinematic
+    batch = cls().generate(params, 10.0, 4, TrialRNG(2, 0, 1, range(4)))
+    assert (batch.scene.valid_steps is None) == (not ragged)
+    task = get_task("tracking")
+    for name in sorted(paired):
+        mcls = registry.get_method(name)
+        out = task.check_output(mcls().run(batch, mcls.Params()), batch)
+        metrics = task.trial_metrics(batch, out, 1.0)
+        assert np.isfinite(metrics["rmse"]).all() and np.isfinite(metrics["nees_mean"]).all(), name
+    for name, mcls in registry.methods().items():
+        if name not in paired and mcls.task == "tracking":
+            assert "glint-model" in missing(mcls, cls, params), name

@@ -5,6 +5,7 @@ import re
 import pandas as pd
 
 from bench import registry
+from bench.capabilities import fits
 from bench.perf import PERF_COLUMNS, SCENE_COLUMNS, Job, scene_jobs, write_report
 
 
@@ -56,9 +57,9 @@ def test_each_method_is_timed_on_a_scenario_it_accepts(monkeypatch):
     for job in jobs():
         cls = registry.get_method(job.method)
         scenario = registry.get_scenario(job.scenario)
-        assert cls.serves(scenario.name, scenario.tasks)
-        assert cls().check_scenario(build_params(cls.Params, {}), build_params(scenario.Params,
-                                                                               job.scenario_params)) is None
+        resolved = build_params(scenario.Params, job.scenario_params)
+        assert fits(cls, scenario, resolved)
+        assert cls().check_scenario(build_params(cls.Params, {}), resolved) is None
 
 
 def _perf_rows():

@@ -10,6 +10,7 @@ import pytest
 from bench import registry, tomlw
 from bench.config import parse_sweep
 from bench.listing import presets
+from tests.conftest import parse_sweep_or_skip
 
 PRESETS = sorted(presets())
 
@@ -20,7 +21,7 @@ def _preset(name: str) -> dict:
 
 @pytest.mark.parametrize("name", PRESETS)
 def test_preset_is_a_valid_sweep(name):
-    plan = parse_sweep(_preset(name), f"preset {name}")
+    plan = parse_sweep_or_skip(_preset(name), f"preset {name}")
     assert plan.name == name
 
 
@@ -62,8 +63,8 @@ def test_tbd_small_preset_runs_through_the_cli(bench_cli, tmp_path):
     bench_cli("run", "--preset", "tbd-small", "--quiet", "--out", tmp_path / "tbd", cwd=tmp_path, check=True)
     out = tmp_path / "tbd"
     summary = pd.read_csv(out / "summary.csv")
-    assert set(summary.method) == {"dp-tbd", "dp-tbd-mf"}
-    assert summary.groupby("config").pd.max().min() == 1.0          # both reach Pd = 1 in the swept range
+    assert set(summary.method) == {"dp-tbd", "dp-tbd-mf", "pf-tbd"}
+    assert summary.groupby("config").pd.max().min() == 1.0          # each reaches Pd = 1 in the swept range
     assert (summary.pfa <= 0.05).all()                              # scene Pfa of the Gumbel threshold
     report = (out / "report.md").read_text()
     assert "## Track-before-detect: null scenes and the scene threshold" in report
@@ -80,7 +81,7 @@ def test_tbd_preset_smoke(bench_cli, tmp_path):
     path = tmp_path / "smoke.toml"
     path.write_text(tomlw.dumps(sweep))
     bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 1, check=True)
-    assert set(pd.read_csv(tmp_path / "out" / "summary.csv").method) == {"dp-tbd", "dp-tbd-mf"}
+    assert set(pd.read_csv(tmp_path / "out" / "summary.csv").method) == {"dp-tbd", "dp-tbd-mf", "pf-tbd"}
 
 
 @pytest.mark.slow
@@ -106,6 +107,14 @@ def test_tbd_ablations_preset_smoke(bench_cli, tmp_path):
     assert "per-cell Pfa" in report
 
 
+def _run_reduced(bench_cli, tmp_path, sweep: dict):
+    """Run a reduced copy of a preset (a sweep file in ``tmp_path``) on two workers; its run folder."""
+    path = tmp_path / "reduced.toml"
+    path.write_text(tomlw.dumps(sweep))
+    bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 2, check=True)
+    return tmp_path / "out"
+
+
 @pytest.mark.slow
 def test_glint_tracking_preset_at_reduced_size(bench_cli, tmp_path):
     """The glint preset through the CLI at reduced trials and duration (the end-to-end test of the tracking suite)."""
@@ -113,10 +122,7 @@ def test_glint_tracking_preset_at_reduced_size(bench_cli, tmp_path):
     sweep.update(trials=4, chunk=4)
     for entry in sweep["scenarios"]:
         entry["params"]["steps"] = 40
-    path = tmp_path / "glint.toml"
-    path.write_text(tomlw.dumps(sweep))
-    bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 2, check=True)
-    out = tmp_path / "out"
+    out = _run_reduced(bench_cli, tmp_path, sweep)
     summary = pd.read_csv(out / "summary.csv")
     assert summary.config.nunique() == 8 and summary.scenario.nunique() == 7
     assert {f"viterbi-paper-1d[n={n}]" for n in (1, 3, 9, 27)} <= set(summary.config)
@@ -193,3 +199,22 @@ def test_ar_tracking_preset_at_reduced_size(bench_cli, tmp_path):
     report = (out / "report.md").read_text()
     assert "### Paired differences against the first method config" in report
     assert re.search(r"\|\s*`default`\s*\|\s*0\s*\|\s*`vd-filter`\s*\|", report)
+
+
+@pytest.mark.slow
+def test_real_trajectories_preset_at_reduced_size(bench_cli, tmp_path):
+    """The real-aircraft preset through the CLI at reduced trials (needs the [data] extra):
+    every tracker and detector on both scenario configs, a trial in the plane (the claims
+    table is a preset's own: a reduced copy is a sweep file, without it)."""
+    parse_sweep_or_skip(_preset("real-trajectories"), "preset real-trajectories")
+    sweep = _preset("real-trajectories")
+    sweep.update(trials=8, chunk=8, snr_db=[0, 10])
+    sweep["calibration"]["h0_trials"] = 100
+    out = _run_reduced(bench_cli, tmp_path, sweep)
+    summary = pd.read_csv(out / "summary.csv")
+    assert set(summary.scenario) == {"calibration", "mixed"}
+    assert {"imm-cv-ca", "ar-adaptive", "innovation[window=1]", "cumulant[window=16]"} <= set(summary.config)
+    assert summary[summary.method == "cv-kf"].rmse_maneuver.notna().all()
+    report = (out / "report.md").read_text()
+    assert "## Tracking: one trial in the plane" in report
+    assert (out / "figures" / "tracking_trial_plane_calibration.png").exists()

@@ -69,9 +69,9 @@ def test_summary_charts_are_split_by_task_unit_and_scenario_config():
         methods = {str(rows["method"].iloc[0]) for _, _, rows in chart.bars}
         assert len({tasks[m].name for m in methods}) == 1                  # one task per chart
         assert all(rows["scenario"].nunique() == 1 for _, _, rows in chart.bars)
-    assert charts["/summary/tracking/rmse_vs_snr"].title == "RMSE (m) vs SNR (dB) · tracking"
-    assert charts["/summary/tbd/rmse_vs_snr"].title == "RMSE of detected tracks (m) vs SNR (dB) · tbd"
-    assert charts["/summary/maneuver-detection/pd_vs_snr/cv-b"].title == "Pd vs SNR (dB) · maneuver-detection, cv-b"
+    assert charts["/summary/tracking/rmse_vs_snr"].title == "tracking · RMSE (m) vs SNR (dB)"
+    assert charts["/summary/tbd/rmse_vs_snr"].title == "tbd · RMSE of detected tracks (m) vs SNR (dB)"
+    assert charts["/summary/maneuver-detection/pd_vs_snr/cv-b"].title == "cv-b, maneuver-detection · Pd vs SNR (dB)"
 
 
 def test_informative_snr_is_where_pd_is_nearest_one_half():
@@ -84,7 +84,8 @@ def test_summary_table_starts_with_the_colour_key():
     summary, tasks = _summary()
     text = summary_markdown(summary, tasks)
     key = text.split("## ")[0]
-    assert "- blue: `cum`, orange: `nis`" in key and "- blue: `ekf`" in key and "- blue: `dp`" in key
+    # one colour per config across the recording: its rank among all the run's configs
+    assert "- blue: `cum`\n- orange: `dp`\n- green: `ekf`\n- red: `nis`" in key
 
 
 def test_legend_headroom_is_above_the_data():

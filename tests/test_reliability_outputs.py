@@ -348,6 +348,11 @@ COMPANIONS = {
     **{("cv-turn-cv", f, v): {"steps": 10000, "onset_step": 1, "turn_steps": 1, "warmup_steps": 0,
                               "detect_window_steps": 1}
        for f, v in (("turn_steps", "9999"), ("detect_window_steps", "9999"), ("onset_jitter_steps", "9998"))},
+    ("recorded-tracks", "steps", "5"): {"onset_step": 1, "warmup_steps": 0, "detect_window_steps": 1},
+    ("recorded-tracks", "onset_step", "1"): {"warmup_steps": 0},
+    ("recorded-tracks", "onset_step", "9999"): {"steps": 10000, "detect_window_steps": 1},
+    ("recorded-tracks", "detect_window_steps", "9999"): {"steps": 10000, "onset_step": 1, "warmup_steps": 0},
+    ("recorded-tracks", "warmup_steps", "9998"): {"steps": 10000, "onset_step": 9999, "detect_window_steps": 1},
     ("glint", "initial_range_m", "10.0"): {"initial_range_std_m": 1.0},
     ("glint", "initial_range_std_m", "100000.0"): {"initial_range_m": 1e6},
     ("glint", "process_noise_los_m_s2", "0.0"): {"process_noise_los_m_s2": (0.0, 0.0, 0.0)},
@@ -359,6 +364,7 @@ COMPANIONS = {
     ("maneuvering-1d", "steps", "2"): {"dt_s": 100.0},
     ("maneuvering-1d", "dt_s", "0.001"): {"maneuver_start_s": 0.0},
     ("maneuvering-1d", "maneuver_start_s", "1000000.0"): {"profile": "singer"},
+    **{("cusum", "window", v): {"score": "glr"} for v in ("1", "1000")},      # the GLR score's window
     ("ar-adaptive", "order_low", "5"): {"order_high": 6, "state_dim": 7},
     ("ar-adaptive", "order_high", "1"): {"order_low": 0},
     ("ar-adaptive", "order_high", "6"): {"state_dim": 7},
@@ -702,11 +708,15 @@ def test_a_position_a_float32_cannot_hold_is_drawn_as_a_gap_without_a_warning():
     assert np.isnan(xy[1, 0]) and xy[1, 1] == 3.0 and np.isnan(xy[2, 1])
 
 
-def _every_task_sweep() -> str:
+def _every_task_sweep(folder) -> str:
     """Every scenario at its small size, with every method that serves it: all the tasks'
-    summary columns at once (the frame pandas warned about), a recorded trial."""
+    summary columns at once (the frame pandas warned about), a recorded trial; recorded-tracks
+    on a CSV written into ``folder`` (its small instance reads an optional extra's sample)."""
     from bench import tomlw
-    scenarios = [{"name": name, "params": dict(cls.small_params)} for name, cls in registry.scenarios().items()]
+    from tests.test_recorded_tracks import small_params_on_a_csv
+    local = {"recorded-tracks": small_params_on_a_csv(folder)}
+    scenarios = [{"name": name, "params": local.get(name, dict(cls.small_params))}
+                 for name, cls in registry.scenarios().items()]
     methods = [{"name": name} for name, cls in registry.methods().items()
                if name in ("innovation", "ekf", "cv-kf", "dp-tbd", "ca-cfar", "os-cfar", "gnn-ekf")]
     return tomlw.dumps({"name": "every-task", "trials": 2, "seed": 3, "snr_db": [10.0], "chunk": 2,
@@ -720,7 +730,7 @@ def test_no_library_warning_reaches_the_terminal_on_a_normal_run(tmp_path):
     import os
     import subprocess
     import sys
-    (tmp_path / "sweep.toml").write_text(_every_task_sweep())
+    (tmp_path / "sweep.toml").write_text(_every_task_sweep(tmp_path))
     env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
     proc = subprocess.run([sys.executable, "-m", "bench", "run", "sweep.toml", "--out", "run", "--workers", "1"],
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)

@@ -18,7 +18,7 @@ from typing import Any
 from bench.recording.paths import entity_root, method_entity_names
 from bench.recording.record import TrialRecord
 
-__all__ = ["MEASUREMENT_COLOR", "PALETTE", "TRUTH_COLOR", "MethodLayout", "TrialLayout", "trial_layout"]
+__all__ = ["MEASUREMENT_COLOR", "PALETTE", "TRUTH_COLOR", "MethodLayout", "TrialLayout", "method_colors", "trial_layout"]
 
 # tab10: distinct on the viewer's dark background.
 PALETTE = [
@@ -27,6 +27,15 @@ PALETTE = [
 ]
 TRUTH_COLOR = (230, 230, 230)
 MEASUREMENT_COLOR = (255, 200, 60)
+
+
+def method_colors(labels) -> dict[str, tuple[int, int, int]]:
+    """The colour of each method config of a run: by its rank among all the run's config
+    labels (sorted), so a config has one colour in every chart and every trial of a
+    recording, whichever configs share the chart or the scenario."""
+    return {label: PALETTE[i % len(PALETTE)] for i, label in enumerate(sorted(labels))}
+
+
 #: Children of a trial root the harness logs itself.
 ROOT_CHILDREN = ("truth", "measurements")
 
@@ -65,7 +74,8 @@ class TrialLayout:
 
 
 def trial_layout(rec: TrialRecord, tasks: Mapping[str, Any]) -> TrialLayout:
-    """The layout of ``rec``; ``tasks`` maps each method config label to its task."""
+    """The layout of ``rec``; ``tasks`` maps each method config label of the run to its
+    task (all of them: a config's colour is its rank among them, :func:`method_colors`)."""
     missing = [label for label in rec.methods if label not in tasks]
     if missing:
         raise ValueError(f"no task given for method config(s) {', '.join(map(repr, missing))}")
@@ -73,14 +83,12 @@ def trial_layout(rec: TrialRecord, tasks: Mapping[str, Any]) -> TrialLayout:
     root = entity_root(rec.scenario, rec.snr_db, rec.trial)
     reserved = set(ROOT_CHILDREN).union(*(t.scene_entities for t in present))
     names = method_entity_names(rec.methods, reserved=reserved)
-    methods = []
-    # Colours follow the sorted labels, so the same configs get the same
-    # colour in every trial of a sweep.
-    for i, label in enumerate(sorted(rec.methods)):
+    methods, colors = [], method_colors(tasks)
+    for label in sorted(rec.methods):
         task, base = tasks[label], f"{root}/{names[label]}"
         trace_names = method_entity_names(rec.methods[label].traces, reserved=task.method_entities)
         traces = {key: f"{base}/{trace_names[key]}" for key in rec.methods[label].traces}
-        methods.append(MethodLayout(label, task, PALETTE[i % len(PALETTE)], base, traces))
+        methods.append(MethodLayout(label, task, colors[label], base, traces))
     snr = "null" if rec.snr_db is None else f"{rec.snr_db:+g} dB"
     return TrialLayout(root=root, scenario=rec.scenario, title=f"{snr} · trial {rec.trial}",
                        sort_key=(rec.scenario, rec.snr_db is None, rec.snr_db or 0.0, rec.trial),

@@ -158,6 +158,11 @@ class _Payload:
             codes = img.codes if isinstance(img, Quantised) else img
             check_shape(codes, (None,) * codes.ndim, f"{where}images[{name!r}]")
 
+    def _steps_of_arrays(self, keep: np.ndarray) -> dict:
+        """The payload's containers with every per-step array cut to the steps ``keep`` (K,) bool."""
+        return {"arrays": {name: arr[keep] for name, arr in self.arrays.items()}, "images": dict(self.images),
+                "info": dict(self.info)}
+
     def _pack(self, prefix: str, npz: dict, meta: dict) -> None:
         meta["has"] = meta.get("has", []) + list(self.arrays)
         for name, arr in self.arrays.items():
@@ -202,6 +207,11 @@ class MethodTrace(_Payload):
             self.threshold = float(self.threshold)
         self.traces = {str(k): np.asarray(v) for k, v in self.traces.items()}
         self._normalise_payload()
+
+    def at_steps(self, keep: np.ndarray) -> MethodTrace:
+        """The trace on the steps ``keep`` (K,) bool only (:meth:`TrialRecord.at_steps`)."""
+        return MethodTrace(threshold=self.threshold, traces={name: v[keep] for name, v in self.traces.items()},
+                           **self._steps_of_arrays(keep))
 
     def check(self, k: int, where: str) -> None:
         """Raise ValueError if an array does not fit ``K = k`` steps."""
@@ -248,6 +258,19 @@ class TrialRecord(_Payload):
     @property
     def steps(self) -> int:
         return int(self.t.shape[0])
+
+    def at_steps(self, keep: np.ndarray) -> TrialRecord:
+        """The record on the steps ``keep`` (K,) bool only: a trial of a ragged batch
+        drawn on the steps it has (docs/architecture.md, 'Ragged batches'). Every
+        per-step array (first axis K) is cut; images and info are kept whole."""
+        keep = np.asarray(keep, dtype=bool)
+
+        def cut(a):
+            return None if a is None else a[keep]
+        return TrialRecord(self.scenario, self.snr_db, self.trial, self.t[keep], truth_xy=cut(self.truth_xy),
+                           measurements_xy=cut(self.measurements_xy),
+                           methods={label: m.at_steps(keep) for label, m in self.methods.items()},
+                           **self._steps_of_arrays(keep))
 
     def has_images(self) -> bool:
         """Whether the trial or a method holds images (megabytes: worth a flush)."""

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bench.markdown import code, frame_table
-from bench.recording.layout import PALETTE
+from bench.recording.layout import PALETTE, method_colors
 from bench.recording.paths import entity_name, method_entity_names, rerun_path
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
@@ -72,6 +72,7 @@ def summary_charts(summary: pd.DataFrame | None, tasks: Mapping[str, Any] | None
     if missing:
         raise ValueError(f"summary: missing column(s) {', '.join(sorted(missing))}")
     tasks = tasks or {}
+    colors = method_colors(set(tasks) | set(summary["method"].astype(str)))
     several_tasks = len(_by_task(summary, tasks)) > 1
     out = []
     for task, rows in _by_task(summary, tasks):
@@ -85,23 +86,26 @@ def summary_charts(summary: pd.DataFrame | None, tasks: Mapping[str, Any] | None
                 root = f"/summary/{entity_name(_task_name(task))}/{key}_vs_snr"
                 if len(scenarios) > 1:
                     root += f"/{entity_name(scenario)}"
-                bars = _bars(part, column, root)
+                bars = _bars(part, column, root, colors)
                 if bars:
                     words = ([_task_name(task)] if several_tasks else []) + \
                         ([scenario] if len(scenarios) > 1 else [])
-                    out.append(Chart(root, f"{title} vs SNR (dB)" + (f" · {', '.join(words)}" if words else ""),
+                    # what tells the chart apart first: a view's header cuts a long title
+                    words = list(reversed(words))
+                    out.append(Chart(root, (f"{', '.join(words)} · " if words else "") + f"{title} vs SNR (dB)",
                                      column, tuple(bars)))
     return out
 
 
-def _bars(rows: pd.DataFrame, column: str, root: str) -> list[tuple[str, tuple, pd.DataFrame]]:
-    """(entity path, colour, rows sorted by SNR) per method with data in ``column``.
-    Colours follow the sorted labels, as in the trial plots."""
+def _bars(rows: pd.DataFrame, column: str, root: str, colors: Mapping[str, tuple]) -> list[tuple[str, tuple, pd.DataFrame]]:
+    """(entity path, colour, rows sorted by SNR) per method with data in ``column``;
+    ``colors``: the run's colour of each config (:func:`~bench.recording.layout.method_colors`),
+    as in the trial plots."""
     df = rows.dropna(subset=["snr_db", column])
     labels = sorted(df["method"].astype(str).unique())
     names = method_entity_names(labels)
-    return [(f"{root}/{names[label]}", PALETTE[i % len(PALETTE)],
-             df[df["method"].astype(str) == label].sort_values("snr_db")) for i, label in enumerate(labels)]
+    return [(f"{root}/{names[label]}", colors[label],
+             df[df["method"].astype(str) == label].sort_values("snr_db")) for label in labels]
 
 
 def informative_snr(summary: pd.DataFrame | None, tasks: Mapping[str, Any] | None = None) -> dict[str, float]:
@@ -153,10 +157,11 @@ def summary_markdown(summary: pd.DataFrame, tasks: Mapping[str, Any] | None = No
 
     parts = ["# Summary"]
     charts = summary_charts(summary, tasks) or []
-    keys = dict.fromkeys(", ".join(f"{COLOUR_NAMES[PALETTE.index(color)]}: {code(rows['method'].iloc[0])}"
-                                   for _, color, rows in chart.bars) for chart in charts)
-    if keys:
-        parts += ["Colours of the charts' bars:", "\n".join(f"- {key}" for key in keys)]
+    colors = {rows["method"].iloc[0]: color for chart in charts for _, color, rows in chart.bars}
+    if colors:       # one colour per config in every chart and trial (layout.method_colors)
+        parts += ["Colours of the methods, in every chart and trial:",
+                  "\n".join(f"- {COLOUR_NAMES[PALETTE.index(color)]}: {code(label)}"
+                            for label, color in sorted(colors.items()))]
     for chart in charts:
         df = pd.concat([rows for _, _, rows in chart.bars])
         pivot = df.pivot_table(index="snr_db", columns="method", values=chart.column, sort=False)

@@ -203,11 +203,11 @@ class TrackingTask(Task):
         metrics = tracking_trial_metrics(out.estimate, batch.truth, position_index=sc.position_index,
                                       labels=self.labels(batch), covariance=out.covariance,
                                       divergence_bound_m=float(sc.divergence_bound_m),
-                                      derived=sc.derived_components)
+                                      derived=sc.derived_components, valid=sc.valid_steps)
         mask = sc.maneuver_mask
         if mask is not None:
             pos_sq = metrics["sq_err_position"]
-            metrics |= maneuver_trial_metrics(pos_sq, mask, sc.maneuver_onset_steps, out.traces)
+            metrics |= maneuver_trial_metrics(pos_sq, mask, sc.maneuver_onset_steps, out.traces, sc.valid_steps)
         return metrics | time_series(batch)
 
     def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:

@@ -15,13 +15,13 @@ import pandas as pd
 
 from bench.batched import inner
 from bench.metrics import (binomial_interval, bootstrap_mean_interval, bootstrap_statistic_interval, by_cell,
-                           clustered_rate_interval, mean_realised_snr, per_step_rmse, series_key,
-                           time_averaged_rmse)
+                           clustered_rate_interval, mean_over_present, mean_realised_snr, per_step_rmse,
+                           series_key, time_averaged_rmse)
 
 
 def tracking_trial_metrics(estimate: np.ndarray, truth: np.ndarray, *, position_index, labels,
                            covariance: np.ndarray | None, divergence_bound_m: float,
-                           derived=None) -> dict[str, np.ndarray]:
+                           derived=None, valid: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Per-trial tracking metrics.
 
     ``rmse``: the trial's position RMSE over time; ``final_error_m``;
@@ -32,21 +32,31 @@ def tracking_trial_metrics(estimate: np.ndarray, truth: np.ndarray, *, position_
     ``true_<component>`` and ``nees``; the same three per component of
     ``derived(states)`` (named functions of the state, e.g. range, bearing,
     elevation), when given.
+
+    ``valid`` (n, K) bool: the steps each trial has (a ragged batch; None: all).
+    Every metric is over a trial's valid steps only (``final_error_m`` at its last
+    one) and every series is NaN at the others, so per-step statistics count a step
+    over the trials that have it (:func:`bench.metrics.mean_over_present`).
     """
-    err = np.asarray(estimate, float) - np.asarray(truth, float)
+    estimate, truth = np.asarray(estimate, float), np.asarray(truth, float)
+    if valid is not None:                    # a missing step: no estimate, no truth (NaN throughout)
+        estimate = np.where(valid[..., None], estimate, np.nan)
+        truth = np.where(valid[..., None], truth, np.nan)
+    err = estimate - truth
     pos_sq = (err[..., list(position_index)] ** 2).sum(axis=-1)
     pos_err = np.sqrt(pos_sq)
-    out = {"rmse": np.sqrt(pos_sq.mean(axis=1)), "final_error_m": pos_err[:, -1],
+    n, K = pos_sq.shape
+    last = np.full(n, K - 1) if valid is None else K - 1 - np.argmax(valid[:, ::-1], axis=1)
+    out = {"rmse": np.sqrt(mean_over_present(pos_sq, axis=1)), "final_error_m": pos_err[np.arange(n), last],
            "diverged": (pos_err > divergence_bound_m).any(axis=1), "sq_err_position": pos_sq}
     if covariance is not None:
-        nees = inner(err, np.linalg.solve(covariance, err[..., None])[..., 0])
-        out["nees_mean"], out["nees"] = nees.mean(axis=1), nees
+        nees = inner(err, np.linalg.solve(covariance, np.nan_to_num(err)[..., None])[..., 0])
+        out["nees_mean"], out["nees"] = mean_over_present(nees, axis=1), nees
     else:
         out["nees_mean"] = np.full(len(err), np.nan)
-    components = {label: (np.asarray(estimate, float)[..., j], np.asarray(truth, float)[..., j])
-                  for j, label in enumerate(labels)}
+    components = {label: (estimate[..., j], truth[..., j]) for j, label in enumerate(labels)}
     if derived is not None:
-        est_d, true_d = derived(np.asarray(estimate, float)), derived(np.asarray(truth, float))
+        est_d, true_d = derived(estimate), derived(truth)
         components |= {name: (est_d[name], true_d[name]) for name in est_d}
     for label, (est, true) in components.items():
         out[f"sq_err_{label}"] = (est - true) ** 2
@@ -77,10 +87,10 @@ def tracking_steps(series: dict, labels) -> pd.DataFrame:
     cols = {"rmse_position": per_step_rmse(series["sq_err_position"])}
     for label in labels:
         cols[f"rmse_{label}"] = per_step_rmse(series[f"sq_err_{label}"])
-        cols[f"mean_est_{label}"] = series[f"est_{label}"].mean(axis=0)
-        cols[f"mean_true_{label}"] = series[f"true_{label}"].mean(axis=0)
+        cols[f"mean_est_{label}"] = mean_over_present(series[f"est_{label}"], axis=0)
+        cols[f"mean_true_{label}"] = mean_over_present(series[f"true_{label}"], axis=0)
     if "nees" in series:
-        cols["nees"] = series["nees"].mean(axis=0)
+        cols["nees"] = mean_over_present(series["nees"], axis=0)
     return pd.DataFrame(cols | maneuver_steps(series))
 
 
@@ -107,7 +117,7 @@ def segment_rms(sq: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 
 def maneuver_trial_metrics(pos_sq: np.ndarray, mask: np.ndarray, onsets: np.ndarray | None,
-                           traces: dict) -> dict[str, np.ndarray]:
+                           traces: dict, valid: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Per-trial metrics against the true maneuvers.
 
     ``rmse_quiet_m`` / ``rmse_maneuver_m``: the trial's position RMS error over
@@ -119,16 +129,22 @@ def maneuver_trial_metrics(pos_sq: np.ndarray, mask: np.ndarray, onsets: np.ndar
     the maneuver's last step; NaN without an onset), ``switch_delay_steps``
     (its step minus the onset), ``false_switches`` (switches before the first
     onset, or anywhere without one) over ``quiet_steps`` (those steps). With
-    a ``q_k`` trace: its mean over quiet and maneuvering steps.
+    a ``q_k`` trace: its mean over quiet and maneuvering steps. ``valid`` (n, K)
+    bool: the steps each trial has (a ragged batch; None: all): every segment is
+    cut to them, and the series are NaN (``maneuvering``, the traces) or 0
+    (``onset_window``) at the others.
     """
     mask = np.asarray(mask, bool)
     n, K = mask.shape
-    out = {"rmse_quiet_m": segment_rms(pos_sq, ~mask), "rmse_maneuver_m": segment_rms(pos_sq, mask),
-           "maneuvering": mask.astype(float)}
+    present = np.ones((n, K), bool) if valid is None else np.asarray(valid, bool)
+    quiet, maneuver = ~mask & present, mask & present
+    out = {"rmse_quiet_m": segment_rms(pos_sq, quiet), "rmse_maneuver_m": segment_rms(pos_sq, maneuver),
+           "maneuvering": np.where(present, mask.astype(float), np.nan)}
     steps = np.arange(K)
     first = np.full(n, K) if onsets is None or onsets.shape[1] == 0 else np.asarray(onsets)[:, 0]
-    before = steps[None, :] < first[:, None]
-    onset_window = ~before & (steps[None, :] < first[:, None] + ONSET_WINDOW_STEPS)
+    before = (steps[None, :] < first[:, None]) & present
+    onset_window = (steps[None, :] >= first[:, None]) & (steps[None, :] < first[:, None] + ONSET_WINDOW_STEPS) \
+        & present
     out["rmse_onset_m"] = segment_rms(pos_sq, onset_window)
     out["onset_window"] = onset_window.astype(float)
     if "switch" in traces:
@@ -143,11 +159,11 @@ def maneuver_trial_metrics(pos_sq: np.ndarray, mask: np.ndarray, onsets: np.ndar
         out["quiet_steps"] = before.sum(axis=1).astype(float)
     for name in SWITCH_TRACES:
         if name in traces:
-            out[name] = np.asarray(traces[name], float)
+            out[name] = np.where(present, np.asarray(traces[name], float), np.nan)
     if "q_k" in traces:
         q = np.asarray(traces["q_k"], float)
-        out["q_quiet_mean"] = _segment_mean(q, ~mask)
-        out["q_maneuver_mean"] = _segment_mean(q, mask)
+        out["q_quiet_mean"] = _segment_mean(q, quiet)
+        out["q_maneuver_mean"] = _segment_mean(q, maneuver)
     return out
 
 
@@ -208,8 +224,8 @@ def maneuver_steps(series: dict) -> dict[str, np.ndarray]:
     mean of each switching trace (fraction in the maneuver model, switch rate, mean Q_k)."""
     cols = {}
     if "maneuvering" in series:
-        cols["maneuver_fraction"] = series["maneuvering"].mean(axis=0)
+        cols["maneuver_fraction"] = mean_over_present(series["maneuvering"], axis=0)
     for name in SWITCH_TRACES:
         if name in series:
-            cols[f"{name}_mean"] = series[name].mean(axis=0)
+            cols[f"{name}_mean"] = mean_over_present(series[name], axis=0)
     return cols

@@ -3,7 +3,8 @@
 Time-averaged position RMSE with bootstrap intervals per scenario config and
 SNR, divergence rate and NEES, RMSE against SNR, per-step RMSE and the mean
 estimate against the truth per step (the usual figure of tracking papers, e.g.
-the glint paper's Viterbi vs EKF comparison). Imported only when a report is
+the glint paper's Viterbi vs EKF comparison), and one recorded trial per scenario
+config drawn in the plane (truth, measurements, estimates). Imported only when a report is
 written (matplotlib).
 """
 
@@ -104,6 +105,35 @@ def _per_step(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: 
     return parts
 
 
+def _trial_in_plane(ctx: ReportContext) -> list[str]:
+    """Per scenario config, its recorded trial closest to the reference SNR drawn in the
+    plane with every tracker's estimate; scenes drawn against time (a range) are left to
+    the per-step figures."""
+    best = {}
+    reference = 0.0 if ctx.timeline_snr_db is None else ctx.timeline_snr_db
+    for rec in ctx.records:
+        estimates = {label: tr.arrays["estimate_xy"] for label, tr in rec.methods.items()
+                     if label in ctx.configs and "estimate_xy" in tr.arrays}
+        if (rec.snr_db is None or rec.truth_xy is None or not estimates
+                or np.array_equal(rec.truth_xy[:, 0], rec.t)):
+            continue
+        distance = abs(rec.snr_db - reference)
+        if rec.scenario not in best or distance < best[rec.scenario][0]:
+            best[rec.scenario] = (distance, rec, estimates)
+    parts = []
+    for scenario, (_, rec, estimates) in best.items():
+        name = f"tracking_trial_plane_{slug(scenario)}.png"
+        figures.trial_in_plane(rec.truth_xy, rec.measurements_xy, estimates, rec.arrays.get("maneuvering"),
+                               ctx.fig_dir / name,
+                               f"{ctx.title}: {scenario}, trial {rec.trial} at {fmt_db(rec.snr_db)} dB")
+        parts.append(f"![one trial of {text(scenario)} in the plane](figures/{name})")
+    if parts:
+        parts.insert(0, "## Tracking: one trial in the plane\n\nOne recorded trial per scenario config (the "
+                        "recording has them all), in metres: the truth, its maneuvering steps, the "
+                        "measurements and every tracker's estimate.")
+    return parts
+
+
 def _maneuvers(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
     """Scenes with a maneuver mask: the quiet / maneuvering split, the switches against
     the true onsets, and the RMSE of each component over time."""
@@ -191,5 +221,5 @@ def sections(ctx: ReportContext) -> list[str]:
     if summary.empty:
         return []
     return _overview(summary, ctx.fig_dir, ctx.title) + _versus_snr(summary, ctx.fig_dir, ctx.title) + \
-        _per_step(summary, ctx.steps, ctx.fig_dir, ctx.title) + \
+        _per_step(summary, ctx.steps, ctx.fig_dir, ctx.title) + _trial_in_plane(ctx) + \
         _maneuvers(summary, ctx.steps, ctx.fig_dir, ctx.title) + _paired(summary, ctx.trials)

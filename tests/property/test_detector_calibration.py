@@ -26,6 +26,8 @@ DETECTORS = [
     ("cumulant", {"window": 32}),
     ("cumulant", {"window": 16, "moment": "raw", "combine": "max"}),
     ("wavelet", {}),
+    ("glr", {"window": 20}),
+    ("cusum", {"drift": 4.0}),
 ]
 TRIALS = 1000
 

@@ -40,6 +40,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from bench import registry
+from bench.capabilities import fits
 from bench.cli import main
 from bench.config import (
     LARGE_SWEEP_TRIAL_RUNS,
@@ -622,15 +623,15 @@ def _sweep_with(kind, name, params, method=None, snr=0.0):
     """A small sweep: the component with ``params`` on (or with) the other side's small config."""
     if kind == "method":
         cls = registry.get_method(name)
-        scenario = next(s for s in registry.scenarios().values() if cls.serves(s.name, s.tasks))
+        scenario = next(s for s in registry.scenarios().values() if fits(cls, s))
         scenarios = [{"name": scenario.name, "params": dict(scenario.small_params)}]
         methods = [{"name": name, "params": params}]
     else:
         scenario = registry.get_scenario(name)
         scenarios = [{"name": name, "params": dict(scenario.small_params) | params}]
         cheap = CHEAP_METHOD.get(scenario.tasks[0])
-        if cheap is None or not registry.get_method(cheap).serves(name, scenario.tasks):
-            cheap = next(m for m, c in registry.methods().items() if c.serves(name, scenario.tasks))
+        if cheap is None or not fits(registry.get_method(cheap), scenario):
+            cheap = next(m for m, c in registry.methods().items() if fits(c, scenario))
         methods = [{"name": method or cheap}]
     return {"name": "bounds", "trials": 2, "seed": 5, "chunk": 2, "snr_db": [snr], "scenarios": scenarios,
             "methods": methods, "calibration": {"pfa": 0.05, "mode": "empirical", "h0_trials": 10},
@@ -699,7 +700,8 @@ def test_the_longest_scene_runs_every_detector_at_its_largest_window():
     data["methods"] = [{"name": "cumulant", "params": {"window": steps}},
                        {"name": "innovation", "params": {"window": steps}},
                        {"name": "innovation", "params": {"window": 1, "delta": 0.999}},
-                       {"name": "wavelet", "params": {"levels": 8, "coarsest": 8}}]
+                       {"name": "wavelet", "params": {"levels": 8, "coarsest": 8}},
+                       {"name": "glr", "params": {"window": 1000}}]
     assert run_to_completion(data) == "ran"
 
 
@@ -713,7 +715,7 @@ def test_a_bound_runs_with_any_method_of_its_task_at_any_snr(case, pick, snr):
     kind, name, params = case
     method = None
     if kind == "scenario":
-        tasks = registry.get_scenario(name).tasks
-        names = sorted(m for m, c in registry.methods().items() if c.serves(name, tasks))
+        scenario = registry.get_scenario(name)
+        names = sorted(m for m, c in registry.methods().items() if fits(c, scenario))
         method = names[pick % len(names)]
     run_to_completion(_sweep_with(kind, name, params, method, snr))

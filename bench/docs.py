@@ -1,0 +1,302 @@
+"""The documentation site's pages generated from the code (docs/architecture.md, 'Documentation').
+
+From the registry: one page per task, method and scenario — its docstring as written
+(equations included), its parameters as ``bench list -v`` describes them (type, default,
+meaning, bounds and their reason: :func:`bench.params.describe_params`), its task, the
+presets that run it and the papers they reproduce, its row of the committed ``bench perf``
+tables. From the repository: every committed report (``reports/NAME/report.md`` and the
+files it links), README.md as the home page and CONTRIBUTING.md, their links rewritten to
+the site's. From :func:`bench.cli.build_parser`: the command-line reference. Everything is
+discovered when the site is built, so a new plugin or report has its page without an edit
+here.
+
+``mkdocs build`` adds the pages to the site through ``docs/hooks.py`` (named by mkdocs.yml),
+writing nothing into the clone; ``python -m bench.docs OUT_DIR`` writes them into a folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import inspect
+import posixpath
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from bench.markdown import code, frame_table, table, text
+
+#: repository files published under another site path (the rest keep theirs; docs/ is the site's root)
+RENAMED = {"README.md": "index.md", "CONTRIBUTING.md": "contributing.md"}
+#: the committed ``bench perf`` tables (:mod:`bench.perf`)
+PERF_DIR = "reports/perf"
+#: the width the command-line reference is wrapped to, whatever the terminal
+HELP_WIDTH = 100
+#: an inline link or image: (its text and the opening parenthesis, the target, an optional title and ")")
+_LINK = re.compile(r"(!?\[(?:\\.|[^\]\\])*\]\()([^)\s]+)((?:\s+\"[^\"]*\")?\))")
+
+
+@dataclass(frozen=True)
+class Preset:
+    """What a packaged sweep runs, and the paper its claims file names ("" for none)."""
+
+    name: str
+    description: str
+    methods: frozenset[str]
+    scenarios: frozenset[str]
+    paper: str
+
+
+def site_path(repo_path: str) -> str:
+    """Where the repository file ``repo_path`` (POSIX, relative) is published on the site."""
+    if repo_path in RENAMED:
+        return RENAMED[repo_path]
+    if repo_path.startswith("docs/"):
+        return repo_path.removeprefix("docs/")
+    if repo_path.startswith("reports/") and repo_path.endswith("/report.md"):
+        return repo_path.removesuffix("report.md") + "index.md"     # its figures/ stay beside it
+    return repo_path
+
+
+def relative(target: str, page: str) -> str:
+    """The link from site page ``page`` to site path ``target``."""
+    return posixpath.relpath(target, posixpath.dirname(page) or ".")
+
+
+def published(root: Path, repo_path: str, pages: dict[str, str | Path]) -> None:
+    """Add the repository Markdown file ``repo_path`` to ``pages``, each relative link to
+    another repository file rewritten to where that file is published, and the file
+    published too unless docs/ (the site's own folder) holds it; a link to nothing is left
+    as written, so the strict build names it."""
+    page = site_path(repo_path)
+
+    def relink(match: re.Match) -> str:
+        target, _, anchor = match.group(2).partition("#")
+        if not target or re.match(r"^[a-z][a-z0-9+.-]*:|^/", target):      # an anchor, a URL, absolute
+            return match.group(0)
+        linked = posixpath.normpath(posixpath.join(posixpath.dirname(repo_path), target))
+        if not (root / linked).is_file():
+            return match.group(0)
+        if not linked.startswith("docs/") and site_path(linked) not in pages:
+            pages[site_path(linked)] = root / linked
+        return match.group(1) + relative(site_path(linked), page) + (f"#{anchor}" if anchor else "") + match.group(3)
+
+    pages[page] = _LINK.sub(relink, (root / repo_path).read_text(encoding="utf-8"))
+
+
+def presets() -> list[Preset]:
+    """Every packaged preset as its plan resolves it (the methods an ``optional`` entry
+    skips in this environment included)."""
+    from bench.claims import preset_claims
+    from bench.config import parse_sweep_text
+    from bench.listing import presets as preset_files
+
+    out = []
+    for name, path in preset_files().items():
+        plan = parse_sweep_text(path.read_bytes(), f"preset {name}", allow_large=True)
+        claims = preset_claims(name)
+        out.append(Preset(name, " ".join(plan.description.split()),
+                          frozenset(m.name for m in plan.methods) | {str(m.get("name")) for m, _ in plan.skipped_methods},
+                          frozenset(s.name for s in plan.scenarios), claims.paper if claims else ""))
+    return out
+
+
+def fenced(body: str, info: str = "text") -> str:
+    """``body`` verbatim in a fenced block no backtick run inside it can close."""
+    fence = "`" * max(3, max((len(run) for run in re.findall("`+", body)), default=0) + 1)
+    return f"{fence}{info}\n{body}\n{fence}"
+
+
+def links(names, folder: str, page: str) -> str:
+    return ", ".join(f"[{code(n)}]({relative(f'{folder}/{n}.md', page)})" for n in sorted(names)) or "–"
+
+
+def preset_links(runs: list[Preset], reports: set[str], page: str) -> str:
+    """The presets of ``runs``, linked to their committed report when there is one, with the paper."""
+    items = []
+    for p in runs:
+        name = f"[{code(p.name)}]({relative(f'reports/{p.name}/index.md', page)})" if p.name in reports else code(p.name)
+        items.append(name + (f" (reproduces {text(p.paper)})" if p.paper else ""))
+    return "; ".join(items) or "–"
+
+
+def facts_list(facts: list[tuple[str, str]]) -> str:
+    """(label, Markdown) pairs as a list, the label in bold."""
+    return "\n".join(f"- **{label}**: {value}" for label, value in facts)
+
+
+def params_table(params_cls: type) -> str:
+    from bench.params import describe_params
+
+    rows = [[code(name), text(ptype), code(repr(default)), text(doc)]
+            for name, ptype, default, doc in describe_params(params_cls)]
+    return table(["parameter", "type", "default", "meaning [bounds: why]"], rows) if rows else "None."
+
+
+def perf_rows(root: Path, csv_name: str, column: str, name: str, page: str) -> str:
+    """The rows of the committed ``bench perf`` table ``csv_name`` whose ``column`` is ``name``."""
+    import pandas as pd
+
+    path = root / PERF_DIR / csv_name
+    source = f"[{PERF_DIR}/{csv_name}]({relative('reports/perf/index.md', page)})"
+    if not path.is_file():
+        return f"No committed `bench perf` table ({PERF_DIR}/{csv_name} is absent)."
+    rows = pd.read_csv(path)
+    rows = rows[rows[column] == name].drop(columns=column).dropna(axis=1, how="all").copy()
+    if rows.empty:
+        return f"No row in {source}: `bench perf` has not measured it yet."
+    seconds = [c for c in rows.columns if c.endswith("seconds_per_trial")]
+    rows[seconds] = rows[seconds] * 1e3
+    rows = rows.rename(columns={c: c.replace("seconds_", "ms_") for c in seconds})
+    return f"From {source} (one core; how it is measured: that page).\n\n{frame_table(rows)}"
+
+
+def component_page(kind: str, cls: type, page: str, facts: list[tuple[str, str]], perf: str) -> str:
+    """A method's or a scenario's page: its summary, ``facts`` (label, Markdown), docstring, parameters, speed."""
+    return "\n\n".join([
+        f"# {text(cls.name)}", text(cls.summary()),
+        facts_list(facts + [("class", code(f"{cls.__module__}.{cls.__qualname__}"))]),
+        "## Description", f"The {kind}'s docstring, as written.", fenced(inspect.getdoc(cls) or ""),
+        "## Parameters", "Set in a sweep's `params` table; `bench list -v` prints the same.", params_table(cls.Params),
+        "## Performance", perf]) + "\n"
+
+
+def plugin_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Preset], reports: set[str]) -> None:
+    """The task, method and scenario pages, and an index of each kind."""
+    from bench import registry
+    from bench.capabilities import fits
+
+    methods, scenarios, tasks = registry.methods(), registry.scenarios(), registry.tasks()
+    for name, cls in methods.items():
+        page = f"methods/{name}.md"
+        facts = [("task", links([cls.task], "tasks", page) + f": {text(tasks[cls.task].summary())}"),
+                 ("runs on", links([s for s, c in scenarios.items() if fits(cls, c)], "scenarios", page)),
+                 ("presets", preset_links([p for p in all_presets if name in p.methods], reports, page))]
+        pages[page] = component_page("method", cls, page, facts, perf_rows(root, "perf.csv", "method", name, page))
+    for name, cls in scenarios.items():
+        page = f"scenarios/{name}.md"
+        runners = [m for m, c in methods.items() if fits(c, cls)]
+        facts = [("tasks", links(cls.tasks, "tasks", page)), ("methods", links(runners, "methods", page)),
+                 ("small instance", code(cls.small_params) if cls.small_params else "the defaults"),
+                 ("presets", preset_links([p for p in all_presets if name in p.scenarios], reports, page))]
+        pages[page] = component_page("scenario", cls, page, facts, perf_rows(root, "scene.csv", "scenario", name, page))
+    for name, task in tasks.items():
+        page = f"tasks/{name}.md"
+        pages[page] = "\n\n".join([
+            f"# {text(name)}", text(task.summary()), fenced(inspect.getdoc(type(task)) or ""),
+            facts_list([("scenarios", links([s for s, c in scenarios.items() if name in c.tasks], "scenarios", page)),
+                        ("methods", links([m for m, c in methods.items() if c.task == name], "methods", page)),
+                        ("class", code(f"{type(task).__module__}.{type(task).__qualname__}"))])]) + "\n"
+    for folder, title, table_of in (("tasks", "Tasks", tasks), ("methods", "Methods", methods),
+                                    ("scenarios", "Scenarios", scenarios)):
+        rows = [[f"[{code(n)}]({n}.md)", text(c.summary())] for n, c in table_of.items()]
+        index = [f"# {title}", f"Every {folder[:-1]} registered when this site was built.", table([folder[:-1], "what"], rows)]
+        missing = [u for u in registry.unavailable()             # "methods.x", "bench.methods:x" -> "methods"
+                   if re.split(r"[.:]", u.source.removeprefix("bench."))[0] == folder]
+        if missing:
+            index += ["Plugins that could not be registered in the environment that built this site:",
+                      table(["plugin", "why"], [[code(u.name or u.source), text(u.error)] for u in missing])]
+        pages[f"{folder}/index.md"] = "\n\n".join(index) + "\n"
+
+
+def report_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Preset]) -> list[str]:
+    """Every committed report (``reports/NAME/report.md``) and the files it links; an index
+    of them, the paper reproductions first. Returns the reports' names."""
+    names = sorted(p.parent.name for p in (root / "reports").glob("*/report.md"))
+    for name in names:
+        published(root, f"reports/{name}/report.md", pages)
+    by_name = {p.name: p for p in all_presets}
+    rows = [[f"[{code(n)}]({n}/index.md)", text(by_name[n].paper) if n in by_name and by_name[n].paper else "–",
+             text(by_name[n].description) if n in by_name else "–"]
+            for n in sorted(names, key=lambda n: (not (n in by_name and by_name[n].paper), n))]
+    pages["reports/index.md"] = "\n\n".join([
+        "# Reports", "The committed report of each preset: a paper preset's report opens with its "
+        "claims against the paper (*Paper vs ours*); every report has its figures and the command that "
+        "reproduces it.", table(["report", "paper", "preset"], rows)]) + "\n"
+    return names
+
+
+def subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]   # noqa: SLF001 - argparse has no public accessor
+    return dict(actions[0].choices) if actions else {}
+
+
+def help_text(parser: argparse.ArgumentParser) -> str:
+    """``parser``'s ``--help``, wrapped to :data:`HELP_WIDTH` columns on any terminal."""
+    parser.formatter_class = functools.partial(parser.formatter_class, width=HELP_WIDTH)
+    return parser.format_help().rstrip()
+
+
+def cli_page() -> str:
+    from bench.cli import build_parser
+
+    parser = build_parser()
+    parts = ["# Command line", "The `bench` command's `--help` and each subcommand's, generated from its parser.",
+             "## bench", fenced(help_text(parser))]
+    for name, sub in subcommands(parser).items():
+        parts += [f"## bench {name}", fenced(help_text(sub))]
+    return "\n\n".join(parts) + "\n"
+
+
+def pages(root: str | Path) -> tuple[dict[str, str | Path], list]:
+    """(site path -> Markdown text or a file to copy, the generated part of the navigation)
+    for the repository at ``root``."""
+    root = Path(root)
+    out: dict[str, str | Path] = {}
+    all_presets = presets()
+    for repo_path in RENAMED:
+        if (root / repo_path).is_file():
+            published(root, repo_path, out)
+    reports = report_pages(root, out, all_presets)
+    plugin_pages(root, out, all_presets, set(reports))
+    out["cli.md"] = cli_page()
+
+    def section(folder: str, names) -> list:
+        return [f"{folder}/index.md"] + [{n: f"{folder}/{n}.md"} for n in names]
+
+    from bench import registry
+    nav = [{"Tasks": section("tasks", registry.tasks())}, {"Methods": section("methods", registry.methods())},
+           {"Scenarios": section("scenarios", registry.scenarios())},
+           {"Reports": ["reports/index.md"] + [{n: f"reports/{n}/index.md"} for n in reports]},
+           {"Command line": "cli.md"}]
+    return out, nav
+
+
+def write(out_dir: Path, generated: dict[str, str | Path]) -> None:
+    """The pages into ``out_dir`` (the files they link copied)."""
+    for path, content in generated.items():
+        target = out_dir / path
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if isinstance(content, Path):
+            target.write_bytes(content.read_bytes())
+        else:
+            target.write_text(content, encoding="utf-8")
+
+
+def folder_problem(out_dir: Path, root: Path) -> str | None:
+    """Why the pages cannot be written to ``out_dir`` from the repository at ``root``, in one line."""
+    if out_dir.exists() and not out_dir.is_dir():
+        return f"OUT_DIR: {out_dir} exists and is not a folder"
+    if not (root / "README.md").is_file():
+        return f"--root: {root} is not the repository's root (no README.md)"
+    return None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m bench.docs OUT_DIR [--root REPO]``: the generated pages into OUT_DIR."""
+    parser = argparse.ArgumentParser(prog="python -m bench.docs", description=__doc__.splitlines()[0])
+    parser.add_argument("out_dir", help="folder to write the pages into (created if absent)")
+    parser.add_argument("--root", default=".", help="the repository's root (default: the current folder)")
+    args = parser.parse_args(argv)
+    out_dir, root = Path(args.out_dir), Path(args.root)
+    problem = folder_problem(out_dir, root)
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2                                   # bad input (bench.errors.ConfigError's exit code)
+    write(out_dir, pages(root)[0])
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

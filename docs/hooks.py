@@ -1,0 +1,30 @@
+"""mkdocs hooks (mkdocs.yml, ``hooks``): the pages :mod:`bench.docs` generates from the code,
+added to the site and to its navigation after the hand-written pages, nothing written
+into the clone (docs/architecture.md, 'Documentation')."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bench.docs import pages
+
+_generated: dict = {}
+
+
+def on_config(config):
+    generated, nav = pages(Path(config.config_file_path).parent)
+    _generated.clear()
+    _generated.update(generated)
+    config.nav = list(config.nav or []) + nav
+    return config
+
+
+def on_files(files, config):
+    from mkdocs.structure.files import File
+
+    for path, content in _generated.items():
+        if isinstance(content, Path):
+            files.append(File.generated(config, path, abs_src_path=str(content)))
+        else:
+            files.append(File.generated(config, path, content=content))
+    return files

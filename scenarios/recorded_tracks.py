@@ -1,0 +1,521 @@
+"""Scenario ``recorded-tracks``: segments of recorded trajectories (a user's CSV or
+Parquet file, or the real aircraft of the ``traffic`` package's sample data) as the
+truth, measured in Gaussian noise at the SNR level; tracking and maneuver detection."""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+import pandas as pd
+from scipy.signal import savgol_filter
+
+from bench.batched import matvec
+from bench.core import MANEUVER_DETECTION, TRACKING, Batch, Scenario
+from bench.errors import ConfigError
+from bench.params import param
+from bench.registry import register_scenario
+from bench.tasks.detection import DetectionScene
+from bench.tasks.tracking import TrackingScene
+from models.geodesy import geodetic_to_enu
+from models.kalman import LinearGaussianFilter, steady_state
+from models.kinematics import KinematicModel, per_axis, position_index, state_labels
+from scenarios.cv_turn_cv import cv_model
+from scenarios.maneuvering import MIN_NOISE_M, NOISE_WHY
+
+MAX_STEPS = 10_000
+#: a file's columns: the track and the time, then planar metres or geodetic degrees
+TRACK, TIME = "track", "time_s"
+PLANAR = ("x_m", "y_m")
+GEODETIC = ("latitude", "longitude")
+ALTITUDE = "altitude_m"
+#: a ``traffic`` sample: "<category>/<name>", a file traffic/data/samples/<category>/<name>.json.gz
+SAMPLE_NAME = re.compile(r"[a-z0-9_]+/[a-z0-9_]+")
+SAMPLES_DIR = "traffic/data/samples"
+INSTALL_HINT = "pip install '.[data]' (the traffic package, whose wheel holds the samples)"
+FEET_M = 0.3048
+EPOCH = pd.Timestamp(0, tz="UTC")
+#: real turns out of the box: VOR calibration flights (circles and racetracks)
+DEFAULT_SAMPLES = ("calibration/ajaccio", "calibration/bornholm", "calibration/cardiff", "calibration/kiruna",
+                   "calibration/munich", "calibration/nice", "calibration/toulouse", "calibration/vienna")
+SNR_DEFINITION = (
+    "snr_db is a measurement-noise level relative to the scenario's reference noise (as in maneuvering-1d): "
+    "the position-measurement noise std is noise_std_m times 10^(-snr_db/20) on each axis, so 0 dB is the "
+    "reference and +6 dB halves the noise; the recorded motion does not change along the axis; snr_db=None "
+    "is the null: the same noise at 0 dB on segments without a maneuver."
+)
+#: what marks a maneuver (RecordedTracks, 'Maneuvers')
+MANEUVER_MEASURES = ("acceleration", "turn-rate")
+#: the reference filter of the innovation detectors: [x, vx, y, vy] of the [x, vx, ax, y, vy, ay] state
+CV_COMPONENTS = [0, 1, 3, 4]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class RecordedTrackScene(TrackingScene, DetectionScene):
+    """A tracking scene and a detection scene at once: the trackers read the kinematic
+    model, the detectors the reference filter (one batch serves both tasks)."""
+
+
+def sample_file(name: str) -> Path:
+    """The installed ``traffic`` sample ``name`` ("calibration/ajaccio"), found through the
+    package's metadata without importing it (its import is heavy); ConfigError naming
+    what to install when the package is absent."""
+    from importlib.metadata import PackageNotFoundError, distribution
+    check_sample_name(name)
+    try:
+        path = Path(distribution("traffic").locate_file(f"{SAMPLES_DIR}/{name}.json.gz"))
+    except PackageNotFoundError:
+        raise ConfigError("traffic_samples", f"the traffic samples need the optional extra: {INSTALL_HINT}") from None
+    if not path.is_file():
+        raise ConfigError("traffic_samples", f"no sample {name!r} in the installed traffic package ({path})")
+    return path
+
+
+def check_sample_name(name: str) -> None:
+    if not SAMPLE_NAME.fullmatch(name):
+        raise ConfigError("traffic_samples", f"{name!r} is not a sample name <category>/<name>, "
+                          "e.g. 'calibration/ajaccio'")
+
+
+def read_sample(name: str) -> pd.DataFrame:
+    """A ``traffic`` sample as a table of this module's columns: the aircraft (icao24) is
+    the track, altitude feet to metres; rows without a position (messages that carried
+    none) and repeated times are dropped."""
+    raw = pd.read_json(sample_file(name), compression="gzip")
+    table = pd.DataFrame({TRACK: name + ":" + raw["icao24"].astype(str),
+                          TIME: (pd.to_datetime(raw["timestamp"], utc=True) - EPOCH).dt.total_seconds(),
+                          GEODETIC[0]: raw["latitude"], GEODETIC[1]: raw["longitude"],
+                          ALTITUDE: pd.to_numeric(raw.get("altitude"), errors="coerce") * FEET_M})
+    table = table.dropna(subset=list(GEODETIC)).sort_values([TRACK, TIME], kind="stable")
+    return table.drop_duplicates([TRACK, TIME]).fillna({ALTITUDE: 0.0})
+
+
+def read_file(path: str) -> pd.DataFrame:
+    """A user's CSV, or Parquet (``.parquet``/``.pq``, with pyarrow), as read."""
+    if path.lower().endswith((".parquet", ".pq")):
+        try:
+            import pyarrow  # noqa: F401
+        except ImportError:
+            raise ConfigError("path", f"{path}: reading Parquet needs pyarrow (pip install pyarrow), "
+                              "or give a CSV") from None
+        return pd.read_parquet(path)
+    try:
+        return pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
+        raise ConfigError("path", f"{path}: not a readable CSV ({str(err).splitlines()[0]})") from None
+
+
+def checked_tracks(table: pd.DataFrame, where: str) -> pd.DataFrame:
+    """The table's tracks as (track, time_s, east, north) in metres, or a ConfigError naming
+    ``where`` (the file) and the first problem: a missing column, a non-numeric or NaN
+    value, too few points in a track, times not increasing within a track."""
+    planar = any(c in table for c in PLANAR)
+    columns = [TRACK, TIME, *(PLANAR if planar else GEODETIC)]
+    missing = [c for c in columns if c not in table]
+    if missing:
+        raise ConfigError("path", f"{where}: missing column(s) {', '.join(missing)} (needs {TRACK}, {TIME} and "
+                          f"{' and '.join(PLANAR)} in metres or {' and '.join(GEODETIC)} in degrees)")
+    if table.empty:
+        raise ConfigError("path", f"{where}: no rows")
+    values = {}
+    for c in columns[1:] + ([ALTITUDE] if not planar and ALTITUDE in table else []):
+        col = _numbers(table[c])
+        bad = ~np.isfinite(col)
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise ConfigError("path", f"{where}: column {c} has {int(bad.sum())} missing or non-numeric "
+                              f"value(s), the first in track {table[TRACK].iloc[row]!r} at row {row + 1}")
+        values[c] = col
+    tracks = table[TRACK].astype(str).to_numpy()
+    _check_times(tracks, values[TIME], where)
+    if planar:
+        east, north = values[PLANAR[0]], values[PLANAR[1]]
+    else:
+        east, north = _local_plane(tracks, values[GEODETIC[0]], values[GEODETIC[1]],
+                                   values.get(ALTITUDE, np.zeros(len(tracks))))
+    return pd.DataFrame({TRACK: tracks, TIME: values[TIME], "east": east, "north": north})
+
+
+def _numbers(column: pd.Series) -> np.ndarray:
+    """A column as floats, NaN where not a number; timestamps (a Parquet file's datetime
+    column) as seconds since the Unix epoch."""
+    if pd.api.types.is_datetime64_any_dtype(column):
+        seconds = (column.dt.tz_localize("UTC") if column.dt.tz is None else column) - EPOCH
+        return seconds.dt.total_seconds().to_numpy(float)
+    return pd.to_numeric(column, errors="coerce").to_numpy(float)
+
+
+def _check_times(tracks: np.ndarray, t: np.ndarray, where: str) -> None:
+    """Each track has two points at least, at strictly increasing times (rows in order)."""
+    ids, first, counts = np.unique(tracks, return_index=True, return_counts=True)
+    short = counts < 2
+    if short.any():
+        raise ConfigError("path", f"{where}: track {ids[short][0]!r} has {counts[short][0]} point(s); a track "
+                          "needs two at least")
+    same_track = tracks[1:] == tracks[:-1]
+    back = same_track & (np.diff(t) <= 0)
+    if back.any():
+        row = int(np.argmax(back)) + 1
+        raise ConfigError("path", f"{where}: time does not increase within track {tracks[row]!r} at row "
+                          f"{row + 1} ({t[row - 1]:g} s, then {t[row]:g} s); sort each track by time")
+    if len(ids) != 1 + int(np.count_nonzero(~same_track)):
+        raise ConfigError("path", f"{where}: the rows of a track are not contiguous (track {ids[0]!r} or "
+                          "another comes back after other tracks); group the rows by track")
+
+
+def _local_plane(tracks, lat, lon, alt) -> tuple[np.ndarray, np.ndarray]:
+    """East and north (m) of each track in the tangent plane at its first point
+    (:func:`models.geodesy.geodetic_to_enu`; height 0 at the reference)."""
+    east, north = np.empty(len(tracks)), np.empty(len(tracks))
+    starts = np.flatnonzero(np.r_[True, tracks[1:] != tracks[:-1]])
+    for a, b in zip(starts, np.r_[starts[1:], len(tracks)]):      # per track (a handful), not per point
+        enu = geodetic_to_enu(lat[a:b], lon[a:b], alt[a:b], lat[a], lon[a], 0.0)
+        east[a:b], north[a:b] = enu[:, 0], enu[:, 1]
+    return east, north
+
+
+@dataclass(frozen=True)
+class Bank:
+    """Every track resampled on the scenario's grid, spans concatenated: position,
+    velocity, acceleration (M, 2) each, the maneuver indicator (M,), and the first
+    step of every segment with a maneuver onset at ``onset_step`` (``onsets``) or
+    without a maneuver (``quiet``)."""
+    pos: np.ndarray
+    vel: np.ndarray
+    acc: np.ndarray
+    maneuvering: np.ndarray
+    onsets: np.ndarray
+    quiet: np.ndarray
+    spans: int
+
+
+def _span_states(t: np.ndarray, xy: np.ndarray, dt: float, window: int) -> np.ndarray:
+    """(k, 3, 2) position, velocity, acceleration on the grid t0 + dt j inside the span: the
+    recorded positions interpolated linearly onto the grid, then a Savitzky-Golay filter of
+    ``window`` steps (a local least-squares cubic, its value and first two derivatives)."""
+    grid = t[0] + dt * np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
+    on_grid = np.stack([np.interp(grid, t, xy[:, axis]) for axis in range(2)], axis=-1)
+    return np.stack([savgol_filter(on_grid, window, 3, deriv=order, delta=dt, axis=0, mode="interp")
+                     for order in range(3)], axis=1)
+
+
+def maneuver_size(states: np.ndarray, measure: str) -> np.ndarray:
+    """(M,) per step: |a| (m/s^2), or the turn rate |v x a| / |v|^2 in deg/s (0 below 1 m/s,
+    where a heading is not defined: a hovering helicopter does not turn)."""
+    (vx, vy), (ax, ay) = states[:, 1].T, states[:, 2].T
+    if measure == "acceleration":
+        return np.hypot(ax, ay)
+    speed_sq = vx * vx + vy * vy
+    rate = np.abs(vx * ay - vy * ax) / np.maximum(speed_sq, 1.0)
+    return np.where(speed_sq >= 1.0, np.rad2deg(rate), 0.0)
+
+
+def maneuver_threshold(p) -> float:
+    return p.maneuver_threshold_m_s2 if p.maneuver_measure == "acceleration" else p.turn_rate_threshold_deg_s
+
+
+def smoothing_steps(p) -> int:
+    """The Savitzky-Golay window in steps: ``smoothing_s`` rounded to an odd count, five at least."""
+    return max(5, 2 * int(round(p.smoothing_s / p.dt_s / 2.0)) + 1)
+
+
+def _runs_at_least(flags: np.ndarray, boundary: np.ndarray, length: int) -> np.ndarray:
+    """``flags`` with its runs of True shorter than ``length`` steps cleared; a run ends at a
+    span boundary (``boundary`` True at each span's first step)."""
+    start = flags & (boundary | ~np.r_[False, flags[:-1]])
+    run_id = np.cumsum(start) * flags
+    sizes = np.bincount(run_id)
+    return flags & (sizes[run_id] >= length)
+
+
+def build_bank(p) -> Bank:
+    """The resampled tracks of config ``p`` and the segments a trial can draw
+    (docstring of :class:`RecordedTracks`)."""
+    table = load_tracks(p)
+    window = smoothing_steps(p)
+    parts, boundary = [], []
+    for _, track in table.groupby(TRACK, sort=False):
+        t, xy = track[TIME].to_numpy(), track[["east", "north"]].to_numpy()
+        cuts = np.flatnonzero(np.diff(t) > p.max_gap_s) + 1
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(t)]):
+            if t[b - 1] - t[a] >= (max(p.steps, window) - 1) * p.dt_s:
+                states = _span_states(t[a:b], xy[a:b], p.dt_s, window)
+                parts.append(states)
+                boundary.append(np.r_[True, np.zeros(len(states) - 1, bool)])
+    if not parts:
+        raise ConfigError("steps", f"{source_text(p)}: no gap-free span (gaps over max_gap_s = {p.max_gap_s:g} s "
+                          f"end one) lasts steps x dt_s = {p.steps} x {p.dt_s:g} s")
+    states, first = np.concatenate(parts), np.concatenate(boundary)
+    maneuvering = _runs_at_least(maneuver_size(states, p.maneuver_measure) >= maneuver_threshold(p), first,
+                                 p.min_maneuver_steps)
+    onsets, quiet = _segment_starts(maneuvering, first, p.steps, p.onset_step)
+    return Bank(pos=states[:, 0], vel=states[:, 1], acc=states[:, 2], maneuvering=maneuvering,
+                onsets=onsets, quiet=quiet, spans=len(parts))
+
+
+def _segment_starts(maneuvering: np.ndarray, first: np.ndarray, K: int, onset: int):
+    """First steps of the K-step segments inside one span: those whose steps before
+    ``onset`` are quiet and whose step ``onset`` maneuvers, and those quiet throughout."""
+    M = len(maneuvering)
+    span_id = np.cumsum(first)
+    s = np.arange(max(M - K + 1, 0))
+    inside = span_id[s] == span_id[s + K - 1]
+    busy = np.r_[0, np.cumsum(maneuvering)]                       # maneuvering steps before each index
+    quiet_before = busy[s + onset] - busy[s] == 0
+    quiet_all = busy[s + K] - busy[s] == 0
+    return s[inside & quiet_before & maneuvering[s + onset]], s[inside & quiet_all]
+
+
+def source_text(p) -> str:
+    return p.path or "traffic samples " + ", ".join(p.traffic_samples)
+
+
+def load_tracks(p) -> pd.DataFrame:
+    """The config's tracks (track, time_s, east, north), checked (:func:`checked_tracks`)."""
+    if p.path:
+        return checked_tracks(read_file(p.path), p.path)
+    return pd.concat([checked_tracks(read_sample(name), f"traffic sample {name}") for name in p.traffic_samples],
+                     ignore_index=True)
+
+
+@functools.lru_cache(maxsize=8)
+def bank_of(p) -> Bank:
+    """:func:`build_bank` once per config and process: a worker reads the file once for
+    all its units and trials (params are frozen, hence hashable)."""
+    return build_bank(p)
+
+
+@register_scenario
+class RecordedTracks(Scenario):
+    """Segments of recorded tracks (a CSV/Parquet file, or the traffic package's real aircraft) as truth; position measurements in Gaussian noise.
+
+    **Source**: ``path``, a CSV (or Parquet, with pyarrow) of one row per recorded
+    point: ``track`` (an id), ``time_s`` (s, increasing within a track, rows grouped
+    by track; in Parquet also a timestamp column), and either ``x_m``, ``y_m`` (planar metres) or ``latitude``,
+    ``longitude`` (degrees, WGS-84) with an optional ``altitude_m`` (m above the
+    ellipsoid, 0 if absent), converted to east/north metres in the tangent plane
+    at each track's first point (:mod:`models.geodesy`). A relative path is read
+    from the sweep file's folder; the file's content is part of the config's
+    identity, so a changed file is a different sweep. Or, with ``path`` empty,
+    ``traffic_samples``: names of the ADS-B trajectories the ``traffic`` package
+    ships as sample data (``"calibration/ajaccio"``: VOR calibration flights in
+    circles and racetracks; ``gliders/...``, ``ambulances/...``,
+    ``featured/zero_gravity``), read from the installed package with pandas
+    (``pip install '.[data]'``); the aircraft (icao24) is the track, altitude
+    feet to metres, rows without a position dropped. A bad file (a missing
+    column, a NaN or non-numeric value, a track with fewer than two points,
+    time not increasing within a track, more than ``max_file_mb``) is refused
+    in one line naming the file, before anything runs.
+
+    **Truth**: each track is cut into gap-free spans (a gap over ``max_gap_s``
+    ends a span) and each span resampled on the grid of ``dt_s``: a cubic
+    smoothing spline per axis (``scipy.interpolate.make_smoothing_spline``, its
+    penalty by generalised cross-validation, so the recorder's quantisation and
+    noise do not become acceleration), position, velocity and acceleration its
+    value and first two derivatives. The state per axis is ``[p, v, a]``,
+    ``("x", "vx", "ax", "y", "vy", "ay")`` with x east and y north
+    (:mod:`models.kinematics`). Only the horizontal plane is tracked.
+
+    **Maneuvers** (the onset truth): with ``maneuver_measure = "acceleration"``
+    (the default) a step maneuvers when the magnitude of the horizontal
+    acceleration is at least ``maneuver_threshold_m_s2`` (a turn, a speed
+    change, or both; a coordinated turn at rate omega and speed v has |a| =
+    omega v: 3 deg/s at 60 m/s is 3.1 m/s^2); with ``"turn-rate"`` when the
+    turn rate |v x a| / |v|^2 is at least ``turn_rate_threshold_deg_s`` (turns
+    only; none below 1 m/s). Either in runs of at least ``min_maneuver_steps``
+    (a shorter run is quiet: a gust, not a maneuver).
+
+    **Segments**: a trial is a segment of ``steps`` steps inside one span whose
+    first ``onset_step`` steps are quiet and whose step ``onset_step`` maneuvers:
+    the onset is at ``onset_step`` in every trial, as in ``cv-turn-cv``. Under
+    the null (``snr_db = None``; detectors' calibration) a trial is a segment
+    quiet throughout. The segment is drawn uniformly among all of them from the
+    trial's own stream. Each segment is moved so that its first position is the
+    trackers' prior mean (the origin) plus a draw from the prior: the shape,
+    speed and turns are the aircraft's; where it flew is not.
+
+    **Measurements**: z_k = position_k + v_k, v_k ~ N(0, sigma^2 I_2), sigma =
+    ``noise_std_m`` x 10^(-snr_db/20) (the SNR definition of ``maneuvering-1d``;
+    the null: 0 dB). Replaying recorded measurements is not provided.
+
+    **Random draws**, in this order whatever the SNR (common random numbers):
+    the segment (one uniform), the initial position offset (2), the reference
+    filter's initial error (4), the measurement noise (K, 2).
+
+    **Scene** (:class:`RecordedTrackScene`, a tracking and a detection scene):
+    for the trackers ``model`` a :class:`models.kinematics.KinematicModel`
+    (dt, the noise std, 2 axes, prior mean 0 with stds ``initial_*``),
+    ``maneuver_mask`` (n, K) and ``maneuver_onset_steps`` (n, 1) (n, 0 under the
+    null); for the detectors ``onset_step`` (None under the null),
+    ``null_onset_step``, ``offset_step`` (n,) (the first quiet step after the
+    onset, K if the maneuver outlasts the segment), ``detect_window_steps``,
+    ``warmup_steps`` and ``reference_filter``: the CV (DWNA) filter of
+    ``cv-turn-cv`` at Kalata's ``tracking_index``, started at its steady state
+    around the truth.
+    """
+
+    name = "recorded-tracks"
+    tasks = (TRACKING, MANEUVER_DETECTION)
+    provides = frozenset({"kinematic-model", "reference-filter"})
+    small_params: ClassVar[dict] = {"traffic_samples": ["calibration/ajaccio"], "steps": 30, "onset_step": 10,
+                                    "detect_window_steps": 10}
+    perf_sizes: ClassVar[dict] = {"replay": ({"steps": 500, "onset_step": 20, "detect_window_steps": 20,
+                                              "traffic_samples": ["featured/zero_gravity"], "dt_s": 1.0}, 1000)}
+    perf_snr_db: ClassVar[float] = 0.0
+    perf_targets: ClassVar[dict] = {"replay": {"seconds_per_trial": 1e-3}}
+
+    @dataclass(frozen=True)
+    class Params:
+        path: str = param("", "CSV or Parquet of recorded tracks (columns in the scenario's description); "
+                          "relative to the sweep file's folder; '' to use traffic_samples", kind="path")
+        traffic_samples: tuple[str, ...] = param(
+            DEFAULT_SAMPLES, "with path '': the traffic package's sample trajectories, '<category>/<name>' "
+            "(needs pip install '.[data]')", max_len=64)
+        max_file_mb: float = param(500.0, "a larger file is refused (MB)", gt=0.0, le=1e5,
+                                   why="any positive size; the file is read whole into memory")
+        dt_s: float = param(5.0, "time step T of the resampled tracks (s)", ge=0.05, le=100.0,
+                            why="radar revisit times; ADS-B positions come every 0.5 to 10 s")
+        max_gap_s: float = param(15.0, "a gap between recorded points longer than this ends a span (s)",
+                                 gt=0.0, le=3600.0, why="any positive duration up to an hour")
+        smoothing_s: float = param(30.0, "span of the Savitzky-Golay filter giving the truth's position, "
+                                   "velocity and acceleration (s; rounded to an odd number of steps, 5 at least)",
+                                   gt=0.0, le=3600.0, why="any positive duration up to an hour")
+        steps: int = param(60, "steps K of a segment (one trial)", ge=5, le=MAX_STEPS,
+                           why="five steps at least; the trackers loop over steps in Python")
+        onset_step: int = param(20, "step of the maneuver onset in every trial; the steps before it are quiet",
+                                ge=1, le=MAX_STEPS - 1, why="after step 0, before the end (checked against steps)")
+        maneuver_threshold_m_s2: float = param(
+            2.0, "a step maneuvers when its horizontal acceleration is at least this (m/s^2)", gt=0.0, le=1000.0,
+            why="any positive acceleration up to 100 g")
+        maneuver_measure: str = param("acceleration", "what marks a maneuver: 'acceleration' (horizontal, any "
+                                      "direction) or 'turn-rate' (turns only)", choices=MANEUVER_MEASURES)
+        turn_rate_threshold_deg_s: float = param(
+            1.5, "with maneuver_measure 'turn-rate': a step maneuvers when its turn rate is at least this (deg/s)",
+            gt=0.0, le=360.0, why="any positive rate up to a turn per second")
+        min_maneuver_steps: int = param(3, "shorter runs of maneuvering steps count as quiet", ge=1,
+                                        le=MAX_STEPS, why="one step at least")
+        detect_window_steps: int = param(20, "a detection counts if the first alarm at or after the onset comes "
+                                         "within this many steps", ge=1, le=MAX_STEPS - 1,
+                                         why="within the steps after the onset (checked against them)")
+        warmup_steps: int = param(5, "steps ignored before false alarms are counted", ge=0, le=MAX_STEPS - 2,
+                                  why="before the onset (checked against it)")
+        tracking_index: float = param(0.1, "Kalata's tracking index of the detectors' reference CV filter",
+                                      ge=1e-4, le=100.0, why="as in cv-turn-cv")
+        noise_std_m: float = param(50.0, "reference std of the position-measurement noise per axis (m), at 0 dB",
+                                   ge=MIN_NOISE_M, le=1e4, why=NOISE_WHY)
+        initial_position_std_m: float = param(50.0, "prior std of the initial position per axis (m)",
+                                              ge=1e-3, le=1e5, why="P0 stays positive definite")
+        initial_velocity_std_m_s: float = param(200.0, "prior std of the initial velocity per axis (m/s); the "
+                                                "prior mean is 0", ge=1e-3, le=1e4,
+                                                why="P0 stays positive definite; at most 10 km/s")
+        initial_accel_std_m_s2: float = param(5.0, "prior std of the initial acceleration per axis (m/s^2)",
+                                              ge=1e-3, le=1e3, why="P0 stays positive definite; at most 100 g")
+        divergence_bound_m: float = param(1000.0, "a trial diverged if its position error exceeds this (m)",
+                                          gt=0.0, le=1e7, why="any positive distance")
+
+        def validate(self) -> None:
+            """The checks that cost nothing: the steps, the source, the file's size (the
+            file's content, and whether the traffic samples are installed, are checked by
+            :meth:`RecordedTracks.check_config` and :meth:`RecordedTracks.data_files`)."""
+            for name, last in (("onset_step", self.onset_step), ("warmup_steps", self.warmup_steps + 1),
+                               ("detect_window_steps", self.onset_step + self.detect_window_steps)):
+                if last > (self.steps - 1 if name == "onset_step" else self.steps):
+                    raise ConfigError(name, f"{getattr(self, name)} does not fit {self.steps} steps with the "
+                                      f"onset at step {self.onset_step}")
+            if self.warmup_steps >= self.onset_step:
+                raise ConfigError("warmup_steps", f"must be < onset_step = {self.onset_step}")
+            if self.path:
+                size_mb = os.path.getsize(self.path) / 1e6
+                if size_mb > self.max_file_mb:
+                    raise ConfigError("path", f"{self.path}: {size_mb:.6g} MB is over max_file_mb = "
+                                      f"{self.max_file_mb:g} MB")
+            elif not self.traffic_samples:
+                raise ConfigError("path", "no tracks: give a path or traffic_samples")
+            else:
+                for name in self.traffic_samples:
+                    check_sample_name(name)
+
+    def data_files(self, params) -> list[Path]:
+        """The file, or the traffic samples read (their content is the config's identity)."""
+        return [Path(params.path)] if params.path else [sample_file(name) for name in params.traffic_samples]
+
+    def check_config(self, params) -> None:
+        """Reads and checks the tracks (ConfigError naming the file) and that they hold a
+        segment with an onset and a quiet one."""
+        bank = bank_of(params)
+        for what, starts in (("with a maneuver onset at step onset_step after quiet steps", bank.onsets),
+                             ("quiet throughout (for the detectors' null trials)", bank.quiet)):
+            if len(starts) == 0:
+                field = "maneuver_threshold_m_s2" if params.maneuver_measure == "acceleration" else \
+                    "turn_rate_threshold_deg_s"
+                raise ConfigError(field, f"{source_text(params)}: no segment of {params.steps} steps {what} at "
+                                  f"{field} = {maneuver_threshold(params):g}")
+
+    def check_snr(self, params, snr_db: float) -> str | None:
+        low = params.noise_std_m * 10.0 ** (-snr_db / 20.0)
+        return None if low >= MIN_NOISE_M else f"the noise std scaled to it, {low:.3g} m, is below {MIN_NOISE_M:g} m"
+
+    def unit_memory_bytes(self, params, n: int) -> int:
+        """About 150 float64 values per trial and step, as ``maneuvering-1d`` (truth, draws,
+        a tracker's estimate and covariance), and the resampled tracks."""
+        return 8 * 150 * n * params.steps
+
+    @staticmethod
+    def model(p, snr_db: float | None) -> KinematicModel:
+        """The trackers' :class:`~models.kinematics.KinematicModel` at ``snr_db``: prior mean 0."""
+        P0 = per_axis(np.diag([p.initial_position_std_m, p.initial_velocity_std_m_s, p.initial_accel_std_m_s2]) ** 2, 2)
+        return KinematicModel(dt_s=float(p.dt_s), noise_std_m=float(noise_std(p, snr_db)), dims=2,
+                              x0=np.zeros(6), P0=P0)
+
+    def generate(self, params, snr_db: float | None, n: int, rng) -> Batch:
+        p, K = params, params.steps
+        u = rng.random(1)[:, 0]                                   # draws first, fixed order and shapes
+        e0 = rng.standard_normal(2)
+        e_ref = rng.standard_normal(4)
+        g = rng.standard_normal((K, 2))
+        bank, null = bank_of(p), snr_db is None
+        starts = bank.quiet if null else bank.onsets
+        start = starts[np.minimum((u * len(starts)).astype(np.int64), len(starts) - 1)]
+        steps = start[:, None] + np.arange(K)                     # (n, K) rows of the bank
+        pos = bank.pos[steps] - bank.pos[start][:, None] + p.initial_position_std_m * e0[:, None, :]
+        # (n, K, 2 axes, [p, v, a]) -> [x, vx, ax, y, vy, ay]
+        truth = np.stack([pos, bank.vel[steps], bank.acc[steps]], axis=-1).reshape(n, K, 6)
+        model = self.model(p, snr_db)
+        z = pos + model.noise_std_m * g
+        scene = RecordedTrackScene(
+            snr_definition=SNR_DEFINITION, realised_snr_db=np.full(n, 0.0 if null else float(snr_db)),
+            position_index=position_index(2), model=model, state_labels=state_labels(2),
+            measurement_labels=("x", "y"), divergence_bound_m=float(p.divergence_bound_m),
+            maneuver_mask=bank.maneuvering[steps],
+            maneuver_onset_steps=np.full((n, 0 if null else 1), p.onset_step, np.int64),
+            onset_step=None if null else p.onset_step, null_onset_step=p.onset_step,
+            offset_step=None if null else self._offsets(bank.maneuvering[steps], p.onset_step),
+            detect_window_steps=p.detect_window_steps, warmup_steps=p.warmup_steps,
+            reference_filter=self._reference_filter(p, model.noise_std_m, truth[:, 0], e_ref))
+        return Batch(t=p.dt_s * np.arange(K), truth=truth, z=z, scene=scene, trials=np.asarray(rng.trials))
+
+    @staticmethod
+    def _offsets(maneuvering: np.ndarray, onset: int) -> np.ndarray:
+        """(n,) the first quiet step after the onset, K where the maneuver outlasts the segment."""
+        after = ~maneuvering[:, onset:]
+        return np.where(after.any(axis=1), onset + np.argmax(after, axis=1), maneuvering.shape[1])
+
+    @staticmethod
+    def _reference_filter(p, sigma: float, truth0: np.ndarray, e: np.ndarray) -> LinearGaussianFilter:
+        """The detectors' CV filter (``cv-turn-cv``'s), started at its steady-state prior
+        around the true [x, vx, y, vy] of step 0."""
+        model = cv_model(p.dt_s, sigma, p.tracking_index)
+        P0 = steady_state(model)[0]
+        return LinearGaussianFilter(model=model, x0=truth0[:, CV_COMPONENTS] + matvec(np.linalg.cholesky(P0), e),
+                                    P0=P0)
+
+
+def noise_std(p, snr_db: float | None) -> float:
+    """The measurement-noise std (m) at ``snr_db`` (0 dB under the null)."""
+    return p.noise_std_m * 10.0 ** (-(0.0 if snr_db is None else float(snr_db)) / 20.0)

@@ -1,0 +1,313 @@
+"""Scenario recorded-tracks on a small CSV each test writes itself: the resampled truth,
+the onset truth, the segments, the trackers and detectors on it, common random numbers,
+the file's content in the config's identity, and bad files refused in one line (exit 2,
+nothing written). The traffic samples are tried only where the package is installed."""
+
+import importlib.util
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench import registry
+from bench.capabilities import fits
+from bench.errors import ConfigError
+from bench.identity import config_identity
+from bench.params import build_params
+from bench.rng import TrialRNG
+from scenarios.recorded_tracks import RecordedTracks
+from tests.conftest import run_bench
+
+SPEED = 100.0                     # m/s
+TURN = np.deg2rad(3.0)            # rad/s: |a| = SPEED * TURN = 5.2 m/s^2
+#: a small config: 5 s steps, 40 per trial, the onset at step 10
+SMALL = {"dt_s": 5.0, "steps": 40, "onset_step": 10, "detect_window_steps": 10, "smoothing_s": 20.0,
+         "maneuver_threshold_m_s2": 2.0}
+
+
+def turn_track(t: np.ndarray, turn_start: float, turn_s: float) -> np.ndarray:
+    """(len(t), 2) east/north of a target flying east at SPEED, turning left at TURN from
+    ``turn_start`` for ``turn_s`` seconds, straight again after."""
+    tau = np.clip(t - turn_start, 0.0, turn_s)                  # time spent turning so far
+    before = np.minimum(t, turn_start)
+    after = np.clip(t - turn_start - turn_s, 0.0, None)
+    heading_end = TURN * turn_s
+    x = SPEED * before + SPEED / TURN * np.sin(TURN * tau) + SPEED * np.cos(heading_end) * after
+    y = SPEED / TURN * (1.0 - np.cos(TURN * tau)) + SPEED * np.sin(heading_end) * after
+    return np.stack([x, y], axis=-1)
+
+
+def tracks_table(seed: int = 0) -> pd.DataFrame:
+    """Two tracks sampled about every 2 s (jittered), one with a 60 s gap."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for name, length, turn_start, gap in (("A", 700.0, 250.0, None), ("B", 900.0, 400.0, (600.0, 660.0))):
+        t = np.cumsum(rng.uniform(1.5, 2.5, int(length / 2)))
+        if gap:
+            t = t[(t < gap[0]) | (t > gap[1])]
+        xy = turn_track(t, turn_start, 60.0) + [1000.0, -500.0]
+        rows.append(pd.DataFrame({"track": name, "time_s": t, "x_m": xy[:, 0], "y_m": xy[:, 1]}))
+    return pd.concat(rows, ignore_index=True)
+
+
+def small_params_on_a_csv(folder) -> dict:
+    """A small config of the scenario on tracks_table() written into ``folder``: for the
+    tests that run every scenario's small instance without the optional [data] extra."""
+    path = folder / "tracks.csv"
+    tracks_table().to_csv(path, index=False)
+    return {**SMALL, "path": str(path)}
+
+
+@pytest.fixture
+def csv(tmp_path):
+    path = tmp_path / "tracks.csv"
+    tracks_table().to_csv(path, index=False)
+    return path
+
+
+def params_for(path, **changes):
+    return build_params(RecordedTracks.Params, {**SMALL, "path": str(path), **changes})
+
+
+def generate(p, snr_db, trials=range(6), seed=5):
+    return RecordedTracks().generate(p, snr_db, len(trials), TrialRNG(seed, 0, 1, list(trials)))
+
+
+def test_truth_is_the_recorded_motion_with_the_onset_at_onset_step(csv):
+    p = params_for(csv)
+    RecordedTracks().check_config(p)
+    batch = generate(p, 10.0)
+    n, K = 6, p.steps
+    assert batch.truth.shape == (n, K, 6) and batch.z.shape == (n, K, 2)
+    speed = np.hypot(batch.truth[..., 1], batch.truth[..., 4])
+    np.testing.assert_allclose(speed, SPEED, rtol=0.02)               # the smoothing keeps the speed
+    accel = np.hypot(batch.truth[..., 2], batch.truth[..., 5])
+    scene = batch.scene
+    assert scene.onset_step == p.onset_step and (scene.maneuver_onset_steps == p.onset_step).all()
+    assert not scene.maneuver_mask[:, :p.onset_step].any() and scene.maneuver_mask[:, p.onset_step].all()
+    # the turn's steps carry its acceleration; the quiet steps far from it almost none
+    turning = scene.maneuver_mask
+    assert np.median(accel[turning]) == pytest.approx(SPEED * TURN, rel=0.1)
+    assert np.median(accel[:, :p.onset_step - 3]) < 0.2
+    np.testing.assert_array_equal(scene.offset_step, np.argmax(~turning[:, p.onset_step:], axis=1) + p.onset_step)
+    # each segment starts at the prior mean (the origin) up to a draw of the prior's position std
+    assert np.all(np.abs(batch.truth[:, 0, [0, 3]]) < 5 * p.initial_position_std_m)
+    noise = batch.z - batch.truth[..., [0, 3]]
+    assert np.std(noise) == pytest.approx(50.0 * 10 ** (-0.5), rel=0.15)
+
+
+def test_turn_rate_marks_turns_and_not_speed_changes():
+    """maneuver_size on three states (position, velocity, acceleration per axis): a turn at
+    3 deg/s and 100 m/s, a speed change along the track, a hover (no heading)."""
+    from scenarios.recorded_tracks import maneuver_size
+    turn = [[0, 0], [SPEED, 0], [0, SPEED * TURN]]
+    speeding_up = [[0, 0], [SPEED, 0], [3.0, 0]]
+    hover = [[0, 0], [0.1, 0], [0, 3.0]]
+    states = np.array([turn, speeding_up, hover], float)
+    np.testing.assert_allclose(maneuver_size(states, "acceleration"), [SPEED * TURN, 3.0, 3.0])
+    np.testing.assert_allclose(maneuver_size(states, "turn-rate"), [3.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_the_turn_rate_measure_finds_the_same_turns(csv):
+    p = params_for(csv, maneuver_measure="turn-rate", turn_rate_threshold_deg_s=1.5)
+    batch = generate(p, 10.0)
+    mask = batch.scene.maneuver_mask
+    assert not mask[:, :p.onset_step].any() and mask[:, p.onset_step].all()
+    from scenarios.recorded_tracks import maneuver_size
+    states = batch.truth.reshape(*batch.truth.shape[:2], 2, 3).transpose(0, 1, 3, 2).reshape(-1, 3, 2)
+    rate = maneuver_size(states, "turn-rate").reshape(mask.shape)
+    assert np.median(rate[mask]) == pytest.approx(3.0, rel=0.1)
+
+
+def test_null_trials_are_quiet_segments_with_the_same_draws(csv):
+    p = params_for(csv)
+    null, alt = generate(p, None), generate(p, 0.0)
+    assert null.scene.onset_step is None and null.scene.maneuver_onset_steps.shape == (6, 0)
+    assert not null.scene.maneuver_mask.any()
+    # common random numbers: the noise draws are the same; the noise std is 0 dB's under the null
+    np.testing.assert_allclose(null.z - null.truth[..., [0, 3]], alt.z - alt.truth[..., [0, 3]])
+
+
+def test_a_trial_is_the_same_alone_and_in_a_batch(csv):
+    p = params_for(csv)
+    whole, part = generate(p, 5.0, range(8)), generate(p, 5.0, range(5, 8))
+    np.testing.assert_array_equal(whole.truth[5:], part.truth)
+    np.testing.assert_array_equal(whole.z[5:], part.z)
+
+
+def test_geodetic_columns_are_converted_to_metres(tmp_path):
+    """A track along the equator at 3 km, 0.001 degree of longitude a second: in the tangent
+    plane at its first point, east = (a + h) sin(lon - lon0) exactly, north 0."""
+    t = np.arange(0.0, 600.0, 1.0)
+    table = pd.DataFrame({"track": "eq", "time_s": t, "latitude": 0.0, "longitude": 10.0 + 1e-3 * t,
+                          "altitude_m": 3000.0})
+    path = tmp_path / "geo.csv"
+    table.to_csv(path, index=False)
+    from scenarios.recorded_tracks import checked_tracks
+    enu = checked_tracks(pd.read_csv(path), str(path))
+    np.testing.assert_allclose(enu["east"], (6_378_137.0 + 3000.0) * np.sin(np.deg2rad(1e-3 * t)), atol=1e-6)
+    assert np.abs(enu["north"]).max() < 1.0
+
+
+@pytest.mark.parametrize("method", ["cv-kf", "imm-cv-ca", "ar-adaptive", "innovation", "cumulant"])
+def test_builtin_methods_run_on_it(csv, method):
+    """The kinematic trackers and the innovation detectors pair with it and give finite
+    output; a tracker does not lose the target (its error within ten noise stds)."""
+    cls = registry.get_method(method)
+    assert fits(cls, RecordedTracks)
+    batch = generate(params_for(csv), 10.0)
+    out = cls().run(batch, cls.Params())
+    if cls.task == "tracking":
+        err = out.estimate[..., [0, 3]] - batch.truth[..., [0, 3]]
+        assert np.sqrt(np.mean(err[:, 5:] ** 2)) < 10 * 50.0 * 10 ** (-0.5)
+    else:
+        assert np.isfinite(out.statistic).all()
+
+
+def test_a_changed_file_is_a_different_config(csv):
+    p = params_for(csv)
+    before = config_identity(RecordedTracks, p)["identity"]
+    table = pd.read_csv(csv)
+    table.loc[3, "x_m"] += 1.0
+    table.to_csv(csv, index=False)
+    assert config_identity(RecordedTracks, p)["identity"] != before
+    assert str(csv) in config_identity(RecordedTracks, p)["data"]
+
+
+def _broken(table: pd.DataFrame, how: str) -> pd.DataFrame:
+    if how == "missing column":
+        return table.drop(columns="y_m")
+    if how == "time not increasing":
+        table.loc[10, "time_s"] = table.loc[8, "time_s"]
+        return table
+    if how == "NaN position":
+        table.loc[12, "x_m"] = np.nan
+        return table
+    if how == "empty track":
+        return pd.concat([table, pd.DataFrame({"track": ["C"], "time_s": [1.0], "x_m": [0.0], "y_m": [0.0]})])
+    if how == "no rows":
+        return table.iloc[:0]
+    raise AssertionError(how)
+
+
+PROBLEMS = {"missing column": "missing column(s) y_m", "time not increasing": "time does not increase",
+            "NaN position": "column x_m has 1 missing", "empty track": "track 'C' has 1 point",
+            "no rows": "no rows"}
+
+
+@pytest.mark.parametrize("how", list(PROBLEMS))
+def test_a_bad_file_is_refused_naming_the_file_and_the_problem(tmp_path, how):
+    path = tmp_path / "bad.csv"
+    _broken(tracks_table(), how).to_csv(path, index=False)
+    with pytest.raises(ConfigError) as err:
+        RecordedTracks().check_config(params_for(path))
+    assert str(path) in err.value.problem and PROBLEMS[how] in err.value.problem
+    assert "\n" not in str(err.value)
+
+
+def test_a_file_over_the_size_limit_is_refused_unread(tmp_path):
+    """A 2 GB file (sparse: nothing is written to disk) fails on its size alone."""
+    path = tmp_path / "huge.csv"
+    with open(path, "wb") as f:
+        f.truncate(2 * 10 ** 9)
+    with pytest.raises(ConfigError, match=r"huge.csv: 2000 MB is over max_file_mb = 500 MB"):
+        params_for(path)
+
+
+SWEEP = """
+name = "mine"
+scenario = "recorded-tracks"
+trials = 4
+seed = 1
+snr_db = [10]
+[scenario_params]
+path = "{path}"
+dt_s = 5.0
+steps = 40
+onset_step = 10
+detect_window_steps = 10
+smoothing_s = 20.0
+[[methods]]
+name = "cv-kf"
+"""
+
+
+def test_the_cli_refuses_a_bad_file_in_one_line_and_writes_nothing(tmp_path):
+    (tmp_path / "data").mkdir()
+    _broken(tracks_table(), "time not increasing").to_csv(tmp_path / "data" / "bad.csv", index=False)
+    (tmp_path / "sweeps").mkdir()
+    sweep = tmp_path / "sweeps" / "mine.toml"
+    sweep.write_text(SWEEP.format(path="../data/bad.csv"))       # relative to the sweep's folder, via ..
+    out = tmp_path / "out"
+    proc = run_bench("run", sweep, "--out", out, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "bad.csv" in lines[0] and "time does not increase" in lines[0], lines
+    assert not out.exists()
+
+
+def test_a_path_via_dotdot_or_a_symlink_is_read_and_left_unchanged(tmp_path, csv):
+    """Outside the sweep's folder is allowed (read-only): the file is read, never written."""
+    link = tmp_path / "sub" / "link.csv"
+    link.parent.mkdir()
+    os.symlink(csv, link)
+    before = csv.read_bytes(), csv.stat().st_mtime_ns
+    for value in ("../tracks.csv", "link.csv"):
+        p = build_params(RecordedTracks.Params, {**SMALL, "path": value}, tmp_path / "sub")
+        RecordedTracks().check_config(p)
+        assert generate(p, 0.0).truth.shape == (6, 40, 6)
+    assert (csv.read_bytes(), csv.stat().st_mtime_ns) == before
+
+
+def test_a_parquet_file_with_timestamps_reads_as_the_csv(tmp_path, csv):
+    """The same tracks as Parquet, their times as UTC timestamps: the same truth."""
+    pytest.importorskip("pyarrow", reason="Parquet needs pyarrow")
+    table = tracks_table()
+    table["time_s"] = pd.Timestamp("2026-01-01", tz="UTC") + pd.to_timedelta(table["time_s"], unit="s")
+    path = tmp_path / "tracks.parquet"
+    table.to_parquet(path)
+    from_csv, from_parquet = generate(params_for(csv), 0.0), generate(params_for(path), 0.0)
+    # float64 seconds since 1970 resolve 0.2 us: 20 um at 100 m/s
+    np.testing.assert_allclose(from_parquet.truth, from_csv.truth, atol=1e-3)
+
+
+def test_too_short_tracks_are_refused(csv):
+    with pytest.raises(ConfigError, match="no gap-free span"):
+        RecordedTracks().check_config(params_for(csv, steps=400, onset_step=10))
+
+
+@pytest.mark.skipif(importlib.util.find_spec("traffic") is not None, reason="the traffic package is installed")
+def test_without_traffic_the_samples_say_what_to_install():
+    p = build_params(RecordedTracks.Params, {"traffic_samples": ["calibration/ajaccio"]})
+    for check in (RecordedTracks().data_files, RecordedTracks().check_config):
+        with pytest.raises(ConfigError, match=r"pip install '\.\[data\]'"):
+            check(p)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("traffic") is None,
+                    reason="needs the optional extra [data] (the traffic package)")
+def test_a_traffic_sample_gives_real_turns():
+    p = build_params(RecordedTracks.Params, RecordedTracks.small_params)
+    RecordedTracks().check_config(p)
+    batch = generate(p, 0.0)
+    accel = np.hypot(batch.truth[..., 2], batch.truth[..., 5])
+    assert (accel[:, p.onset_step] >= p.maneuver_threshold_m_s2).all()
+    assert all(f.name.endswith(".json.gz") for f in RecordedTracks().data_files(p))
+
+
+@pytest.mark.slow
+def test_the_readme_example_runs_the_builtin_methods_on_a_users_csv(tmp_path):
+    """README, 'Your own recorded tracks': its TOML as printed (fewer trials), a CSV beside
+    it, no harness edit: the trackers and a detector run, and the report draws a trial in the plane."""
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    section = readme.split("## Your own recorded tracks", 1)[1]
+    sweep = re.search(r"```toml\n(.*?)```", section, re.S).group(1)
+    (tmp_path / "my.toml").write_text(sweep + 'trials = 6\n[calibration]\nh0_trials = 50\n[record]\ntrials = 1\n')
+    small_params_on_a_csv(tmp_path)
+    run_bench("run", "my.toml", "--out", "out", "--quiet", cwd=tmp_path, check=True)
+    summary = pd.read_csv(tmp_path / "out" / "summary.csv")
+    assert {"cv-kf", "imm-cv-ca", "innovation"} <= set(summary.config) and summary.n_trials.min() == 6
+    assert (tmp_path / "out" / "figures" / "tracking_trial_plane_recorded-tracks.png").exists()
