@@ -341,11 +341,11 @@ class RecordedTracks(Scenario):
     in one line naming the file, before anything runs.
 
     **Truth**: each track is cut into gap-free spans (a gap over ``max_gap_s``
-    ends a span) and each span resampled on the grid of ``dt_s``: a cubic
-    smoothing spline per axis (``scipy.interpolate.make_smoothing_spline``, its
-    penalty by generalised cross-validation, so the recorder's quantisation and
-    noise do not become acceleration), position, velocity and acceleration its
-    value and first two derivatives. The state per axis is ``[p, v, a]``,
+    ends a span) and each span resampled on the grid of ``dt_s``: the recorded
+    positions interpolated linearly onto it, then a Savitzky-Golay filter (a
+    local least-squares cubic over ``smoothing_s``, so the recorder's
+    quantisation and noise do not become acceleration), position, velocity and
+    acceleration its value and first two derivatives. The state per axis is ``[p, v, a]``,
     ``("x", "vx", "ax", "y", "vy", "ay")`` with x east and y north
     (:mod:`models.kinematics`). Only the horizontal plane is tracked. With
     ``masked_gap_s`` (over ``max_gap_s``), a gap over ``max_gap_s`` but at most
