@@ -17,6 +17,7 @@ import pandas as pd
 from scipy.signal import savgol_filter
 
 from bench.batched import matvec
+from bench.capabilities import VALID_STEP_MASKS
 from bench.core import MANEUVER_DETECTION, TRACKING, Batch, Scenario
 from bench.errors import ConfigError
 from bench.params import param
@@ -183,7 +184,8 @@ def _local_plane(tracks, lat, lon, alt) -> tuple[np.ndarray, np.ndarray]:
 @dataclass(frozen=True)
 class Bank:
     """Every track resampled on the scenario's grid, spans concatenated: position,
-    velocity, acceleration (M, 2) each, the maneuver indicator (M,), and the first
+    velocity, acceleration (M, 2) each, the maneuver indicator (M,) (False at a
+    missing step), whether each step was recorded (M,), and the first
     step of every segment with a maneuver onset at ``onset_step`` (``onsets``) or
     without a maneuver (``quiet``)."""
     pos: np.ndarray
@@ -193,6 +195,8 @@ class Bank:
     onsets: np.ndarray
     quiet: np.ndarray
     spans: int
+    #: (M,) bool: False at the steps inside a masked gap (``masked_gap_s``), True elsewhere
+    valid: np.ndarray
 
 
 def _span_states(t: np.ndarray, xy: np.ndarray, dt: float, window: int) -> np.ndarray:
@@ -203,6 +207,14 @@ def _span_states(t: np.ndarray, xy: np.ndarray, dt: float, window: int) -> np.nd
     on_grid = np.stack([np.interp(grid, t, xy[:, axis]) for axis in range(2)], axis=-1)
     return np.stack([savgol_filter(on_grid, window, 3, deriv=order, delta=dt, axis=0, mode="interp")
                      for order in range(3)], axis=1)
+
+
+def _gap_steps(t: np.ndarray, dt: float, steps: int, max_gap_s: float) -> np.ndarray:
+    """(steps,) bool: the grid steps t0 + dt j strictly inside a recorded gap over
+    ``max_gap_s`` (no point of the track near them: missing, not interpolated)."""
+    grid = t[0] + dt * np.arange(steps)
+    after = np.clip(np.searchsorted(t, grid, side="right"), 1, len(t) - 1)   # t[after - 1] <= grid < t[after]
+    return (grid > t[after - 1]) & (grid < t[after]) & (t[after] - t[after - 1] > max_gap_s)
 
 
 def maneuver_size(states: np.ndarray, measure: str) -> np.ndarray:
@@ -239,37 +251,52 @@ def build_bank(p) -> Bank:
     (docstring of :class:`RecordedTracks`)."""
     table = load_tracks(p)
     window = smoothing_steps(p)
-    parts, boundary = [], []
+    parts, boundary, recorded = [], [], []
     for _, track in table.groupby(TRACK, sort=False):
         t, xy = track[TIME].to_numpy(), track[["east", "north"]].to_numpy()
-        cuts = np.flatnonzero(np.diff(t) > p.max_gap_s) + 1
+        cuts = np.flatnonzero(np.diff(t) > max(p.max_gap_s, p.masked_gap_s)) + 1
         for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(t)]):
             if t[b - 1] - t[a] >= (max(p.steps, window) - 1) * p.dt_s:
                 states = _span_states(t[a:b], xy[a:b], p.dt_s, window)
                 parts.append(states)
                 boundary.append(np.r_[True, np.zeros(len(states) - 1, bool)])
+                recorded.append(~_gap_steps(t[a:b], p.dt_s, len(states), p.max_gap_s))
     if not parts:
-        raise ConfigError("steps", f"{source_text(p)}: no gap-free span (gaps over max_gap_s = {p.max_gap_s:g} s "
-                          f"end one) lasts steps x dt_s = {p.steps} x {p.dt_s:g} s")
-    states, first = np.concatenate(parts), np.concatenate(boundary)
-    maneuvering = _runs_at_least(maneuver_size(states, p.maneuver_measure) >= maneuver_threshold(p), first,
-                                 p.min_maneuver_steps)
-    onsets, quiet = _segment_starts(maneuvering, first, p.steps, p.onset_step)
+        ends = f"masked_gap_s = {p.masked_gap_s:g} s" if masks_gaps(p) else f"max_gap_s = {p.max_gap_s:g} s"
+        raise ConfigError("steps", f"{source_text(p)}: no {'' if masks_gaps(p) else 'gap-free '}span (gaps over "
+                          f"{ends} end one) lasts steps x dt_s = {p.steps} x {p.dt_s:g} s")
+    states, first, valid = np.concatenate(parts), np.concatenate(boundary), np.concatenate(recorded)
+    # a maneuver is seen on the steps the track has: the straight line across a gap is no evidence
+    maneuvering = _runs_at_least((maneuver_size(states, p.maneuver_measure) >= maneuver_threshold(p)) & valid,
+                                 first, p.min_maneuver_steps)
+    onsets, quiet = _segment_starts(maneuvering, first, valid, p.steps, p.onset_step)
     return Bank(pos=states[:, 0], vel=states[:, 1], acc=states[:, 2], maneuvering=maneuvering,
-                onsets=onsets, quiet=quiet, spans=len(parts))
+                onsets=onsets, quiet=quiet, spans=len(parts), valid=valid)
 
 
-def _segment_starts(maneuvering: np.ndarray, first: np.ndarray, K: int, onset: int):
-    """First steps of the K-step segments inside one span: those whose steps before
-    ``onset`` are quiet and whose step ``onset`` maneuvers, and those quiet throughout."""
+def _segment_starts(maneuvering: np.ndarray, first: np.ndarray, valid: np.ndarray, K: int, onset: int):
+    """First steps of the K-step segments inside one span that start at a recorded step:
+    those whose steps before ``onset`` are quiet and whose step ``onset`` maneuvers (so
+    was recorded), and those quiet throughout."""
     M = len(maneuvering)
     span_id = np.cumsum(first)
     s = np.arange(max(M - K + 1, 0))
-    inside = span_id[s] == span_id[s + K - 1]
+    inside = (span_id[s] == span_id[s + K - 1]) & valid[s]
     busy = np.r_[0, np.cumsum(maneuvering)]                       # maneuvering steps before each index
     quiet_before = busy[s + onset] - busy[s] == 0
     quiet_all = busy[s + K] - busy[s] == 0
     return s[inside & quiet_before & maneuvering[s + onset]], s[inside & quiet_all]
+
+
+def masks_gaps(p) -> bool:
+    """Whether config ``p`` keeps the gaps over ``max_gap_s`` (up to ``masked_gap_s``) in a
+    span, their steps missing."""
+    return p.masked_gap_s > 0.0
+
+
+def is_ragged(p) -> bool:
+    """Whether the trials of config ``p`` may miss steps: masked gaps, or lengths under ``steps``."""
+    return masks_gaps(p) or 0 < p.min_steps < p.steps
 
 
 def source_text(p) -> str:
@@ -314,13 +341,17 @@ class RecordedTracks(Scenario):
     in one line naming the file, before anything runs.
 
     **Truth**: each track is cut into gap-free spans (a gap over ``max_gap_s``
-    ends a span) and each span resampled on the grid of ``dt_s``: a cubic
-    smoothing spline per axis (``scipy.interpolate.make_smoothing_spline``, its
-    penalty by generalised cross-validation, so the recorder's quantisation and
-    noise do not become acceleration), position, velocity and acceleration its
-    value and first two derivatives. The state per axis is ``[p, v, a]``,
+    ends a span) and each span resampled on the grid of ``dt_s``: the recorded
+    positions interpolated linearly onto it, then a Savitzky-Golay filter (a
+    local least-squares cubic over ``smoothing_s``, so the recorder's
+    quantisation and noise do not become acceleration), position, velocity and
+    acceleration its value and first two derivatives. The state per axis is ``[p, v, a]``,
     ``("x", "vx", "ax", "y", "vy", "ay")`` with x east and y north
-    (:mod:`models.kinematics`). Only the horizontal plane is tracked.
+    (:mod:`models.kinematics`). Only the horizontal plane is tracked. With
+    ``masked_gap_s`` (over ``max_gap_s``), a gap over ``max_gap_s`` but at most
+    ``masked_gap_s`` long no longer ends a span: the grid steps strictly inside
+    it are *missing* (the truth there is the straight line across the gap,
+    smoothed; no trial is measured or scored there).
 
     **Maneuvers** (the onset truth): with ``maneuver_measure = "acceleration"``
     (the default) a step maneuvers when the magnitude of the horizontal
@@ -329,14 +360,16 @@ class RecordedTracks(Scenario):
     omega v: 3 deg/s at 60 m/s is 3.1 m/s^2); with ``"turn-rate"`` when the
     turn rate |v x a| / |v|^2 is at least ``turn_rate_threshold_deg_s`` (turns
     only; none below 1 m/s). Either in runs of at least ``min_maneuver_steps``
-    (a shorter run is quiet: a gust, not a maneuver).
+    (a shorter run is quiet: a gust, not a maneuver), counted over the steps a
+    track has: a missing step never maneuvers.
 
     **Segments**: a trial is a segment of ``steps`` steps inside one span whose
     first ``onset_step`` steps are quiet and whose step ``onset_step`` maneuvers:
     the onset is at ``onset_step`` in every trial, as in ``cv-turn-cv``. Under
     the null (``snr_db = None``; detectors' calibration) a trial is a segment
     quiet throughout. The segment is drawn uniformly among all of them from the
-    trial's own stream. Each segment is moved so that its first position is the
+    trial's own stream; it starts at a recorded step, and its onset step is a
+    recorded one. Each segment is moved so that its first position is the
     trackers' prior mean (the origin) plus a draw from the prior: the shape,
     speed and turns are the aircraft's; where it flew is not.
 
@@ -344,15 +377,27 @@ class RecordedTracks(Scenario):
     ``noise_std_m`` x 10^(-snr_db/20) (the SNR definition of ``maneuvering-1d``;
     the null: 0 dB). Replaying recorded measurements is not provided.
 
+    **Ragged trials** (docs/architecture.md, 'Ragged batches'): with
+    ``min_steps`` (after ``onset_step``, at most ``steps``) a trial's length L
+    is drawn uniformly in ``min_steps``..``steps`` from its own stream and its
+    steps from L on are padding. With masked gaps or ``min_steps`` the scene's
+    ``valid_steps`` (n, K) is False at a segment's missing steps and its
+    padding, the measurements there NaN, ``maneuver_mask`` False there; the
+    config then requires ``valid-step-masks``, so the maneuver detectors
+    (whose windows assume every step) do not run on it and the kinematic
+    trackers do. Without either option (the default) every trial has every
+    step and ``valid_steps`` is None.
+
     **Random draws**, in this order whatever the SNR (common random numbers):
     the segment (one uniform), the initial position offset (2), the reference
-    filter's initial error (4), the measurement noise (K, 2).
+    filter's initial error (4), the measurement noise (K, 2), the trial's
+    length (one uniform; used with ``min_steps``).
 
     **Scene** (:class:`RecordedTrackScene`, a tracking and a detection scene):
     for the trackers ``model`` a :class:`models.kinematics.KinematicModel`
     (dt, the noise std, 2 axes, prior mean 0 with stds ``initial_*``),
     ``maneuver_mask`` (n, K) and ``maneuver_onset_steps`` (n, 1) (n, 0 under the
-    null); for the detectors ``onset_step`` (None under the null),
+    null), ``valid_steps`` (n, K) or None (above); for the detectors ``onset_step`` (None under the null),
     ``null_onset_step``, ``offset_step`` (n,) (the first quiet step after the
     onset, K if the maneuver outlasts the segment), ``detect_window_steps``,
     ``warmup_steps`` and ``reference_filter``: the CV (DWNA) filter of
@@ -383,6 +428,12 @@ class RecordedTracks(Scenario):
                             why="radar revisit times; ADS-B positions come every 0.5 to 10 s")
         max_gap_s: float = param(15.0, "a gap between recorded points longer than this ends a span (s)",
                                  gt=0.0, le=3600.0, why="any positive duration up to an hour")
+        masked_gap_s: float = param(0.0, "gaps over max_gap_s and at most this long stay inside a span, their "
+                                    "steps missing (a ragged batch; s); 0: every such gap ends a span", ge=0.0,
+                                    le=86400.0, why="0, or over max_gap_s (checked) up to a day")
+        min_steps: int = param(0, "a trial's length is drawn between this and steps, the rest padding (a ragged "
+                               "batch); 0: every trial has steps", ge=0, le=MAX_STEPS,
+                               why="0, or after onset_step and at most steps (checked)")
         smoothing_s: float = param(30.0, "span of the Savitzky-Golay filter giving the truth's position, "
                                    "velocity and acceleration (s; rounded to an odd number of steps, 5 at least)",
                                    gt=0.0, le=3600.0, why="any positive duration up to an hour")
@@ -430,6 +481,12 @@ class RecordedTracks(Scenario):
                                       f"onset at step {self.onset_step}")
             if self.warmup_steps >= self.onset_step:
                 raise ConfigError("warmup_steps", f"must be < onset_step = {self.onset_step}")
+            if self.min_steps and not self.onset_step < self.min_steps <= self.steps:
+                raise ConfigError("min_steps", f"{self.min_steps} is not 0 or in onset_step + 1 = "
+                                  f"{self.onset_step + 1} to steps = {self.steps} (every trial holds the onset)")
+            if 0.0 < self.masked_gap_s <= self.max_gap_s:
+                raise ConfigError("masked_gap_s", f"{self.masked_gap_s:g} s masks no gap: it is 0 or over "
+                                  f"max_gap_s = {self.max_gap_s:g} s")
             if self.path:
                 size_mb = os.path.getsize(self.path) / 1e6
                 if size_mb > self.max_file_mb:
@@ -457,6 +514,10 @@ class RecordedTracks(Scenario):
                 raise ConfigError(field, f"{source_text(params)}: no segment of {params.steps} steps {what} at "
                                   f"{field} = {maneuver_threshold(params):g}")
 
+    def requires(self, params) -> frozenset[str]:
+        """``valid-step-masks`` when the trials may miss steps (masked gaps, or ``min_steps``)."""
+        return frozenset({VALID_STEP_MASKS}) if is_ragged(params) else frozenset()
+
     def check_snr(self, params, snr_db: float) -> str | None:
         low = params.noise_std_m * 10.0 ** (-snr_db / 20.0)
         return None if low >= MIN_NOISE_M else f"the noise std scaled to it, {low:.3g} m, is below {MIN_NOISE_M:g} m"
@@ -479,6 +540,7 @@ class RecordedTracks(Scenario):
         e0 = rng.standard_normal(2)
         e_ref = rng.standard_normal(4)
         g = rng.standard_normal((K, 2))
+        u_length = rng.random(1)[:, 0]
         bank, null = bank_of(p), snr_db is None
         starts = bank.quiet if null else bank.onsets
         start = starts[np.minimum((u * len(starts)).astype(np.int64), len(starts) - 1)]
@@ -488,17 +550,28 @@ class RecordedTracks(Scenario):
         truth = np.stack([pos, bank.vel[steps], bank.acc[steps]], axis=-1).reshape(n, K, 6)
         model = self.model(p, snr_db)
         z = pos + model.noise_std_m * g
+        valid = self._valid_steps(p, bank.valid[steps], u_length) if is_ragged(p) else None
+        if valid is not None:
+            z = np.where(valid[..., None], z, np.nan)
         scene = RecordedTrackScene(
             snr_definition=SNR_DEFINITION, realised_snr_db=np.full(n, 0.0 if null else float(snr_db)),
             position_index=position_index(2), model=model, state_labels=state_labels(2),
             measurement_labels=("x", "y"), divergence_bound_m=float(p.divergence_bound_m),
-            maneuver_mask=bank.maneuvering[steps],
+            maneuver_mask=bank.maneuvering[steps] if valid is None else bank.maneuvering[steps] & valid,
             maneuver_onset_steps=np.full((n, 0 if null else 1), p.onset_step, np.int64),
             onset_step=None if null else p.onset_step, null_onset_step=p.onset_step,
             offset_step=None if null else self._offsets(bank.maneuvering[steps], p.onset_step),
             detect_window_steps=p.detect_window_steps, warmup_steps=p.warmup_steps,
-            reference_filter=self._reference_filter(p, model.noise_std_m, truth[:, 0], e_ref))
+            reference_filter=self._reference_filter(p, model.noise_std_m, truth[:, 0], e_ref), valid_steps=valid)
         return Batch(t=p.dt_s * np.arange(K), truth=truth, z=z, scene=scene, trials=np.asarray(rng.trials))
+
+    @staticmethod
+    def _valid_steps(p, recorded: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """(n, K) the steps a trial has: recorded (not inside a masked gap) and before its
+        length, drawn uniformly in min_steps..steps (all of them without min_steps)."""
+        low = p.min_steps or p.steps
+        length = low + np.minimum((u * (p.steps - low + 1)).astype(np.int64), p.steps - low)
+        return recorded & (np.arange(p.steps)[None, :] < length[:, None])
 
     @staticmethod
     def _offsets(maneuvering: np.ndarray, onset: int) -> np.ndarray:

@@ -13,11 +13,13 @@ import pandas as pd
 import pytest
 
 from bench import registry
-from bench.capabilities import fits
+from bench.capabilities import VALID_STEP_MASKS, fits
+from bench.core import Batch
 from bench.errors import ConfigError
 from bench.identity import config_identity
 from bench.params import build_params
 from bench.rng import TrialRNG
+from bench.tasks.tracking import TrackingScene
 from scenarios.recorded_tracks import RecordedTracks
 from tests.conftest import run_bench
 
@@ -311,3 +313,125 @@ def test_the_readme_example_runs_the_builtin_methods_on_a_users_csv(tmp_path):
     summary = pd.read_csv(tmp_path / "out" / "summary.csv")
     assert {"cv-kf", "imm-cv-ca", "innovation"} <= set(summary.config) and summary.n_trials.min() == 6
     assert (tmp_path / "out" / "figures" / "tracking_trial_plane_recorded-tracks.png").exists()
+
+
+# Ragged trials (the scenario's 'Ragged trials'): a track with a 40 s gap inside a span
+# (masked_gap_s), another shorter one, and trials of random lengths (min_steps).
+GAP = (320.0, 360.0)              # s: no point strictly between; 40 s is over max_gap_s, under masked_gap_s
+RAGGED = {"masked_gap_s": 60.0, "min_steps": 20}
+NORTH = np.array([[0.0, 1.0], [-1.0, 0.0]])     # a row (x, y) times this: (-y, x), east becomes north
+
+
+def turn_velocity(t: np.ndarray, turn_start: float, turn_s: float) -> np.ndarray:
+    """(len(t), 2) the velocity of turn_track."""
+    heading = TURN * np.clip(t - turn_start, 0.0, turn_s)
+    return SPEED * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+
+
+def ragged_csv(folder) -> Path:
+    """Track 'gap', east then turning at 250 s, recorded every second for 600 s but never
+    inside GAP; track 'short', 450 s, flying north, turning at 150 s, no gap."""
+    t_gap = np.arange(0.0, 601.0)
+    t_gap = t_gap[(t_gap <= GAP[0]) | (t_gap >= GAP[1])]
+    t_short = np.arange(0.0, 451.0)
+    rows = [pd.DataFrame({"track": name, "time_s": t, "x_m": xy[:, 0], "y_m": xy[:, 1]})
+            for name, t, xy in (("gap", t_gap, turn_track(t_gap, 250.0, 60.0)),
+                                ("short", t_short, turn_track(t_short, 150.0, 60.0) @ NORTH))]
+    path = folder / "ragged.csv"
+    pd.concat(rows, ignore_index=True).to_csv(path, index=False)
+    return path
+
+
+def expected_gap_steps(truth_velocity: np.ndarray, dt: float) -> np.ndarray:
+    """(K,) bool, by hand: the steps of a trial of track 'gap' strictly inside GAP. The
+    segment's first grid step s (time s dt from the track's start) is the one whose
+    analytic velocity best matches the trial's truth."""
+    K = len(truth_velocity)
+    candidates = np.arange(0, 120 - K + 1)
+    times = dt * (candidates[:, None] + np.arange(K))
+    misfit = [np.sum((turn_velocity(row, 250.0, 60.0) - truth_velocity) ** 2) for row in times]
+    t = times[int(np.argmin(misfit))]
+    return (t > GAP[0]) & (t < GAP[1])
+
+
+def test_a_gap_and_different_lengths_make_a_ragged_batch(tmp_path):
+    p = params_for(ragged_csv(tmp_path), **RAGGED)
+    RecordedTracks().check_config(p)
+    assert RecordedTracks().requires(p) == {VALID_STEP_MASKS}
+    batch = generate(p, 10.0, range(16))
+    valid, K = batch.scene.valid_steps, p.steps
+    assert valid.shape == (16, K)
+    steps = np.arange(K)
+    east = batch.truth[:, 0, 1] > 0.5 * SPEED                      # track 'gap' flies east first, 'short' north
+    assert east.any() and (~east).any()
+    seen_gap = 0
+    for i in range(16):
+        gap = expected_gap_steps(batch.truth[i][:, [1, 4]], p.dt_s) if east[i] else np.zeros(K, bool)
+        lengths = [L for L in range(p.min_steps, K + 1) if np.array_equal(valid[i], ~gap & (steps < L))]
+        assert lengths, (i, valid[i].astype(int))
+        seen_gap += bool((gap & (steps < lengths[-1])).any())
+    assert seen_gap and len({int(np.flatnonzero(v)[-1]) for v in valid}) > 3    # gaps seen, lengths differ
+    # the measurements are NaN exactly at the missing steps; the maneuvers only at steps a trial has
+    np.testing.assert_array_equal(np.isnan(batch.z).any(axis=-1), ~valid)
+    scene = batch.scene
+    assert not (scene.maneuver_mask & ~valid).any()
+    assert valid[:, p.onset_step].all() and scene.maneuver_mask[:, p.onset_step].all()
+    assert not scene.maneuver_mask[:, :p.onset_step].any()
+    np.testing.assert_array_equal(generate(p, 10.0, range(12, 16)).scene.valid_steps, valid[12:])
+    null = generate(p, None, range(16)).scene
+    assert null.valid_steps[:, 0].all() and not (null.valid_steps[:, p.min_steps:].all(axis=1)).all()
+
+
+def test_default_params_keep_every_step(csv):
+    p = params_for(csv)
+    assert RecordedTracks().requires(p) == frozenset() and generate(p, 0.0).scene.valid_steps is None
+    assert RecordedTracks().requires(params_for(csv, min_steps=p.steps)) == frozenset()
+
+
+@pytest.mark.parametrize("changes, field", [({"min_steps": 10}, "min_steps"), ({"min_steps": 41}, "min_steps"),
+                                            ({"masked_gap_s": 15.0}, "masked_gap_s")])
+def test_ragged_options_out_of_their_range_are_refused(csv, changes, field):
+    with pytest.raises(ConfigError) as err:
+        params_for(csv, **changes)
+    assert err.value.field == field
+
+
+def _trial_alone(batch: Batch, i: int, length: int) -> Batch:
+    """Trial ``i`` of ``batch`` as a batch of one, cut to its ``length`` steps."""
+    sc = batch.scene
+    scene = TrackingScene(model=sc.model, state_labels=sc.state_labels, position_index=sc.position_index,
+                          valid_steps=sc.valid_steps[i:i + 1, :length])
+    return Batch(t=batch.t[:length], truth=batch.truth[i:i + 1, :length], z=batch.z[i:i + 1, :length],
+                 scene=scene, trials=batch.trials[i:i + 1])
+
+
+@pytest.mark.parametrize("method", ["cv-kf", "imm-cv-ca"])
+def test_a_tracker_on_the_ragged_batch_gives_each_trial_what_it_gets_alone(tmp_path, method):
+    batch = generate(params_for(ragged_csv(tmp_path), **RAGGED), 10.0, range(10))
+    valid = batch.scene.valid_steps
+    lengths = [int(np.flatnonzero(v)[-1]) + 1 for v in valid]
+    assert any((~valid[i, :L]).any() for i, L in enumerate(lengths))          # a gap inside some trial
+    cls = registry.get_method(method)
+    out = cls().run(batch, cls.Params())
+    assert np.isfinite(out.estimate).all()
+    for i, L in enumerate(lengths):
+        alone = cls().run(_trial_alone(batch, i, L), cls.Params())
+        np.testing.assert_array_equal(out.estimate[i, :L], alone.estimate[0])
+        np.testing.assert_array_equal(out.covariance[i, :L], alone.covariance[0])
+
+
+def test_the_cli_runs_the_trackers_on_ragged_tracks_and_refuses_a_detector(tmp_path):
+    ragged_csv(tmp_path)
+    sweep = SWEEP.format(path="ragged.csv").replace(
+        "[[methods]]", "masked_gap_s = 60.0\nmin_steps = 20\n[[methods]]") + '[[methods]]\nname = "imm-cv-ca"\n'
+    (tmp_path / "with_detector.toml").write_text(sweep + '[[methods]]\nname = "innovation"\n')
+    proc = run_bench("run", "with_detector.toml", "--out", "refused", cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "'innovation'" in lines[0] and VALID_STEP_MASKS in lines[0], lines
+    assert not (tmp_path / "refused").exists()
+    (tmp_path / "trackers.toml").write_text(sweep)
+    run_bench("run", "trackers.toml", "--out", "out", "--quiet", cwd=tmp_path, check=True)
+    summary = pd.read_csv(tmp_path / "out" / "summary.csv")
+    assert set(summary.method) == {"cv-kf", "imm-cv-ca"} and (summary.n_trials == 4).all()
+    assert np.isfinite(summary.rmse_mean).all()
