@@ -86,19 +86,22 @@ def published(root: Path, repo_path: str, pages: dict[str, str | Path]) -> None:
 
 
 def presets() -> list[Preset]:
-    """Every packaged preset as its plan resolves it (the methods an ``optional`` entry
-    skips in this environment included)."""
+    """Every packaged preset's description, method and scenario names, read from its TOML
+    as written (not resolved into a plan: resolving reads a preset's data files, e.g.
+    real-trajectories' samples of an optional extra, which building the docs must not need)."""
+    import tomllib
+
     from bench.claims import preset_claims
-    from bench.config import parse_sweep_text
     from bench.listing import presets as preset_files
 
     out = []
     for name, path in preset_files().items():
-        plan = parse_sweep_text(path.read_bytes(), f"preset {name}", allow_large=True)
+        sweep = tomllib.loads(path.read_text(encoding="utf-8"))
+        scenarios = [sweep["scenario"]] if "scenario" in sweep else [s["name"] for s in sweep.get("scenarios", [])]
         claims = preset_claims(name)
-        out.append(Preset(name, " ".join(plan.description.split()),
-                          frozenset(m.name for m in plan.methods) | {str(m.get("name")) for m, _ in plan.skipped_methods},
-                          frozenset(s.name for s in plan.scenarios), claims.paper if claims else ""))
+        out.append(Preset(name, " ".join(str(sweep.get("description", "")).split()),
+                          frozenset(str(m["name"]) for m in sweep.get("methods", [])),
+                          frozenset(map(str, scenarios)), claims.paper if claims else ""))
     return out
 
 
