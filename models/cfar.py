@@ -46,10 +46,15 @@ transform of t, so "S > -log10(pfa)" is exactly "t > K(pfa)" and one
 threshold serves every detector, window and dimension. S is capped at
 :data:`MAX_SIGNIFICANCE` (Pfa = 1e-300, the smallest the calibration takes).
 
+GO and SO (the larger or smaller of the two half-windows' means, our
+baselines beside the chapter's detectors) share CA's windows and running
+sums; their maths is in :mod:`models.cfar_halves`.
+
 All kernels take a batch of maps with a leading trial axis; the per-axis
 ones run along axis 1 of a (P, A, B) array (the Doppler axis on the
-transposed maps), and :func:`window_cfar` runs CA or OS in one fused pass
-per map (:func:`_window_cfar_fused`), bit-identical to its composed steps
+transposed maps), and :func:`window_cfar` runs a detector in one fused pass
+per map (CA, GO, SO streamed row by row, :func:`_sum_cfar_rows`; OS,
+:func:`_os_cfar_fused`), bit-identical to its composed steps
 (:func:`window_cfar_composed`, the readable oracle). The order-statistic
 machinery is in :mod:`models.order_statistic`, the peak detection in
 :mod:`models.cfar_peaks` (re-exported here). Single-threaded and free of
@@ -511,6 +516,51 @@ def _os_cfar_fused(x, use_r, use_d, both, window_r, window_d, n_r, k_r, n_d, k_d
                         use_r, use_d, both, OS, log_den, statistic[p, r], noise[p, r])
 
 
+#: rows whose Doppler prefix sums run side by side (independent chains of additions overlap)
+ROW_BLOCK = 4
+
+
+@numba.njit(cache=True)
+def _doppler_means(detector, x, i0, i1, window, c, mu):
+    """mu along Doppler (axis 1) of rows i0 .. i1 - 1 of one map x (R, D), into
+    rows 0 .. i1 - i0 of ``mu``: each row's prefix sums c[j, d] = sum_{e<d} x[i0 + j, e]
+    (float64, the rows' additions interleaved), then the window means
+    (:func:`_window_mean`, the same sums as :func:`_sum_mean_lines` along the
+    transposed map), the interior cells with fixed offsets (they vectorise).
+    ``window`` = (L, g, 1/N', 1/n_left, 1/n_right per cell)."""
+    L, g, inv, inv_l, inv_r = window
+    D = x.shape[1]
+    rows = i1 - i0
+    for j in range(rows):
+        c[j, 0] = 0.0
+    for d in range(D):
+        for j in range(rows):
+            c[j, d + 1] = c[j, d] + x[i0 + j, d]
+    lo = min(g + L, D)
+    hi = max(D - g - L, lo)                      # interior lo .. hi - 1: every offset inside the row
+    for j in range(rows):
+        cj, out = c[j], mu[j]
+        if detector == CA:                       # the branch outside the loop: it vectorises
+            for d in range(lo, hi):
+                out[d] = (cj[d + g + L + 1] - cj[d + g + 1] + cj[d - g] - cj[d - g - L]) * inv[d]
+        else:
+            for d in range(lo, hi):
+                out[d] = _window_mean(detector, cj[d + g + L + 1], cj[d + g + 1], cj[d - g], cj[d - g - L],
+                                      inv[d], inv_l[d], inv_r[d])
+        for d in range(lo):
+            out[d] = _clipped_mean(detector, cj, d, L, g, inv[d], inv_l[d], inv_r[d])
+        for d in range(hi, D):
+            out[d] = _clipped_mean(detector, cj, d, L, g, inv[d], inv_l[d], inv_r[d])
+
+
+@numba.njit(cache=True, inline="always")
+def _clipped_mean(detector, c, d, L, g, inv, inv_l, inv_r):
+    """:func:`_window_mean` of cell d from the prefix sums ``c`` (D + 1,), its window cut at the ends."""
+    D = c.shape[0] - 1
+    return _window_mean(detector, c[min(d + g + L + 1, D)], c[min(d + g + 1, D)], c[max(d - g, 0)],
+                        c[max(d - g - L, 0)], inv, inv_l, inv_r)
+
+
 @numba.njit(cache=True)
 def _sum_cfar_rows(x, detector, use_r, use_d, both, window_r, window_d, n_r, k_r, n_d, k_d, log_den,
                    half_range, half_doppler, statistic, noise):
@@ -527,11 +577,10 @@ def _sum_cfar_rows(x, detector, use_r, use_d, both, window_r, window_d, n_r, k_r
     bit-identical. ``window`` = (L, g, 1/N', 1/n_left, 1/n_right per cell)."""
     P, R, D = x.shape
     L_r, g_r, inv_r, inv_rl, inv_rr = window_r
-    L_d, g_d, inv_d, inv_dl, inv_dr = window_d
     ring = np.empty((2 * (g_r + L_r) + 2, D))
-    c_d = np.empty(D + 1)
+    c_d = np.empty((ROW_BLOCK, D + 1))
     mu_r = np.zeros(D, dtype=np.float32)
-    mu_d = np.zeros(D, dtype=np.float32)
+    mu_d = np.zeros((ROW_BLOCK, D), dtype=np.float32)
     scratch = _row_scratch(D)
     for p in range(P):
         xp = x[p]
@@ -546,16 +595,10 @@ def _sum_cfar_rows(x, detector, use_r, use_d, both, window_r, window_d, n_r, k_r
                         dst[b] = src[b] + xp[filled, b]
                     filled += 1
                 _mean_of_rows(detector, ring, i, L_r, g_r, R, inv_r[i], inv_rl[i], inv_rr[i], mu_r)
-            if use_d:
-                c_d[0] = 0.0
-                for d in range(D):
-                    c_d[d + 1] = c_d[d] + xp[i, d]
-                for d in range(D):
-                    mu_d[d] = _window_mean(detector, c_d[min(d + g_d + L_d + 1, D)], c_d[min(d + g_d + 1, D)],
-                                           c_d[max(d - g_d, 0)], c_d[max(d - g_d - L_d, 0)],
-                                           inv_d[d], inv_dl[d], inv_dr[d])
-            _finish_row(xp, i, scratch, half_range, half_doppler, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d,
-                        both, detector, log_den, statistic[p, i], noise[p, i])
+            if use_d and i % ROW_BLOCK == 0:
+                _doppler_means(detector, xp, i, min(i + ROW_BLOCK, R), window_d, c_d, mu_d)
+            _finish_row(xp, i, scratch, half_range, half_doppler, mu_r, n_r, k_r, mu_d[i % ROW_BLOCK], n_d, k_d,
+                        use_r, use_d, both, detector, log_den, statistic[p, i], noise[p, i])
 
 
 def _os_window(window: tuple[int, int, int] | None) -> tuple:
