@@ -531,26 +531,49 @@ def _doppler_means(detector, x, i0, i1, window, c, mu):
     L, g, inv, inv_l, inv_r = window
     D = x.shape[1]
     rows = i1 - i0
-    for j in range(rows):
-        c[j, 0] = 0.0
-    for d in range(D):
+    if rows == 4:                                # four chains in registers (the sums in the same order)
+        _prefix_rows4(x, i0, c)
+    else:
         for j in range(rows):
-            c[j, d + 1] = c[j, d] + x[i0 + j, d]
+            c[j, 0] = 0.0
+        for d in range(D):
+            for j in range(rows):
+                c[j, d + 1] = c[j, d] + x[i0 + j, d]
     lo = min(g + L, D)
     hi = max(D - g - L, lo)                      # interior lo .. hi - 1: every offset inside the row
     for j in range(rows):
         cj, out = c[j], mu[j]
+        # the interior through views offset so every index is a loop counter (no negative-index checks)
+        c_hi, c_lo, c_lhi, c_llo = cj[lo + g + L + 1:], cj[lo + g + 1:], cj[lo - g:], cj[lo - g - L:]
+        inv_k, out_k = inv[lo:], out[lo:]
         if detector == CA:                       # the branch outside the loop: it vectorises
-            for d in range(lo, hi):
-                out[d] = (cj[d + g + L + 1] - cj[d + g + 1] + cj[d - g] - cj[d - g - L]) * inv[d]
+            for k in range(hi - lo):
+                out_k[k] = (c_hi[k] - c_lo[k] + c_lhi[k] - c_llo[k]) * inv_k[k]
         else:
-            for d in range(lo, hi):
-                out[d] = _window_mean(detector, cj[d + g + L + 1], cj[d + g + 1], cj[d - g], cj[d - g - L],
-                                      inv[d], inv_l[d], inv_r[d])
+            inv_lk, inv_rk = inv_l[lo:], inv_r[lo:]
+            for k in range(hi - lo):
+                out_k[k] = _window_mean(detector, c_hi[k], c_lo[k], c_lhi[k], c_llo[k], inv_k[k], inv_lk[k],
+                                        inv_rk[k])
         for d in range(lo):
             out[d] = _clipped_mean(detector, cj, d, L, g, inv[d], inv_l[d], inv_r[d])
         for d in range(hi, D):
             out[d] = _clipped_mean(detector, cj, d, L, g, inv[d], inv_l[d], inv_r[d])
+
+
+@numba.njit(cache=True)
+def _prefix_rows4(x, i0, c):
+    """c[j, d] = sum_{e<d} x[i0 + j, e] for the four rows j = 0..3 (float64, in order along each row)."""
+    a0 = a1 = a2 = a3 = 0.0
+    c[0, 0] = c[1, 0] = c[2, 0] = c[3, 0] = 0.0
+    for d in range(x.shape[1]):
+        a0 += x[i0, d]
+        a1 += x[i0 + 1, d]
+        a2 += x[i0 + 2, d]
+        a3 += x[i0 + 3, d]
+        c[0, d + 1] = a0
+        c[1, d + 1] = a1
+        c[2, d + 1] = a2
+        c[3, d + 1] = a3
 
 
 @numba.njit(cache=True, inline="always")

@@ -37,11 +37,15 @@ def _local_maxima_row(x, r, half_range, half_doppler, col_max, keep_row):
             col_max[d] = _larger(col_max[d], x[q, d])
     for d in range(D):
         keep_row[d] = x[r, d] >= col_max[d]
-    for e in range(1, half_doppler + 1):
+    x_r = x[r]
+    for e in range(1, min(half_doppler, D - 1) + 1):
+        # views offset by e, so every index is a loop counter (no negative-index checks: it vectorises)
+        keep_lo, x_lo, col_hi = keep_row[:D - e], x_r[:D - e], col_max[e:]
         for d in range(D - e):
-            keep_row[d] = keep_row[d] & (x[r, d] >= col_max[d + e])
-        for d in range(e, D):
-            keep_row[d] = keep_row[d] & (x[r, d] >= col_max[d - e])
+            keep_lo[d] = keep_lo[d] & (x_lo[d] >= col_hi[d])
+        keep_hi, x_hi, col_lo = keep_row[e:], x_r[e:], col_max[:D - e]
+        for d in range(D - e):
+            keep_hi[d] = keep_hi[d] & (x_hi[d] >= col_lo[d])
 
 
 @numba.njit(cache=True)
