@@ -9,7 +9,8 @@ guard cells and the cell under test; the count of in-map reference cells by
 the same correlation of ones, so edges are one-sided exactly as in the
 kernel), OS by ``scipy.ndimage.rank_filter`` with that footprint where the
 window is whole and ``np.partition`` of the gathered window at the edges
-(where k' = ceil(k N'/N) changes), the regression by a per-line
+(where k' = ceil(k N'/N) changes), GO and SO by one correlation per
+half-window and ``scipy.special.betainc`` for their closed forms, the regression by a per-line
 ``numpy.linalg.lstsq`` loop with its explicit hat matrix.
 """
 
@@ -19,7 +20,7 @@ import numpy as np
 import scipy.ndimage
 
 from bench.tasks.cells import CellDetectionOutput
-from models import cfar, cfar_regression
+from models import cfar, cfar_halves, cfar_regression
 
 AXIS = {"range": 1, "doppler": 2}
 
@@ -76,6 +77,26 @@ def os_axis(maps: np.ndarray, L: int, g: int, k: int, axis: str) -> tuple[np.nda
     return mu, cfar.os_significance(maps / mu, _along(n_ref, axis), _along(ranks, axis))
 
 
+def halves_axis(maps: np.ndarray, L: int, g: int, axis: str, detector: str) -> tuple[np.ndarray, np.ndarray]:
+    """(mu, S) of GO- or SO-CFAR along ``axis``: each half's sum and in-map count by
+    correlation with its own footprint, the larger/smaller mean (an empty half:
+    the other's), the closed form by ``scipy.special.betainc`` (:func:`models.cfar_halves.halves_pfa`)."""
+    means, counts = [], []
+    M = maps.shape[AXIS[axis]]
+    for side in (slice(0, L), slice(L + 2 * g + 1, None)):     # leading half, lagging half
+        w = np.zeros(2 * (g + L) + 1)
+        w[side] = 1.0
+        n = scipy.ndimage.correlate1d(np.ones(M), w, mode="constant", cval=0.0)
+        sums = scipy.ndimage.correlate1d(maps.astype(np.float64), w, axis=AXIS[axis], mode="constant", cval=0.0)
+        means.append(np.where(_along(n, axis) > 0, sums / _along(np.maximum(n, 1.0), axis), np.nan))
+        counts.append(_along(n, axis))
+    pick = np.fmax if detector == "go" else np.fmin                # NaN (an empty half): the other
+    mu = pick(*means)
+    pfa = cfar_halves.halves_pfa(maps / mu, *counts, greatest=detector == "go")
+    with np.errstate(divide="ignore"):
+        return mu, np.minimum(-np.log10(pfa), cfar.MAX_SIGNIFICANCE)
+
+
 def regression_axis(maps: np.ndarray, params, axis: str) -> tuple[np.ndarray, np.ndarray]:
     """(noise level, S) of the regression CFAR along ``axis``, one line at a time by lstsq."""
     curve = cfar_regression.Curve(params.family, params.order, params.iterations, params.exclusion_factor)
@@ -116,6 +137,12 @@ def os(maps: np.ndarray, params):
     return _finish(maps, {axis: os_axis(maps, getattr(params, f"reference_{axis}"), getattr(params, f"guard_{axis}"),
                                         getattr(params, f"k_{axis}"), axis) for axis in _axes(params.dimension)},
                    params)
+
+
+def halves(maps: np.ndarray, params, detector: str):
+    return _finish(maps, {axis: halves_axis(maps, getattr(params, f"reference_{axis}"),
+                                            getattr(params, f"guard_{axis}"), axis, detector)
+                          for axis in _axes(params.dimension)}, params)
 
 
 def regression(maps: np.ndarray, params):

@@ -1,5 +1,6 @@
 """Methods ``ca-cfar``, ``os-cfar``, ``regression-cfar`` and ``region-adaptive``:
-the CFAR detectors of an HF surface-wave radar on range-Doppler power maps
+the CFAR detectors of an HF surface-wave radar on range-Doppler power maps,
+and ``go-cfar``, ``so-cfar``, the greatest-of and smallest-of baselines
 (task ``cell-detection``; docs/architecture.md, 'Tasks').
 
 After "目标检测与跟踪方法-海洋遥感技术应用" (the shared paper
@@ -45,7 +46,7 @@ from bench.params import param
 from bench.registry import register_method
 from bench.tasks.cells import CELL_DETECTION, CellDetectionOutput
 from methods import _cfar_reference
-from models import cfar, cfar_regression
+from models import cfar, cfar_halves, cfar_regression
 
 #: the longest reference half-window (cells per side); the axis must hold it (checked per scenario)
 MAX_REFERENCE = 256
@@ -316,6 +317,75 @@ class OsCfar(CfarMethod):
     def axis_factors(self, params, pfa: float, M: int, axis: str) -> np.ndarray:
         return cfar.os_factor_along(pfa, M, getattr(params, f"reference_{axis}"), getattr(params, f"guard_{axis}"),
                                     getattr(params, f"k_{axis}"))
+
+
+class HalvesCfar(CfarMethod):
+    """GO- or SO-CFAR (:attr:`detector`): along range and along Doppler, the
+    larger or the smaller of the two half-windows' means is mu, combined, with
+    peak detection.
+
+    Not in the HFSWR chapter (which names CA, OS and regression): the
+    classical answers to CA's two weaknesses it names, "at clutter edges and
+    with multiple targets the noise estimate is too high": GO takes the
+    greater half to hold the false alarms down at a clutter edge (Hansen &
+    Sawyers, "Detectability loss due to 'greatest of' selection in a
+    cell-averaging CFAR", 1980), SO the smaller to keep a neighbouring target
+    in one half from masking the cell under test (Trunk, "Range resolution of
+    targets using automatic detectors", 1978); both analysed in Gandhi &
+    Kassam, "Analysis of CFAR processors in nonhomogeneous background", 1988. Per dimension, with the leading half
+    (L cells behind g guard cells before the cell under test) and the lagging
+    half (after it), each cut at the map's edges (n_l, n_r cells; one empty:
+    the other alone, CA's estimate):
+
+        mu = max(m_l, m_r) (GO) or min(m_l, m_r) (SO),  m = (1/n) sum of the half,  U0 = T mu;
+
+    under homogeneous exponential noise, with p_a = (n_a + T)/(N + T), q_a = 1 - p_a,
+
+        Pfa_GO(T) = sum_{a in (l, r)} (1 + T/n_a)^(-n_a) I_{q_a}(n_o, n_a)
+        Pfa_SO(T) = sum_{a in (l, r)} (1 + T/n_a)^(-n_a) I_{p_a}(n_a, n_o)
+
+    (I the regularised incomplete beta function, o the other half; at
+    n_l = n_r = n, Pfa_SO = 2 sum_{k<n} C(n - 1 + k, k) (2 + T/n)^(-(n + k)) and
+    Pfa_GO = 2 (1 + T/n)^(-n) - Pfa_SO; :mod:`models.cfar_halves`), and the
+    statistic is S = -log10 Pfa(x / mu) per cell; T for a Pfa by root-finding.
+    """
+
+    detector = ""
+    reference_name = ("scipy.ndimage.correlate1d of each half-window's footprint (guard cells excluded), "
+                      "NumPy max/min, significance by scipy.special.betainc")
+    perf_targets = {"*": {"speedup": 10.0}}
+
+    Params = CaCfar.Params                      # CA's windows, split in two halves
+
+    def run(self, batch: Batch, params) -> CellDetectionOutput:
+        return window_output(self, maps_of(batch), self.detector, params)
+
+    def reference_run(self, batch: Batch, params) -> CellDetectionOutput:
+        return _cfar_reference.halves(maps_of(batch), params, self.detector)
+
+    def axis_factor(self, params, pfa: float, axis: str) -> float:
+        L = getattr(params, f"reference_{axis}")
+        return cfar_halves.halves_threshold_factor(pfa, L, L, self.detector == "go")
+
+    def axis_factors(self, params, pfa: float, M: int, axis: str) -> np.ndarray:
+        left, right = cfar.window_counts(M, getattr(params, f"reference_{axis}"), getattr(params, f"guard_{axis}"))
+        return cfar_halves.halves_factor_along(pfa, left, right, self.detector == "go")
+
+
+@register_method
+class GoCfar(HalvesCfar):
+    """Greatest-of CFAR: :class:`HalvesCfar` with mu = max(m_l, m_r) per dimension."""
+
+    name = "go-cfar"
+    detector = "go"
+
+
+@register_method
+class SoCfar(HalvesCfar):
+    """Smallest-of CFAR: :class:`HalvesCfar` with mu = min(m_l, m_r) per dimension."""
+
+    name = "so-cfar"
+    detector = "so"
 
 
 @register_method

@@ -46,10 +46,15 @@ transform of t, so "S > -log10(pfa)" is exactly "t > K(pfa)" and one
 threshold serves every detector, window and dimension. S is capped at
 :data:`MAX_SIGNIFICANCE` (Pfa = 1e-300, the smallest the calibration takes).
 
+GO and SO (the larger or smaller of the two half-windows' means, our
+baselines beside the chapter's detectors) share CA's windows and running
+sums; their maths is in :mod:`models.cfar_halves`.
+
 All kernels take a batch of maps with a leading trial axis; the per-axis
 ones run along axis 1 of a (P, A, B) array (the Doppler axis on the
-transposed maps), and :func:`window_cfar` runs CA or OS in one fused pass
-per map (:func:`_window_cfar_fused`), bit-identical to its composed steps
+transposed maps), and :func:`window_cfar` runs a detector in one fused pass
+per map (CA, GO, SO streamed row by row, :func:`_sum_cfar_rows`; OS,
+:func:`_os_cfar_fused`), bit-identical to its composed steps
 (:func:`window_cfar_composed`, the readable oracle). The order-statistic
 machinery is in :mod:`models.order_statistic`, the peak detection in
 :mod:`models.cfar_peaks` (re-exported here). Single-threaded and free of
@@ -65,7 +70,8 @@ import numba
 import numpy as np
 import scipy.optimize
 
-from models.cfar_peaks import _local_maxima_map, local_maxima, local_maxima_scipy, with_peaks  # noqa: F401
+from models.cfar_peaks import _local_maxima_row, local_maxima, local_maxima_scipy, with_peaks  # noqa: F401
+from models.cfar_halves import HALVES, halves_log_survival, halves_mu, inverse_counts
 from models.order_statistic import (_os_kth_axis1, _os_kth_lines, _os_log_denominators, _os_log_survival,
                                     selection_networks)
 
@@ -184,15 +190,33 @@ def os_significance(t, N, k):
 
 # ------------------------------------------------------------------ noise estimates
 
+#: detector codes of the kernels (numba dispatches on an int, not a str)
+CA, OS, GO, SO = 0, 1, 2, 3
+DETECTOR_CODES = {"ca": CA, "os": OS, "go": GO, "so": SO}
+#: the detectors whose noise estimate is a function of the reference cells' sums
+SUM_DETECTORS = ("ca",) + HALVES
+
+
+@numba.njit(cache=True, inline="always")
+def _window_mean(detector, c_hi, c_lo, c_lhi, c_llo, inv, inv_l, inv_r):
+    """mu of one cell from four prefix sums: the right half c_hi - c_lo, the left
+    c_lhi - c_llo; CA their mean (the sum in this order, so the kernels agree bit
+    for bit), GO/SO the larger/smaller half mean (:func:`models.cfar_halves.halves_mu`)."""
+    if detector == CA:
+        return (c_hi - c_lo + c_lhi - c_llo) * inv
+    return halves_mu(c_lhi - c_llo, c_hi - c_lo, inv_l, inv_r, detector == GO)
+
+
 @numba.njit(cache=True)
-def _ca_mean_lines(x, L, g, inv_count, c, mu):
-    """CA-CFAR's mu along axis 0 of one map x (A, B) float32, the B cells of a
-    row at once: running sums, O(1) per cell.
+def _sum_mean_lines(x, L, g, detector, inv_count, inv_l, inv_r, c, mu):
+    """CA's (or GO's, SO's) mu along axis 0 of one map x (A, B) float32, the B
+    cells of a row at once: running sums, O(1) per cell.
 
     The prefix sums c[j] = sum_{a<j} x[a] (float64, in ``c`` (A + 1, B)) give
-    each window sum as two differences: right = c[min(i+g+L+1, A)] - c[min(i+g+1, A)],
-    left = c[max(i-g, 0)] - c[max(i-g-L, 0)]; mu = (left + right) / N'
-    (``inv_count`` = 1 / N' per cell of the axis).
+    each half's sum as one difference: right = c[min(i+g+L+1, A)] - c[min(i+g+1, A)],
+    left = c[max(i-g, 0)] - c[max(i-g-L, 0)]; CA: mu = (left + right) / N'
+    (``inv_count`` = 1 / N' per cell of the axis; ``inv_l``, ``inv_r`` = 1 / n
+    of each half, 0 where it is empty).
     """
     A, B = x.shape
     for b in range(B):                           # element loops: a slice copy costs a call per row
@@ -201,41 +225,66 @@ def _ca_mean_lines(x, L, g, inv_count, c, mu):
         for b in range(B):
             c[a + 1, b] = c[a, b] + x[a, b]
     for i in range(A):
-        hi, lo = min(i + g + L + 1, A), min(i + g + 1, A)
-        lhi, llo = max(i - g, 0), max(i - g - L, 0)
-        for b in range(B):
-            mu[i, b] = (c[hi, b] - c[lo, b] + c[lhi, b] - c[llo, b]) * inv_count[i]
+        _mean_of_rows(detector, c, i, L, g, A, inv_count[i], inv_l[i], inv_r[i], mu[i])
+
+
+@numba.njit(cache=True, inline="always")
+def _mean_of_rows(detector, c, i, L, g, A, inv, inv_l, inv_r, mu_row):
+    """mu of row i of an axis of A rows from the prefix rows of ``c`` (any row
+    of ``c`` is prefix row j mod its length: the streaming kernel's ring)."""
+    n = c.shape[0]
+    hi, lo = min(i + g + L + 1, A) % n, min(i + g + 1, A) % n
+    lhi, llo = max(i - g, 0) % n, max(i - g - L, 0) % n
+    if detector == CA:                           # the branch outside the loop: it vectorises
+        for b in range(mu_row.shape[0]):
+            mu_row[b] = (c[hi, b] - c[lo, b] + c[lhi, b] - c[llo, b]) * inv
+    else:
+        for b in range(mu_row.shape[0]):
+            mu_row[b] = halves_mu(c[lhi, b] - c[llo, b], c[hi, b] - c[lo, b], inv_l, inv_r, detector == GO)
 
 
 @numba.njit(cache=True)
-def _ca_mean_axis1(x, L, g, inv_count, mu):
-    """:func:`_ca_mean_lines` along axis 1 of every map of x (P, A, B) float32."""
+def _sum_mean_axis1(x, L, g, detector, inv_count, inv_l, inv_r, mu):
+    """:func:`_sum_mean_lines` along axis 1 of every map of x (P, A, B) float32."""
     c = np.empty((x.shape[1] + 1, x.shape[2]))
     for p in range(x.shape[0]):
-        _ca_mean_lines(x[p], L, g, inv_count, c, mu[p])
+        _sum_mean_lines(x[p], L, g, detector, inv_count, inv_l, inv_r, c, mu[p])
+
+
+def sum_inverses(L: int, g: int, M: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(1/N', 1/n_left, 1/n_right) per cell of an axis of M cells (0 for an empty half)."""
+    left, right = window_counts(M, L, g)
+    return 1.0 / (left + right), inverse_counts(left), inverse_counts(right)
 
 
 def window_noise(maps: np.ndarray, detector: str, L: int, g: int, k: int, axis: str) -> np.ndarray:
     """mu (n, R, D) float32 along ``axis`` ("range" or "doppler") of maps
     (n, R, D) float32: the mean of the N' reference cells (``detector``
-    "ca") or their k'-th smallest ("os"). Both kernels run along axis 1
+    "ca"), their k'-th smallest ("os"), or the larger ("go") or smaller
+    ("so") of the two half-windows' means. The kernels run along axis 1
     with the other axis as vector lanes, so along Doppler they run on the
-    transposed maps (a transpose costs less than a scalar pass along each line)."""
+    transposed maps (the readable composition; :func:`window_cfar` streams rows)."""
     lines = maps if axis == "range" else np.ascontiguousarray(maps.transpose(0, 2, 1))
     mu = np.empty_like(lines)
-    if detector == "ca":
-        _ca_mean_axis1(lines, L, g, 1.0 / reference_counts(lines.shape[1], L, g), mu)
-    else:
+    if detector == "os":
         _os_kth_axis1(lines, L, g, k, *selection_networks(2 * L), mu)
+    else:
+        _sum_mean_axis1(lines, L, g, DETECTOR_CODES[detector], *sum_inverses(L, g, lines.shape[1]), mu)
     return mu if axis == "range" else np.ascontiguousarray(mu.transpose(0, 2, 1))
 
 
 # ------------------------------------------------------------------ significance
 
 @numba.njit(cache=True, inline="always")
-def _window_sig(is_os, t, N, k, log_den):
-    """-log10 Pfa(t) of OS (:func:`models.order_statistic._os_log_survival`) or CA."""
-    return _os_log_survival(t, N, k, log_den) / _LOG10 if is_os else _ca_sig(t, N)
+def _window_sig(detector, t, N, k, log_den):
+    """-log10 Pfa(t) of CA (N = N'), OS (:func:`models.order_statistic._os_log_survival`,
+    N = N', k = k') or GO/SO (:func:`models.cfar_halves.halves_log_survival`,
+    N, k = the halves' n_left, n_right)."""
+    if detector == CA:
+        return _ca_sig(t, N)
+    if detector == OS:
+        return _os_log_survival(t, N, k, log_den) / _LOG10
+    return halves_log_survival(t, N, k, detector == GO) / _LOG10
 
 
 #: t_a < t_b (1 - ORDER_MARGIN) orders CA's significances at t_a and t_b with margin to spare
@@ -250,7 +299,7 @@ def _clearly_below(a: float, b: float) -> bool:
 
 
 @numba.njit(cache=True, inline="always")
-def _combined_sig(is_os, t_r, n_r, k_r, t_d, n_d, k_d, both, log_den):
+def _combined_sig(detector, t_r, n_r, k_r, t_d, n_d, k_d, both, log_den):
     """min (``both``) or max of the range and Doppler significances at ratios
     t_r, t_d. CA at equal N' (every cell away from the edges when the windows
     match): S = N' log10(1 + t/N') rises with t, so the smaller (larger) S is
@@ -259,64 +308,79 @@ def _combined_sig(is_os, t_r, n_r, k_r, t_d, n_d, k_d, both, log_den):
     log, so the value is the one both would give, bit for bit); otherwise both."""
     lo = t_r if t_r < t_d else t_d               # selects, not branches: the order is a coin toss
     hi = t_d if t_r < t_d else t_r
-    if not is_os and n_r == n_d and _clearly_below(lo, hi):
+    if detector == CA and n_r == n_d and _clearly_below(lo, hi):
         return _ca_sig(lo if both else hi, n_r)
-    s_r = _window_sig(is_os, t_r, n_r, k_r, log_den)
-    s_d = _window_sig(is_os, t_d, n_d, k_d, log_den)
+    s_r = _window_sig(detector, t_r, n_r, k_r, log_den)
+    s_d = _window_sig(detector, t_d, n_d, k_d, log_den)
     return min(s_r, s_d) if both else max(s_r, s_d)
 
 
 @numba.njit(cache=True)
-def _map_significance(x, keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, is_os, log_den, out):
+def _row_significance(x, keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, detector, log_den,
+                      kept, t_r, t_d, out):
     """out = the capped significance of the active dimensions combined ("both":
-    the smaller, else the larger), at the cells of one map x (R, D) where
+    the smaller, else the larger), at the cells of one row x (D,) where
     ``keep``; 0 elsewhere (so the logs are paid only at the local maxima of
-    the peak detection). Per row: the kept cells' indices, their ratios
-    t = x / mu, then the logs in a loop of their own."""
+    the peak detection). The row's range window is (n_r, k_r), its Doppler
+    windows (n_d, k_d) (D,). The kept cells' indices (into ``kept``), their
+    ratios t = x / mu (into ``t_r``, ``t_d``), then the logs in a loop of their own."""
+    D = x.shape[0]
+    n_kept = 0
+    for d in range(D):                           # zeros, and the kept cells' indices, branch-free
+        out[d] = 0.0
+    for d in range(D):
+        kept[n_kept] = d
+        n_kept += keep[d]
+    for j in range(n_kept):
+        d = kept[j]
+        if use_r:
+            t_r[j] = _ratio(x[d], mu_r[d])
+        if use_d:
+            t_d[j] = _ratio(x[d], mu_d[d])
+    for j in range(n_kept):
+        d = kept[j]
+        if use_r and use_d:
+            s = _combined_sig(detector, t_r[j], n_r, k_r, t_d[j], n_d[d], k_d[d], both, log_den)
+        elif use_r:
+            s = _window_sig(detector, t_r[j], n_r, k_r, log_den)
+        else:
+            s = _window_sig(detector, t_d[j], n_d[d], k_d[d], log_den)
+        out[d] = _capped(s)
+
+
+@numba.njit(cache=True)
+def _map_significance(x, keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, detector, log_den, out):
+    """:func:`_row_significance` on every row of one map x (R, D) (n_r, k_r (R,))."""
     R, D = x.shape
     kept = np.empty(D, dtype=np.int64)
     t_r = np.zeros(D)
     t_d = np.zeros(D)
     for r in range(R):
-        n_kept = 0
-        for d in range(D):                       # zeros, and the kept cells' indices, branch-free
-            out[r, d] = 0.0
-        for d in range(D):
-            kept[n_kept] = d
-            n_kept += keep[r, d]
-        for j in range(n_kept):
-            d = kept[j]
-            if use_r:
-                t_r[j] = _ratio(x[r, d], mu_r[r, d])
-            if use_d:
-                t_d[j] = _ratio(x[r, d], mu_d[r, d])
-        for j in range(n_kept):
-            d = kept[j]
-            if use_r and use_d:
-                s = _combined_sig(is_os, t_r[j], n_r[r], k_r[r], t_d[j], n_d[d], k_d[d], both, log_den)
-            elif use_r:
-                s = _window_sig(is_os, t_r[j], n_r[r], k_r[r], log_den)
-            else:
-                s = _window_sig(is_os, t_d[j], n_d[d], k_d[d], log_den)
-            out[r, d] = _capped(s)
+        _row_significance(x[r], keep[r], mu_r[r], n_r[r] if use_r else 0, k_r[r] if use_r else 0, mu_d[r],
+                          n_d, k_d, use_r, use_d, both, detector, log_den, kept, t_r, t_d, out[r])
 
 
 @numba.njit(cache=True)
-def _window_significance(x, keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, is_os, log_den, out):
+def _window_significance(x, keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, detector, log_den, out):
     """:func:`_map_significance` on every map of x (P, R, D)."""
     for p in range(x.shape[0]):
-        _map_significance(x[p], keep[p], mu_r[p], n_r, k_r, mu_d[p], n_d, k_d, use_r, use_d, both, is_os,
+        _map_significance(x[p], keep[p], mu_r[p], n_r, k_r, mu_d[p], n_d, k_d, use_r, use_d, both, detector,
                           log_den, out[p])
 
 
 def _axis_windows(detector: str, windows: dict, sizes: dict) -> tuple[dict, dict, np.ndarray]:
-    """({axis: N' per cell}, {axis: k' per cell (CA: N')}, the log-denominator
-    table of :func:`models.order_statistic._os_log_survival`) of the windows
+    """The two per-cell window arrays of each axis the closed forms take
+    (:func:`_window_sig`): CA ({axis: N'}, {axis: N'}), OS ({axis: N'}, {axis: k'}),
+    GO/SO ({axis: n_left}, {axis: n_right}), and the log-denominator table of
+    :func:`models.order_statistic._os_log_survival`, of the windows
     ``{axis: (L, g, k)}`` on axes of ``sizes`` ``{axis: M}`` cells."""
     counts, ranks, full = {}, {}, 1
     for axis, (L, g, k) in windows.items():
-        counts[axis] = reference_counts(sizes[axis], L, g).astype(np.int64)
-        ranks[axis] = (edge_rank(k, 2 * L, counts[axis]) if detector == "os" else counts[axis]).astype(np.int64)
+        if detector in HALVES:
+            counts[axis], ranks[axis] = (n.astype(np.int64) for n in window_counts(sizes[axis], L, g))
+        else:
+            counts[axis] = reference_counts(sizes[axis], L, g).astype(np.int64)
+            ranks[axis] = (edge_rank(k, 2 * L, counts[axis]) if detector == "os" else counts[axis]).astype(np.int64)
         full = max(full, 2 * L)
     return counts, ranks, _os_log_denominators(full)
 
@@ -327,7 +391,7 @@ _UNUSED = np.zeros(1, dtype=np.int64)
 
 def window_significance(maps: np.ndarray, detector: str, windows: dict, mus: dict, dimension: str,
                         keep: np.ndarray | None = None) -> np.ndarray:
-    """S (n, R, D) float32 of CA or OS (``detector``) for the active
+    """S (n, R, D) float32 of CA, OS, GO or SO (``detector``) for the active
     dimensions combined (``dimension``), from their noise estimates ``mus``
     ``{axis: mu}`` and windows ``{axis: (L, g, k)}``, at each cell's own N'
     and k'; 0 where ``keep`` is False (None: every cell)."""
@@ -338,7 +402,8 @@ def window_significance(maps: np.ndarray, detector: str, windows: dict, mus: dic
     _window_significance(maps, np.ones(maps.shape, np.bool_) if keep is None else keep,
                          mus.get("range", some), counts.get("range", _UNUSED), ranks.get("range", _UNUSED),
                          mus.get("doppler", some), counts.get("doppler", _UNUSED), ranks.get("doppler", _UNUSED),
-                         "range" in mus, "doppler" in mus, dimension == "both", detector == "os", log_den, out)
+                         "range" in mus, "doppler" in mus, dimension == "both", DETECTOR_CODES[detector], log_den,
+                         out)
     return out
 
 
@@ -351,6 +416,22 @@ def ca_cfar(maps: np.ndarray, L: int, g: int, axis: str) -> tuple[np.ndarray, np
     return mu, window_significance(maps, "ca", {axis: (L, g, 0)}, {axis: mu}, axis)
 
 
+def halves_cfar(maps: np.ndarray, detector: str, L: int, g: int, axis: str) -> tuple[np.ndarray, np.ndarray]:
+    """GO- or SO-CFAR (``detector`` "go", "so") along ``axis`` of maps (n, R, D):
+    (mu, S) (n, R, D) float32, mu the larger/smaller half-window mean, S =
+    -log10 Pfa(x / mu; n_left, n_right) (:mod:`models.cfar_halves`)."""
+    maps = np.ascontiguousarray(maps, dtype=np.float32)
+    mu = window_noise(maps, detector, L, g, 0, axis)
+    return mu, window_significance(maps, detector, {axis: (L, g, 0)}, {axis: mu}, axis)
+
+
+def axis_cfar(maps: np.ndarray, detector: str, L: int, g: int, k: int, axis: str) -> tuple[np.ndarray, np.ndarray]:
+    """(mu, S) of ``detector`` ("ca", "os", "go", "so") along ``axis`` (k: OS's rank)."""
+    if detector == "ca":
+        return ca_cfar(maps, L, g, axis)
+    return os_cfar(maps, L, g, k, axis) if detector == "os" else halves_cfar(maps, detector, L, g, axis)
+
+
 def os_cfar(maps: np.ndarray, L: int, g: int, k: int, axis: str) -> tuple[np.ndarray, np.ndarray]:
     """OS-CFAR along ``axis`` of maps (n, R, D): (mu, S) (n, R, D) float32, mu
     the k'-th smallest reference cell, S = -log10 Pfa_OS(x / mu; N', k')."""
@@ -360,18 +441,6 @@ def os_cfar(maps: np.ndarray, L: int, g: int, k: int, axis: str) -> tuple[np.nda
 
 
 # ------------------------------------------------------------------ window CFAR, fused
-
-@numba.njit(cache=True, inline="always")
-def _noise_lines(is_os, x, window, c, buf, mu):
-    """mu along axis 0 of one map x (A, B): :func:`_ca_mean_lines` or
-    :func:`models.order_statistic._os_kth_lines`, ``window`` = (L, g, k, 1/N'
-    per cell, the selection networks of N = 2L)."""
-    L, g, k, inv_count, comps, n_comps, of_k, wires = window
-    if is_os:
-        _os_kth_lines(x, L, g, k, comps, n_comps, of_k, wires, buf, mu)
-    else:
-        _ca_mean_lines(x, L, g, inv_count, c, mu)
-
 
 @numba.njit(cache=True)
 def _transpose_into(src, dst):
@@ -383,75 +452,213 @@ def _transpose_into(src, dst):
             dst[b, a] = src[a, b]
 
 
+@numba.njit(cache=True, inline="always")
+def _combine_row(mu_r, mu_d, use_r, use_d, both, out):
+    """One row of the noise estimate: the larger ("both") or smaller of the two
+    dimensions' estimates (np.maximum / np.minimum, cell by cell), or the one active."""
+    for d in range(out.shape[0]):
+        if use_r and use_d:
+            out[d] = np.maximum(mu_r[d], mu_d[d]) if both else np.minimum(mu_r[d], mu_d[d])
+        else:
+            out[d] = mu_r[d] if use_r else mu_d[d]
+
+
 @numba.njit(cache=True)
-def _window_cfar_fused(x, is_os, use_r, use_d, both, window_r, window_d, n_r, k_r, n_d, k_d, log_den,
-                       half_range, half_doppler, statistic, noise):
-    """:func:`window_cfar_composed` in one pass per map x[p] (R, D), its
+def _row_scratch(D):
+    """The per-row scratch of :func:`_finish_row`: (keep, col_max, kept, t_r, t_d) for rows of D cells."""
+    return (np.ones(D, dtype=np.bool_), np.empty(D, dtype=np.float32), np.empty(D, dtype=np.int64), np.zeros(D),
+            np.zeros(D))
+
+
+@numba.njit(cache=True, inline="always")
+def _finish_row(x, i, scratch, half_range, half_doppler, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both,
+                detector, log_den, statistic, noise):
+    """Row i of a map x (R, D) once its noise estimates ``mu_r``, ``mu_d`` (D,)
+    are known: its local maxima by row views (:func:`models.cfar_peaks._local_maxima_row`;
+    none when both half-widths are 0), the significance at the kept cells
+    (:func:`_row_significance`, the range window (n_r, k_r) of row i), the
+    estimates combined (:func:`_combine_row`), into the rows ``statistic``, ``noise``."""
+    keep, col_max, kept, t_r, t_d = scratch
+    if half_range > 0 or half_doppler > 0:
+        _local_maxima_row(x, i, half_range, half_doppler, col_max, keep)
+    _row_significance(x[i], keep, mu_r, n_r[i] if use_r else 0, k_r[i] if use_r else 0, mu_d, n_d, k_d,
+                      use_r, use_d, both, detector, log_den, kept, t_r, t_d, statistic)
+    _combine_row(mu_r, mu_d, use_r, use_d, both, noise)
+
+
+@numba.njit(cache=True)
+def _os_cfar_fused(x, use_r, use_d, both, window_r, window_d, n_r, k_r, n_d, k_d, log_den,
+                   half_range, half_doppler, statistic, noise):
+    """:func:`window_cfar_composed` of OS in one pass per map x[p] (R, D), its
     scratch (a few maps' worth) reused from map to map while it sits in cache:
     the range noise estimate along axis 0 of the map, the Doppler one along
-    axis 0 of its transpose (vector lanes either way), the local maxima, the
-    significance at the kept cells only, and the noise estimates combined
-    ("both": the larger, "either": the smaller); the same kernels on the same
-    values as the composition, so the result is bit-identical."""
+    axis 0 of its transpose (the selection network's vector lanes either way),
+    then row by row the local maxima, the significance at the kept cells only
+    and the noise estimates combined ("both": the larger, "either": the
+    smaller); the same kernels on the same values as the composition, so the
+    result is bit-identical. ``window`` = (L, g, k, the selection networks of N = 2L)."""
     P, R, D = x.shape
     mu_r = np.empty((R, D), dtype=np.float32)
     x_t = np.empty((D, R), dtype=np.float32)
     mu_t = np.empty((D, R), dtype=np.float32)
     mu_d = mu_t.T                                # read in place: a transposing copy back would thrash the cache
-    c_r = np.empty((R + 1, D))
-    c_d = np.empty((D + 1, R))
-    buf_r = np.empty((window_r[7], D), dtype=np.float32)
-    buf_d = np.empty((window_d[7], R), dtype=np.float32)
-    keep = np.ones((R, D), dtype=np.bool_)
-    row_max = np.empty((R, D), dtype=np.float32)
-    box_max = np.empty(D, dtype=np.float32)
-    peaks = half_range > 0 or half_doppler > 0
+    buf_r = np.empty((window_r[6], D), dtype=np.float32)
+    buf_d = np.empty((window_d[6], R), dtype=np.float32)
+    scratch = _row_scratch(D)
     for p in range(P):
         if use_r:
-            _noise_lines(is_os, x[p], window_r, c_r, buf_r, mu_r)
+            _os_kth_lines(x[p], *window_r, buf_r, mu_r)
         if use_d:
             _transpose_into(x[p], x_t)
-            _noise_lines(is_os, x_t, window_d, c_d, buf_d, mu_t)
-        if peaks:
-            _local_maxima_map(x[p], half_range, half_doppler, row_max, box_max, keep)
-        _map_significance(x[p], keep, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both, is_os, log_den,
-                          statistic[p])
-        if use_r and use_d:
-            for r in range(R):                   # np.maximum / np.minimum, cell by cell along the row
-                for d in range(D):
-                    noise[p, r, d] = np.maximum(mu_r[r, d], mu_d[r, d]) if both else np.minimum(mu_r[r, d],
-                                                                                                mu_d[r, d])
+            _os_kth_lines(x_t, *window_d, buf_d, mu_t)
+        for r in range(R):
+            _finish_row(x[p], r, scratch, half_range, half_doppler, mu_r[r], n_r, k_r, mu_d[r], n_d, k_d,
+                        use_r, use_d, both, OS, log_den, statistic[p, r], noise[p, r])
+
+
+#: rows whose Doppler prefix sums run side by side (independent chains of additions overlap)
+ROW_BLOCK = 4
+
+
+@numba.njit(cache=True)
+def _doppler_means(detector, x, i0, i1, window, c, mu):
+    """mu along Doppler (axis 1) of rows i0 .. i1 - 1 of one map x (R, D), into
+    rows 0 .. i1 - i0 of ``mu``: each row's prefix sums c[j, d] = sum_{e<d} x[i0 + j, e]
+    (float64, the rows' additions interleaved), then the window means
+    (:func:`_window_mean`, the same sums as :func:`_sum_mean_lines` along the
+    transposed map), the interior cells with fixed offsets (they vectorise).
+    ``window`` = (L, g, 1/N', 1/n_left, 1/n_right per cell)."""
+    L, g, inv, inv_l, inv_r = window
+    D = x.shape[1]
+    rows = i1 - i0
+    if rows == 4:                                # four chains in registers (the sums in the same order)
+        _prefix_rows4(x, i0, c)
+    else:
+        for j in range(rows):
+            c[j, 0] = 0.0
+        for d in range(D):
+            for j in range(rows):
+                c[j, d + 1] = c[j, d] + x[i0 + j, d]
+    lo = min(g + L, D)
+    hi = max(D - g - L, lo)                      # interior lo .. hi - 1: every offset inside the row
+    for j in range(rows):
+        cj, out = c[j], mu[j]
+        # the interior through views offset so every index is a loop counter (no negative-index checks)
+        c_hi, c_lo, c_lhi, c_llo = cj[lo + g + L + 1:], cj[lo + g + 1:], cj[lo - g:], cj[lo - g - L:]
+        inv_k, out_k = inv[lo:], out[lo:]
+        if detector == CA:                       # the branch outside the loop: it vectorises
+            for k in range(hi - lo):
+                out_k[k] = (c_hi[k] - c_lo[k] + c_lhi[k] - c_llo[k]) * inv_k[k]
         else:
-            noise[p] = mu_r if use_r else mu_d
+            inv_lk, inv_rk = inv_l[lo:], inv_r[lo:]
+            for k in range(hi - lo):
+                out_k[k] = _window_mean(detector, c_hi[k], c_lo[k], c_lhi[k], c_llo[k], inv_k[k], inv_lk[k],
+                                        inv_rk[k])
+        for d in range(lo):
+            out[d] = _clipped_mean(detector, cj, d, L, g, inv[d], inv_l[d], inv_r[d])
+        for d in range(hi, D):
+            out[d] = _clipped_mean(detector, cj, d, L, g, inv[d], inv_l[d], inv_r[d])
 
 
-def _fused_window(detector: str, window: tuple[int, int, int] | None, M: int) -> tuple:
-    """The ``window`` argument of :func:`_noise_lines` for an axis of M cells
-    (a placeholder of the same types where the axis is not active)."""
+@numba.njit(cache=True)
+def _prefix_rows4(x, i0, c):
+    """c[j, d] = sum_{e<d} x[i0 + j, e] for the four rows j = 0..3 (float64, in order along each row)."""
+    a0 = a1 = a2 = a3 = 0.0
+    c[0, 0] = c[1, 0] = c[2, 0] = c[3, 0] = 0.0
+    for d in range(x.shape[1]):
+        a0 += x[i0, d]
+        a1 += x[i0 + 1, d]
+        a2 += x[i0 + 2, d]
+        a3 += x[i0 + 3, d]
+        c[0, d + 1] = a0
+        c[1, d + 1] = a1
+        c[2, d + 1] = a2
+        c[3, d + 1] = a3
+
+
+@numba.njit(cache=True, inline="always")
+def _clipped_mean(detector, c, d, L, g, inv, inv_l, inv_r):
+    """:func:`_window_mean` of cell d from the prefix sums ``c`` (D + 1,), its window cut at the ends."""
+    D = c.shape[0] - 1
+    return _window_mean(detector, c[min(d + g + L + 1, D)], c[min(d + g + 1, D)], c[max(d - g, 0)],
+                        c[max(d - g - L, 0)], inv, inv_l, inv_r)
+
+
+@numba.njit(cache=True)
+def _sum_cfar_rows(x, detector, use_r, use_d, both, window_r, window_d, n_r, k_r, n_d, k_d, log_den,
+                   half_range, half_doppler, statistic, noise):
+    """:func:`window_cfar_composed` of CA, GO or SO streamed row by row over
+    each map x[p] (R, D): x is read in row order once, the two outputs written
+    once, every scratch a few rows long (in cache at any map size; no
+    transposed reads). Per row i: the range prefix sums advanced to row
+    i + g + L + 1 in a ring of 2(g + L) + 2 rows (row j of the prefix in ring
+    row j mod its length), row i's range estimate from four of them; the row's
+    own Doppler prefix sums and its Doppler estimate; its local maxima by row
+    views (:func:`models.cfar_peaks._local_maxima_row`); the significance at
+    the kept cells; the estimates combined. The same sums in the same order as
+    the composition (:func:`_sum_mean_lines` along each axis), so the result is
+    bit-identical. ``window`` = (L, g, 1/N', 1/n_left, 1/n_right per cell)."""
+    P, R, D = x.shape
+    L_r, g_r, inv_r, inv_rl, inv_rr = window_r
+    ring = np.empty((2 * (g_r + L_r) + 2, D))
+    c_d = np.empty((ROW_BLOCK, D + 1))
+    mu_r = np.zeros(D, dtype=np.float32)
+    mu_d = np.zeros((ROW_BLOCK, D), dtype=np.float32)
+    scratch = _row_scratch(D)
+    for p in range(P):
+        xp = x[p]
+        for b in range(D):
+            ring[0, b] = 0.0
+        filled = 0                               # prefix rows 0 .. filled are in the ring
+        for i in range(R):
+            if use_r:
+                while filled < min(i + g_r + L_r + 1, R):
+                    src, dst = ring[filled % ring.shape[0]], ring[(filled + 1) % ring.shape[0]]
+                    for b in range(D):
+                        dst[b] = src[b] + xp[filled, b]
+                    filled += 1
+                _mean_of_rows(detector, ring, i, L_r, g_r, R, inv_r[i], inv_rl[i], inv_rr[i], mu_r)
+            if use_d and i % ROW_BLOCK == 0:
+                _doppler_means(detector, xp, i, min(i + ROW_BLOCK, R), window_d, c_d, mu_d)
+            _finish_row(xp, i, scratch, half_range, half_doppler, mu_r, n_r, k_r, mu_d[i % ROW_BLOCK], n_d, k_d,
+                        use_r, use_d, both, detector, log_den, statistic[p, i], noise[p, i])
+
+
+def _os_window(window: tuple[int, int, int] | None) -> tuple:
+    """The ``window`` argument of :func:`_os_cfar_fused` for an axis (a
+    placeholder of the same types where the axis is not active)."""
     L, g, k = window or (1, 0, 1)
-    inv_count = 1.0 / reference_counts(M, L, g)
-    comps, n_comps, of_k, wires = selection_networks(2 * L) if detector == "os" and window else selection_networks(1)
-    return L, g, k, inv_count, comps, n_comps, of_k, wires
+    return (L, g, k, *selection_networks(2 * L if window else 1))
+
+
+def _sum_window(window: tuple[int, int, int] | None, M: int) -> tuple:
+    """The ``window`` argument of :func:`_sum_cfar_rows` for an axis of M cells
+    (a placeholder of the same types where the axis is not active)."""
+    L, g, _ = window or (1, 0, 1)
+    return (L, g, *sum_inverses(L, g, M))
 
 
 def window_cfar(maps: np.ndarray, detector: str, windows: dict, dimension: str, half_range: int,
                 half_doppler: int) -> tuple[np.ndarray, np.ndarray]:
-    """(statistic, noise estimate) (n, R, D) float32 of CA or OS over the
-    active dimensions ``windows`` ``{axis: (L, g, k)}``, combined
+    """(statistic, noise estimate) (n, R, D) float32 of CA, OS, GO or SO over
+    the active dimensions ``windows`` ``{axis: (L, g, k)}``, combined
     (``dimension``, :func:`combine`), with the peak detection folded in; the
     significance computed at the local maxima only. One pass per map
-    (:func:`_window_cfar_fused`), bit-identical to :func:`window_cfar_composed`."""
+    (:func:`_sum_cfar_rows`, :func:`_os_cfar_fused`), bit-identical to
+    :func:`window_cfar_composed`."""
     maps = np.ascontiguousarray(maps, dtype=np.float32)
     n, R, D = maps.shape
     counts, ranks, log_den = _axis_windows(detector, windows, {"range": R, "doppler": D})
     statistic = np.empty(maps.shape, dtype=np.float32)
     noise = np.empty(maps.shape, dtype=np.float32)
-    _window_cfar_fused(maps, detector == "os", "range" in windows, "doppler" in windows, dimension == "both",
-                       _fused_window(detector, windows.get("range"), R),
-                       _fused_window(detector, windows.get("doppler"), D),
-                       counts.get("range", _UNUSED), ranks.get("range", _UNUSED),
-                       counts.get("doppler", _UNUSED), ranks.get("doppler", _UNUSED), log_den,
-                       half_range, half_doppler, statistic, noise)
+    use = ("range" in windows, "doppler" in windows, dimension == "both")
+    arrays = (counts.get("range", _UNUSED), ranks.get("range", _UNUSED), counts.get("doppler", _UNUSED),
+              ranks.get("doppler", _UNUSED), log_den, half_range, half_doppler, statistic, noise)
+    if detector == "os":
+        _os_cfar_fused(maps, *use, _os_window(windows.get("range")), _os_window(windows.get("doppler")), *arrays)
+    else:
+        _sum_cfar_rows(maps, DETECTOR_CODES[detector], *use, _sum_window(windows.get("range"), R),
+                       _sum_window(windows.get("doppler"), D), *arrays)
     return statistic, noise
 
 

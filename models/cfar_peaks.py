@@ -22,38 +22,45 @@ def _larger(a, b):
 
 
 @numba.njit(cache=True)
-def _local_maxima_map(x, half_range, half_doppler, row_max, box_max, keep):
-    """keep[r, d] = x[r, d] >= the box maximum, on one map x (R, D): separable,
-    first along Doppler (per row, into ``row_max`` (R, D)), then along range
-    over the row maxima (``box_max`` (D,)), each as a running maximum over the
-    box's offsets, vectorised along the row; the box cut at the map's edges."""
+def _local_maxima_row(x, r, half_range, half_doppler, col_max, keep_row):
+    """keep_row[d] = x[r, d] >= the box maximum, for row r of one map x (R, D),
+    by row views: the column maxima of rows r - half_range .. r + half_range
+    (``col_max`` (D,), whole contiguous rows at a time), then x[r, d] compared
+    with each of col_max[d - half_doppler .. d + half_doppler]; the box cut at
+    the map's edges. x >= the maximum of a set is x >= each of its members, so
+    the mask is the box maximum's (maps hold no NaN)."""
     R, D = x.shape
-    for r in range(R):
-        for d in range(D):                       # element loops: a slice copy costs a call per row
-            row_max[r, d] = x[r, d]
-        for e in range(1, half_doppler + 1):
-            for d in range(D - e):
-                row_max[r, d] = _larger(row_max[r, d], x[r, d + e])
-            for d in range(e, D):
-                row_max[r, d] = _larger(row_max[r, d], x[r, d - e])
-    for r in range(R):
+    for d in range(D):                           # element loops: a slice copy costs a call per row
+        col_max[d] = x[r, d]
+    for q in range(max(r - half_range, 0), min(r + half_range + 1, R)):
         for d in range(D):
-            box_max[d] = row_max[r, d]
-        for q in range(max(r - half_range, 0), min(r + half_range + 1, R)):
-            for d in range(D):
-                box_max[d] = _larger(box_max[d], row_max[q, d])
-        for d in range(D):
-            keep[r, d] = x[r, d] >= box_max[d]
+            col_max[d] = _larger(col_max[d], x[q, d])
+    for d in range(D):
+        keep_row[d] = x[r, d] >= col_max[d]
+    x_r = x[r]
+    for e in range(1, min(half_doppler, D - 1) + 1):
+        # views offset by e, so every index is a loop counter (no negative-index checks: it vectorises)
+        keep_lo, x_lo, col_hi = keep_row[:D - e], x_r[:D - e], col_max[e:]
+        for d in range(D - e):
+            keep_lo[d] = keep_lo[d] & (x_lo[d] >= col_hi[d])
+        keep_hi, x_hi, col_lo = keep_row[e:], x_r[e:], col_max[:D - e]
+        for d in range(D - e):
+            keep_hi[d] = keep_hi[d] & (x_hi[d] >= col_lo[d])
+
+
+@numba.njit(cache=True)
+def _local_maxima_map(x, half_range, half_doppler, col_max, keep):
+    """:func:`_local_maxima_row` for every row of one map x (R, D)."""
+    for r in range(x.shape[0]):
+        _local_maxima_row(x, r, half_range, half_doppler, col_max, keep[r])
 
 
 @numba.njit(cache=True)
 def _local_maxima(x, half_range, half_doppler, keep):
     """:func:`_local_maxima_map` on every map of x (P, R, D)."""
-    P, R, D = x.shape
-    row_max = np.empty((R, D), dtype=x.dtype)
-    box_max = np.empty(D, dtype=x.dtype)
-    for p in range(P):
-        _local_maxima_map(x[p], half_range, half_doppler, row_max, box_max, keep[p])
+    col_max = np.empty(x.shape[2], dtype=x.dtype)
+    for p in range(x.shape[0]):
+        _local_maxima_map(x[p], half_range, half_doppler, col_max, keep[p])
 
 
 def local_maxima(maps: np.ndarray, half_range: int, half_doppler: int) -> np.ndarray:

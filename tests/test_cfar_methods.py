@@ -15,7 +15,7 @@ from bench.rng import TrialRNG
 from bench.tasks.cells_metrics import REGION_NAMES
 from models import cfar
 
-CFAR_METHODS = ("ca-cfar", "os-cfar", "regression-cfar", "region-adaptive")
+CFAR_METHODS = ("ca-cfar", "os-cfar", "go-cfar", "so-cfar", "regression-cfar", "region-adaptive")
 
 
 def _batch(snr_db, n=3, **overrides):
@@ -24,7 +24,8 @@ def _batch(snr_db, n=3, **overrides):
     return cls().generate(params, snr_db, n, TrialRNG(21, 0, 5, range(n)))
 
 
-@pytest.mark.parametrize(("name", "extra"), [("ca-cfar", {}), ("os-cfar", {}), ("regression-cfar", {}),
+@pytest.mark.parametrize(("name", "extra"), [("ca-cfar", {}), ("os-cfar", {}), ("go-cfar", {}), ("so-cfar", {}),
+                                           ("regression-cfar", {}),
                                            ("regression-cfar", {"family": "polynomial"})])
 @pytest.mark.parametrize("dimension", ["range", "doppler", "both", "either"])
 def test_the_scipy_reference_gives_the_same_output(name, extra, dimension):
@@ -85,7 +86,7 @@ def test_threshold_factors_are_the_closed_forms():
     assert math.isclose(math.prod((16 - i) / (16 - i + K) for i in range(12)), pfa, rel_tol=1e-7)
 
 
-@pytest.mark.parametrize("name", ["ca-cfar", "os-cfar"])
+@pytest.mark.parametrize("name", ["ca-cfar", "os-cfar", "go-cfar", "so-cfar"])
 def test_the_threshold_map_reproduces_the_decisions_of_one_dimension(name):
     """With one dimension and no peak detection, "statistic >= -log10 pfa" is
     "x > K mu" cell by cell, K from the closed form at the cell's own window."""

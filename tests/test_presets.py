@@ -147,7 +147,7 @@ def test_cfar_preset_smoke(bench_cli, tmp_path):
     path.write_text(tomlw.dumps(sweep))
     bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 1, check=True)
     summary = pd.read_csv(tmp_path / "out" / "summary.csv")
-    assert set(summary.method) == {"ca-cfar", "os-cfar", "regression-cfar", "region-adaptive"}
+    assert set(summary.method) == {"ca-cfar", "os-cfar", "go-cfar", "so-cfar", "regression-cfar", "region-adaptive"}
     assert set(summary.scenario) == {"rd-map-mixed", "rd-map-homogeneous", "rd-map-edge", "rd-map-bragg-strong",
                                      "rd-map-bragg-weak"}
     report = (tmp_path / "out" / "report.md").read_text()
