@@ -55,8 +55,8 @@ from bench.markdown import code, fmt, table
 from bench.params import build_params
 from bench.rng import EVALUATION, TrialRNG, stable_key
 
-PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "trials_per_second", "reference",
-                "reference_seconds_per_trial", "speedup", "peak_rss_mb"]
+PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "trials_per_second", "chunk",
+                "chunk_seconds_per_trial", "reference", "reference_seconds_per_trial", "speedup", "peak_rss_mb"]
 SCENE_COLUMNS = ["scenario", "size", "trials", "seconds_per_trial", "peak_rss_mb"]
 SEED = 20261121
 REPEATS = 3
@@ -72,6 +72,7 @@ class Job:
     scenario_params: dict
     trials: int
     reference: bool          # time the reference implementation instead of the method
+    chunk: int | None = None     # also time a batch of this many trials (a preset's chunk), or not
 
 
 @dataclass(frozen=True)
@@ -132,6 +133,10 @@ def measure(job: Job) -> dict:
         out["work_per_trial"] = float(count) / job.trials
     fn(warm, params)
     seconds = _timed(lambda: fn(batch, params), REPEATS)
+    out["chunk_seconds_per_trial"] = np.nan
+    if job.chunk:      # the same batch cut to a preset's chunk: what a sweep's unit pays per trial
+        chunk = _batch(job, job.chunk)
+        out["chunk_seconds_per_trial"] = _timed(lambda: fn(chunk, params), REPEATS) / job.chunk
     return {**out, "seconds_per_trial": seconds / job.trials, "peak_rss_mb": _peak_rss_mb()}
 
 
@@ -207,9 +212,25 @@ def check_sizes(methods: list[str] | None, sizes: list[str] | None) -> None:
             raise ConfigError("--sizes", f"unknown size {size!r} (known: {', '.join(known) or 'none'})")
 
 
+def preset_chunks() -> dict[str, int]:
+    """Method name -> the smallest ``chunk`` among the packaged presets that run it: the
+    batch size a sweep's units hand it, where a fixed cost per call weighs most per trial."""
+    from bench.config import parse_sweep_text
+    from bench.listing import presets
+
+    out: dict[str, int] = {}
+    for name, path in presets().items():
+        plan = parse_sweep_text(path.read_bytes(), f"preset {name}")
+        for method in plan.methods:
+            out[method.name] = min(out.get(method.name, plan.chunk), plan.chunk)
+    return out
+
+
 def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> list[tuple[Job, int]]:
-    """(job, reference trials) for every method x its scenario's sizes."""
+    """(job, reference trials) for every method x its scenario's sizes, each also timed at
+    its presets' smallest chunk (:func:`preset_chunks`) when that is fewer trials."""
     check_sizes(methods, sizes)
+    chunks = preset_chunks()
     out = []
     for name, cls in registry.methods().items():
         if methods and name not in methods:
@@ -219,7 +240,9 @@ def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> li
             if sizes and size not in sizes:
                 continue
             ref_trials = trials if cls.reference_trials is None else max(1, min(trials, cls.reference_trials))
-            out.append((Job(name, scenario.name, size, dict(params), int(trials), False), ref_trials))
+            chunk = chunks.get(name)
+            chunk = chunk if chunk is not None and chunk < trials else None
+            out.append((Job(name, scenario.name, size, dict(params), int(trials), False, chunk), ref_trials))
     return out
 
 
@@ -251,6 +274,7 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
         speedup = r["seconds_per_trial"] / m["seconds_per_trial"] if np.isfinite(r["seconds_per_trial"]) else np.nan
         rows.append({"method": job.method, "size": job.size, "trials": job.trials,
                      "seconds_per_trial": m["seconds_per_trial"], "trials_per_second": 1.0 / m["seconds_per_trial"],
+                     "chunk": job.chunk, "chunk_seconds_per_trial": m["chunk_seconds_per_trial"],
                      "reference": r["name"] or "", "reference_seconds_per_trial": r["seconds_per_trial"],
                      "speedup": speedup, "peak_rss_mb": m["peak_rss_mb"],
                      f"{m['work_unit']}_per_second": m["work_per_trial"] / m["seconds_per_trial"]})
@@ -338,6 +362,14 @@ def _target_text(targets: dict, row: dict) -> str:
     return "; ".join(checks) or "–"
 
 
+def _chunk_text(row: dict) -> str:
+    """Per-trial time at the presets' smallest chunk and its ratio to the large batch's, or –."""
+    at_chunk = row.get("chunk_seconds_per_trial", np.nan)
+    if not (isinstance(at_chunk, float) and np.isfinite(at_chunk)):
+        return "–"
+    return f"{at_chunk * 1e3:.3g} ({int(row['chunk'])} trials; ×{at_chunk / row['seconds_per_trial']:.2g})"
+
+
 def _write_csv(df: pd.DataFrame, path: Path) -> None:
     from bench.runfolder import write_text      # whole, under a unique temporary name
     write_text(path, df.to_csv(index=False, lineterminator="\n"))
@@ -383,6 +415,7 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
     for row, info in zip(perf.to_dict("records"), extra):
         targets = info["targets"].get(row["size"], info["targets"].get("*", {}))
         rows.append([code(row["method"]), row["size"], row["trials"], f"{row['seconds_per_trial'] * 1e3:.3g}",
+                     _chunk_text(row),
                      *("–" if not np.isfinite(row[rate]) else f"{row[rate]:.3g}" for rate in rates),
                      row["reference"] or "–",
                      "–" if not np.isfinite(row["reference_seconds_per_trial"])
@@ -390,11 +423,13 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
                      fmt(row["speedup"]), f"{row['peak_rss_mb']:.0f}", _target_text(targets, row)])
     parts = ["# Performance", "Written by `bench perf`; `perf.csv` holds the same numbers. One core per "
              "measurement (a fresh process, numba, OpenMP, MKL and OpenBLAS held to one thread), best of 3 "
-             "runs after a one-trial warm-up (JIT compilation is not timed); the reference likewise, on its "
+             "runs after a one-trial warm-up (JIT compilation is not timed), and the same at the smallest chunk of the "
+             "presets that run the method (the batch a sweep's unit hands it; × its per-trial time over the "
+             "large batch's: the fixed cost per call); the reference likewise, on its "
              "trials, in a separate fresh process. Rates are per core: trials per second, and each method's "
              "own work unit per second (`Method.work`: cells of a CFAR map, DP state transitions). Peak RSS "
              "is the whole measuring process's (interpreter and libraries included).",
-             table(["method", "size", "trials", "ms per trial",
+             table(["method", "size", "trials", "ms per trial", "ms per trial at a preset's chunk",
                     *(f"{rate.removesuffix('_per_second')}/s per core" for rate in rates), "reference",
                     "reference ms per trial", "speed-up", "peak RSS (MB)", "targets"], rows),
              "Sizes: " + "; ".join(sorted({f"{code(i['scenario'])} {r['size']} = {i['params'] or 'defaults'}"
