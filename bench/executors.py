@@ -92,6 +92,11 @@ class SerialExecutor:
                 out = UnitFailure(task, error_text(exc))
             yield out
 
+    def warm_up(self, fn: Callable, tasks: Iterable, timeout: float | None = None) -> None:
+        """Run ``fn`` on each task here, results and failures dropped (:mod:`bench.warmup`)."""
+        for _ in self.imap_unordered(fn, tasks):
+            pass
+
     def shutdown(self, cancel: bool = False) -> None:
         pass
 
@@ -350,6 +355,16 @@ class LocalExecutor:
                     continue
                 yield out       # the consumer may add tasks meanwhile: the next round starts them
 
+    def warm_up(self, fn: Callable, tasks: Iterable, timeout: float | None = None) -> None:
+        """Run ``fn`` on each task in the first worker alone, results and failures dropped, while
+        the others wait (:mod:`bench.warmup`: what it compiles, the others then load from the cache)."""
+        rest, self._pool = self._pool[1:], self._pool[:1]
+        try:
+            for _ in self.imap_unordered(fn, tasks, timeout=timeout):
+                pass
+        finally:
+            self._pool += rest
+
     def _send(self, i: int, fn: Callable, task) -> None:
         for _ in range(3):
             w = self._pool[i]
@@ -567,6 +582,9 @@ class DaskExecutor:
                 yield result
                 refill()
             refill()
+
+    def warm_up(self, fn: Callable, tasks: Iterable, timeout: float | None = None) -> None:
+        """Nothing: a cluster's workers are other machines' processes, each with its own cache."""
 
     def shutdown(self, cancel: bool = False) -> None:
         """Close the client (and the LocalCluster); with ``cancel``, drop the units in flight.

@@ -419,7 +419,7 @@ def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None) -> Pa
         raise ConfigError("", f"{out_dir} has no results.sqlite (not a bench run folder)")
     store = Store(db)
     try:
-        with runfolder.writing(out_dir):
+        with runfolder.writing(out_dir), figures.drawn_apart():
             return _build(store, out_dir, recording, on_phase)
     finally:
         store.close()
@@ -505,6 +505,7 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
             "glance": glance_markdown(glance(trials, task_of, comparisons, chance)),
             "parts": [p for p in parts if p]}
     report = out_dir / "report.md"
+    figures.wait_drawn()          # every PNG written before the report names it and the HTML embeds it
     _write_text(report, escape_controls(render("report.md.j2", html=False, **page) + "\n"))
     html = markdown_to_html(escape_controls(render("report.md.j2", html=True, **page)), title, out_dir,
                             escape_controls(interactive_figures(summary, task_of)))
