@@ -78,6 +78,7 @@ def in_worker() -> bool:
 
 class SerialExecutor:
     workers = 1
+    local = True        # its processes share this machine's numba cache (bench.warmup)
 
     def imap_unordered(self, fn: Callable, tasks: Iterable, *, stop: Callable[[], bool] | None = None,
                        timeout: float | None = None) -> Iterator:
@@ -91,11 +92,6 @@ class SerialExecutor:
             except Exception as exc:  # noqa: BLE001 - a unit's failure, never the run's
                 out = UnitFailure(task, error_text(exc))
             yield out
-
-    def warm_up(self, fn: Callable, tasks: Iterable, timeout: float | None = None) -> None:
-        """Run ``fn`` on each task here, results and failures dropped (:mod:`bench.warmup`)."""
-        for _ in self.imap_unordered(fn, tasks):
-            pass
 
     def shutdown(self, cancel: bool = False) -> None:
         pass
@@ -284,6 +280,8 @@ def _kill_live_executors() -> None:
 class LocalExecutor:
     """``workers`` processes, one unit each at a time; a dead or overdue worker is replaced."""
 
+    local = True
+
     def __init__(self, workers: int):
         self.workers = workers
         # forkserver: no fork of a driver that may hold threads (rerun, BLAS).
@@ -354,16 +352,6 @@ class LocalExecutor:
                 else:
                     continue
                 yield out       # the consumer may add tasks meanwhile: the next round starts them
-
-    def warm_up(self, fn: Callable, tasks: Iterable, timeout: float | None = None) -> None:
-        """Run ``fn`` on each task in the first worker alone, results and failures dropped, while
-        the others wait (:mod:`bench.warmup`: what it compiles, the others then load from the cache)."""
-        rest, self._pool = self._pool[1:], self._pool[:1]
-        try:
-            for _ in self.imap_unordered(fn, tasks, timeout=timeout):
-                pass
-        finally:
-            self._pool += rest
 
     def _send(self, i: int, fn: Callable, task) -> None:
         for _ in range(3):
@@ -443,6 +431,7 @@ class DaskExecutor:
     streams come from the sweep seed and the unit's trials only.
     """
 
+    local = False       # its workers, on other machines too, keep their own numba caches (bench.warmup)
     retries = 2
     connect_timeout = "15s"     # to reach an existing scheduler
     worker_timeout = 60         # seconds to wait for its first worker
@@ -582,9 +571,6 @@ class DaskExecutor:
                 yield result
                 refill()
             refill()
-
-    def warm_up(self, fn: Callable, tasks: Iterable, timeout: float | None = None) -> None:
-        """Nothing: a cluster's workers are other machines' processes, each with its own cache."""
 
     def shutdown(self, cancel: bool = False) -> None:
         """Close the client (and the LocalCluster); with ``cancel``, drop the units in flight.

@@ -419,9 +419,16 @@ def _capped_workers(workers: int, to_run: int, quiet: bool) -> int:
 def _warm_up(executor, plan: Plan, store: Store, progress: Progress, timeout: float | None) -> None:
     """Compile the sweep's kernels in one worker before any unit is timed (:mod:`bench.warmup`);
     its seconds are stored apart (meta ``warm_up_seconds``), never in a unit's runtime."""
-    progress.phase("warm-up")
+    import tempfile
+
+    tasks = warmup.warm_up_tasks(plan)
+    progress.phase("warm-up", len(tasks))
     t0 = time.monotonic()
-    executor.warm_up(warmup.run_warm_up, warmup.warm_up_tasks(plan, announce=not progress.quiet), timeout)
+    with tempfile.TemporaryDirectory(prefix="bench-warm-up-") as folder:
+        announce = None if progress.quiet else str(Path(folder) / "announced")
+        for _ in executor.imap_unordered(warmup.run_warm_up, [(units, announce) for units, _ in tasks],
+                                         timeout=timeout):
+            progress.advance()
     store.set_meta("warm_up_seconds", repr(time.monotonic() - t0))
     progress.close()
 
@@ -474,7 +481,7 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
                 ex = SerialExecutor() if to_run == 0 else \
                     make_executor(executor, _capped_workers(workers, to_run, quiet), scheduler)
             started = time.monotonic()
-            if to_run and warmup.cache_is_cold():
+            if to_run and ex.local and warmup.cache_is_cold():        # a cluster's workers have their own caches
                 _warm_up(ex, plan, store, progress, timeout)
             if cal_tasks:
                 stored = sum(u.key in done for u in cal_units)

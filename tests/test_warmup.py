@@ -7,23 +7,33 @@ import os
 import sqlite3
 import subprocess
 import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 
 from bench import warmup
 from bench.config import load_sweep
-from bench.executors import LocalExecutor
 
 
-def test_warm_up_covers_every_scenario_config_in_both_phases_with_one_trial(write_sweep):
+def test_warm_up_is_one_task_per_pair_with_both_phases_and_one_trial(write_sweep):
     plan = load_sweep(write_sweep(snr="[8, 0]"))
-    tasks = warmup.warm_up_tasks(plan, announce=False)
-    units = [(t.unit.phase, t.unit.snr_db, t.unit.n, t.unit.trial_start) for t, announce in tasks]
-    assert units == [("calibration", None, 1, 0), ("evaluation", 0.0, 1, 0)]     # the lowest SNR
-    assert tasks[1][0].thresholds == {m.label: 0.0 for m in plan.methods}
-    assert not any(announce for _, announce in tasks)
+    tasks = warmup.warm_up_tasks(plan, announce="marker")
+    assert [units[0].methods for units, _ in tasks] == [(m.label,) for m in plan.methods]   # one pair each
+    for units, announce in tasks:
+        assert announce == "marker" and len({u.methods for u in units}) == 1
+        assert [(u.unit.phase, u.unit.snr_db, u.unit.n) for u in units] == [("calibration", None, 1),
+                                                                           ("evaluation", 0.0, 1)]  # lowest SNR
+        assert units[1].thresholds == {m.label: 0.0 for m in plan.methods}
+
+
+def test_only_the_first_process_to_compile_says_so(tmp_path, monkeypatch, capsys):
+    marker = str(tmp_path / "announced")
+    monkeypatch.setattr(warmup, "_announced", False)
+    warmup._announce_once(marker)
+    warmup._announce_once(marker)                 # the same process again: silent
+    monkeypatch.setattr(warmup, "_announced", False)
+    warmup._announce_once(marker)                 # another process (its own flag): the marker exists
+    assert capsys.readouterr().err == f"bench: {warmup.COMPILING}\n"
 
 
 def _dispatcher(index_exists: bool, fresh: bool):
@@ -43,31 +53,11 @@ def test_cache_is_cold(monkeypatch, kernels, cold):
     assert warmup.cache_is_cold() is cold
 
 
-def _mark_pid(task):
-    """A warm-up task: leave this worker's pid in the task's folder; ``die`` kills the worker."""
-    folder, die = task
-    Path(folder, str(os.getpid())).touch()
-    if die:
-        os._exit(3)
-    return os.getpid()
-
-
-def test_local_warm_up_runs_in_one_worker_survives_its_death_and_leaves_the_pool_whole(tmp_path):
-    ex = LocalExecutor(2)
-    try:
-        ex.warm_up(_mark_pid, [(tmp_path, False), (tmp_path, True), (tmp_path, False)], timeout=60)
-        pids = sorted(p.name for p in tmp_path.iterdir())
-        assert len(pids) == 2                    # the first worker, then the one that replaced it
-        later = list(ex.imap_unordered(_mark_pid, [(tmp_path, False)] * 8))
-        assert len(ex._pool) == 2 and len(later) == 8 and all(isinstance(pid, int) for pid in later)
-    finally:
-        ex.shutdown()
-
-
 @pytest.mark.slow
 def test_a_cold_cache_is_compiled_once_and_said_so_a_warm_one_silently(tmp_path):
-    """A sweep with a numba kernel, twice on an empty NUMBA_CACHE_DIR: the first run says
-    it compiles (once) and stores the warm-up's seconds apart; the second says nothing."""
+    """A sweep with a numba kernel, twice on an empty NUMBA_CACHE_DIR with two workers: the
+    first run says it compiles (once) and stores the warm-up's seconds apart; the second
+    says nothing and warms nothing up."""
     sweep = tmp_path / "imm.toml"
     sweep.write_text('name = "imm"\nscenario = "maneuvering-1d"\ntrials = 2\nseed = 1\nsnr_db = [10]\n'
                      'chunk = 1\n\n[[methods]]\nname = "imm-cv-ca"\n')
