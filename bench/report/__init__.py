@@ -492,6 +492,7 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     parts.append(comparisons_markdown(comparisons, task_of))
     parts += [s for task, ctx in contexts for s in task.trial_sections(ctx)]
     parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
+    figures.wait_drawn()          # every PNG written before the recording, report.md and the HTML (which embeds them)
     if recording and records:
         on_phase("recording")
         write_recording(out_dir / "recording.rrd", records, _recording_summary(summary, present),
@@ -505,7 +506,6 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
             "glance": glance_markdown(glance(trials, task_of, comparisons, chance)),
             "parts": [p for p in parts if p]}
     report = out_dir / "report.md"
-    figures.wait_drawn()          # every PNG written before the report names it and the HTML embeds it
     _write_text(report, escape_controls(render("report.md.j2", html=False, **page) + "\n"))
     html = markdown_to_html(escape_controls(render("report.md.j2", html=True, **page)), title, out_dir,
                             escape_controls(interactive_figures(summary, task_of)))
