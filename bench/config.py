@@ -43,6 +43,8 @@ from bench.errors import ConfigError
 from bench.params import PATH, as_float, build_params, field_types, is_tuple_field, params_as_dict, show
 from bench.rng import stable_key
 
+#: trials per unit when a sweep sets no ``chunk``
+DEFAULT_CHUNK = 50
 TOP_KEYS = {"name", "description", "scenario", "scenarios", "trials", "seed", "snr_db", "chunk",
             "scenario_params", "methods", "calibration", "record", "provenance", "unit_timeout_s",
             "max_unit_memory_gb"}
@@ -610,7 +612,7 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     base = None if base is None else os.path.abspath(base)
     scenario, scenarios, scenario_fields = _parse_scenarios(data, trials, base)
     seed = _expect_int(data.get("seed", 0), "seed", 0, 2**63 - 1)
-    chunk = _expect_int(data.get("chunk", 50), "chunk", 1, 1_000_000)
+    chunk = _expect_int(data.get("chunk", DEFAULT_CHUNK), "chunk", 1, 1_000_000)
     snr_db = _parse_snr(data["snr_db"]) if "snr_db" in data else scenarios[0].snr_db
     methods, method_fields, skipped = _parse_methods(data["methods"], scenarios, base)
     method_tasks = tuple(registry.get_method(m.name).task for m in methods)

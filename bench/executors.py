@@ -78,6 +78,7 @@ def in_worker() -> bool:
 
 class SerialExecutor:
     workers = 1
+    local = True        # its processes share this machine's numba cache (bench.warmup)
 
     def imap_unordered(self, fn: Callable, tasks: Iterable, *, stop: Callable[[], bool] | None = None,
                        timeout: float | None = None) -> Iterator:
@@ -279,6 +280,8 @@ def _kill_live_executors() -> None:
 class LocalExecutor:
     """``workers`` processes, one unit each at a time; a dead or overdue worker is replaced."""
 
+    local = True
+
     def __init__(self, workers: int):
         self.workers = workers
         # forkserver: no fork of a driver that may hold threads (rerun, BLAS).
@@ -428,6 +431,7 @@ class DaskExecutor:
     streams come from the sweep seed and the unit's trials only.
     """
 
+    local = False       # its workers, on other machines too, keep their own numba caches (bench.warmup)
     retries = 2
     connect_timeout = "15s"     # to reach an existing scheduler
     worker_timeout = 60         # seconds to wait for its first worker

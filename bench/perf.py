@@ -60,7 +60,8 @@ from bench.markdown import code, fmt, table
 from bench.params import build_params
 from bench.rng import EVALUATION, TrialRNG, stable_key
 
-PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "trials_per_second", "reference",
+PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "trials_per_second", "chunk",
+                "chunk_seconds_per_trial", "reference",
                 "reference_seconds_per_trial", "speedup", "peak_rss_mb"]
 SCENE_COLUMNS = ["scenario", "size", "trials", "seconds_per_trial", "peak_rss_mb"]
 SEED = 20261121
@@ -79,6 +80,7 @@ class Job:
     scenario_params: dict
     trials: int
     reference_trials: int    # trials of the batch the reference runs on; 0: the method alone
+    chunk: int | None = None     # also time a batch of this many trials (a preset's chunk), or not
 
 
 @dataclass(frozen=True)
@@ -149,6 +151,11 @@ def measure(job: Job) -> dict:
     else:
         for _ in range(ROUNDS - 1):
             best["method"] = min(best["method"], _cpu_seconds(lambda: method.run(batch, params)))
+    out["chunk_seconds_per_trial"] = np.nan
+    if job.chunk:      # the same batch cut to a preset's chunk: what a sweep's unit pays per trial
+        chunk = _batch(job, job.chunk)
+        out["chunk_seconds_per_trial"] = min(_cpu_seconds(lambda: method.run(chunk, params))
+                                             for _ in range(ROUNDS)) / job.chunk
     return {**out, "seconds_per_trial": best["method"] / job.trials}
 
 
@@ -227,10 +234,30 @@ def check_sizes(methods: list[str] | None, sizes: list[str] | None) -> None:
             raise ConfigError("--sizes", f"unknown size {size!r} (known: {', '.join(known) or 'none'})")
 
 
+def preset_chunks() -> dict[str, int]:
+    """Method name -> the smallest ``chunk`` among the packaged presets that run it: the
+    batch size a sweep's units hand it, where a fixed cost per call weighs most per trial.
+    Read from the presets' TOML as written (resolving a plan would read their data files)."""
+    import tomllib
+
+    from bench.config import DEFAULT_CHUNK
+    from bench.listing import presets
+
+    out: dict[str, int] = {}
+    for path in presets().values():
+        sweep = tomllib.loads(path.read_text(encoding="utf-8"))
+        chunk = int(sweep.get("chunk", DEFAULT_CHUNK))
+        for method in sweep.get("methods", []):
+            out[method["name"]] = min(out.get(method["name"], chunk), chunk)
+    return out
+
+
 def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> list[Job]:
     """A job for every method x its scenario's sizes, with the trials its reference runs on
-    (0 when it declares none)."""
+    (0 when it declares none), each also timed at its presets' smallest chunk
+    (:func:`preset_chunks`) when that is fewer trials."""
     check_sizes(methods, sizes)
+    chunks = preset_chunks()
     out = []
     for name, cls in registry.methods().items():
         if methods and name not in methods:
@@ -240,8 +267,10 @@ def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> li
             if sizes and size not in sizes:
                 continue
             ref_trials = trials if cls.reference_trials is None else max(1, min(trials, cls.reference_trials))
+            chunk = chunks.get(name)
             out.append(Job(name, scenario.name, size, dict(params), int(trials),
-                           ref_trials if cls.reference_name is not None else 0))
+                           ref_trials if cls.reference_name is not None else 0,
+                           chunk if chunk is not None and chunk < trials else None))
     return out
 
 
@@ -278,6 +307,7 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
         for name, seconds in references:
             rows.append({"method": job.method, "size": job.size, "trials": job.trials,
                          "seconds_per_trial": m["seconds_per_trial"], "trials_per_second": 1.0 / m["seconds_per_trial"],
+                         "chunk": job.chunk, "chunk_seconds_per_trial": m["chunk_seconds_per_trial"],
                          "reference": name, "reference_seconds_per_trial": seconds,
                          "speedup": seconds / m["seconds_per_trial"] if np.isfinite(seconds) else np.nan,
                          "peak_rss_mb": m["peak_rss_mb"],
@@ -397,6 +427,14 @@ def _scene_section(scenes: pd.DataFrame) -> list[str]:
             table(["scenario", "size", "trials", "ms per trial", "peak RSS (MB)", "targets"], rows)]
 
 
+def _chunk_text(row: dict) -> str:
+    """Per-trial time at the presets' smallest chunk and its ratio to the large batch's, or –."""
+    at_chunk = row.get("chunk_seconds_per_trial", np.nan)
+    if not (isinstance(at_chunk, float) and np.isfinite(at_chunk)):
+        return "–"
+    return f"{at_chunk * 1e3:.3g} ({int(row['chunk'])} trials; ×{at_chunk / row['seconds_per_trial']:.2g})"
+
+
 def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: pd.DataFrame | None,
                  scaling_sweep: str = "", scenes: pd.DataFrame | None = None) -> Path:
     """``perf.csv``, ``scene.csv`` and ``report.md``; ``scaling_sweep`` describes the sweep
@@ -410,6 +448,7 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
     for row, info in zip(perf.to_dict("records"), extra):
         targets = info["targets"].get(row["size"], info["targets"].get("*", {}))
         rows.append([code(row["method"]), row["size"], row["trials"], f"{row['seconds_per_trial'] * 1e3:.3g}",
+                     _chunk_text(row),
                      *("–" if not np.isfinite(row[rate]) else f"{row[rate]:.3g}" for rate in rates),
                      row["reference"] or "–",
                      "–" if not np.isfinite(row["reference_seconds_per_trial"])
@@ -419,12 +458,14 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
              "measurement (a fresh process, numba, OpenMP, MKL and OpenBLAS held to one thread); times are "
              f"the CPU time of that thread, the minimum over {ROUNDS} rounds in which the method and its "
              "reference (on the reference's trials, same process) run in turn, each after a one-trial "
-             "warm-up (JIT compilation is not timed). A reference timed with a part apart (a peer tracker's "
+             "warm-up (JIT compilation is not timed); the method also at the smallest chunk of the presets "
+             "that run it (the batch a sweep's unit hands it; × its per-trial time over the large batch's: "
+             "the fixed cost per call). A reference timed with a part apart (a peer tracker's "
              "initiator) has a second row: the reference less that part. Rates are per core: trials per "
              "second, and each method's own work unit per second (`Method.work`: cells of a CFAR map, DP "
              "state transitions). Peak RSS is the whole measuring process's (interpreter and libraries "
              "included) before the reference runs.",
-             table(["method", "size", "trials", "ms per trial",
+             table(["method", "size", "trials", "ms per trial", "ms per trial at a preset's chunk",
                     *(f"{rate.removesuffix('_per_second')}/s per core" for rate in rates), "reference",
                     "reference ms per trial", "speed-up", "peak RSS (MB)", "targets"], rows),
              "Sizes: " + "; ".join(sorted({f"{code(i['scenario'])} {r['size']} = {i['params'] or 'defaults'}"

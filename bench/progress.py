@@ -18,7 +18,7 @@ import sys
 import threading
 import time
 
-__all__ = ["PERIOD_S", "Progress"]
+__all__ = ["PERIOD_S", "Progress", "say"]
 
 #: Seconds between two plain progress lines when stderr is not a terminal.
 PERIOD_S = 10.0
@@ -27,6 +27,16 @@ PERIOD_S = 10.0
 def _fmt_seconds(s: float) -> str:
     s = int(round(s))
     return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+
+
+def say(text: str, stream=None) -> None:
+    """``bench: text`` as one line on ``stream`` (default stderr)."""
+    stream = stream or sys.stderr
+    try:
+        stream.write(f"bench: {text}\n")
+        stream.flush()
+    except (OSError, ValueError):   # a closed or full stderr never stops a run
+        pass
 
 
 class Progress:
@@ -97,11 +107,7 @@ class Progress:
         return f"{name}: {done}/{total} {self.label}{pct}, {_fmt_seconds(elapsed)} elapsed{eta}"
 
     def _line(self, text: str | None = None) -> None:
-        try:
-            self.stream.write(f"bench: {text or self.status()}\n")
-            self.stream.flush()
-        except (OSError, ValueError):   # a closed or full stderr never stops a run
-            pass
+        say(text or self.status(), self.stream)
 
     def _start_timer(self) -> None:
         self._wake = threading.Event()

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import capabilities, failures, registry, tomlw
+from bench import capabilities, failures, registry, tomlw, warmup
 from bench.calibration import EQUAL_CHANCE_PD, CalibrationResult, calibrate
 from bench.config import Plan, snr_key
 from bench.executors import (STOP_SIGNALS, SerialExecutor, UnitFailure, error_text, in_worker, make_executor,
@@ -418,6 +418,23 @@ def _capped_workers(workers: int, to_run: int, quiet: bool) -> int:
     return n
 
 
+def _warm_up(executor, plan: Plan, store: Store, progress: Progress, timeout: float | None) -> None:
+    """Compile the sweep's kernels in one worker before any unit is timed (:mod:`bench.warmup`);
+    its seconds are stored apart (meta ``warm_up_seconds``), never in a unit's runtime."""
+    import tempfile
+
+    tasks = warmup.warm_up_tasks(plan)
+    progress.phase("warm-up", len(tasks))
+    t0 = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="bench-warm-up-") as folder:
+        announce = None if progress.quiet else str(Path(folder) / "announced")
+        for _ in executor.imap_unordered(warmup.run_warm_up, [(units, announce) for units, _ in tasks],
+                                         timeout=timeout):
+            progress.advance()
+    store.set_meta("warm_up_seconds", repr(time.monotonic() - t0))
+    progress.close()
+
+
 def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
               executor: str = "local", fresh: bool = False, quiet: bool = False,
               on_result=None, scheduler: str | None = None, retry_failed: bool = False,
@@ -466,6 +483,8 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
                 ex = SerialExecutor() if to_run == 0 else \
                     make_executor(executor, _capped_workers(workers, to_run, quiet), scheduler)
             started = time.monotonic()
+            if to_run and ex.local and warmup.cache_is_cold():        # a cluster's workers have their own caches
+                _warm_up(ex, plan, store, progress, timeout)
             if cal_tasks:
                 stored = sum(u.key in done for u in cal_units)
                 progress.phase("calibration", stored + len(cal_tasks), stored)

@@ -1,4 +1,6 @@
-"""A straightforward SciPy DP-TBD: the speed baseline and test oracle of ``dp-tbd``.
+"""Two plain DP-TBDs: the test oracle of ``dp-tbd`` and its ``bench perf`` peer.
+
+:func:`reference_dp_tbd`, the test oracle, is the straightforward SciPy recursion:
 
 Per trial and frame, the Tonissen-Evans recursion written the obvious way:
 the box maximum of the previous merit with ``scipy.ndimage.maximum_filter``
@@ -10,6 +12,12 @@ shift leaves the grid), stored as int8, then backtracking. Same conventions as
 numbered ``(dr + q) (2q + 1) + (dc + q)``, first maximum wins, merits in the
 frames' dtype (float32 for ``tbd-grid``), so it agrees with the numba kernel
 bit for bit.
+
+:func:`numpy_dp_tbd`, the peer ``bench perf`` times the kernel against, is the
+kernel's own algorithm as a competent NumPy user would write it: the whole batch
+at once, the forward pass maxima only (the box maximum separable, 2 (2q + 1)
+``np.maximum`` passes over -inf-padded planes), every frame's merit kept, the
+backpointers recomputed along the track only. Same outputs, bit for bit.
 """
 
 from __future__ import annotations
@@ -147,4 +155,52 @@ def reference_pf_tbd(frames, keys, geometry, model, betas, variances, flags):
             picks = np.minimum(np.searchsorted(np.cumsum(weights), (np.arange(nc) + offsets) / nc), P - 1)
             state, cells = state[:, picks], cells_all[:, picks]
         score[t] = log_odds
+
+
+def _box_max(merit: np.ndarray, q: int, padded: np.ndarray) -> np.ndarray:
+    """max over |d|_inf <= q of merit(x - d) per plane of ``merit`` (n, H, W), -inf off-grid:
+    along columns then along rows, in ``padded`` (n, H + 2q, W + 2q), already -inf."""
+    n, H, W = merit.shape
+    padded[:, q:q + H, q:q + W] = merit
+    along_cols = padded[:, :, :W].copy()
+    for dc in range(1, 2 * q + 1):
+        np.maximum(along_cols, padded[:, :, dc:dc + W], out=along_cols)
+    best = along_cols[:, :H].copy()
+    for dr in range(1, 2 * q + 1):
+        np.maximum(best, along_cols[:, dr:dr + H], out=best)
+    return best
+
+
+def _first_best_step(merit: np.ndarray, r: np.ndarray, c: np.ndarray, q: int) -> tuple[np.ndarray, np.ndarray]:
+    """(dr, dc) per trial: the first displacement, in the window numbering, whose predecessor
+    (r - dr, c - dc) in ``merit`` (n, H, W) is the window's maximum (off-grid: -inf)."""
+    n, H, W = merit.shape
+    steps = np.arange(-q, q + 1)
+    dr, dc = np.repeat(steps, 2 * q + 1), np.tile(steps, 2 * q + 1)       # j = (dr + q)(2q + 1) + (dc + q)
+    rows, cols = r[:, None] - dr, c[:, None] - dc
+    inside = (rows >= 0) & (rows < H) & (cols >= 0) & (cols < W)
+    values = np.where(inside, merit[np.arange(n)[:, None], rows.clip(0, H - 1), cols.clip(0, W - 1)], -np.inf)
+    j = np.argmax(values, axis=1)                                          # the first maximum wins
+    return dr[j], dc[j]
+
+
+def numpy_dp_tbd(frames: np.ndarray, window_radius: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`reference_dp_tbd`'s outputs by the kernel's algorithm in vectorised NumPy (module docstring)."""
+    frames = np.asarray(frames)
+    n, K, H, W = frames.shape
+    q = int(window_radius)
+    merits = np.empty_like(frames)
+    merits[:, 0] = frames[:, 0]
+    padded = np.full((n, H + 2 * q, W + 2 * q), -np.inf, frames.dtype)
+    for k in range(1, K):
+        np.add(frames[:, k], _box_max(merits[:, k - 1], q, padded), out=merits[:, k])
+    flat = np.argmax(merits[:, K - 1].reshape(n, -1), axis=1)
+    r, c = np.divmod(flat, W)
+    score = merits[np.arange(n), K - 1, r, c].astype(float)
+    track = np.empty((n, K, 2), np.int64)
+    track[:, K - 1, 0], track[:, K - 1, 1] = r, c
+    for k in range(K - 1, 0, -1):
+        dr, dc = _first_best_step(merits[:, k - 1], r, c, q)
+        r, c = r - dr, c - dc
+        track[:, k - 1, 0], track[:, k - 1, 1] = r, c
     return score, track

@@ -27,6 +27,7 @@ only the state recursion carries the trial axis ``n``.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numba
@@ -159,12 +160,36 @@ def _update_covariance(P, H, R):
     return S, K, P_post
 
 
+#: how many covariance sequences :func:`covariance_sequence` keeps (least recently used dropped first)
+COVARIANCE_MEMO_SIZE = 64
+_covariance_memo: OrderedDict = OrderedDict()
+
+
 def covariance_sequence(model: LinearGaussianModel, P0: np.ndarray, steps: int):
     """The data-independent part of the filter, for ``steps`` steps.
 
     ``P0`` is the prior covariance of step 0. Returns ``(P_prior, P_post, S,
-    K)`` with shapes ``(K, d, d), (K, d, d), (K, m, m), (K, d, m)``.
+    K)`` with shapes ``(K, d, d), (K, d, d), (K, m, m), (K, d, m)`` (fresh
+    arrays the caller may write).
+
+    It depends on the model, ``P0`` and ``steps`` only, never on the data, so
+    it is computed once per distinct (F, H, Q, R, P0, steps), keyed on their
+    bytes, and kept in a small LRU memo: a sweep calls the filter once per
+    chunk of trials with the same model (the fixed cost per call, issue 28).
     """
+    P0 = np.asarray(P0, dtype=float)
+    key = (steps, *((a.shape, a.dtype.str, a.tobytes()) for a in (model.F, model.H, model.Q, model.R, P0)))
+    found = _covariance_memo.get(key)
+    if found is None:
+        found = _covariance_memo[key] = _covariance_sequence(model, P0, steps)
+        if len(_covariance_memo) > COVARIANCE_MEMO_SIZE:
+            _covariance_memo.popitem(last=False)
+    else:
+        _covariance_memo.move_to_end(key)
+    return tuple(a.copy() for a in found)
+
+
+def _covariance_sequence(model: LinearGaussianModel, P0: np.ndarray, steps: int):
     F, H, Q, R = model.F, model.H, model.Q, model.R
     d, m = model.dim_x, model.dim_z
     P_prior = np.empty((steps, d, d))

@@ -11,7 +11,7 @@ from bench.tasks.tbd import Grid, TBDScene
 from bench.params import build_params
 from bench.registry import get_method
 from bench.rng import TrialRNG
-from methods._tbd_reference import reference_dp_tbd
+from methods._tbd_reference import numpy_dp_tbd, reference_dp_tbd
 from methods.dp_tbd import (
     LOG_UNIFORM_ANGLE,
     ConditionalLLR,
@@ -110,6 +110,19 @@ def test_numba_dp_tbd_equals_scipy_reference_on_scene_frames(q):
     score, track = reference_dp_tbd(b.z, q)
     np.testing.assert_array_equal(out.score, score)
     np.testing.assert_array_equal(out.track, track)
+
+
+@pytest.mark.parametrize("q", [1, 2, 3])
+def test_numpy_peer_equals_scipy_reference_with_ties_and_edges(q):
+    """The ``bench perf`` peer (the kernel's algorithm in NumPy) gives the oracle's score and
+    track bit for bit: on scene frames, and on small-integer frames full of ties (the first
+    maximum must win) over grids narrower than the window (the -inf edges)."""
+    b = scene(4.0, n=2, frames=8)
+    for frames in (b.z, np.random.default_rng(q).integers(0, 3, (3, 6, 4, 2 * q)).astype(np.float32)):
+        score, track = numpy_dp_tbd(frames, q)
+        ref_score, ref_track = reference_dp_tbd(frames, q)
+        np.testing.assert_array_equal(score, ref_score)
+        np.testing.assert_array_equal(track, ref_track)
 
 
 def test_mf_with_white_noise_and_flat_prior_is_the_scaled_dp():

@@ -59,6 +59,24 @@ def test_steady_state_is_limit_of_recursion(setup):
     np.testing.assert_allclose(K[-1], K_inf, rtol=1e-8, atol=1e-12)
 
 
+def test_covariance_sequence_memo_is_exact_and_private(setup, monkeypatch):
+    """The memoised sequence is bit for bit the recursion's; each call gets its own arrays (a caller
+    writing one changes nothing for the next); another P0 or step count is another entry."""
+    import models.kalman as kalman
+
+    model, _, _, P0 = setup
+    monkeypatch.setattr(kalman, "_covariance_memo", type(kalman._covariance_memo)())
+    fresh = kalman._covariance_sequence(model, P0, 30)
+    first = covariance_sequence(model, P0, 30)
+    for a in first:
+        a[...] = np.nan
+    for again, exact in zip(covariance_sequence(model, P0, 30), fresh):
+        assert again.tobytes() == exact.tobytes()
+    assert covariance_sequence(model, P0, 31)[0].shape[0] == 31
+    assert covariance_sequence(model, 2 * P0, 30)[0][0].tobytes() == (2 * P0).tobytes()
+    assert len(kalman._covariance_memo) == 3
+
+
 def test_steady_start_gives_constant_gain(setup):
     model, z, x0, _ = setup
     P_inf = steady_state(model)[0]

@@ -68,7 +68,8 @@ def _perf_rows():
     return [{**base, "method": "ca-cfar", "size": "small", "trials_per_second": 1e4, "cells_per_second": 4.6e7},
             {**base, "method": "dp-tbd", "size": "paper", "trials_per_second": 1e4,
              "transitions_per_second": 3e10},
-            {**base, "method": "cv-kf", "size": "default", "trials_per_second": 1e4}]
+            {**base, "method": "cv-kf", "size": "default", "trials_per_second": 1e4, "chunk": 25,
+             "chunk_seconds_per_trial": 3e-4}]
 
 
 def test_perf_csv_has_a_rate_column_per_work_unit(tmp_path):
@@ -87,7 +88,8 @@ def test_perf_csv_has_a_rate_column_per_work_unit(tmp_path):
               "targets": {"*": {"cells_per_second": 1.0}}}]
     text = re.sub(" +", " ", write_report(tmp_path, perf, extra, None).read_text())
     assert "| trials/s per core | cells/s per core | transitions/s per core |" in text
-    assert "| `ca-cfar` | small | 100 | 0.1 | 1e+04 | 4.6e+07 | – | ref |" in text
+    assert "| `ca-cfar` | small | 100 | 0.1 | – | 1e+04 | 4.6e+07 | – | ref |" in text
+    assert "| `cv-kf` | default | 100 | 0.1 | 0.3 (25 trials; ×3) | 1e+04 |" in text   # the fixed cost per call
     assert "≥ 1e+10 transitions/s: 3.00e+10 ✓" in text
     assert "≥ 1e+00 cells/s: nan ✗" in text                     # a goal in a unit the method does not count
     written = pd.read_csv(tmp_path / "perf.csv")

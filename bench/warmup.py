@@ -1,0 +1,124 @@
+"""The kernels a sweep uses, compiled once before any unit is timed (docs/architecture.md, "Runner").
+
+Plugins compile their numba kernels on first call and keep them in numba's on-disk
+cache. On a fresh install every worker would compile the same kernels, inside the
+units it times. So when the cache looks cold (:func:`cache_is_cold`) the runner first
+hands the workers a warm-up: per (scenario config, method config) pair, one task that
+runs its one-trial calibration unit (where its task needs a threshold) and evaluation
+unit (at the lowest SNR), results thrown away. Each method's kernels are compiled by the
+one worker that takes its pair (the pairs spread over the workers), with the types the
+sweep passes, and cached; a kernel two methods share may compile in two workers at
+once. The first worker to compile says so on stderr (:data:`COMPILING`, once per run).
+The sweep's units then load the kernels from the cache, so the runtime of every stored
+unit excludes compilation (the warm-up's seconds are stored apart).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+from bench import registry
+from bench.config import Plan
+from bench.progress import say
+
+__all__ = ["cache_is_cold", "warm_up_tasks", "run_warm_up", "COMPILING"]
+
+#: the line on stderr when the warm-up compiles
+COMPILING = "compiling kernels (first run only)…"
+
+
+def _cached_dispatchers():
+    """Every numba dispatcher with ``cache=True`` among the imported modules (none without numba)."""
+    numba = sys.modules.get("numba")
+    if numba is None:
+        return
+    from numba.core.caching import FunctionCache
+    from numba.core.registry import CPUDispatcher
+
+    for module in list(sys.modules.values()):
+        for obj in list(getattr(module, "__dict__", {}).values()):
+            if isinstance(obj, CPUDispatcher) and isinstance(getattr(obj, "_cache", None), FunctionCache):
+                yield obj
+
+
+def cache_is_cold() -> bool:
+    """Whether numba's on-disk cache misses the imported kernels: no kernel has an entry
+    yet (a fresh install), or the entry of one is stale (its source changed since).
+    A kernel with no entry at all while others have one is taken as one this
+    installation's sweeps do not call."""
+    registry.discover()
+    indexed = False
+    for dispatcher in _cached_dispatchers():
+        index = dispatcher._cache._cache_file
+        if not os.path.exists(index._index_path):
+            continue
+        if not index._load_index():          # numba's own test: another version or another source
+            return True
+        indexed = True
+    return not indexed and any(True for _ in _cached_dispatchers())
+
+
+def warm_up_tasks(plan: Plan, announce: str | None = None) -> list:
+    """One task per (scenario config, method config) pair of ``plan``: its one-trial
+    calibration unit (when its task is calibrated) then its one-trial evaluation unit at
+    the lowest SNR (thresholds zero), for one worker to run both (:func:`run_warm_up`), so
+    each method's kernels compile in one process, with the types a sweep passes them.
+    ``announce``: the marker file whose creation elects the one process that says it
+    compiles (None: silent)."""
+    from bench.runner import Unit, UnitTask, _calibrated
+
+    zero = {m.label: 0.0 for m in plan.methods}
+    tasks = []
+    for i, sc in enumerate(plan.scenarios):
+        calibrated = {m.label for m in _calibrated(plan, sc)}
+        for mc in plan.pairs(sc):
+            units = [UnitTask(plan, Unit("calibration", i, sc.label, None, 0, 1), methods=(mc.label,))] \
+                if mc.label in calibrated else []
+            if sc.snr_db:
+                units.append(UnitTask(plan, Unit("evaluation", i, sc.label, min(sc.snr_db), 0, 1), zero,
+                                      methods=(mc.label,)))
+            tasks.append((units, announce))
+    return tasks
+
+
+_announced = False
+
+
+def _announce_once(marker: str) -> None:
+    """Say on stderr that kernels compile, if no process of this run has said it (the first
+    to create ``marker`` speaks)."""
+    global _announced
+    if _announced:
+        return
+    _announced = True
+    try:
+        os.close(os.open(marker, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+    except OSError:            # another worker said it (or the folder is gone: the run is over)
+        return
+    say(COMPILING)
+
+
+def run_warm_up(units_announce) -> None:
+    """In a worker: run one pair's warm-up units and drop their results (their failures are the
+    real units' to report). With ``announce`` (:func:`warm_up_tasks`), the first kernel numba
+    compiles (not one it loads from the cache: numba's ``numba:compile`` event) says so."""
+    from bench.runner import execute_unit
+
+    units, announce = units_announce
+    if announce is None or _announced:
+        for unit in units:
+            execute_unit(unit)
+        return
+    from numba.core import event
+
+    class Announce(event.Listener):
+        def on_start(self, ev):
+            _announce_once(announce)
+
+        def on_end(self, ev):
+            pass
+
+    with event.install_listener("numba:compile", Announce()):
+        for unit in units:
+            execute_unit(unit)

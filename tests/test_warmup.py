@@ -1,0 +1,76 @@
+"""The warm-up (bench.warmup): a cold numba cache compiled once, in one worker, before any
+unit is timed, and said so on stderr; a warm cache costs nothing."""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+import subprocess
+import sys
+from types import SimpleNamespace
+
+import pytest
+
+from bench import warmup
+from bench.config import load_sweep
+
+
+def test_warm_up_is_one_task_per_pair_with_both_phases_and_one_trial(write_sweep):
+    plan = load_sweep(write_sweep(snr="[8, 0]"))
+    tasks = warmup.warm_up_tasks(plan, announce="marker")
+    assert [units[0].methods for units, _ in tasks] == [(m.label,) for m in plan.methods]   # one pair each
+    for units, announce in tasks:
+        assert announce == "marker" and len({u.methods for u in units}) == 1
+        assert [(u.unit.phase, u.unit.snr_db, u.unit.n) for u in units] == [("calibration", None, 1),
+                                                                           ("evaluation", 0.0, 1)]  # lowest SNR
+        assert units[1].thresholds == {m.label: 0.0 for m in plan.methods}
+
+
+def test_only_the_first_process_to_compile_says_so(tmp_path, monkeypatch, capsys):
+    marker = str(tmp_path / "announced")
+    monkeypatch.setattr(warmup, "_announced", False)
+    warmup._announce_once(marker)
+    warmup._announce_once(marker)                 # the same process again: silent
+    monkeypatch.setattr(warmup, "_announced", False)
+    warmup._announce_once(marker)                 # another process (its own flag): the marker exists
+    assert capsys.readouterr().err == f"bench: {warmup.COMPILING}\n"
+
+
+def _dispatcher(index_exists: bool, fresh: bool):
+    index = SimpleNamespace(_index_path="/nonexistent" if not index_exists else __file__,
+                            _load_index=lambda: {"sig": 1} if fresh else {})
+    return SimpleNamespace(_cache=SimpleNamespace(_cache_file=index))
+
+
+@pytest.mark.parametrize("kernels, cold", [
+    ([], False),                                            # no numba kernel imported: nothing to compile
+    ([(False, False), (False, False)], True),               # a fresh install: no kernel cached yet
+    ([(True, True), (False, False)], False),                # cached; the other one is not used by sweeps
+    ([(True, True), (True, False)], True),                  # a kernel's source changed since it was cached
+])
+def test_cache_is_cold(monkeypatch, kernels, cold):
+    monkeypatch.setattr(warmup, "_cached_dispatchers", lambda: iter([_dispatcher(*k) for k in kernels]))
+    assert warmup.cache_is_cold() is cold
+
+
+@pytest.mark.slow
+def test_a_cold_cache_is_compiled_once_and_said_so_a_warm_one_silently(tmp_path):
+    """A sweep with a numba kernel, twice on an empty NUMBA_CACHE_DIR with two workers: the
+    first run says it compiles (once) and stores the warm-up's seconds apart; the second
+    says nothing and warms nothing up."""
+    sweep = tmp_path / "imm.toml"
+    sweep.write_text('name = "imm"\nscenario = "maneuvering-1d"\ntrials = 2\nseed = 1\nsnr_db = [10]\n'
+                     'chunk = 1\n\n[[methods]]\nname = "imm-cv-ca"\n')
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    runs = []
+    for name in ("cold", "warm"):
+        proc = subprocess.run([sys.executable, "-m", "bench", "run", sweep, "--out", tmp_path / name,
+                               "--workers", "2", "--no-record"], capture_output=True, text=True, env=env,
+                              timeout=1200)
+        assert proc.returncode == 0, proc.stderr
+        meta = dict(sqlite3.connect(tmp_path / name / "results.sqlite").execute("SELECT key, value FROM meta"))
+        runs.append((proc.stderr.splitlines(), meta))
+    (cold, cold_meta), (warm, warm_meta) = runs
+    assert cold.count(f"bench: {warmup.COMPILING}") == 1 and float(cold_meta["warm_up_seconds"]) > 0
+    assert not any(warmup.COMPILING in line or "warm-up" in line for line in warm)
+    assert "warm_up_seconds" not in warm_meta
