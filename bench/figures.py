@@ -82,16 +82,19 @@ def drawn_apart(workers: int | None = None):
     tight bounding boxes) is most of a report's time. Each figure goes pickled; one that cannot
     be pickled, or whose process failed, is drawn here (so an error is the figure's own). Leaving the block writes what is left (:func:`wait_drawn`).
     The processes are forked by the runner's forkserver (:mod:`bench.executors`), so they
-    start with the harness imported and die with this process."""
+    start with the harness imported, and exit when this process dies."""
     global _drawing
     import concurrent.futures as cf
     import multiprocessing
 
-    from bench.executors import _start_forkserver
+    from bench.executors import _exit_with_driver, _start_forkserver
 
     _start_forkserver(["bench._forkserver"])
     workers = workers or max(1, min(os.cpu_count() or 1, MAX_DRAWING_PROCESSES))
-    pool = cf.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("forkserver"))
+    # each drawing process exits the moment this one dies (it holds both ends of its task
+    # queue, so it would otherwise wait forever)
+    pool = cf.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("forkserver"),
+                                  initializer=_exit_with_driver)
     _drawing = (pool, [])
     try:
         yield
