@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
-import os
-import pickle
 from pathlib import Path
 
 import matplotlib
@@ -18,87 +14,18 @@ import pandas as pd  # noqa: E402
 DPI = 110
 #: zlib level of the PNGs: 1 encodes several times faster than Pillow's default 6, for files a little larger
 PNG_COMPRESS_LEVEL = 1
-#: at most this many processes draw a report's figures (:func:`drawn_apart`)
-MAX_DRAWING_PROCESSES = 4
-
-_drawing = None       # (process pool, [(path, future)]) while :func:`drawn_apart` is open
-
-
-def _png(fig) -> bytes:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=DPI, bbox_inches="tight",
-                pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
-    return buffer.getvalue()
-
-
-def _png_of_pickled(payload: bytes) -> bytes:
-    """In a drawing process: the PNG of a pickled figure."""
-    fig = pickle.loads(payload)
-    try:
-        return _png(fig)
-    finally:
-        plt.close(fig)
 
 
 def _save(fig, path: Path) -> Path:
-    """Write ``fig`` to ``path`` whole (:func:`bench.runfolder.write_bytes`); inside
-    :func:`drawn_apart` it is drawn by another process and written by :func:`wait_drawn`."""
+    """Write ``fig`` to ``path`` whole (:func:`bench.runfolder.atomic_output`)."""
     from bench import runfolder
     try:
         runfolder.folder_for(path.parent)
-        if _drawing is not None:
-            pool, pending = _drawing
-            with contextlib.suppress(pickle.PicklingError, TypeError, AttributeError):   # e.g. a lambda formatter
-                payload = pickle.dumps(fig)
-                with contextlib.suppress(RuntimeError):            # a broken or shut pool: drawn here
-                    pending.append((path, payload, pool.submit(_png_of_pickled, payload)))
-                    return path
-        runfolder.write_bytes(path, _png(fig))
+        with runfolder.atomic_output(path) as (f, _):
+            fig.savefig(f, format="png", dpi=DPI, bbox_inches="tight", pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
     finally:
         plt.close(fig)
     return path
-
-
-def wait_drawn() -> None:
-    """Write every figure handed to the drawing processes so far (the first error raised):
-    before anything reads the PNGs (the HTML embeds them)."""
-    from bench import runfolder
-    if _drawing is None:
-        return
-    pending = _drawing[1]
-    while pending:
-        path, payload, future = pending.pop(0)
-        try:
-            png = future.result()
-        except Exception:  # noqa: BLE001 - drawn again here: the figure's own error, or the PNG
-            png = _png_of_pickled(payload)
-        runfolder.write_bytes(path, png)
-
-
-@contextlib.contextmanager
-def drawn_apart(workers: int | None = None):
-    """Within the block, figures are drawn and encoded by ``workers`` processes (default: one per
-    CPU, at most :data:`MAX_DRAWING_PROCESSES`) while this one goes on: drawing (text layout,
-    tight bounding boxes) is most of a report's time. Each figure goes pickled; one that cannot
-    be pickled, or whose process failed, is drawn here (so an error is the figure's own). Leaving the block writes what is left (:func:`wait_drawn`).
-    The processes are forked by the runner's forkserver (:mod:`bench.executors`), so they
-    start with the harness imported and die with this process."""
-    global _drawing
-    import concurrent.futures as cf
-    import multiprocessing
-
-    from bench.executors import _start_forkserver
-
-    _start_forkserver(["bench._forkserver"])
-    workers = workers or max(1, min(os.cpu_count() or 1, MAX_DRAWING_PROCESSES))
-    pool = cf.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("forkserver"))
-    _drawing = (pool, [])
-    try:
-        yield
-        wait_drawn()
-    finally:
-        _drawing = None
-        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _legend_outside(ax) -> None:

@@ -419,7 +419,7 @@ def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None) -> Pa
         raise ConfigError("", f"{out_dir} has no results.sqlite (not a bench run folder)")
     store = Store(db)
     try:
-        with runfolder.writing(out_dir), figures.drawn_apart():
+        with runfolder.writing(out_dir):
             return _build(store, out_dir, recording, on_phase)
     finally:
         store.close()
@@ -492,7 +492,6 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     parts.append(comparisons_markdown(comparisons, task_of))
     parts += [s for task, ctx in contexts for s in task.trial_sections(ctx)]
     parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
-    figures.wait_drawn()          # every PNG written before the recording, report.md and the HTML (which embeds them)
     if recording and records:
         on_phase("recording")
         write_recording(out_dir / "recording.rrd", records, _recording_summary(summary, present),
