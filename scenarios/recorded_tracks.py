@@ -41,6 +41,8 @@ PLANAR_MEAS = ("x_meas_m", "y_meas_m")
 GEODETIC_MEAS = ("latitude_meas", "longitude_meas")
 #: where measurements come from (RecordedTracks, 'Measurements')
 MEASUREMENTS = ("synthetic", "recorded")
+#: the measurement-noise std of bench perf's racetracks (write_racetracks; m)
+PERF_NOISE_M = 30.0
 #: a ``traffic`` sample: "<category>/<name>", a file traffic/data/samples/<category>/<name>.json.gz
 SAMPLE_NAME = re.compile(r"[a-z0-9_]+/[a-z0-9_]+")
 SAMPLES_DIR = "traffic/data/samples"
@@ -474,10 +476,14 @@ class RecordedTracks(Scenario):
     provides = frozenset({"kinematic-model", "reference-filter"})
     small_params: ClassVar[dict] = {"traffic_samples": ["calibration/ajaccio"], "steps": 30, "onset_step": 10,
                                     "detect_window_steps": 10}
-    perf_sizes: ClassVar[dict] = {"replay": ({"steps": 500, "onset_step": 20, "detect_window_steps": 20,
-                                              "traffic_samples": ["featured/zero_gravity"], "dt_s": 1.0}, 1000)}
+    #: 1,000 trials of 500 steps, the measurements synthesised or replayed, on racetracks
+    #: the scenario writes itself (:meth:`perf_data`)
+    perf_sizes: ClassVar[dict] = {
+        "segments": ({"steps": 500, "onset_step": 20, "detect_window_steps": 20, "dt_s": 1.0}, 1000),
+        "replay": ({"steps": 500, "onset_step": 20, "detect_window_steps": 20, "dt_s": 1.0,
+                    "measurements": "recorded", "noise_std_m": PERF_NOISE_M}, 1000)}
     perf_snr_db: ClassVar[float] = 0.0
-    perf_targets: ClassVar[dict] = {"replay": {"seconds_per_trial": 1e-3}}
+    perf_targets: ClassVar[dict] = {"*": {"seconds_per_trial": 1e-3}}
 
     @dataclass(frozen=True)
     class Params:
@@ -565,6 +571,11 @@ class RecordedTracks(Scenario):
             else:
                 for name in self.traffic_samples:
                     check_sample_name(name)
+
+    def perf_data(self, size: str, folder: Path) -> dict:
+        """Every perf size reads :func:`write_racetracks` in ``folder`` (not the traffic samples:
+        ``bench perf`` needs no optional extra)."""
+        return {"path": str(write_racetracks(folder / "racetracks.csv"))}
 
     def data_files(self, params) -> list[Path]:
         """The file, or the traffic samples read (their content is the config's identity)."""
@@ -662,6 +673,31 @@ class RecordedTracks(Scenario):
         P0 = steady_state(model)[0]
         return LinearGaussianFilter(model=model, x0=truth0[:, CV_COMPONENTS] + matvec(np.linalg.cholesky(P0), e),
                                     P0=P0)
+
+
+def write_racetracks(path: Path, tracks: int = 4, hours: float = 1.0, seed: int = 0) -> Path:
+    """A CSV of ``tracks`` aircraft flying racetracks for ``hours`` (``bench perf``'s data):
+    100 m/s, legs of 120 s joined by 180-degree turns at 3 deg/s (5.2 m/s^2), each track
+    at its own phase and straight for its last 10 minutes (quiet segments), sampled about
+    every second (jittered, 2 % of the samples lost) with recorded measurements in
+    N(0, PERF_NOISE_M^2) per axis. Deterministic (``seed``)."""
+    rng = np.random.default_rng(seed)
+    dt_fine, speed, leg_s, turn_s = 0.1, 100.0, 120.0, 60.0
+    t = np.arange(0.0, 3600.0 * hours, dt_fine)
+    tables = []
+    for k in range(tracks):
+        phase = (t + k * (leg_s + turn_s) / tracks) % (leg_s + turn_s)
+        turning = (phase >= leg_s) & (t < t[-1] - 600.0)
+        heading = np.cumsum(np.where(turning, np.pi / turn_s, 0.0)) * dt_fine
+        xy = np.cumsum(speed * np.stack([np.cos(heading), np.sin(heading)], axis=-1), axis=0) * dt_fine
+        times = np.arange(0.0, t[-1], 1.0) + rng.uniform(0.0, 0.3, int(np.ceil(t[-1])))
+        times = times[rng.random(len(times)) >= 0.02]           # 2 % lost: a replay misses their steps
+        truth = np.stack([np.interp(times, t, xy[:, axis]) for axis in range(2)], axis=-1)
+        z = truth + PERF_NOISE_M * rng.standard_normal(truth.shape)
+        tables.append(pd.DataFrame({TRACK: f"racetrack-{k}", TIME: times, PLANAR[0]: truth[:, 0],
+                                    PLANAR[1]: truth[:, 1], PLANAR_MEAS[0]: z[:, 0], PLANAR_MEAS[1]: z[:, 1]}))
+    pd.concat(tables, ignore_index=True).to_csv(path, index=False)
+    return path
 
 
 def noise_std(p, snr_db: float | None) -> float:

@@ -546,3 +546,18 @@ def test_the_cli_refuses_a_replay_with_an_snr_axis_and_runs_it_at_0_db(tmp_path)
     run_bench("run", "replay.toml", "--out", "out", "--quiet", cwd=tmp_path, check=True)
     summary = pd.read_csv(tmp_path / "out" / "summary.csv")
     assert set(summary.method) == {"cv-kf"} and (summary.n_trials == 4).all() and np.isfinite(summary.rmse_mean).all()
+
+
+def test_the_perf_sizes_run_on_the_racetracks_the_scenario_writes(tmp_path):
+    """``bench perf`` times every size without the optional extra: the racetracks hold
+    segments with an onset and quiet ones, and the replay misses the lost samples' steps."""
+    scenario = RecordedTracks()
+    for size, (params, _) in RecordedTracks.perf_sizes.items():
+        p = build_params(RecordedTracks.Params, {**params, **scenario.perf_data(size, tmp_path)})
+        scenario.check_config(p)
+        batch = generate(p, RecordedTracks.perf_snr_db, range(4))
+        assert batch.scene.maneuver_mask[:, p.onset_step].all()
+        valid = batch.scene.valid_steps
+        assert (valid is None) == (p.measurements == "synthetic")
+        if valid is not None:
+            assert 0.9 < valid.mean() < 1.0
