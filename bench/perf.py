@@ -262,19 +262,13 @@ def scene_sizes(methods: list[str] | None = None) -> dict[str, dict]:
 
 
 def check_sizes(methods: list[str] | None, sizes: list[str] | None) -> None:
-    """Raise ConfigError('--sizes', ...) naming an unknown size and the known ones (the
-    sizes of the scenarios the chosen methods run on), before anything is measured
-    or written."""
+    """Raise ConfigError('--sizes', ...) naming an unknown size and the known ones (those
+    :func:`scene_sizes` times: a method's sizes are among them), before anything is
+    measured or written."""
     registry.discover()
     if not sizes:
         return
-    names: set[str] = set()
-    for name, cls in registry.methods().items():
-        if not methods or name in methods:
-            names |= set(perf_sizes_of(cls)[1])
-    for sizes_of_scenario in scene_sizes(methods).values():
-        names |= set(sizes_of_scenario)
-    known = sorted(names)
+    known = sorted({size for sized in scene_sizes(methods).values() for size in sized})
     for size in sizes:
         if size not in known:
             raise ConfigError("--sizes", f"unknown size {size!r} (known: {', '.join(known) or 'none'})")
@@ -328,9 +322,9 @@ def scene_jobs(methods: list[str] | None = None, sizes: list[str] | None = None)
             for size, (params, trials) in sized.items() if not sizes or size in sizes]
 
 
-def measure_scenes(scene_jobs: list[SceneJob], progress=print) -> pd.DataFrame:
+def measure_scenes(planned: list[SceneJob], progress=print) -> pd.DataFrame:
     rows = []
-    for job in scene_jobs:
+    for job in planned:
         progress(f"perf: {job.scenario} scene generation at {job.size} ({job.trials} trials)")
         m = _in_fresh_process(job)
         rows.append({"scenario": job.scenario, "size": job.size, "trials": job.trials, **m})

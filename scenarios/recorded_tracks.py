@@ -701,5 +701,7 @@ def write_racetracks(path: Path, tracks: int = 4, hours: float = 1.0, seed: int 
 
 
 def noise_std(p, snr_db: float | None) -> float:
-    """The measurement-noise std (m) at ``snr_db`` (0 dB under the null)."""
-    return p.noise_std_m * 10.0 ** (-(0.0 if snr_db is None else float(snr_db)) / 20.0)
+    """The measurement-noise std (m) at ``snr_db`` (0 dB under the null; replaying,
+    ``noise_std_m`` whatever the level: the recorded noise does not change with it)."""
+    level = 0.0 if snr_db is None or replays(p) else float(snr_db)
+    return p.noise_std_m * 10.0 ** (-level / 20.0)
