@@ -302,6 +302,13 @@ class Scenario(Component):
         """
         raise NotImplementedError
 
+    def perf_data(self, size: str, folder: Path) -> dict[str, Any]:
+        """Params added to ``bench perf`` size ``size`` (:attr:`perf_sizes`) when it reads a
+        data file: the file written into ``folder`` (a temporary folder of the measuring
+        process), so the size is timed on data the scenario makes itself, not on a user's
+        file or an optional extra's. The default: none."""
+        return {}
+
     def requires(self, params) -> frozenset[str]:
         """The capabilities a method must handle (``Method.handles``) to run on a config
         with ``params``: ``valid-step-masks`` when its trials may differ in length or have

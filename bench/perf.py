@@ -28,10 +28,14 @@ shows against the measurements. The plugin protocol (:mod:`bench.core`) gives
 every one of these a default, read here as "not provided".
 
 Scene generation is measured too, in its own table: for every (scenario,
-size) of the measured methods, ``Scenario.generate`` of that many trials
-(after a one-trial warm-up, best of a few repetitions, fresh process), which
-is what every unit of a sweep pays before any method runs. A scenario may
-declare ``Scenario.perf_targets`` (``size -> {"seconds_per_trial": goal}``) for it.
+size) of every registered scenario (with ``--methods``, of the scenarios those
+methods run on, at the sizes they accept), ``Scenario.generate`` of that many
+trials (after a one-trial warm-up, best of a few repetitions, fresh process),
+which is what every unit of a sweep pays before any method runs. A size that
+reads a data file is timed on one the scenario writes into a temporary folder
+(``Scenario.perf_data``); one that cannot be generated (a ``ConfigError``, e.g.
+an optional extra's data absent) is reported with its reason, not timed. A
+scenario may declare ``Scenario.perf_targets`` (``size -> {"seconds_per_trial": goal}``) for it.
 Nothing here is asserted by tests: speed is measured, never a pass/fail gate.
 
 Optionally (``--executors``) a compute-bound sweep, the packaged preset
@@ -47,6 +51,7 @@ import multiprocessing
 import os
 import platform
 import resource
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -63,7 +68,7 @@ from bench.rng import EVALUATION, TrialRNG, stable_key
 PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "trials_per_second", "chunk",
                 "chunk_seconds_per_trial", "reference",
                 "reference_seconds_per_trial", "speedup", "peak_rss_mb"]
-SCENE_COLUMNS = ["scenario", "size", "trials", "seconds_per_trial", "peak_rss_mb"]
+SCENE_COLUMNS = ["scenario", "size", "trials", "seconds_per_trial", "peak_rss_mb", "skipped"]
 SEED = 20261121
 REPEATS = 3
 #: interleaved rounds of a method and its reference (each keeps its minimum)
@@ -95,10 +100,16 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # Linux: kB
 
 
-def _batch(job: Job | SceneJob, n: int):
-    cls = registry.get_scenario(job.scenario)
-    params = build_params(cls.Params, job.scenario_params)
-    return cls().generate(params, float(cls.perf_snr_db), n, _trial_rng(job, n))
+def _scenario(job: Job | SceneJob, folder: Path):
+    """The job's scenario and its params, with the data files the size reads written into
+    ``folder`` (:meth:`bench.core.Scenario.perf_data`)."""
+    scenario = registry.get_scenario(job.scenario)()
+    return scenario, build_params(type(scenario).Params, {**job.scenario_params,
+                                                          **scenario.perf_data(job.size, folder)})
+
+
+def _batch(job: Job | SceneJob, n: int, scenario, params):
+    return scenario.generate(params, float(scenario.perf_snr_db), n, _trial_rng(job, n))
 
 
 def _trial_rng(job: Job | SceneJob, n: int) -> TrialRNG:
@@ -125,20 +136,29 @@ def measure(job: Job) -> dict:
     reference (min over :data:`ROUNDS` interleaved rounds, each after a one-trial
     warm-up), of the reference less each of its parts, and the peak RSS."""
     registry.discover()
+    with tempfile.TemporaryDirectory() as folder:
+        return _measure(job, *_scenario(job, Path(folder)))
+
+
+def _measure(job: Job, scenario, scenario_params) -> dict:
     method = registry.get_method(job.method)()
     params = method.Params()
-    batch = _batch(job, job.trials)
+
+    def batch_of(n: int):
+        return _batch(job, n, scenario, scenario_params)
+
+    batch = batch_of(job.trials)
     unit, count = method.work(batch, params)
     out = {"name": None, "work_unit": unit, "work_per_trial": float(count) / job.trials,
            "reference_seconds_per_trial": np.nan, "parts": {}}
-    method.run(_batch(job, 1), params)
+    method.run(batch_of(1), params)
     best = {"method": _cpu_seconds(lambda: method.run(batch, params))}
     out["peak_rss_mb"] = _peak_rss_mb()                  # before the reference adds its own
     ref = reference_of(method) if job.reference_trials else None
     if ref is not None:
         out["name"], reference_run = ref
-        ref_batch = _batch(job, job.reference_trials)
-        reference_run(_batch(job, 1), params)
+        ref_batch = batch_of(job.reference_trials)
+        reference_run(batch_of(1), params)
         parts: dict[str, float] = {}
         for _ in range(ROUNDS):
             seconds = _cpu_seconds(lambda: reference_run(ref_batch, params))
@@ -153,27 +173,31 @@ def measure(job: Job) -> dict:
             best["method"] = min(best["method"], _cpu_seconds(lambda: method.run(batch, params)))
     out["chunk_seconds_per_trial"] = np.nan
     if job.chunk:      # the same batch cut to a preset's chunk: what a sweep's unit pays per trial
-        chunk = _batch(job, job.chunk)
+        chunk = batch_of(job.chunk)
         out["chunk_seconds_per_trial"] = min(_cpu_seconds(lambda: method.run(chunk, params))
                                              for _ in range(ROUNDS)) / job.chunk
     return {**out, "seconds_per_trial": best["method"] / job.trials}
 
 
 def measure_scene(job: SceneJob) -> dict:
-    """Run in a fresh process: seconds per trial of ``generate`` (best of
-    REPEATS; the per-trial streams are set up outside the timing), peak RSS."""
+    """Run in a fresh process: seconds per trial of ``generate`` (best of REPEATS; the
+    per-trial streams are set up outside the timing, and the warm-up reads the data a
+    scenario caches per process), peak RSS; or, when the size cannot be generated
+    (a ``ConfigError``), why (``skipped``)."""
     registry.discover()
-    _batch(job, 1)                                    # warm-up: JIT compilation
-    cls = registry.get_scenario(job.scenario)
-    params = build_params(cls.Params, job.scenario_params)
-    snr_db = float(cls.perf_snr_db)
-    best = np.inf
-    for _ in range(REPEATS):
-        rng = _trial_rng(job, job.trials)
-        t0 = time.perf_counter()
-        cls().generate(params, snr_db, job.trials, rng)
-        best = min(best, time.perf_counter() - t0)
-    return {"seconds_per_trial": best / job.trials, "peak_rss_mb": _peak_rss_mb()}
+    with tempfile.TemporaryDirectory() as folder:
+        try:
+            scenario, params = _scenario(job, Path(folder))
+            _batch(job, 1, scenario, params)               # warm-up: JIT compilation, data read
+        except ConfigError as err:
+            return {"seconds_per_trial": np.nan, "peak_rss_mb": np.nan, "skipped": str(err)}
+        best = np.inf
+        for _ in range(REPEATS):
+            rng = _trial_rng(job, job.trials)
+            t0 = time.perf_counter()
+            scenario.generate(params, float(scenario.perf_snr_db), job.trials, rng)
+            best = min(best, time.perf_counter() - t0)
+    return {"seconds_per_trial": best / job.trials, "peak_rss_mb": _peak_rss_mb(), "skipped": ""}
 
 
 @contextlib.contextmanager
@@ -198,37 +222,53 @@ def _in_fresh_process(job: Job | SceneJob) -> dict:
         return pool.submit(measure_scene if isinstance(job, SceneJob) else measure, job).result()
 
 
+def accepted_sizes(method_cls, scenario) -> dict:
+    """The perf sizes of ``scenario`` a method runs on: those whose resolved params fit its
+    capabilities (:func:`bench.capabilities.fits`) and its default config's
+    ``check_scenario`` accepts (none for a scenario of another task)."""
+    if method_cls.task not in scenario.tasks:
+        return {}
+    method, params = method_cls(), build_params(method_cls.Params, {})
+    sized = {size: (entry, build_params(scenario.Params, entry[0])) for size, entry in scenario.perf_sizes.items()}
+    return {size: entry for size, (entry, resolved) in sized.items()
+            if capabilities.fits(method_cls, scenario, resolved) and method.check_scenario(params, resolved) is None}
+
+
 def perf_sizes_of(method_cls) -> tuple[type | None, dict]:
-    """The scenario a method is timed on and its perf sizes the method accepts: the first
-    registered scenario it runs on with a size whose resolved params fit its capabilities
-    (:func:`bench.capabilities.fits`) and its default config's ``check_scenario`` accepts,
-    and those sizes; (None, {}) if none."""
-    method = method_cls()
-    params = build_params(method_cls.Params, {})
+    """The scenario a method is timed on and its perf sizes the method accepts
+    (:func:`accepted_sizes`): the first registered scenario with one; (None, {}) if none."""
     for scenario in registry.scenarios().values():
-        if method_cls.task not in scenario.tasks:
-            continue
-        sized = {size: (entry, build_params(scenario.Params, entry[0])) for size, entry in scenario.perf_sizes.items()}
-        accepted = {size: entry for size, (entry, resolved) in sized.items()
-                    if capabilities.fits(method_cls, scenario, resolved)
-                    and method.check_scenario(params, resolved) is None}
+        accepted = accepted_sizes(method_cls, scenario)
         if accepted:
             return scenario, accepted
     return None, {}
 
 
+def scene_sizes(methods: list[str] | None = None) -> dict[str, dict]:
+    """Scenario name -> the perf sizes whose scene generation is timed: every size of every
+    registered scenario, or with ``methods`` the sizes those methods accept
+    (:func:`accepted_sizes`) on any scenario."""
+    out = {}
+    for name, scenario in registry.scenarios().items():
+        if not methods:
+            sizes = dict(scenario.perf_sizes)
+        else:
+            sizes = {}
+            for method in methods:
+                sizes |= accepted_sizes(registry.get_method(method), scenario)
+        if sizes:
+            out[name] = {size: scenario.perf_sizes[size] for size in scenario.perf_sizes if size in sizes}
+    return out
+
+
 def check_sizes(methods: list[str] | None, sizes: list[str] | None) -> None:
-    """Raise ConfigError('--sizes', ...) naming an unknown size and the known ones (the
-    sizes of the scenarios the chosen methods run on), before anything is measured
-    or written."""
+    """Raise ConfigError('--sizes', ...) naming an unknown size and the known ones (those
+    :func:`scene_sizes` times: a method's sizes are among them), before anything is
+    measured or written."""
     registry.discover()
     if not sizes:
         return
-    names: set[str] = set()
-    for name, cls in registry.methods().items():
-        if not methods or name in methods:
-            names |= set(perf_sizes_of(cls)[1])
-    known = sorted(names)
+    known = sorted({size for sized in scene_sizes(methods).values() for size in sized})
     for size in sizes:
         if size not in known:
             raise ConfigError("--sizes", f"unknown size {size!r} (known: {', '.join(known) or 'none'})")
@@ -274,17 +314,17 @@ def jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> li
     return out
 
 
-def scene_jobs(method_jobs: list[Job]) -> list[SceneJob]:
-    """One scene-generation job per (scenario, size) among ``method_jobs``, in order."""
-    out = {}
-    for j in method_jobs:
-        out.setdefault((j.scenario, j.size), SceneJob(j.scenario, j.size, j.scenario_params, j.trials))
-    return list(out.values())
+def scene_jobs(methods: list[str] | None = None, sizes: list[str] | None = None) -> list[SceneJob]:
+    """One scene-generation job per (scenario, size) of :func:`scene_sizes`, in registry
+    order, only ``sizes`` if given."""
+    return [SceneJob(scenario, size, dict(params), int(trials))
+            for scenario, sized in scene_sizes(methods).items()
+            for size, (params, trials) in sized.items() if not sizes or size in sizes]
 
 
-def measure_scenes(method_jobs: list[Job], progress=print) -> pd.DataFrame:
+def measure_scenes(planned: list[SceneJob], progress=print) -> pd.DataFrame:
     rows = []
-    for job in scene_jobs(method_jobs):
+    for job in planned:
         progress(f"perf: {job.scenario} scene generation at {job.size} ({job.trials} trials)")
         m = _in_fresh_process(job)
         rows.append({"scenario": job.scenario, "size": job.size, "trials": job.trials, **m})
@@ -313,7 +353,7 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
                          "peak_rss_mb": m["peak_rss_mb"],
                          f"{m['work_unit']}_per_second": m["work_per_trial"] / m["seconds_per_trial"]})
             extra.append(info)
-    scenes = measure_scenes(planned, progress)
+    scenes = measure_scenes(scene_jobs(methods, sizes), progress)
     scaling, sweep = None, ""
     if executors:
         plan = scaling_plan()
@@ -419,11 +459,16 @@ def _scene_section(scenes: pd.DataFrame) -> list[str]:
         cls = registry.scenarios().get(r["scenario"])
         targets = cls.perf_targets if cls is not None else {}
         goal = targets.get(r["size"], targets.get("*", {}))
+        if isinstance(r.get("skipped"), str) and r["skipped"]:
+            rows.append([code(r["scenario"]), r["size"], r["trials"], "–", "–", f"not timed: {r['skipped']}"])
+            continue
         rows.append([code(r["scenario"]), r["size"], r["trials"], f"{r['seconds_per_trial'] * 1e3:.3g}",
                      f"{r['peak_rss_mb']:.0f}", _target_text(goal, r)])
     return ["## Scene generation", "`Scenario.generate` alone (the scene every unit of a sweep draws before "
-            "its methods run), at each size of the table above: one core, fresh process, best of 3 runs after "
-            "a one-trial warm-up; `scene.csv` holds the same numbers.",
+            "its methods run), at each perf size of every scenario (of the scenarios the methods measured run "
+            "on, with `--methods`): one core, fresh process, best of 3 runs after a one-trial warm-up (which "
+            "reads what a scenario caches once per worker, e.g. a tracks file; a size that reads a file reads "
+            "one its scenario writes, `Scenario.perf_data`); `scene.csv` holds the same numbers.",
             table(["scenario", "size", "trials", "ms per trial", "peak RSS (MB)", "targets"], rows)]
 
 

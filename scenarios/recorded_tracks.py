@@ -36,6 +36,13 @@ TRACK, TIME = "track", "time_s"
 PLANAR = ("x_m", "y_m")
 GEODETIC = ("latitude", "longitude")
 ALTITUDE = "altitude_m"
+#: recorded measurements (``measurements = "recorded"``): the same form as the truth's columns
+PLANAR_MEAS = ("x_meas_m", "y_meas_m")
+GEODETIC_MEAS = ("latitude_meas", "longitude_meas")
+#: where measurements come from (RecordedTracks, 'Measurements')
+MEASUREMENTS = ("synthetic", "recorded")
+#: the measurement-noise std of bench perf's racetracks (write_racetracks; m)
+PERF_NOISE_M = 30.0
 #: a ``traffic`` sample: "<category>/<name>", a file traffic/data/samples/<category>/<name>.json.gz
 SAMPLE_NAME = re.compile(r"[a-z0-9_]+/[a-z0-9_]+")
 SAMPLES_DIR = "traffic/data/samples"
@@ -50,6 +57,10 @@ SNR_DEFINITION = (
     "the position-measurement noise std is noise_std_m times 10^(-snr_db/20) on each axis, so 0 dB is the "
     "reference and +6 dB halves the noise; the recorded motion does not change along the axis; snr_db=None "
     "is the null: the same noise at 0 dB on segments without a maneuver."
+)
+REPLAY_SNR_DEFINITION = (
+    "no SNR axis: the file's recorded measurements are replayed as recorded, their noise std taken as "
+    "noise_std_m; snr_db is 0 by convention (the only level a sweep may give)"
 )
 #: what marks a maneuver (RecordedTracks, 'Maneuvers')
 MANEUVER_MEASURES = ("acceleration", "turn-rate")
@@ -112,20 +123,26 @@ def read_file(path: str) -> pd.DataFrame:
         raise ConfigError("path", f"{path}: not a readable CSV ({str(err).splitlines()[0]})") from None
 
 
-def checked_tracks(table: pd.DataFrame, where: str) -> pd.DataFrame:
-    """The table's tracks as (track, time_s, east, north) in metres, or a ConfigError naming
-    ``where`` (the file) and the first problem: a missing column, a non-numeric or NaN
-    value, too few points in a track, times not increasing within a track."""
+def checked_tracks(table: pd.DataFrame, where: str, recorded: bool = False) -> pd.DataFrame:
+    """The table's tracks as (track, time_s, east, north) in metres, and with ``recorded``
+    the recorded measurements (meas_east, meas_north) in the same frame, or a ConfigError
+    naming ``where`` (the file) and the first problem: a missing column, a non-numeric or
+    NaN value, too few points in a track, times not increasing within a track."""
     planar = any(c in table for c in PLANAR)
     columns = [TRACK, TIME, *(PLANAR if planar else GEODETIC)]
     missing = [c for c in columns if c not in table]
     if missing:
         raise ConfigError("path", f"{where}: missing column(s) {', '.join(missing)} (needs {TRACK}, {TIME} and "
                           f"{' and '.join(PLANAR)} in metres or {' and '.join(GEODETIC)} in degrees)")
+    measured = list(PLANAR_MEAS if planar else GEODETIC_MEAS) if recorded else []
+    missing = [c for c in measured if c not in table]
+    if missing:
+        raise ConfigError("path", f"{where}: missing column(s) {', '.join(missing)}: measurements = 'recorded' "
+                          f"replays them (with {' and '.join(columns[2:])}, the truth)")
     if table.empty:
         raise ConfigError("path", f"{where}: no rows")
     values = {}
-    for c in columns[1:] + ([ALTITUDE] if not planar and ALTITUDE in table else []):
+    for c in columns[1:] + measured + ([ALTITUDE] if not planar and ALTITUDE in table else []):
         col = _numbers(table[c])
         bad = ~np.isfinite(col)
         if bad.any():
@@ -135,12 +152,21 @@ def checked_tracks(table: pd.DataFrame, where: str) -> pd.DataFrame:
         values[c] = col
     tracks = table[TRACK].astype(str).to_numpy()
     _check_times(tracks, values[TIME], where)
+    out = pd.DataFrame({TRACK: tracks, TIME: values[TIME]})
+    for prefix, pair in (("", columns[2:]), ("meas_", measured)):
+        if pair:
+            out[prefix + "east"], out[prefix + "north"] = _in_metres(tracks, values, pair, planar)
+    return out
+
+
+def _in_metres(tracks, values: dict, pair, planar: bool) -> tuple[np.ndarray, np.ndarray]:
+    """East and north (m) of the columns ``pair`` (planar metres as they are; latitude and
+    longitude in each track's tangent plane at its first *truth* point, so truth and
+    recorded measurements share the frame)."""
     if planar:
-        east, north = values[PLANAR[0]], values[PLANAR[1]]
-    else:
-        east, north = _local_plane(tracks, values[GEODETIC[0]], values[GEODETIC[1]],
-                                   values.get(ALTITUDE, np.zeros(len(tracks))))
-    return pd.DataFrame({TRACK: tracks, TIME: values[TIME], "east": east, "north": north})
+        return values[pair[0]], values[pair[1]]
+    return _local_plane(tracks, values[pair[0]], values[pair[1]], values.get(ALTITUDE, np.zeros(len(tracks))),
+                        values[GEODETIC[0]], values[GEODETIC[1]])
 
 
 def _numbers(column: pd.Series) -> np.ndarray:
@@ -170,13 +196,13 @@ def _check_times(tracks: np.ndarray, t: np.ndarray, where: str) -> None:
                           "another comes back after other tracks); group the rows by track")
 
 
-def _local_plane(tracks, lat, lon, alt) -> tuple[np.ndarray, np.ndarray]:
-    """East and north (m) of each track in the tangent plane at its first point
-    (:func:`models.geodesy.geodetic_to_enu`; height 0 at the reference)."""
+def _local_plane(tracks, lat, lon, alt, lat_ref, lon_ref) -> tuple[np.ndarray, np.ndarray]:
+    """East and north (m) of each track in the tangent plane at its first point of
+    ``lat_ref``, ``lon_ref`` (:func:`models.geodesy.geodetic_to_enu`; height 0 at the reference)."""
     east, north = np.empty(len(tracks)), np.empty(len(tracks))
     starts = np.flatnonzero(np.r_[True, tracks[1:] != tracks[:-1]])
     for a, b in zip(starts, np.r_[starts[1:], len(tracks)]):      # per track (a handful), not per point
-        enu = geodetic_to_enu(lat[a:b], lon[a:b], alt[a:b], lat[a], lon[a], 0.0)
+        enu = geodetic_to_enu(lat[a:b], lon[a:b], alt[a:b], lat_ref[a], lon_ref[a], 0.0)
         east[a:b], north[a:b] = enu[:, 0], enu[:, 1]
     return east, north
 
@@ -195,8 +221,11 @@ class Bank:
     onsets: np.ndarray
     quiet: np.ndarray
     spans: int
-    #: (M,) bool: False at the steps inside a masked gap (``masked_gap_s``), True elsewhere
+    #: (M,) bool: False at the steps inside a masked gap (``masked_gap_s``) and, replaying, at
+    #: the steps without a recorded measurement; True elsewhere
     valid: np.ndarray
+    #: (M, 2) replaying: the recorded measurement of each step (NaN where none); else None
+    z: np.ndarray | None = None
 
 
 def _span_states(t: np.ndarray, xy: np.ndarray, dt: float, window: int) -> np.ndarray:
@@ -215,6 +244,17 @@ def _gap_steps(t: np.ndarray, dt: float, steps: int, max_gap_s: float) -> np.nda
     grid = t[0] + dt * np.arange(steps)
     after = np.clip(np.searchsorted(t, grid, side="right"), 1, len(t) - 1)   # t[after - 1] <= grid < t[after]
     return (grid > t[after - 1]) & (grid < t[after]) & (t[after] - t[after - 1] > max_gap_s)
+
+
+def _on_grid(t: np.ndarray, z: np.ndarray, dt: float, steps: int) -> np.ndarray:
+    """(steps, 2) recorded measurements on the grid t0 + dt j: each sample on its nearest
+    step, the first sample where two fall on one step, NaN on a step with none."""
+    step = np.rint((t - t[0]) / dt).astype(np.int64)
+    keep = step < steps                                  # the grid ends at or before the last sample
+    first = np.unique(step[keep], return_index=True)[1]  # times increase: the earliest sample of each step
+    out = np.full((steps, 2), np.nan)
+    out[step[keep][first]] = z[keep][first]
+    return out
 
 
 def maneuver_size(states: np.ndarray, measure: str) -> np.ndarray:
@@ -251,9 +291,10 @@ def build_bank(p) -> Bank:
     (docstring of :class:`RecordedTracks`)."""
     table = load_tracks(p)
     window = smoothing_steps(p)
-    parts, boundary, recorded = [], [], []
+    parts, boundary, recorded, measured = [], [], [], []
     for _, track in table.groupby(TRACK, sort=False):
         t, xy = track[TIME].to_numpy(), track[["east", "north"]].to_numpy()
+        z = track[["meas_east", "meas_north"]].to_numpy() if replays(p) else None
         cuts = np.flatnonzero(np.diff(t) > max(p.max_gap_s, p.masked_gap_s)) + 1
         for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(t)]):
             if t[b - 1] - t[a] >= (max(p.steps, window) - 1) * p.dt_s:
@@ -261,6 +302,8 @@ def build_bank(p) -> Bank:
                 parts.append(states)
                 boundary.append(np.r_[True, np.zeros(len(states) - 1, bool)])
                 recorded.append(~_gap_steps(t[a:b], p.dt_s, len(states), p.max_gap_s))
+                if z is not None:
+                    measured.append(_on_grid(t[a:b], z[a:b], p.dt_s, len(states)))
     if not parts:
         ends = f"masked_gap_s = {p.masked_gap_s:g} s" if masks_gaps(p) else f"max_gap_s = {p.max_gap_s:g} s"
         raise ConfigError("steps", f"{source_text(p)}: no {'' if masks_gaps(p) else 'gap-free '}span (gaps over "
@@ -269,9 +312,12 @@ def build_bank(p) -> Bank:
     # a maneuver is seen on the steps the track has: the straight line across a gap is no evidence
     maneuvering = _runs_at_least((maneuver_size(states, p.maneuver_measure) >= maneuver_threshold(p)) & valid,
                                  first, p.min_maneuver_steps)
+    z = np.concatenate(measured) if measured else None
+    if z is not None:                       # a step without a measurement is missing, as one in a gap
+        valid = valid & ~np.isnan(z[:, 0])
     onsets, quiet = _segment_starts(maneuvering, first, valid, p.steps, p.onset_step)
     return Bank(pos=states[:, 0], vel=states[:, 1], acc=states[:, 2], maneuvering=maneuvering,
-                onsets=onsets, quiet=quiet, spans=len(parts), valid=valid)
+                onsets=onsets, quiet=quiet, spans=len(parts), valid=valid, z=z)
 
 
 def _segment_starts(maneuvering: np.ndarray, first: np.ndarray, valid: np.ndarray, K: int, onset: int):
@@ -294,9 +340,15 @@ def masks_gaps(p) -> bool:
     return p.masked_gap_s > 0.0
 
 
+def replays(p) -> bool:
+    """Whether config ``p`` replays the file's recorded measurements."""
+    return p.measurements == "recorded"
+
+
 def is_ragged(p) -> bool:
-    """Whether the trials of config ``p`` may miss steps: masked gaps, or lengths under ``steps``."""
-    return masks_gaps(p) or 0 < p.min_steps < p.steps
+    """Whether the trials of config ``p`` may miss steps: masked gaps, lengths under ``steps``,
+    or replayed measurements (a step may have none)."""
+    return masks_gaps(p) or 0 < p.min_steps < p.steps or replays(p)
 
 
 def source_text(p) -> str:
@@ -306,9 +358,9 @@ def source_text(p) -> str:
 def load_tracks(p) -> pd.DataFrame:
     """The config's tracks (track, time_s, east, north), checked (:func:`checked_tracks`)."""
     if p.path:
-        return checked_tracks(read_file(p.path), p.path)
-    return pd.concat([checked_tracks(read_sample(name), f"traffic sample {name}") for name in p.traffic_samples],
-                     ignore_index=True)
+        return checked_tracks(read_file(p.path), p.path, replays(p))
+    return pd.concat([checked_tracks(read_sample(name), f"traffic sample {name}", replays(p))
+                      for name in p.traffic_samples], ignore_index=True)
 
 
 @functools.lru_cache(maxsize=8)
@@ -375,9 +427,23 @@ class RecordedTracks(Scenario):
 
     **Measurements**: z_k = position_k + v_k, v_k ~ N(0, sigma^2 I_2), sigma =
     ``noise_std_m`` x 10^(-snr_db/20) (the SNR definition of ``maneuvering-1d``;
-    the null: 0 dB). Replaying recorded measurements is not provided.
+    the null: 0 dB). With ``measurements = "recorded"`` the trials *replay* the
+    file's own measurements instead: columns ``x_meas_m``, ``y_meas_m`` (beside
+    planar truth) or ``latitude_meas``, ``longitude_meas`` (beside geodetic
+    truth, in the same tangent plane, at the row's ``altitude_m``), one per
+    row, no NaN (a missing or NaN column is refused in one line naming the
+    file and the column); the truth columns stay the truth. Each sample falls
+    on the grid step nearest its time (the first sample where two fall on one
+    step; the others dropped), a step with none is missing (``valid_steps``
+    False, so the config requires ``valid-step-masks``: only the trackers that
+    handle masks pair), and a segment starts at a measured step. The
+    measurements move with the segment's truth (the same shift to the prior
+    mean). The trackers take ``noise_std_m`` as the measurements' noise std.
+    There is no SNR axis: the only level a sweep may give is 0 dB (any other
+    is refused before anything runs, :meth:`check_snr`), and the noise draws
+    are drawn but unused.
 
-    **Ragged trials** (docs/architecture.md, 'Ragged batches'): with
+    **Ragged trials** (docs/architecture.md, 'Ragged batches'): replaying, and with
     ``min_steps`` (after ``onset_step``, at most ``steps``) a trial's length L
     is drawn uniformly in ``min_steps``..``steps`` from its own stream and its
     steps from L on are padding. With masked gaps or ``min_steps`` the scene's
@@ -410,10 +476,14 @@ class RecordedTracks(Scenario):
     provides = frozenset({"kinematic-model", "reference-filter"})
     small_params: ClassVar[dict] = {"traffic_samples": ["calibration/ajaccio"], "steps": 30, "onset_step": 10,
                                     "detect_window_steps": 10}
-    perf_sizes: ClassVar[dict] = {"replay": ({"steps": 500, "onset_step": 20, "detect_window_steps": 20,
-                                              "traffic_samples": ["featured/zero_gravity"], "dt_s": 1.0}, 1000)}
+    #: 1,000 trials of 500 steps, the measurements synthesised or replayed, on racetracks
+    #: the scenario writes itself (:meth:`perf_data`)
+    perf_sizes: ClassVar[dict] = {
+        "segments": ({"steps": 500, "onset_step": 20, "detect_window_steps": 20, "dt_s": 1.0}, 1000),
+        "replay": ({"steps": 500, "onset_step": 20, "detect_window_steps": 20, "dt_s": 1.0,
+                    "measurements": "recorded", "noise_std_m": PERF_NOISE_M}, 1000)}
     perf_snr_db: ClassVar[float] = 0.0
-    perf_targets: ClassVar[dict] = {"replay": {"seconds_per_trial": 1e-3}}
+    perf_targets: ClassVar[dict] = {"*": {"seconds_per_trial": 1e-3}}
 
     @dataclass(frozen=True)
     class Params:
@@ -458,8 +528,12 @@ class RecordedTracks(Scenario):
                                   why="before the onset (checked against it)")
         tracking_index: float = param(0.1, "Kalata's tracking index of the detectors' reference CV filter",
                                       ge=1e-4, le=100.0, why="as in cv-turn-cv")
-        noise_std_m: float = param(50.0, "reference std of the position-measurement noise per axis (m), at 0 dB",
+        noise_std_m: float = param(50.0, "reference std of the position-measurement noise per axis (m), at 0 dB; "
+                                   "replaying, the std the trackers assume for the recorded measurements",
                                    ge=MIN_NOISE_M, le=1e4, why=NOISE_WHY)
+        measurements: str = param("synthetic", "'synthetic': drawn at the SNR level around the truth; 'recorded': "
+                                  "the file's x_meas_m, y_meas_m (or latitude_meas, longitude_meas) replayed "
+                                  "on the grid, no SNR axis (snr_db = [0] only)", choices=MEASUREMENTS)
         initial_position_std_m: float = param(50.0, "prior std of the initial position per axis (m)",
                                               ge=1e-3, le=1e5, why="P0 stays positive definite")
         initial_velocity_std_m_s: float = param(200.0, "prior std of the initial velocity per axis (m/s); the "
@@ -498,6 +572,11 @@ class RecordedTracks(Scenario):
                 for name in self.traffic_samples:
                     check_sample_name(name)
 
+    def perf_data(self, size: str, folder: Path) -> dict:
+        """Every perf size reads :func:`write_racetracks` in ``folder`` (not the traffic samples:
+        ``bench perf`` needs no optional extra)."""
+        return {"path": str(write_racetracks(folder / "racetracks.csv"))}
+
     def data_files(self, params) -> list[Path]:
         """The file, or the traffic samples read (their content is the config's identity)."""
         return [Path(params.path)] if params.path else [sample_file(name) for name in params.traffic_samples]
@@ -519,6 +598,9 @@ class RecordedTracks(Scenario):
         return frozenset({VALID_STEP_MASKS}) if is_ragged(params) else frozenset()
 
     def check_snr(self, params, snr_db: float) -> str | None:
+        if replays(params) and snr_db != 0.0:
+            return ("measurements = 'recorded' replays the file's measurements as recorded (no SNR axis): "
+                    "give snr_db = [0]")
         low = params.noise_std_m * 10.0 ** (-snr_db / 20.0)
         return None if low >= MIN_NOISE_M else f"the noise std scaled to it, {low:.3g} m, is below {MIN_NOISE_M:g} m"
 
@@ -549,12 +631,16 @@ class RecordedTracks(Scenario):
         # (n, K, 2 axes, [p, v, a]) -> [x, vx, ax, y, vy, ay]
         truth = np.stack([pos, bank.vel[steps], bank.acc[steps]], axis=-1).reshape(n, K, 6)
         model = self.model(p, snr_db)
-        z = pos + model.noise_std_m * g
+        if bank.z is None:
+            z = pos + model.noise_std_m * g
+        else:                          # the recorded error about the truth, moved with the truth
+            z = pos + (bank.z[steps] - bank.pos[steps])
         valid = self._valid_steps(p, bank.valid[steps], u_length) if is_ragged(p) else None
         if valid is not None:
             z = np.where(valid[..., None], z, np.nan)
         scene = RecordedTrackScene(
-            snr_definition=SNR_DEFINITION, realised_snr_db=np.full(n, 0.0 if null else float(snr_db)),
+            snr_definition=REPLAY_SNR_DEFINITION if replays(p) else SNR_DEFINITION,
+            realised_snr_db=np.full(n, 0.0 if null else float(snr_db)),
             position_index=position_index(2), model=model, state_labels=state_labels(2),
             measurement_labels=("x", "y"), divergence_bound_m=float(p.divergence_bound_m),
             maneuver_mask=bank.maneuvering[steps] if valid is None else bank.maneuvering[steps] & valid,
@@ -589,6 +675,33 @@ class RecordedTracks(Scenario):
                                     P0=P0)
 
 
+def write_racetracks(path: Path, tracks: int = 4, hours: float = 1.0, seed: int = 0) -> Path:
+    """A CSV of ``tracks`` aircraft flying racetracks for ``hours`` (``bench perf``'s data):
+    100 m/s, legs of 120 s joined by 180-degree turns at 3 deg/s (5.2 m/s^2), each track
+    at its own phase and straight for its last 10 minutes (quiet segments), sampled about
+    every second (jittered, 2 % of the samples lost) with recorded measurements in
+    N(0, PERF_NOISE_M^2) per axis. Deterministic (``seed``)."""
+    rng = np.random.default_rng(seed)
+    dt_fine, speed, leg_s, turn_s = 0.1, 100.0, 120.0, 60.0
+    t = np.arange(0.0, 3600.0 * hours, dt_fine)
+    tables = []
+    for k in range(tracks):
+        phase = (t + k * (leg_s + turn_s) / tracks) % (leg_s + turn_s)
+        turning = (phase >= leg_s) & (t < t[-1] - 600.0)
+        heading = np.cumsum(np.where(turning, np.pi / turn_s, 0.0)) * dt_fine
+        xy = np.cumsum(speed * np.stack([np.cos(heading), np.sin(heading)], axis=-1), axis=0) * dt_fine
+        times = np.arange(0.0, t[-1], 1.0) + rng.uniform(0.0, 0.3, int(np.ceil(t[-1])))
+        times = times[rng.random(len(times)) >= 0.02]           # 2 % lost: a replay misses their steps
+        truth = np.stack([np.interp(times, t, xy[:, axis]) for axis in range(2)], axis=-1)
+        z = truth + PERF_NOISE_M * rng.standard_normal(truth.shape)
+        tables.append(pd.DataFrame({TRACK: f"racetrack-{k}", TIME: times, PLANAR[0]: truth[:, 0],
+                                    PLANAR[1]: truth[:, 1], PLANAR_MEAS[0]: z[:, 0], PLANAR_MEAS[1]: z[:, 1]}))
+    pd.concat(tables, ignore_index=True).to_csv(path, index=False)
+    return path
+
+
 def noise_std(p, snr_db: float | None) -> float:
-    """The measurement-noise std (m) at ``snr_db`` (0 dB under the null)."""
-    return p.noise_std_m * 10.0 ** (-(0.0 if snr_db is None else float(snr_db)) / 20.0)
+    """The measurement-noise std (m) at ``snr_db`` (0 dB under the null; replaying,
+    ``noise_std_m`` whatever the level: the recorded noise does not change with it)."""
+    level = 0.0 if snr_db is None or replays(p) else float(snr_db)
+    return p.noise_std_m * 10.0 ** (-level / 20.0)

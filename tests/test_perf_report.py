@@ -6,25 +6,84 @@ import pandas as pd
 
 from bench import registry
 from bench.capabilities import fits
-from bench.perf import PERF_COLUMNS, SCENE_COLUMNS, Job, scene_jobs, write_report
+from bench.perf import PERF_COLUMNS, SCENE_COLUMNS, accepted_sizes, jobs, scene_jobs, write_report
 
 
-def test_scene_jobs_one_per_scenario_size():
-    jobs = [Job("dp-tbd", "tbd-grid", "small", {"cells": 100}, 20, 0),
-            Job("dp-tbd-mf", "tbd-grid", "small", {"cells": 100}, 20, 0),
-            Job("dp-tbd", "tbd-grid", "paper", {}, 4, 0)]
-    assert [(j.scenario, j.size, j.trials) for j in scene_jobs(jobs)] == \
-        [("tbd-grid", "small", 20), ("tbd-grid", "paper", 4)]
+def test_scene_jobs_cover_every_scenarios_sizes():
+    """Every size of every registered scenario is timed, also those no method job reaches
+    (generic: no scenario is named); ``--methods`` keeps the scenes the methods accept."""
+    registry.discover()
+    every = {(j.scenario, j.size): j.trials for j in scene_jobs()}
+    assert every == {(name, size): trials for name, cls in registry.scenarios().items()
+                     for size, (_, trials) in cls.perf_sizes.items()}
+    reached = {(j.scenario, j.size) for j in jobs()}
+    assert reached < set(every)                           # sizes beyond the method jobs' scenarios
+    for method in ("cv-kf", "dp-tbd"):
+        cls = registry.get_method(method)
+        picked = {(j.scenario, j.size) for j in scene_jobs([method])}
+        assert picked == {(name, size) for name, scenario in registry.scenarios().items()
+                          for size in accepted_sizes(cls, scenario)}
+        assert {(j.scenario, j.size) for j in jobs([method])} <= picked
+        assert all(cls.task in registry.get_scenario(name).tasks for name, _ in picked)
+    assert [(j.scenario, j.size) for j in scene_jobs(sizes=["small"])] == \
+        [key for key in every if key[1] == "small"]
+
+
+def test_a_size_reading_a_file_is_timed_on_one_its_scenario_writes(monkeypatch):
+    """A scenario's ``perf_data`` writes the file its size reads into the measuring process's
+    temporary folder (removed after); a size that cannot be generated is reported, not timed."""
+    from dataclasses import dataclass
+    from pathlib import Path
+
+    from bench import perf
+    from bench.core import Scenario
+    from bench.errors import ConfigError
+
+    registry.discover()
+    written = []
+
+    class ReadsAFile(Scenario):
+        name = "reads-a-file"
+        perf_sizes = {"tiny": ({}, 3), "absent": ({"needs": "an extra"}, 3)}
+
+        @dataclass(frozen=True)
+        class Params:
+            path: str = ""
+            needs: str = ""
+
+        def perf_data(self, size, folder):
+            written.append(folder / "data.txt")
+            written[-1].write_text("3")
+            return {"path": str(written[-1])}
+
+        def generate(self, params, snr_db, n, rng):
+            if params.needs:
+                raise ConfigError("needs", f"install {params.needs}")
+            return int(Path(params.path).read_text()) * n
+
+    monkeypatch.setitem(registry._SCENARIOS, ReadsAFile.name, ReadsAFile)
+    monkeypatch.setattr(registry, "discover", lambda: None)
+    tiny, absent = [j for j in scene_jobs() if j.scenario == ReadsAFile.name]
+    assert (tiny.size, absent.size) == ("tiny", "absent")
+    timed = perf.measure_scene(tiny)
+    assert timed["seconds_per_trial"] >= 0 and timed["skipped"] == ""
+    assert written and not written[0].exists()                       # the temporary folder is gone
+    refused = perf.measure_scene(absent)
+    assert refused["skipped"] == "needs: install an extra" and pd.isna(refused["seconds_per_trial"])
 
 
 def test_report_has_scene_generation_table_and_csv(tmp_path):
     registry.discover()
-    scenes = pd.DataFrame([["tbd-grid", "paper", 4, 0.0123, 400.0]], columns=SCENE_COLUMNS)
+    scenes = pd.DataFrame([["tbd-grid", "paper", 4, 0.0123, 400.0, ""],
+                           ["tbd-grid", "small", 20, float("nan"), float("nan"), "path: no such file"]],
+                          columns=SCENE_COLUMNS)
     report = write_report(tmp_path, pd.DataFrame(columns=PERF_COLUMNS), [], None, scenes=scenes)
-    text = report.read_text()
+    text = re.sub(" +", " ", report.read_text())                                  # padded cells
     assert "## Scene generation" in text
-    assert "| `tbd-grid` | paper | 4 | 12.3 | 400 | ≤ 0.02 s/trial: 0.0123 ✓ |" in re.sub(" +", " ", text)   # padded cells
-    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "scene.csv"), scenes)
+    assert "| `tbd-grid` | paper | 4 | 12.3 | 400 | ≤ 0.02 s/trial: 0.0123 ✓ |" in text
+    assert "| `tbd-grid` | small | 20 | – | – | not timed: path: no such file |" in text
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "scene.csv", keep_default_na=False, na_values=[""])
+                                  .fillna({"skipped": ""}), scenes)
 
 
 def test_each_method_is_timed_on_a_scenario_it_accepts(monkeypatch):

@@ -435,3 +435,129 @@ def test_the_cli_runs_the_trackers_on_ragged_tracks_and_refuses_a_detector(tmp_p
     summary = pd.read_csv(tmp_path / "out" / "summary.csv")
     assert set(summary.method) == {"cv-kf", "imm-cv-ca"} and (summary.n_trials == 4).all()
     assert np.isfinite(summary.rmse_mean).all()
+
+
+# Replayed measurements (the scenario's 'Measurements', measurements = "recorded"): a track
+# turning at 300 s, a sample near every 5 s grid step but none at the steps j = 3 mod 7 and
+# two at the steps j = 5 mod 11 (the second 1.5 s later: dropped), measured in N(0, MEAS_STD^2).
+MEAS_STD = 30.0                   # m
+REPLAY = {**SMALL, "measurements": "recorded", "noise_std_m": MEAS_STD}
+
+
+def replay_csv(folder, jitter_s: float = 0.5, seed: int = 3) -> tuple[Path, np.ndarray]:
+    """The file, and by hand the (J, 2) measurement each grid step j (time 5 j) replays:
+    the first sample falling on it, NaN where none. Sample j is at 5 j + U(-jitter_s, jitter_s)
+    (the first exactly at 0, where the grid starts), always nearest to step j."""
+    rng = np.random.default_rng(seed)
+    j = np.arange(200)
+    j = j[j % 7 != 3]
+    t = SMALL["dt_s"] * j + np.r_[0.0, rng.uniform(-jitter_s, jitter_s, len(j) - 1)]
+    second = j % 11 == 5
+    times = np.sort(np.r_[t, t[second] + 1.5])
+    truth = turn_track(times, 300.0, 60.0)
+    z = truth + MEAS_STD * rng.standard_normal(truth.shape)
+    path = folder / "replay.csv"
+    pd.DataFrame({"track": "A", "time_s": times, "x_m": truth[:, 0], "y_m": truth[:, 1],
+                  "x_meas_m": z[:, 0], "y_meas_m": z[:, 1]}).to_csv(path, index=False)
+    on_grid = np.full((200, 2), np.nan)
+    on_grid[j] = z[np.searchsorted(times, t)]                 # the sample at t, not the one 1.5 s after
+    return path, on_grid
+
+
+def segment_start(z: np.ndarray, on_grid: np.ndarray) -> int:
+    """The one grid step s whose replayed measurements, moved by a constant, are ``z``
+    (K, 2): the same missing steps and the same differences to the first."""
+    K = len(z)
+    found = [s for s in range(len(on_grid) - K + 1)
+             if np.array_equal(np.isnan(on_grid[s:s + K]), np.isnan(z)) and not np.isnan(z[0]).any()
+             and np.allclose(on_grid[s:s + K] - on_grid[s], z - z[0], atol=1e-6, equal_nan=True)]
+    assert len(found) == 1, found
+    return found[0]
+
+
+def test_replay_puts_the_files_measurements_on_the_grid(tmp_path):
+    path, on_grid = replay_csv(tmp_path)
+    p = params_for(path, **REPLAY)
+    RecordedTracks().check_config(p)
+    assert RecordedTracks().requires(p) == {VALID_STEP_MASKS}
+    for snr_db in (0.0, None):
+        batch = generate(p, snr_db, range(12))
+        valid = batch.scene.valid_steps
+        assert batch.scene.model.noise_std_m == MEAS_STD and not (valid.all(axis=1)).any()
+        for i in range(12):
+            s = segment_start(batch.z[i], on_grid)
+            np.testing.assert_array_equal(valid[i], ~np.isnan(on_grid[s:s + p.steps, 0]))
+        # the replayed error about the truth: the file's noise, and the motion during the
+        # sample's time off its step (uniform within 0.5 s at SPEED along the track)
+        err = (batch.z - batch.truth[..., [0, 3]])[valid]
+        assert np.sqrt(np.mean(err ** 2)) == pytest.approx(np.sqrt(MEAS_STD ** 2 + (SPEED * 0.5) ** 2 / 6),
+                                                           rel=0.2)
+    np.testing.assert_array_equal(generate(p, 0.0, range(8, 12)).z, generate(p, 0.0, range(12)).z[8:])
+
+
+def _position_rmse(batch: Batch, out) -> float:
+    err = (out.estimate[..., [0, 3]] - batch.truth[..., [0, 3]])[:, 5:]
+    valid = np.ones(batch.z.shape[:2], bool) if batch.scene.valid_steps is None else batch.scene.valid_steps
+    return float(np.sqrt(np.mean(err[valid[:, 5:]] ** 2)))
+
+
+def test_cv_kf_on_replayed_measurements_matches_the_known_noise(tmp_path):
+    """Samples on the grid (no jitter): cv-kf's position RMSE on the replayed measurements
+    equals its RMSE on measurements drawn at the same std about the same truth, on segments
+    with the turn and on quiet ones (the null), within the spread of one file's noise (about
+    100 to 190 samples per axis, correlated a few steps by the filter: 5 to 8 % in RMSE; 25 %
+    allows three standard errors); on quiet segments filtering beats one measurement."""
+    path, _ = replay_csv(tmp_path, jitter_s=0.0)
+    cls = registry.get_method("cv-kf")
+    for snr_db in (0.0, None):
+        rmse = {}
+        for measurements in ("recorded", "synthetic"):
+            batch = generate(params_for(path, **{**REPLAY, "measurements": measurements}), snr_db, range(200))
+            rmse[measurements] = _position_rmse(batch, cls().run(batch, cls.Params()))
+        assert rmse["recorded"] == pytest.approx(rmse["synthetic"], rel=0.25), snr_db
+    assert rmse["recorded"] < MEAS_STD
+
+
+@pytest.mark.parametrize("column", ["x_meas_m", "y_meas_m"])
+def test_replay_refuses_a_file_without_or_with_nan_measurements(tmp_path, column):
+    path, _ = replay_csv(tmp_path)
+    table = pd.read_csv(path)
+    for how, broken, problem in (("missing", table.drop(columns=column), f"missing column(s) {column}"),
+                                 ("nan", table.assign(**{column: table[column].where(table.index != 7)}),
+                                  f"column {column} has 1 missing")):
+        bad = tmp_path / f"{how}.csv"
+        broken.to_csv(bad, index=False)
+        with pytest.raises(ConfigError) as err:
+            RecordedTracks().check_config(params_for(bad, **REPLAY))
+        assert str(bad) in err.value.problem and problem in err.value.problem and "\n" not in str(err.value)
+
+
+def test_the_cli_refuses_a_replay_with_an_snr_axis_and_runs_it_at_0_db(tmp_path):
+    replay_csv(tmp_path)
+    sweep = SWEEP.format(path="replay.csv").replace(
+        "[[methods]]", f'measurements = "recorded"\nnoise_std_m = {MEAS_STD}\n[[methods]]')
+    (tmp_path / "axis.toml").write_text(sweep.replace("snr_db = [10]", "snr_db = [0, 10]"))
+    proc = run_bench("run", "axis.toml", "--out", "refused", cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "10 dB" in lines[0] and "no SNR axis" in lines[0], lines
+    assert not (tmp_path / "refused").exists()
+    (tmp_path / "replay.toml").write_text(sweep.replace("snr_db = [10]", "snr_db = [0]"))
+    run_bench("run", "replay.toml", "--out", "out", "--quiet", cwd=tmp_path, check=True)
+    summary = pd.read_csv(tmp_path / "out" / "summary.csv")
+    assert set(summary.method) == {"cv-kf"} and (summary.n_trials == 4).all() and np.isfinite(summary.rmse_mean).all()
+
+
+def test_the_perf_sizes_run_on_the_racetracks_the_scenario_writes(tmp_path):
+    """``bench perf`` times every size without the optional extra: the racetracks hold
+    segments with an onset and quiet ones, and the replay misses the lost samples' steps."""
+    scenario = RecordedTracks()
+    for size, (params, _) in RecordedTracks.perf_sizes.items():
+        p = build_params(RecordedTracks.Params, {**params, **scenario.perf_data(size, tmp_path)})
+        scenario.check_config(p)
+        batch = generate(p, RecordedTracks.perf_snr_db, range(4))
+        assert batch.scene.maneuver_mask[:, p.onset_step].all()
+        valid = batch.scene.valid_steps
+        assert (valid is None) == (p.measurements == "synthetic")
+        if valid is not None:
+            assert 0.9 < valid.mean() < 1.0

@@ -506,7 +506,7 @@ def test_bench_perf_with_an_unknown_size_is_one_line_and_writes_nothing(tmp_path
         code = main(["perf", "--sizes", "small", "bogus", "--out", str(tmp_path / "perf")])
     lines = err.getvalue().splitlines()
     assert code == 2 and len(lines) == 1, err.getvalue()
-    assert lines[0] == "error: --sizes: unknown size 'bogus' (known: default, paper, small)"
+    assert lines[0] == "error: --sizes: unknown size 'bogus' (known: default, large, paper, replay, segments, small)"
     assert not list(tmp_path.iterdir())
 
 
