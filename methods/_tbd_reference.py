@@ -155,6 +155,7 @@ def reference_pf_tbd(frames, keys, geometry, model, betas, variances, flags):
             picks = np.minimum(np.searchsorted(np.cumsum(weights), (np.arange(nc) + offsets) / nc), P - 1)
             state, cells = state[:, picks], cells_all[:, picks]
         score[t] = log_odds
+    return score, track
 
 
 def _box_max(merit: np.ndarray, q: int, padded: np.ndarray) -> np.ndarray:
