@@ -310,7 +310,12 @@ def test_the_default_limit_is_a_fraction_of_this_machine_and_every_preset_fits()
     root = importlib.resources.files("bench") / "presets"
     for preset in root.iterdir():
         if preset.name.endswith(".toml") and not preset.name.endswith(".claims.toml"):   # claims: not sweeps
-            plan = parse_sweep_text(preset.read_bytes(), preset.name)
+            try:
+                plan = parse_sweep_text(preset.read_bytes(), preset.name)
+            except ConfigError as err:      # real-trajectories reads the [data] extra's samples
+                if "the optional extra: pip install" in err.problem:
+                    continue
+                raise
             for s in plan.scenarios:
                 need = unit_memory_bytes(plan, s, min(plan.chunk, s.trials), False)[0]
                 assert need < 4 * 2 ** 30, (preset.name, s.label, need)     # fits a 8 GB machine's default
