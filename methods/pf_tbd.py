@@ -175,9 +175,9 @@ class PfTbd(Method):
                                             "acceleration, 0.35 rad/s x 141 m/s = 49.5 m/s^2",
                                       ge=0.0, le=1000.0, why="0 is constant velocity; 1000 m/s^2 is 100 g")
         snr_min_db: float = param(-10.0, "lower end of the birth SNR prior 20 log10(A / sigma) (dB)",
-                                  ge=-30.0, le=40.0, why="the DP methods' design-SNR range")
+                                  ge=-30.0, lt=40.0, why="the DP methods' design-SNR range, below snr_max_db")
         snr_max_db: float = param(20.0, "upper end of the birth SNR prior (dB); > snr_min_db",
-                                  ge=-30.0, le=40.0, why="the DP methods' design-SNR range")
+                                  gt=-30.0, le=40.0, why="the DP methods' design-SNR range, above snr_min_db")
         amplitude_walk_db: float = param(0.5, "std of the amplitude's random walk per frame (dB)",
                                          ge=0.0, le=10.0, why="0 is a constant amplitude; 10 dB a frame "
                                                               "is a fully fluctuating one")

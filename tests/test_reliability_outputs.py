@@ -365,6 +365,7 @@ COMPANIONS = {
     ("maneuvering-1d", "dt_s", "0.001"): {"maneuver_start_s": 0.0},
     ("maneuvering-1d", "maneuver_start_s", "1000000.0"): {"profile": "singer"},
     **{("cusum", "window", v): {"score": "glr"} for v in ("1", "1000")},      # the GLR score's window
+    ("recorded-tracks", "min_steps", "10000"): {"steps": 10000},             # at most steps
     ("ar-adaptive", "order_low", "5"): {"order_high": 6, "state_dim": 7},
     ("ar-adaptive", "order_high", "1"): {"order_low": 0},
     ("ar-adaptive", "order_high", "6"): {"state_dim": 7},

@@ -88,7 +88,7 @@ def test_false_switch_rate_equals_alpha(switching, coefficients):
     alpha, n, K, sigma = 0.02, 400, 120, 10.0
     z, x0, P0 = _quiet_matched(n, K, 1.0, sigma, 7)
     params = SimpleNamespace(state_dim=4, window=1000, order_low=1, order_high=2, alpha=alpha, q0_m2=0.0,
-                             coefficients=coefficients, switching=switching)
+                             coefficients=coefficients, switching=switching, state_noise="matching")
     res = ar_adaptive_filter(z, 1.0, sigma ** 2, x0, P0, params)
     tests = int(np.isfinite(res.nis).sum())
     switches = int(res.switch.sum())
