@@ -126,7 +126,10 @@ class StoneSoupPeer(Method):
         return assemble(trials, slots)
 
     def _trial(self, z, n_plots, scene, params, K) -> tuple[TrialBuffers, int]:
-        raise NotImplementedError
+        """One trial through the peer's Stone Soup tracker: its output buffers and the track
+        slots used. Each peer overrides it; Stone Soup runs one scene at a time, so this loop
+        over trials is the peer's own cost, timed as such by ``bench perf``."""
+        raise NotImplementedError(f"{type(self).__name__} must define _trial")
 
 
 @register_method
