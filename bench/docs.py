@@ -257,8 +257,8 @@ def presets_page(root: Path, all_presets: list[Preset], reports: list[str]) -> s
     that run's wall time (read from the report, never typed), and the commands that
     regenerate the committed reports."""
     page = "presets.md"
-    rows = [[code(p.name), text(p.description), text(p.paper) if p.paper else "–",
-             report_link(p.name, page) if p.name in reports else "–",
+    rows = [[report_link(p.name, page) if p.name in reports else code(p.name), text(p.description),
+             text(p.paper) if p.paper else "–",
              wall_time(root / "reports" / p.name / "report.md") if p.name in reports else "–"]
             for p in sorted(all_presets, key=lambda p: (not p.paper, p.name))]
     regenerate = [f"for p in {' '.join(n for n in reports if n in {p.name for p in all_presets})}; do",
@@ -273,7 +273,7 @@ def presets_page(root: Path, all_presets: list[Preset], reports: list[str]) -> s
         "The wall time is that of the units of the last `bench run` that wrote the committed report "
         "(before its report and recording; a run that resumed, or re-ran only what an edit changed, "
         "counts the units it ran), as the report's *Provenance* states it, on the machine it names.",
-        table(["preset", "what", "paper", "committed report", "wall time of the units"], rows),
+        table(["preset (its committed report)", "what", "paper", "wall time of the units"], rows),
         "## Regenerating the committed reports",
         "One command per preset with a committed report (they are regenerated after a change that "
         "alters results), then the speed tables:",
