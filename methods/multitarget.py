@@ -40,6 +40,10 @@ class _MultiTargetTracker(Method):
     def check_scenario(self, params, scenario_params) -> str | None:
         return check_speed_bound(params, scenario_params)
 
+    def least_cost(self, batch: Batch, params, output) -> str:
+        return ("gating, clusters and joint events follow the scene's plots and tracks: no floor of bytes or "
+                "add/max operations holds apart from the algorithm's own branching")
+
     def run(self, batch: Batch, params) -> MultiTargetOutput:
         scene = scene_of(batch)
         models = tracker_models(scene, params, FILTERS[params.filter], CONFIRMATIONS[params.confirmation])
