@@ -78,6 +78,8 @@ SEED = 20261121
 REPEATS = 3
 #: interleaved rounds of a method and its reference (each keeps its minimum)
 ROUNDS = 5
+#: a row's note when its method declares no least cost (``Method.least_cost`` returned None)
+NO_MODEL = "no model declared (`Method.least_cost`)"
 #: the environment of a measuring process: one thread per library, so a rate is per core
 ONE_CORE = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
 
@@ -244,7 +246,7 @@ def limit_columns(cost, seconds: float, machine: dict) -> dict:
     there is none) from a method's declared least cost of a call taking ``seconds``."""
     if not isinstance(cost, dict):
         return {"limit_fraction": np.nan, "limit": "",
-                "limit_note": cost or "no model declared (`Method.least_cost`)"}
+                "limit_note": cost or NO_MODEL}
     fraction, binding = limits.limit_fraction(cost, seconds, machine)
     return {"limit_fraction": fraction, "limit": binding, "limit_note": ""}
 
@@ -534,7 +536,8 @@ def _fraction_cell(row: dict, notes: list[str]) -> str:
     fraction = row.get("limit_fraction", np.nan)
     if isinstance(fraction, float) and np.isfinite(fraction):
         return f"{fraction:.2g} ({limits.LIMIT_NAMES[row['limit']]})"
-    note = row.get("limit_note") or "no model declared (`Method.least_cost`)"
+    note = row.get("limit_note")
+    note = note if isinstance(note, str) and note else NO_MODEL
     if note not in notes:
         notes.append(note)
     return f"— (note {notes.index(note) + 1})"
