@@ -42,7 +42,7 @@ class MfaParams(TrackerParams):
                               why="1 is the single-scan assignment; each scan of window multiplies a "
                                   "track's hypotheses by its gated plots, and Stone Soup builds the "
                                   "assignment's constraint matrix densely over all of them")
-    max_hypotheses: int = param(20, "at most this many hypotheses (mixture components) per track after "
+    max_hypotheses: int = param(100, "at most this many hypotheses (mixture components) per track after "
                                     "each scan's update, the heaviest kept (k-best pruning)", ge=1, le=1000,
                                 why="1 keeps only each track's best branch; above 1000 one track's "
                                     "hypotheses cost Stone Soup seconds per scan")
