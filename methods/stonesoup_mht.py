@@ -63,9 +63,11 @@ class StoneSoupMfa(InitiatedPeer):
     mixture filter" (J. Adv. Information Fusion 14(2), 2019): the
     W-dimensional assignment is relaxed by Lagrange multipliers into W
     single-scan assignments (``linear_sum_assignment``), the multipliers move
-    by subgradient steps, and a primal solution is completed by an integer
-    programme (SCIP through OR-Tools) until the duality gap is small; then
-    every hypothesis whose association W − 1 scans back differs from the
+    by subgradient steps, and where the single-scan solutions disagree a
+    primal solution is completed by an integer programme (SCIP through
+    OR-Tools), until they agree, the duality gap is small or the primal cost
+    stops falling (Stone Soup's limits, at most 10 iterations); then every
+    hypothesis whose association W − 1 scans back differs from the
     best global hypothesis's is pruned (N-scan pruning). Stone Soup's other
     MHT-family tracker, ``PMHTTracker`` (Streit & Luginbuhl's probabilistic
     MHT), is not used: it keeps a fixed number of targets from given priors
