@@ -38,7 +38,8 @@ def _cached_dispatchers():
 
     for module in list(sys.modules.values()):
         for obj in list(getattr(module, "__dict__", {}).values()):
-            if isinstance(obj, CPUDispatcher) and isinstance(getattr(obj, "_cache", None), FunctionCache):
+            # type(obj), not isinstance: a SWIG module's ``cvar`` (OR-Tools') raises on any attribute, __class__ too
+            if issubclass(type(obj), CPUDispatcher) and isinstance(getattr(obj, "_cache", None), FunctionCache):
                 yield obj
 
 

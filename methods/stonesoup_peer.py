@@ -132,20 +132,16 @@ class StoneSoupPeer(Method):
         raise NotImplementedError(f"{type(self).__name__} must define _trial")
 
 
-@register_method
-class StoneSoupJpda(StoneSoupPeer):
-    """Stone Soup's JPDA with UnscentedKalmanUpdater and MultiMeasurementInitiator (peer of jpda-ukf; extra [peers]).
+class InitiatedPeer(StoneSoupPeer):
+    """The peers that start tracks as ``stonesoup-jpda`` does and end them by ``jpda-ukf``'s rules.
 
-    The same models and parameters as ``jpda-ukf`` (:mod:`methods.multitarget`):
-    the CV transition and discrete white-noise Q of :mod:`models.hfswr`
-    (:class:`HFSWRTransition`), the range / azimuth / radial velocity
-    measurement with R = diag(σ²) (:class:`HFSWRMeasurement`),
-    ``UnscentedKalmanPredictor`` / ``UnscentedKalmanUpdater`` with the same
-    α, β, κ, ``PDAHypothesiser`` (clutter density λ, P_D, gate probability
-    P_G) under ``JPDA`` (which enumerates the joint events of *all* tracks of
-    a scan at once: no clustering, so its cost grows exponentially with the
-    number of tracks), the JPDA mixture reduced by ``gm_reduce_single`` (eqs.
-    6.73–6.74).
+    The scan loop of the track-based Stone Soup peers at equal footing with
+    ``jpda-ukf`` (:mod:`methods.multitarget`): the same models and UKF
+    (:func:`ukf_parts`), the peer's data associator over the confirmed tracks
+    (:meth:`_associator`) and its update of a track from the hypotheses kept
+    (:meth:`_update`), then ``MultiMeasurementInitiator`` on the plots no
+    confirmed track's gate held (:meth:`_initiator`), the three termination
+    rules on the track's estimate (:meth:`_estimate`).
 
     **Initiation**: Stone Soup's closest to M/N is ``MultiMeasurementInitiator``:
     every plot no confirmed track's gate holds starts a holding track
@@ -163,35 +159,55 @@ class StoneSoupJpda(StoneSoupPeer):
     bound), evaluated here on Stone Soup's tracks (Stone Soup has no
     "M of N" deleter). Outputs: confirmed tracks (2), terminated at their last
     scan (3), holding tracks with at least two plots as tentative (1).
-    Per trial and scan in Python objects: slow by nature, the baseline of
-    ``bench perf`` for ``jpda-ukf``.
     """
 
-    name = "stonesoup-jpda"
     #: CPU seconds (this thread) spent in ``MultiMeasurementInitiator.initiate`` since the instance was made
     initiation_seconds: float = 0.0
-    Params = TrackerParams
 
     def check_scenario(self, params, scenario_params) -> str | None:
         return check_speed_bound(params, scenario_params)
 
-    def _components(self, scene, params):
-        models = tracker_models(scene, params, kern.UKF)
-        measurement, predictor, updater = ukf_parts(scene, models.F, models.Q, models.R, params)
-        jpda = JPDA(PDAHypothesiser(predictor, updater, clutter_spatial_density=max(scene.clutter_density,
-                                                                                     LAMBDA_FLOOR),
-                                    prob_detect=scene.pd, prob_gate=params.gate_probability))
+    def _associator(self, scene, params, predictor, updater):
+        """The peer's data associator of the confirmed tracks (``associate(tracks, plots, when)``)."""
+        raise NotImplementedError(f"{type(self).__name__} must define _associator")
+
+    def _update(self, track, multi, when, updater, params) -> None:
+        """Append to ``track`` its posterior at ``when`` from the hypotheses ``multi`` the associator kept."""
+        raise NotImplementedError(f"{type(self).__name__} must define _update")
+
+    def _adopt(self, track) -> None:
+        """A holding track just confirmed becomes one of the associator's (nothing to do by default)."""
+
+    def _estimate(self, track):
+        """The track's state estimate (a Gaussian state) for the termination rules and the outputs."""
+        return track.state
+
+    def _initiator(self, scene, params, models, measurement, predictor, updater):
         vmax = float(scene.speed_bounds_m_s[1])
-        initiator = MultiMeasurementInitiator(
+        return MultiMeasurementInitiator(
             prior_state=GaussianState(StateVector([0.0, 0.0, 0.0, 0.0]), np.diag([0.0, vmax ** 2, 0.0, vmax ** 2])),
             deleter=UpdateTimeStepsDeleter(time_steps_since_update=params.confirm_n - params.confirm_m + 1),
             data_associator=GNNWith2DAssignment(DistanceHypothesiser(
                 predictor, updater, Mahalanobis(), missed_distance=float(np.sqrt(models.gamma)))),
             updater=updater, measurement_model=measurement, min_points=params.confirm_m + 2)
-        return measurement, updater, jpda, initiator
+
+    def _components(self, scene, params):
+        models = tracker_models(scene, params, kern.UKF)
+        measurement, predictor, updater = ukf_parts(scene, models.F, models.Q, models.R, params)
+        associator = self._associator(scene, params, predictor, updater)
+        return measurement, updater, associator, self._initiator(scene, params, models, measurement, predictor,
+                                                                 updater)
+
+    def _ends(self, track, misses: int, params) -> bool:
+        """The three termination rules on the track's miss history and estimate."""
+        estimate = self._estimate(track)
+        speed = float(np.hypot(estimate.state_vector[1, 0], estimate.state_vector[3, 0]))
+        return (bin(misses).count("1") >= params.terminate_m
+                or kern.position_std(np.asarray(estimate.covar, float)) > params.max_position_std_m
+                or speed > params.max_speed_m_s)
 
     def _trial(self, z, n_plots, scene, params, K):
-        measurement, updater, jpda, initiator = self._components(scene, params)
+        measurement, updater, associator, initiator = self._components(scene, params)
         start = datetime.datetime(2000, 1, 1)
         buf = TrialBuffers.empty(K, params.max_tracks)
         tracks: dict = {}                 # Stone Soup track -> its miss history (bit 0 = this scan)
@@ -203,34 +219,62 @@ class StoneSoupJpda(StoneSoupPeer):
                        for p in z[k, :int(n_plots[k])]]
             detections = set(ordered)
             # lists, not sets: Stone Soup sums the joint events in iteration order (determinism to the last bit)
-            hypotheses = jpda.associate(list(tracks), ordered, when)
+            hypotheses = associator.associate(list(tracks), ordered, when)
             gated = set()
             ended = []
             for track, multi in hypotheses.items():
                 hit = any(h for h in multi)
                 gated |= {h.measurement for h in multi if h}
-                _append_mixture(track, multi, when, updater)
+                self._update(track, multi, when, updater, params)
                 tracks[track] = ((tracks[track] << 1) | (0 if hit else 1)) & term_mask
-                speed = float(np.hypot(track.state_vector[1, 0], track.state_vector[3, 0]))
-                if (bin(tracks[track]).count("1") >= params.terminate_m
-                        or kern.position_std(np.asarray(track.covar, float)) > params.max_position_std_m
-                        or speed > params.max_speed_m_s):
+                if self._ends(track, tracks[track], params):
                     ended.append(track)
             t0 = time.thread_time()
             started = initiator.initiate(detections - gated, when)
             self.initiation_seconds += time.thread_time() - t0
             for track in sorted(started, key=_track_key):
+                self._adopt(track)
                 tracks[track] = 0
             for track in ended:
                 del tracks[track]
-                slots.record(buf, k, track, kern.TERMINATED)
+                slots.record(buf, k, track, kern.TERMINATED, self._estimate(track))
             for track in tracks:
-                slots.record(buf, k, track, kern.CONFIRMED)
+                slots.record(buf, k, track, kern.CONFIRMED, self._estimate(track))
             for track in sorted(initiator.holding_tracks, key=_track_key):
                 if sum(1 for s in track if isinstance(s, Update) and s.hypothesis) >= 2:
                     slots.record(buf, k, track, kern.TENTATIVE)
             slots.release_missing(set(tracks) | set(initiator.holding_tracks))
         return buf, slots.used
+
+
+@register_method
+class StoneSoupJpda(InitiatedPeer):
+    """Stone Soup's JPDA with UnscentedKalmanUpdater and MultiMeasurementInitiator (peer of jpda-ukf; extra [peers]).
+
+    The same models and parameters as ``jpda-ukf`` (:mod:`methods.multitarget`):
+    the CV transition and discrete white-noise Q of :mod:`models.hfswr`
+    (:class:`HFSWRTransition`), the range / azimuth / radial velocity
+    measurement with R = diag(σ²) (:class:`HFSWRMeasurement`),
+    ``UnscentedKalmanPredictor`` / ``UnscentedKalmanUpdater`` with the same
+    α, β, κ, ``PDAHypothesiser`` (clutter density λ, P_D, gate probability
+    P_G) under ``JPDA`` (which enumerates the joint events of *all* tracks of
+    a scan at once: no clustering, so its cost grows exponentially with the
+    number of tracks), the JPDA mixture reduced by ``gm_reduce_single`` (eqs.
+    6.73–6.74). Initiation and termination: :class:`InitiatedPeer`.
+    Per trial and scan in Python objects: slow by nature, the baseline of
+    ``bench perf`` for ``jpda-ukf``.
+    """
+
+    name = "stonesoup-jpda"
+    Params = TrackerParams
+
+    def _associator(self, scene, params, predictor, updater):
+        return JPDA(PDAHypothesiser(predictor, updater, clutter_spatial_density=max(scene.clutter_density,
+                                                                                     LAMBDA_FLOOR),
+                                    prob_detect=scene.pd, prob_gate=params.gate_probability))
+
+    def _update(self, track, multi, when, updater, params) -> None:
+        _append_mixture(track, multi, when, updater)
 
 
 def _track_key(track):

@@ -159,7 +159,8 @@ def test_cfar_preset_smoke(bench_cli, tmp_path):
 @pytest.mark.slow
 def test_multi_target_preset_smoke(bench_cli, tmp_path):
     """The multi-target preset's scenario configs and trackers, few trials and short runs; the
-    Stone Soup peer runs when the [peers] extra is installed and is listed as not run otherwise."""
+    Stone Soup peers run when the [peers] extra is installed and are listed as not run otherwise
+    (the MFA peer also needs the extra's OR-Tools)."""
     sweep = _preset("multi-target")
     sweep.update(trials=2, chunk=2)
     for sc in sweep["scenarios"]:
@@ -169,13 +170,13 @@ def test_multi_target_preset_smoke(bench_cli, tmp_path):
     bench_cli("run", path, "--out", tmp_path / "out", "--quiet", "--workers", 1, check=True)
     summary = pd.read_csv(tmp_path / "out" / "summary.csv")
     report = (tmp_path / "out" / "report.md").read_text()
-    peers = "stonesoup-jpda" in registry.methods()
-    assert ("stonesoup-gmphd" in registry.methods()) == peers                  # one extra for both
-    assert set(summary.method) == {"jpda-ukf", "gnn-ekf"} | ({"stonesoup-jpda", "stonesoup-gmphd"} if peers else set())
+    ran = {peer: peer in registry.methods() for peer in ("stonesoup-jpda", "stonesoup-gmphd", "stonesoup-mfa")}
+    assert ran["stonesoup-gmphd"] == ran["stonesoup-jpda"] >= ran["stonesoup-mfa"]   # one extra; MFA: OR-Tools too
+    assert set(summary.method) == {"jpda-ukf", "gnn-ekf"} | {peer for peer, here in ran.items() if here}
     assert summary.scenario.nunique() == 5 and summary.gospa_mean.notna().all()
     assert "## Multi-target tracking: paired comparison" in report
-    for peer in ("stonesoup-jpda", "stonesoup-gmphd"):                       # Markdown-escaped
-        assert (f"`{peer}` ({peer}): needs the \\[peers\\] extra" in report) != peers
+    for peer, here in ran.items():                                            # Markdown-escaped
+        assert (f"`{peer}` ({peer}): needs the \\[peers\\] extra" in report) != here
 
 
 @pytest.mark.slow

@@ -375,7 +375,7 @@ COMPANIONS = {
     ("imm-cv-ca", "initial_probabilities", "0.0"): {"initial_probabilities": (0.0, 1.0)},
     ("imm-cv-ca", "initial_probabilities", "1.0"): {"initial_probabilities": (1.0, 0.0)},
     ("innovation", "delta", "0.999"): {"window": 1},
-    **{(m, f, v): c for m in ("gnn-ekf", "jpda-ukf", "stonesoup-jpda") for f, v, c in (
+    **{(m, f, v): c for m in ("gnn-ekf", "jpda-ukf", "stonesoup-jpda", "stonesoup-mfa") for f, v, c in (
         ("confirm_m", "20", {"confirm_n": 20}), ("confirm_n", "1", {"confirm_m": 1}),
         ("terminate_m", "60", {"terminate_n": 60}), ("terminate_n", "1", {"terminate_m": 1}))},
     **{(m, f, v): c for m in ("os-cfar", "region-adaptive") for f, v, c in (

@@ -1,5 +1,5 @@
 """The Stone Soup peers (``[peers]`` extra): unavailable with the reason without it; the
-GM-PHD peer finds the targets of a clean scene; ``bench perf`` times the JPDA peer's
+GM-PHD and MFA peers find the targets of a clean scene; ``bench perf`` times the JPDA peer's
 initiator apart."""
 
 import importlib
@@ -13,7 +13,8 @@ from bench.params import build_params
 from bench.registry import PluginError
 from bench.rng import TrialRNG
 
-PEERS = {"methods.stonesoup_peer": "stonesoup-jpda", "methods.stonesoup_gmphd": "stonesoup-gmphd"}
+PEERS = {"methods.stonesoup_peer": "stonesoup-jpda", "methods.stonesoup_gmphd": "stonesoup-gmphd",
+         "methods.stonesoup_mht": "stonesoup-mfa"}
 
 
 @pytest.mark.parametrize("module, name", PEERS.items())
@@ -30,9 +31,22 @@ def test_a_peer_without_the_extra_is_unavailable_with_the_reason(monkeypatch, mo
     assert err.value.name == name
 
 
-def _clean_scene(seed: int, clutter_per_scan: float = 0.0):
+def test_the_mfa_peer_without_ortools_is_unavailable_with_the_reason(monkeypatch):
+    """Stone Soup without OR-Tools (its MFA's primal solver): the MFA peer alone is
+    unavailable, its reason Stone Soup's line naming the package."""
+    pytest.importorskip("stonesoup")
+    for loaded in [m for m in sys.modules if m.startswith("stonesoup.dataassociator.mfa")
+                   or m == "ortools" or m.startswith("ortools.")] + ["methods.stonesoup_mht"]:
+        monkeypatch.delitem(sys.modules, loaded, raising=False)
+    monkeypatch.setitem(sys.modules, "ortools", None)
+    with pytest.raises(PluginError, match=r"\[peers\] extra.*'ortools'") as err:
+        importlib.import_module("methods.stonesoup_mht")
+    assert err.value.name == "stonesoup-mfa"
+
+
+def _clean_scene(seed: int, clutter_per_scan: float = 0.0, pd: float = 0.95):
     cls = registry.get_scenario("hfswr-targets")
-    params = build_params(cls.Params, {"detection": "fixed", "pd": 0.95, "clutter_per_scan": clutter_per_scan,
+    params = build_params(cls.Params, {"detection": "fixed", "pd": pd, "clutter_per_scan": clutter_per_scan,
                                        "scans": 30, "targets": 3, "crossing": False})
     return cls().generate(params, 15.0, 1, TrialRNG(seed, 0, 1, range(1)))
 
@@ -60,6 +74,39 @@ def test_gmphd_finds_the_targets_of_a_clean_scene(cardinality, clutter):
     assert np.mean(metrics["gospa"][0]) < 0.5 * np.mean(empty_tracker)
     assert np.sum(metrics["gospa_missed"][0]) < 0.25 * present.sum()
     assert np.sum(metrics["gospa_false"][0]) <= clutter * present.size / 10     # at most 1 in 10 clutter plots
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_mfa_follows_every_target_of_a_clean_scene(seed):
+    """3 ships, Pd = 1, no clutter, 30 scans (seeds fixed): the MHT peer's GOSPA is
+    what initiation and termination cost, nothing more. Every ship is confirmed
+    exactly M + 1 scans after its first plot (``MultiMeasurementInitiator``'s
+    M + 2 plots at Pd = 1) and missed on no other scan; no confirmed track is
+    false but for the M_t - 1 scans a track coasts after its ship leaves
+    before the termination rule ends it; no break, no identity switch; and the
+    tracks' positions are closer to the truth than the plots are (RMS over the
+    assigned pairs against the plots' own RMS error): the UKF filters."""
+    pytest.importorskip("stonesoup")
+    pytest.importorskip("ortools", reason="the MFA peer needs OR-Tools (the [peers] extra)")
+    from models.hfswr import plot_to_cartesian
+
+    method = registry.get_method("stonesoup-mfa")
+    params = method.Params()
+    batch = _clean_scene(seed, pd=1.0)
+    metrics = registry.get_task("multi-target").trial_metrics(batch, method().run(batch, params), 1.0)
+    present = np.isfinite(batch.truth[0, :, :, 0])
+    targets = int(present.any(axis=0).sum())
+    assert targets == 3 and metrics["targets_initiated"][0] == targets
+    assert metrics["init_delay_scans"][0] == params.confirm_m + 1
+    assert metrics["gospa_missed"][0].sum() == targets * (params.confirm_m + 1)
+    assert metrics["gospa_false"][0].sum() <= targets * (params.terminate_m - 1)
+    assert metrics["false_tracks"][0] == metrics["track_breaks"][0] == metrics["id_switches"][0] == 0
+    scene, (k, j) = batch.scene, np.nonzero(batch.scene.plot_origin[0] >= 0)
+    plots = np.array([plot_to_cartesian(batch.z[0, a, b, :2], scene.sensor_xy) for a, b in zip(k, j)])
+    plot_rms = np.sqrt(np.mean(np.sum((plots - batch.truth[0, k, scene.plot_origin[0, k, j]][:, [0, 2]]) ** 2,
+                                      axis=1)))
+    assigned = present.sum() - metrics["gospa_missed"][0].sum()
+    assert np.sqrt(metrics["gospa_loc"][0].sum() / assigned) < plot_rms
 
 
 def test_the_jpda_reference_times_its_initiator_apart():

@@ -53,6 +53,25 @@ def test_cache_is_cold(monkeypatch, kernels, cold):
     assert warmup.cache_is_cold() is cold
 
 
+class _SwigGlobals:
+    """Like a SWIG module's ``cvar`` (OR-Tools' has one): every attribute raises, ``__class__`` too."""
+
+    def __getattribute__(self, name):
+        raise AttributeError(f"Unknown C global variable '{name}'")
+
+
+def test_the_dispatcher_scan_passes_over_a_module_global_that_refuses_every_attribute(monkeypatch):
+    """Scanning the imported modules for numba kernels must not stop at an object whose
+    attribute lookup raises (``isinstance`` asks it for ``__class__``): the kernels are still found."""
+    import types
+
+    from methods import _mtt_kernels
+    swig_like = types.ModuleType("swig_like")
+    swig_like.cvar = _SwigGlobals()
+    monkeypatch.setitem(sys.modules, "swig_like", swig_like)
+    found = list(warmup._cached_dispatchers())
+    assert _mtt_kernels.predict_all in found
+
 @pytest.mark.slow
 def test_a_cold_cache_is_compiled_once_and_said_so_a_warm_one_silently(tmp_path):
     """A sweep with a numba kernel, twice on an empty NUMBA_CACHE_DIR with two workers: the
