@@ -8,7 +8,7 @@ import pytest
 
 from bench.recording import blueprint as bp
 from bench.recording.layout import PALETTE, TrialLayout, method_colors
-from bench.recording.summary import informative_snr, snr_axis, summary_charts, summary_markdown
+from bench.recording.summary import informative_snr, legend_corner, snr_axis, summary_charts, summary_markdown
 from bench.tasks.detection import DetectionTask
 from bench.tasks.tbd import TBDTask
 from bench.tasks.tracking import TrackingTask
@@ -115,6 +115,17 @@ def test_informative_snr_is_where_pd_is_nearest_one_half():
     assert informative_snr(summary, tasks) == {"cv-a": 0.0, "cv-b": 6.0, "grid": 0.0}
 
 
+def test_the_legend_goes_where_the_curves_are_not():
+    x = np.arange(-15.0, 10.0, 3.0)
+    rising = 1 / (1 + np.exp(-x / 3))
+    assert legend_corner([(x, rising), (x, rising ** 2)], 20) == "LeftTop"             # a Pd: top left is free
+    assert legend_corner([(x, rising[::-1])], 20) == "RightTop"                          # an RMSE: top right
+    assert legend_corner([(x, np.abs(x + 3))], 20) == "LeftBottom"                      # high at both ends
+    summary, tasks = _summary()
+    assert {c.root: c.legend_corner for c in summary_charts(summary, tasks)}["/summary/tracking/rmse_vs_snr"] == \
+        "RightTop"                                                                       # its RMSE falls
+
+
 def test_summary_table_starts_with_the_colour_key():
     summary, tasks = _summary()
     text = summary_markdown(summary, tasks)
@@ -160,3 +171,46 @@ def test_the_onset_is_marked_above_the_data(detection_rrd):
     values = sorted(v for row in rows for key, v in row.items() if key.endswith("Scalars:scalars") for v in v)
     assert steps == [30]                                       # one marker at the onset step
     assert values[0] > float(np.max(np.random.default_rng(3).chisquare(2, 60))) and values[0] > 6.0   # above the data
+
+
+def _series_names(rrd, path: str) -> list[str]:
+    """The names of the series (lines and points) the static styles at ``path`` give."""
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    names = []
+    for component in ("SeriesLines:names", "SeriesPoints:names"):
+        chunks = RrdReader(rrd).stream().filter(content=path, is_static=True, components=component).to_chunks()
+        if chunks:
+            names += [n for row in pa.Table.from_batches([c.to_record_batch() for c in chunks]).column(component)
+                      .to_pylist() for n in row]
+    return names
+
+
+def test_the_first_screen_is_the_summary_with_a_named_curve_per_config(small_run):
+    """What the viewer opens on (issue 29): the side panels collapsed, the summary tab, in
+    it a sub-tab per task whose views are time series with their legend on, one series per
+    config named by its label, lines through the SNR levels; and no view of the recording
+    empty."""
+    import pandas as pd
+
+    from tests.rrd_blueprint import TABS, read_blueprint
+    from tests.rrd_blueprint import entities as entities_of
+
+    rrd = small_run / "recording.rrd"
+    blueprint, entities = read_blueprint(rrd), entities_of(rrd)
+    assert set(blueprint.panels.values()) == {2}                  # blueprint, selection and time: collapsed
+    root = blueprint.containers[blueprint.root]
+    assert root.kind == TABS and blueprint.child(root.contents[0]).name == "summary"
+    summary = blueprint.tab("summary")
+    assert [blueprint.child(c).name for c in summary.contents] == ["maneuver-detection", "summary table"]
+    configs = sorted(pd.read_csv(small_run / "summary.csv")["config"].unique())
+    charts = blueprint.views_under(blueprint.tab("summary", "maneuver-detection"))
+    assert [v.name for v in charts] == ["cv-turn-cv · Pd vs SNR (dB)", "cv-turn-cv · mean delay (steps) vs SNR (dB)"]
+    for view in charts:
+        assert view.kind == "TimeSeries" and view.legend_visible
+        shown = view.shows(entities)
+        assert sorted(name for path in shown for name in set(_series_names(rrd, path))) == configs
+        assert all(_series_names(rrd, path).count(_series_names(rrd, path)[0]) == 2 for path in shown)  # line and points
+    empty = [(v.kind, v.name) for v in blueprint.views.values() if not v.shows(entities)]
+    assert not empty

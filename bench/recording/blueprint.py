@@ -120,13 +120,12 @@ def _trial_container(tab: TrialTab, title: str):
 
 
 def _chart_view(chart):
-    """A chart's time-series view, its legend (the configs' names) in the top corner
-    above the lower values."""
+    """A chart's time-series view, its legend (the configs' names) in the corner the
+    curves cross least."""
     import rerun.blueprint as rrb
 
-    corner = rrb.Corner2D.RightTop if chart.falling else rrb.Corner2D.LeftTop
     return rrb.TimeSeriesView(origin=rerun_path(chart.root), name=chart.title,
-                              plot_legend=rrb.PlotLegend(corner=corner, visible=True))
+                              plot_legend=rrb.PlotLegend(corner=getattr(rrb.Corner2D, chart.legend_corner), visible=True))
 
 
 def _summary_tab(charts):

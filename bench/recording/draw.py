@@ -102,27 +102,34 @@ def log_points(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius:
     return steps
 
 
-def log_track(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius: float = 5.0) -> None:
+def log_track(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius: float = 5.0,
+              label: str | None = None) -> None:
     """Current position per step plus the whole track as a static line
-    (``pos`` in screen coordinates: north-up metres or image pixels)."""
+    (``pos`` in screen coordinates: north-up metres or image pixels), the line named
+    ``label`` on the plot (2-D views have no legend)."""
     import rerun as rr
 
     steps = log_points(stream, path, t, pos, color, radius=radius)
     if steps.size:
         stream.log(
             rerun_path(path),
-            rr.LineStrips2D([pos[steps]], colors=[color],
-                            radii=[rr.components.Radius.ui_points(1.0)]),
+            rr.LineStrips2D([pos[steps]], colors=[color], radii=[rr.components.Radius.ui_points(1.0)],
+                            **_shown(label)),
             static=True,
         )
 
 
-def log_static_points(stream, path: str, pos: np.ndarray, color, radius: float) -> None:
-    """Static Points2D (a cloud that shows on every step)."""
+def _shown(label: str | None) -> dict:
+    """The fields that name a 2-D entity on the plot, where one label is drawn at its centre."""
+    return {} if label is None else {"labels": [label], "show_labels": True}
+
+
+def log_static_points(stream, path: str, pos: np.ndarray, color, radius: float, label: str | None = None) -> None:
+    """Static Points2D (a cloud that shows on every step), named ``label`` on the plot."""
     import rerun as rr
 
-    stream.log(rerun_path(path), rr.Points2D(pos, colors=[color], radii=[rr.components.Radius.ui_points(radius)]),
-               static=True)
+    stream.log(rerun_path(path), rr.Points2D(pos, colors=[color], radii=[rr.components.Radius.ui_points(radius)],
+                                             **_shown(label)), static=True)
 
 
 def quant_info(q: Quantised, extra: dict | None = None):
@@ -201,7 +208,8 @@ def _log_measurements(stream, layout: TrialLayout, t: np.ndarray, xy: np.ndarray
     if steps.size:
         # A child entity: static positions on `measurements` itself would
         # shadow the per-step ones.
-        log_static_points(stream, layout.path("measurements/all"), pos[steps], (*MEASUREMENT_COLOR, 110), 2.0)
+        log_static_points(stream, layout.path("measurements/all"), pos[steps], (*MEASUREMENT_COLOR, 110), 2.0,
+                          label="measurements")
 
 
 def _log_traces(stream, layout: TrialLayout, rec: TrialRecord, t: np.ndarray) -> None:
@@ -218,7 +226,7 @@ def log_record(rec: TrialRecord, stream, layout: TrialLayout) -> None:
     """Log one trial: the harness's part, then each task's."""
     t = np.asarray(rec.t, dtype=np.float64)
     if rec.truth_xy is not None:
-        log_track(stream, layout.path("truth"), t, north_up(rec.truth_xy), TRUTH_COLOR)
+        log_track(stream, layout.path("truth"), t, north_up(rec.truth_xy), TRUTH_COLOR, label="truth")
     if rec.measurements_xy is not None:
         _log_measurements(stream, layout, t, rec.measurements_xy)
     for task in layout.tasks:

@@ -39,7 +39,7 @@ from bench.recording.paths import entity_name, method_entity_names, rerun_path
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd
 
-__all__ = ["SNR_TIMELINE", "Chart", "Series", "informative_snr", "log_summary", "snr_axis", "summary_charts",
+__all__ = ["SNR_TIMELINE", "Chart", "Series", "informative_snr", "legend_corner", "log_summary", "snr_axis", "summary_charts",
            "summary_markdown"]
 
 #: The timeline of the summary's curves (besides ``step``, the one the viewer opens on).
@@ -83,11 +83,38 @@ class Chart:
         return self.snrs.size == 1
 
     @property
-    def falling(self) -> bool:
-        """Whether the values fall with SNR (an RMSE), by the configs' mean at the lowest and
-        at the highest level: the legend then goes top right, over the low values."""
-        snr, values = self._column("snr_db"), self._column(self.column)
-        return bool(values[snr == snr.min()].mean() > values[snr == snr.max()].mean())
+    def legend_corner(self) -> str:
+        """The plot corner (``rerun.blueprint.Corner2D`` name) whose legend box the series
+        cross least (:func:`legend_corner`)."""
+        return legend_corner([(s.rows["snr_db"].to_numpy(float), s.rows[self.column].to_numpy(float))
+                              for s in self.series], max(len(s.label) for s in self.series))
+
+
+#: The plot a legend is placed for (ui points): half a 1280-point window wide, a grid row
+#: high; and a legend's size in it: an entry's height, its marker and margins, a character.
+PLOT_SIZE, LEGEND_ENTRY, LEGEND_MARGIN, LEGEND_CHAR = (620.0, 400.0), 23.0, 30.0, 7.0
+#: Corners in order of preference when several are as free.
+CORNERS = ("LeftTop", "RightTop", "LeftBottom", "RightBottom")
+
+
+def legend_corner(curves: list[tuple[np.ndarray, np.ndarray]], longest_label: int) -> str:
+    """The corner of a plot of ``curves`` ((x, y) each, drawn as lines) whose legend box
+    (one entry per curve, ``longest_label`` characters wide) covers the fewest points
+    sampled along the lines, in coordinates scaled to the data's range."""
+    x = np.concatenate([c[0] for c in curves])
+    y = np.concatenate([c[1] for c in curves])
+    (x0, x1), (y0, y1) = (x.min(), x.max()), (y.min(), y.max())
+    t = np.linspace(0.0, 1.0, 20)[:, None]
+    samples = np.concatenate([np.column_stack([(cx[:-1] + t * np.diff(cx)).ravel(), (cy[:-1] + t * np.diff(cy)).ravel()])
+                              if cx.size > 1 else np.column_stack([cx, cy]) for cx, cy in curves])
+    u = (samples[:, 0] - x0) / (x1 - x0) if x1 > x0 else np.full(len(samples), 0.5)
+    v = (samples[:, 1] - y0) / (y1 - y0) if y1 > y0 else np.full(len(samples), 0.5)
+    width = min(0.9, (LEGEND_MARGIN + LEGEND_CHAR * longest_label) / PLOT_SIZE[0])
+    height = min(0.9, (LEGEND_MARGIN + LEGEND_ENTRY * len(curves)) / PLOT_SIZE[1])
+    left, bottom = u <= width, v <= height
+    right, top = u >= 1 - width, v >= 1 - height
+    covered = [np.sum(a & b) for a, b in ((left, top), (right, top), (left, bottom), (right, bottom))]
+    return CORNERS[int(np.argmin(covered))]
 
 
 #: Names of the PALETTE colours (tab10), for the colour key.
