@@ -131,7 +131,7 @@ def test_summary_table_starts_with_the_colour_key():
     text = summary_markdown(summary, tasks)
     key = text.split("## ")[0]
     # one colour per config across the recording: its rank among its task's configs
-    assert "- blue: `cum`\n- blue: `dp`\n- blue: `ekf`\n- orange: `nis`" in key
+    assert "- maneuver-detection: blue `cum`, orange `nis`\n- tracking: blue `ekf`\n- tbd: blue `dp`" in key
 
 
 def test_legend_headroom_is_above_the_data():

@@ -240,11 +240,14 @@ def summary_markdown(summary: pd.DataFrame, tasks: Mapping[str, Any] | None = No
 
     parts = ["# Summary"]
     charts = summary_charts(summary, tasks) or []
-    colors = {s.label: s.color for chart in charts for s in chart.series}
-    if colors:       # one colour per config in every chart and trial (layout.method_colors)
-        parts += ["Colours of the methods, in every chart and trial:",
-                  "\n".join(f"- {COLOUR_NAMES[PALETTE.index(color)]}: {code(label)}"
-                            for label, color in sorted(colors.items()))]
+    colors: dict[str, dict[str, tuple]] = {}     # task -> config -> colour (layout.method_colors)
+    for chart in charts:
+        colors.setdefault(chart.task, {}).update({s.label: s.color for s in chart.series})
+    if colors:
+        parts += ["Colours of the methods, task by task, in every chart and trial (the charts' legends name them):",
+                  "\n".join(f"- {task}: " + ", ".join(f"{COLOUR_NAMES[PALETTE.index(color)]} {code(label)}"
+                                                    for label, color in sorted(mine.items()))
+                            for task, mine in colors.items())]
     for chart in charts:
         df = pd.concat([s.rows for s in chart.series])
         pivot = df.pivot_table(index="snr_db", columns="method", values=chart.column, sort=False)
