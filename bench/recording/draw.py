@@ -85,8 +85,10 @@ def log_series(stream, path: str, t: np.ndarray, steps: np.ndarray, values: np.n
     )
 
 
-def log_points(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius: float) -> np.ndarray:
-    """One Points2D per step with finite (screen) coordinates; returns those steps."""
+def log_points(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius: float,
+               label: str | None = None) -> np.ndarray:
+    """One Points2D per step with finite (screen) coordinates, named ``label`` beside the
+    point on the plot; returns those steps."""
     import rerun as rr
 
     steps = np.flatnonzero(np.isfinite(pos).all(axis=1))
@@ -94,7 +96,7 @@ def log_points(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius:
         return steps
     path = rerun_path(path)
     ui = rr.components.Radius.ui_points(radius)
-    stream.log(path, rr.Points2D.from_fields(colors=[color], radii=[ui]), static=True)
+    stream.log(path, rr.Points2D.from_fields(colors=[color], radii=[ui], **_shown(label)), static=True)
     stream.send_columns(
         path, indexes=indexes(steps, t),
         columns=rr.Points2D.columns(positions=pos[steps]),
@@ -204,12 +206,13 @@ def log_image_series(stream, path: str, q: Quantised, t: np.ndarray, colormap: s
 def _log_measurements(stream, layout: TrialLayout, t: np.ndarray, xy: np.ndarray) -> None:
     """Current measurement per step, and all of them as a static cloud."""
     pos = north_up(xy)
-    steps = log_points(stream, layout.path("measurements"), t, pos, MEASUREMENT_COLOR, radius=4.0)
+    # Named at the current one: the faded cloud's label would be faded too.
+    steps = log_points(stream, layout.path("measurements"), t, pos, MEASUREMENT_COLOR, radius=4.0,
+                       label="measurement")
     if steps.size:
         # A child entity: static positions on `measurements` itself would
         # shadow the per-step ones.
-        log_static_points(stream, layout.path("measurements/all"), pos[steps], (*MEASUREMENT_COLOR, 110), 2.0,
-                          label="measurements")
+        log_static_points(stream, layout.path("measurements/all"), pos[steps], (*MEASUREMENT_COLOR, 110), 2.0)
 
 
 def _log_traces(stream, layout: TrialLayout, rec: TrialRecord, t: np.ndarray) -> None:
