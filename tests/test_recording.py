@@ -633,6 +633,15 @@ def test_task_rrd_verify_and_blueprint(task_rrd):
     assert proc.returncode == 0, proc.stderr[-2000:]
 
 
+def test_no_view_is_empty(rrd, task_rrd):
+    """Every view of the default blueprint shows some entity of the recording (issue 29)."""
+    from tests.rrd_blueprint import entities, read_blueprint
+
+    for path in (rrd, task_rrd):
+        blueprint, logged = read_blueprint(path), entities(path)
+        assert blueprint.views and not [(v.kind, v.name) for v in blueprint.views.values() if not v.shows(logged)]
+
+
 def test_summary_without_pd_column(tmp_path, task_records):
     from rerun.chunk import RrdReader
 

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 from bench.recording import blueprint as bp
-from bench.recording.layout import TrialLayout
-from bench.recording.summary import informative_snr, summary_charts, summary_markdown
+from bench.recording.layout import PALETTE, TrialLayout, method_colors
+from bench.recording.summary import informative_snr, legend_corner, snr_axis, summary_charts, summary_markdown
 from bench.tasks.detection import DetectionTask
 from bench.tasks.tbd import TBDTask
 from bench.tasks.tracking import TrackingTask
@@ -66,12 +66,47 @@ def test_summary_charts_are_split_by_task_unit_and_scenario_config():
         "/summary/tracking/rmse_vs_snr", "/summary/tracking/divergence_rate_vs_snr",
         "/summary/tbd/pd_vs_snr", "/summary/tbd/rmse_vs_snr"}
     for chart in charts.values():
-        methods = {str(rows["method"].iloc[0]) for _, _, rows in chart.bars}
-        assert len({tasks[m].name for m in methods}) == 1                  # one task per chart
-        assert all(rows["scenario"].nunique() == 1 for _, _, rows in chart.bars)
-    assert charts["/summary/tracking/rmse_vs_snr"].title == "tracking · RMSE (m) vs SNR (dB)"
-    assert charts["/summary/tbd/rmse_vs_snr"].title == "tbd · RMSE of detected tracks (m) vs SNR (dB)"
-    assert charts["/summary/maneuver-detection/pd_vs_snr/cv-b"].title == "cv-b, maneuver-detection · Pd vs SNR (dB)"
+        methods = {s.label for s in chart.series}
+        assert {tasks[m].name for m in methods} == {chart.task}              # one task per chart
+        assert all(s.rows["scenario"].nunique() == 1 and set(s.rows["method"]) == {s.label} for s in chart.series)
+    # the scenario config leads (the task is the chart's tab); one SNR level: "at", not "vs"
+    assert charts["/summary/tracking/rmse_vs_snr"].title == "glint · RMSE (m) vs SNR (dB)"
+    assert charts["/summary/tbd/rmse_vs_snr"].title == "grid · RMSE of detected tracks (m) vs SNR (dB)"
+    assert charts["/summary/maneuver-detection/pd_vs_snr/cv-b"].title == "cv-b · Pd vs SNR (dB)"
+    # in the summary's order: task by task, scenario config by scenario config
+    assert [c.root.split("/")[2:] for c in summary_charts(summary, tasks)][:4] == [
+        ["maneuver-detection", "pd_vs_snr", "cv-a"], ["maneuver-detection", "delay_vs_snr", "cv-a"],
+        ["maneuver-detection", "pd_vs_snr", "cv-b"], ["maneuver-detection", "delay_vs_snr", "cv-b"]]
+
+
+def test_one_colour_per_config_distinct_within_a_task():
+    summary, tasks = _summary()
+    many = {f"det{i:02d}": DET for i in range(10)} | {f"trk{i}": TRK for i in range(3)}
+    colors = method_colors(many)
+    assert len({colors[label] for label in many if label.startswith("det")}) == 10    # the palette's ten
+    assert [colors[f"trk{i}"] for i in range(3)] == PALETTE[:3]                       # ranks within the task
+    charts = summary_charts(summary, tasks)
+    used = {}
+    for chart in charts:
+        for s in chart.series:
+            assert used.setdefault(s.label, s.color) == s.color                       # the same in every chart
+        assert len({s.color for s in chart.series}) == len(chart.series)
+
+
+def test_a_chart_with_one_snr_level_is_a_comparison_at_it():
+    summary, tasks = _summary()
+    single = summary[(summary.method != "ekf") | (summary.snr_db == 10)]
+    chart = next(c for c in summary_charts(single, tasks) if c.root == "/summary/tracking/rmse_vs_snr")
+    assert chart.single_level and chart.title == "glint · RMSE (m) at +10 dB"
+
+
+def test_snr_levels_that_are_not_whole_db_are_drawn_in_tenths():
+    assert snr_axis([-3.0, 0.0, 6.0]) == (1, "dB")
+    assert snr_axis([-2.5, 0.0, 6.0]) == (10, "0.1 dB")
+    assert snr_axis([0.25, 1.0]) == (100, "0.01 dB")
+    summary, tasks = _summary()
+    summary["snr_db"] = summary["snr_db"].astype(float).replace(6.0, 6.5)
+    assert summary_charts(summary, tasks)[0].title == "cv-a · Pd vs SNR (0.1 dB)"
 
 
 def test_informative_snr_is_where_pd_is_nearest_one_half():
@@ -80,12 +115,23 @@ def test_informative_snr_is_where_pd_is_nearest_one_half():
     assert informative_snr(summary, tasks) == {"cv-a": 0.0, "cv-b": 6.0, "grid": 0.0}
 
 
+def test_the_legend_goes_where_the_curves_are_not():
+    x = np.arange(-15.0, 10.0, 3.0)
+    rising = 1 / (1 + np.exp(-x / 3))
+    assert legend_corner([(x, rising), (x, rising ** 2)], 20) == "LeftTop"             # a Pd: top left is free
+    assert legend_corner([(x, rising[::-1])], 20) == "RightTop"                          # an RMSE: top right
+    assert legend_corner([(x, np.abs(x + 3))], 20) == "LeftBottom"                      # high at both ends
+    summary, tasks = _summary()
+    assert {c.root: c.legend_corner for c in summary_charts(summary, tasks)}["/summary/tracking/rmse_vs_snr"] == \
+        "RightTop"                                                                       # its RMSE falls
+
+
 def test_summary_table_starts_with_the_colour_key():
     summary, tasks = _summary()
     text = summary_markdown(summary, tasks)
     key = text.split("## ")[0]
-    # one colour per config across the recording: its rank among all the run's configs
-    assert "- blue: `cum`\n- orange: `dp`\n- green: `ekf`\n- red: `nis`" in key
+    # one colour per config across the recording: its rank among its task's configs
+    assert "- maneuver-detection: blue `cum`, orange `nis`\n- tracking: blue `ekf`\n- tbd: blue `dp`" in key
 
 
 def test_legend_headroom_is_above_the_data():
@@ -125,3 +171,46 @@ def test_the_onset_is_marked_above_the_data(detection_rrd):
     values = sorted(v for row in rows for key, v in row.items() if key.endswith("Scalars:scalars") for v in v)
     assert steps == [30]                                       # one marker at the onset step
     assert values[0] > float(np.max(np.random.default_rng(3).chisquare(2, 60))) and values[0] > 6.0   # above the data
+
+
+def _series_names(rrd, path: str) -> list[str]:
+    """The names of the series (lines and points) the static styles at ``path`` give."""
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    names = []
+    for component in ("SeriesLines:names", "SeriesPoints:names"):
+        chunks = RrdReader(rrd).stream().filter(content=path, is_static=True, components=component).to_chunks()
+        if chunks:
+            names += [n for row in pa.Table.from_batches([c.to_record_batch() for c in chunks]).column(component)
+                      .to_pylist() for n in row]
+    return names
+
+
+def test_the_first_screen_is_the_summary_with_a_named_curve_per_config(small_run):
+    """What the viewer opens on (issue 29): the side panels collapsed, the summary tab, in
+    it a sub-tab per task whose views are time series with their legend on, one series per
+    config named by its label, lines through the SNR levels; and no view of the recording
+    empty."""
+    import pandas as pd
+
+    from tests.rrd_blueprint import TABS, read_blueprint
+    from tests.rrd_blueprint import entities as entities_of
+
+    rrd = small_run / "recording.rrd"
+    blueprint, entities = read_blueprint(rrd), entities_of(rrd)
+    assert set(blueprint.panels.values()) == {2}                  # blueprint, selection and time: collapsed
+    root = blueprint.containers[blueprint.root]
+    assert root.kind == TABS and blueprint.child(root.contents[0]).name == "summary"
+    summary = blueprint.tab("summary")
+    assert [blueprint.child(c).name for c in summary.contents] == ["maneuver-detection", "summary table"]
+    configs = sorted(pd.read_csv(small_run / "summary.csv")["config"].unique())
+    charts = blueprint.views_under(blueprint.tab("summary", "maneuver-detection"))
+    assert [v.name for v in charts] == ["cv-turn-cv · Pd vs SNR (dB)", "cv-turn-cv · mean delay (steps) vs SNR (dB)"]
+    for view in charts:
+        assert view.kind == "TimeSeries" and view.legend_visible
+        shown = view.shows(entities)
+        assert sorted(name for path in shown for name in set(_series_names(rrd, path))) == configs
+        assert all(_series_names(rrd, path).count(_series_names(rrd, path)[0]) == 2 for path in shown)  # line and points
+    empty = [(v.kind, v.name) for v in blueprint.views.values() if not v.shows(entities)]
+    assert not empty

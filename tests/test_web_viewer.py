@@ -1,6 +1,8 @@
 """`bench view --web` the way a user sees it: a headless Chromium loads the served viewer
-and its screenshot shows the default view (the summary's bar charts in the methods'
-colours), not the loading or welcome screen. Skipped where Chromium is absent.
+at 1280 x 800 and its screenshot shows the default view, the summary's first sub-tab: as
+many plot panels side by side as the recording's blueprint puts there, each with every
+method config's colour (its curve, or at least its legend entry) and none filled like a
+bar chart, not the loading or welcome screen. Skipped where Chromium is absent.
 
 The viewer draws long after the page's load event (its Wasm compiles, then the recording
 streams, with a software rasterizer), so the test drives Chromium over the DevTools
@@ -35,8 +37,14 @@ ROOT = Path(__file__).resolve().parent.parent
 #: the test goes on at the first that shows it.
 VIEWER_TIMEOUT_S = 240
 POLL_S = 1.0
-#: Pixels of each method config's colour in a screenshot of the summary (the test, below).
-SUMMARY_PIXELS = 5000
+#: Pixels of each method config's colour in each plot panel of the summary: a legend entry's
+#: dot is about 50 (measured), a line 2 px wide across a panel a few thousand at most.
+PANEL_MIN_PIXELS = 30
+#: More pixels of one colour in a panel than a line can have: a bar (tens of thousands).
+PANEL_MAX_PIXELS = 6000
+#: The plots' rows in a 1280 x 800 screenshot: below the top bar and the two tab bars (the
+#: summary's and its task's) and the views' titles, above the time panel's play bar.
+PLOT_ROWS = slice(120, 760)
 #: The window a newcomer's laptop gives the viewer (issue 29: legible at 1280 x 800).
 VIEWPORT = (1280, 800)
 
@@ -74,15 +82,15 @@ def _listen_addresses(port: int) -> set[str]:
     return out
 
 
-def _hue_pixels(png: bytes, colors) -> list[int]:
-    """Per colour, in the PNG image ``png``, the saturated pixels of its hue (±15°) in the viewport (the sidebars and
-    the top bar cropped away). The viewer draws bars lighter than their colour, so hues,
-    not exact RGB values, are counted."""
+def _hue_pixels(rgb: np.ndarray, colors) -> list[int]:
+    """Per colour, the saturated pixels of its hue (±15°) in the image ``rgb`` (H, W, 3).
+    The viewer draws lines and legend dots anti-aliased and bars lighter than their colour,
+    so hues, not exact RGB values, are counted."""
     import colorsys
 
     from PIL import Image
 
-    hsv = np.asarray(Image.open(io.BytesIO(png)).convert("RGB").resize((1600, 1000)).convert("HSV"), float)[80:850, 230:1020]
+    hsv = np.asarray(Image.fromarray(rgb).convert("HSV"), float)
     hue, sat, val = hsv[..., 0] * 360 / 255, hsv[..., 1] / 255, hsv[..., 2] / 255
     vivid = (sat > 0.35) & (val > 0.35)
     counts = []
@@ -90,6 +98,16 @@ def _hue_pixels(png: bytes, colors) -> list[int]:
         target = colorsys.rgb_to_hsv(*(c / 255 for c in color))[0] * 360
         counts.append(int((vivid & (np.abs((hue - target + 180) % 360 - 180) < 15)).sum()))
     return counts
+
+
+def panel_pixels(png: bytes, panels: int, colors) -> list[list[int]]:
+    """Per plot panel (``panels`` side by side across the window), :func:`_hue_pixels` of
+    ``colors`` in its plot rows (a margin at each side left out: the panels' borders)."""
+    from PIL import Image
+
+    rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))[PLOT_ROWS]
+    edges = np.linspace(0, rgb.shape[1], panels + 1).astype(int)
+    return [_hue_pixels(rgb[:, a + 5:b - 5], colors) for a, b in zip(edges[:-1], edges[1:])]
 
 
 @pytest.fixture
@@ -189,17 +207,32 @@ class DevTools:
             os.close(fd)
 
 
+def _summary_panels(run: Path) -> int:
+    """The views of the summary's first sub-tab, which the viewer opens on, as the
+    recording's blueprint lays them out (side by side: one task, one scenario config)."""
+    from tests.rrd_blueprint import HORIZONTAL, read_blueprint
+
+    blueprint = read_blueprint(run / "recording.rrd")
+    summary = blueprint.tab("summary")
+    first = blueprint.child(summary.contents[0])
+    assert getattr(first, "kind", None) == HORIZONTAL, first
+    return len(blueprint.views_under(first))
+
+
 @pytest.mark.slow
-def test_web_viewer_screenshot_shows_the_summary(served, tmp_path):
+def test_web_viewer_screenshot_shows_the_summary(small_run, served, tmp_path):
     url, _ = served
+    panels = _summary_panels(small_run)
+    assert panels == 2                            # the detection task's Pd and mean delay
+    # The small sweep's three method configs are one task's: PALETTE's first three colours
+    # (bench.recording.layout.method_colors), in every panel's legend and curves. The loading
+    # screen and the welcome page hold none.
+    colors = PALETTE[:3]
     profile = tmp_path / "chromium-profile"
     profile.mkdir()
     browser = DevTools(["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                         "--disable-background-networking", "--disable-component-update", "--disable-sync",
                         f"--user-data-dir={profile}", f"--window-size={VIEWPORT[0]},{VIEWPORT[1]}", "about:blank"])
-    # The small sweep has three method configs: their bars (tab10 blue, orange, green) fill
-    # the summary charts, thousands of pixels each. The loading
-    # screen and the welcome page hold none; a trial tab with only its track, a few hundred.
     try:
         # a size on Target.createTarget is refused by Debian's Chromium ("Target position can
         # only be set for new windows"): the page's viewport is sized once attached
@@ -210,12 +243,13 @@ def test_web_viewer_screenshot_shows_the_summary(served, tmp_path):
         deadline = time.monotonic() + VIEWER_TIMEOUT_S
         while True:
             png = base64.b64decode(browser.call("Page.captureScreenshot", session, format="png")["data"])
-            counts = _hue_pixels(png, PALETTE[:3])
-            if min(counts) >= SUMMARY_PIXELS or time.monotonic() > deadline:
+            counts = panel_pixels(png, panels, colors)
+            if min(map(min, counts)) >= PANEL_MIN_PIXELS or time.monotonic() > deadline:
                 break
             time.sleep(POLL_S)
     finally:
         browser.close()
     shot = tmp_path / "viewer.png"
     shot.write_bytes(png)                         # the last screenshot, for whoever reads a failure
-    assert min(counts) >= SUMMARY_PIXELS, (counts, str(shot))
+    assert min(map(min, counts)) >= PANEL_MIN_PIXELS, (counts, str(shot))   # every config in every panel
+    assert max(map(max, counts)) <= PANEL_MAX_PIXELS, (counts, str(shot))   # lines, not bars

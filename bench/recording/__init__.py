@@ -8,7 +8,7 @@ spawned viewer (:class:`LiveViewer`). The modules:
 * :mod:`~bench.recording.paths`: entity paths;
 * :mod:`~bench.recording.layout`: where one trial goes (paths, colours, title);
 * :mod:`~bench.recording.draw`: logging, the harness's part and the primitives tasks draw with;
-* :mod:`~bench.recording.summary`: Pd / RMSE bars and the summary table;
+* :mod:`~bench.recording.summary`: Pd / RMSE curves against SNR and the summary table;
 * :mod:`~bench.recording.blueprint`: the default tabs;
 * :mod:`~bench.recording.sinks`: the file and the live viewer;
 * :mod:`~bench.recording.serve`: ``bench view`` (native viewer, or ``--web`` in a browser).

@@ -119,20 +119,32 @@ def _trial_container(tab: TrialTab, title: str):
     return rrb.Vertical(*top, row, name=title, row_shares=[3] * len(top) + [2])
 
 
-def _summary_tab(charts):
-    """The charts of :func:`bench.recording.summary.summary_charts` (a grid when
-    there are many), the table beside them."""
+def _chart_view(chart):
+    """A chart's time-series view, its legend (the configs' names) in the corner the
+    curves cross least."""
     import rerun.blueprint as rrb
 
-    # No legend: a bar chart's legend lists whole entity paths over the bars (its axes
-    # cannot make room); the table's colour key names the methods instead.
-    views = [rrb.BarChartView(origin=chart.root, name=chart.title, plot_legend=rrb.PlotLegend(visible=False))
-             for chart in charts]
+    return rrb.TimeSeriesView(origin=rerun_path(chart.root), name=chart.title,
+                              plot_legend=rrb.PlotLegend(corner=getattr(rrb.Corner2D, chart.legend_corner), visible=True))
+
+
+def _summary_tab(charts):
+    """The charts of :func:`bench.recording.summary.summary_charts`, a sub-tab per task
+    (its charts side by side; a row per scenario config when it ran on several), then
+    the table in a sub-tab of its own."""
+    import rerun.blueprint as rrb
+
+    by_task: dict[str, list] = {}
+    for chart in charts:
+        by_task.setdefault(chart.task, []).append(chart)
+    tabs = []
+    for task, mine in by_task.items():
+        views = [_chart_view(chart) for chart in mine]
+        per_scenario = len({chart.column for chart in mine})
+        tabs.append(views[0] if len(views) == 1 else rrb.Horizontal(*views, name=task)
+                    if len(views) == per_scenario else rrb.Grid(*views, grid_columns=per_scenario, name=task))
     table = rrb.TextDocumentView(origin="/summary/table", name="summary table")
-    if not views:
-        return rrb.Horizontal(table, name="summary")
-    plots = views[0] if len(views) == 1 else rrb.Vertical(*views) if len(views) <= 3 else rrb.Grid(*views)
-    return rrb.Horizontal(plots, table, column_shares=[3, 1], name="summary")
+    return rrb.Tabs(*tabs, table, name="summary", active_tab=0)
 
 
 def _informativeness(tab: TrialTab, informative: dict[str, float], middle: dict[str, float]):
@@ -180,7 +192,10 @@ def blueprint(tabs: list[TrialTab], charts, informative: dict[str, float] | None
                                    else tab.layout.title) for tab in chosen(tabs, informative)]
     if charts is not None:
         containers.insert(0, _summary_tab(charts))
-    parts = [rrb.TimePanel(timeline="step")]
+    # The side panels collapsed: the views get the whole width of a laptop's window
+    # (legends name the methods); the time panel keeps its play bar.
+    parts = [rrb.TimePanel(timeline="step", state="collapsed"), rrb.BlueprintPanel(state="collapsed"),
+             rrb.SelectionPanel(state="collapsed")]
     if containers:
         parts.insert(0, rrb.Tabs(*containers, active_tab=0))
     return rrb.Blueprint(*parts)

@@ -85,8 +85,10 @@ def log_series(stream, path: str, t: np.ndarray, steps: np.ndarray, values: np.n
     )
 
 
-def log_points(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius: float) -> np.ndarray:
-    """One Points2D per step with finite (screen) coordinates; returns those steps."""
+def log_points(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius: float,
+               label: str | None = None) -> np.ndarray:
+    """One Points2D per step with finite (screen) coordinates, named ``label`` beside the
+    point on the plot; returns those steps."""
     import rerun as rr
 
     steps = np.flatnonzero(np.isfinite(pos).all(axis=1))
@@ -94,7 +96,7 @@ def log_points(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius:
         return steps
     path = rerun_path(path)
     ui = rr.components.Radius.ui_points(radius)
-    stream.log(path, rr.Points2D.from_fields(colors=[color], radii=[ui]), static=True)
+    stream.log(path, rr.Points2D.from_fields(colors=[color], radii=[ui], **_shown(label)), static=True)
     stream.send_columns(
         path, indexes=indexes(steps, t),
         columns=rr.Points2D.columns(positions=pos[steps]),
@@ -102,27 +104,34 @@ def log_points(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius:
     return steps
 
 
-def log_track(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius: float = 5.0) -> None:
+def log_track(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius: float = 5.0,
+              label: str | None = None) -> None:
     """Current position per step plus the whole track as a static line
-    (``pos`` in screen coordinates: north-up metres or image pixels)."""
+    (``pos`` in screen coordinates: north-up metres or image pixels), the line named
+    ``label`` on the plot (2-D views have no legend)."""
     import rerun as rr
 
     steps = log_points(stream, path, t, pos, color, radius=radius)
     if steps.size:
         stream.log(
             rerun_path(path),
-            rr.LineStrips2D([pos[steps]], colors=[color],
-                            radii=[rr.components.Radius.ui_points(1.0)]),
+            rr.LineStrips2D([pos[steps]], colors=[color], radii=[rr.components.Radius.ui_points(1.0)],
+                            **_shown(label)),
             static=True,
         )
 
 
-def log_static_points(stream, path: str, pos: np.ndarray, color, radius: float) -> None:
-    """Static Points2D (a cloud that shows on every step)."""
+def _shown(label: str | None) -> dict:
+    """The fields that name a 2-D entity on the plot, where one label is drawn at its centre."""
+    return {} if label is None else {"labels": [label], "show_labels": True}
+
+
+def log_static_points(stream, path: str, pos: np.ndarray, color, radius: float, label: str | None = None) -> None:
+    """Static Points2D (a cloud that shows on every step), named ``label`` on the plot."""
     import rerun as rr
 
-    stream.log(rerun_path(path), rr.Points2D(pos, colors=[color], radii=[rr.components.Radius.ui_points(radius)]),
-               static=True)
+    stream.log(rerun_path(path), rr.Points2D(pos, colors=[color], radii=[rr.components.Radius.ui_points(radius)],
+                                             **_shown(label)), static=True)
 
 
 def quant_info(q: Quantised, extra: dict | None = None):
@@ -197,7 +206,9 @@ def log_image_series(stream, path: str, q: Quantised, t: np.ndarray, colormap: s
 def _log_measurements(stream, layout: TrialLayout, t: np.ndarray, xy: np.ndarray) -> None:
     """Current measurement per step, and all of them as a static cloud."""
     pos = north_up(xy)
-    steps = log_points(stream, layout.path("measurements"), t, pos, MEASUREMENT_COLOR, radius=4.0)
+    # Named at the current one: the faded cloud's label would be faded too.
+    steps = log_points(stream, layout.path("measurements"), t, pos, MEASUREMENT_COLOR, radius=4.0,
+                       label="measurement")
     if steps.size:
         # A child entity: static positions on `measurements` itself would
         # shadow the per-step ones.
@@ -218,7 +229,7 @@ def log_record(rec: TrialRecord, stream, layout: TrialLayout) -> None:
     """Log one trial: the harness's part, then each task's."""
     t = np.asarray(rec.t, dtype=np.float64)
     if rec.truth_xy is not None:
-        log_track(stream, layout.path("truth"), t, north_up(rec.truth_xy), TRUTH_COLOR)
+        log_track(stream, layout.path("truth"), t, north_up(rec.truth_xy), TRUTH_COLOR, label="truth")
     if rec.measurements_xy is not None:
         _log_measurements(stream, layout, t, rec.measurements_xy)
     for task in layout.tasks:

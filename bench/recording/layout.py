@@ -29,11 +29,17 @@ TRUTH_COLOR = (230, 230, 230)
 MEASUREMENT_COLOR = (255, 200, 60)
 
 
-def method_colors(labels) -> dict[str, tuple[int, int, int]]:
-    """The colour of each method config of a run: by its rank among all the run's config
-    labels (sorted), so a config has one colour in every chart and every trial of a
-    recording, whichever configs share the chart or the scenario."""
-    return {label: PALETTE[i % len(PALETTE)] for i, label in enumerate(sorted(labels))}
+def method_colors(tasks: Mapping[str, Any]) -> dict[str, tuple[int, int, int]]:
+    """The colour of each method config of a run (``tasks``: config label -> its task, or
+    None): by its rank among the run's configs of the same task (sorted labels), so a
+    config has one colour in every chart and every trial of a recording, whichever configs
+    share the chart or the scenario, and the configs of a task (which share its charts)
+    have distinct colours up to the PALETTE's ten. Configs of different tasks, which share
+    no chart, may share a colour."""
+    by_task: dict[str, list[str]] = {}
+    for label in sorted(tasks):
+        by_task.setdefault(str(getattr(tasks[label], "name", "")), []).append(label)
+    return {label: PALETTE[i % len(PALETTE)] for labels in by_task.values() for i, label in enumerate(labels)}
 
 
 #: Children of a trial root the harness logs itself.
@@ -75,7 +81,7 @@ class TrialLayout:
 
 def trial_layout(rec: TrialRecord, tasks: Mapping[str, Any]) -> TrialLayout:
     """The layout of ``rec``; ``tasks`` maps each method config label of the run to its
-    task (all of them: a config's colour is its rank among them, :func:`method_colors`)."""
+    task (all of them: a config's colour is its rank among its task's, :func:`method_colors`)."""
     missing = [label for label in rec.methods if label not in tasks]
     if missing:
         raise ValueError(f"no task given for method config(s) {', '.join(map(repr, missing))}")

@@ -52,7 +52,7 @@ def write_recording(
     wait on rerun's writer thread. The whole recording is held in memory once (tens of
     MB for the largest committed preset).
     ``summary`` needs columns ``method`` and ``snr_db``; the columns each task charts
-    (``Task.recording_charts``; NaN rows skipped) become bar charts, every row and column
+    (``Task.recording_charts``; NaN rows skipped) become curves against SNR, every row and column
     goes into the table. The viewer lists the recording under ``application_id`` by
     ``recording_name`` (default: ``recording_id``). Returns ``path``.
     """
@@ -174,7 +174,7 @@ class LiveViewer:
         self._send_blueprint()
 
     def log_summary(self, summary: pd.DataFrame | None) -> None:
-        """Log the Pd / RMSE vs SNR bars and table, and add the summary tab."""
+        """Log the Pd / RMSE vs SNR curves and table, and add the summary tab."""
         charts = log_summary(self._stream, summary, self._tasks)
         if charts is not None:
             self._summary = tuple(charts)

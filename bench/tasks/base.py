@@ -237,7 +237,7 @@ class Task:
     #: whether the task's report draws a ROC (Pd against per-step Pfa from the stored statistics)
     has_roc: ClassVar[bool] = False
     #: the recording's summary charts: (summary.csv column, axis title with its unit), one
-    #: bar chart each against SNR, per scenario config (docs/architecture.md, 'Recordings')
+    #: curve per config against SNR, per scenario config (docs/architecture.md, 'Recordings')
     recording_charts: ClassVar[tuple[tuple[str, str], ...]] = (("pd", "Pd"), ("rmse_mean", "RMSE (m)"))
     #: the summary column that finds a scenario config's most informative SNR level, the
     #: one whose value (averaged over configs) is nearest ``informative_target``: the

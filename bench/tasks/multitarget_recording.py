@@ -62,7 +62,8 @@ def log_scene(stream, layout: TrialLayout, rec: TrialRecord) -> None:
     truths = rec.arrays.get("truths_xy")
     if truths is not None:
         for j in range(truths.shape[1]):
-            log_track(stream, layout.path(f"truths/target_{j}"), t, north_up(truths[:, j]), TRUTH_COLOR, radius=4.0)
+            log_track(stream, layout.path(f"truths/target_{j}"), t, north_up(truths[:, j]), TRUTH_COLOR, radius=4.0,
+                      label=f"target {j}")
     plots, origin = rec.arrays.get("plots_xy"), rec.arrays.get("plot_origin")
     if plots is not None and origin is not None:
         colors = np.where((origin >= 0)[..., None], (*TARGET_PLOT_COLOR, 255), (*CLUTTER_COLOR, 200)).astype(np.uint8)

@@ -354,7 +354,7 @@ class TBDTask(Task):
                          None if grid is None else {f"grid_{k}": v for k, v in grid.items()})
         if "truth_cells" in rec.arrays and image is not None:
             log_track(stream, layout.path("frames/truth_track"), t, cell_pixels(rec.arrays["truth_cells"], image),
-                      TRUTH_COLOR, radius=3.0)
+                      TRUTH_COLOR, radius=3.0, label="truth")
 
     @staticmethod
     def _log_method(stream, layout: TrialLayout, m: MethodLayout, tr: MethodTrace, t: np.ndarray, image) -> None:
@@ -371,7 +371,7 @@ class TBDTask(Task):
                        rr.SeriesLines(names=f"{m.label} threshold", colors=[(*m.color, 150)], widths=[1.0]))
         if drawn["track"]:
             log_track(stream, _track_path(layout, m), t, cell_pixels(tr.arrays["track_cells"], image), m.color,
-                      radius=3.0)
+                      radius=3.0, label=m.label)
         if drawn["value"]:
             log_image(stream, m.path("value"), tr.quantised("value"), _VALUE_COLORMAP)
 

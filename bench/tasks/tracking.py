@@ -245,11 +245,11 @@ class TrackingTask(Task):
             pos = north_up(rec.measurements_xy)
             glint = np.intersect1d(np.flatnonzero(np.isfinite(pos).all(axis=1)), np.flatnonzero(flags))
             if glint.size:
-                log_static_points(stream, layout.path("measurements/glint"), pos[glint], _GLINT_COLOR, 4.5)
+                log_static_points(stream, layout.path("measurements/glint"), pos[glint], _GLINT_COLOR, 4.5, label="glint")
         for m in layout.methods_of(self):
             estimate = rec.methods[m.label].arrays.get("estimate_xy")
             if estimate is not None:
-                log_track(stream, m.path("estimate"), t, north_up(estimate), m.color)
+                log_track(stream, m.path("estimate"), t, north_up(estimate), m.color, label=m.label)
         _log_maneuver(stream, layout, t, rec)
 
     def views(self, layout: TrialLayout, rec: TrialRecord) -> Views:
