@@ -230,5 +230,5 @@ class CellDetectionTask(Task):
         return views(self, layout, rec)
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks.cells import report as cells_report
-        return cells_report.sections(ctx)
+        from bench.tasks.cells import report
+        return report.sections(ctx)

@@ -288,9 +288,9 @@ class DetectionTask(Task):
         return Views(top=[top])
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks.detection import report as detection_report
-        return detection_report.sections(ctx)
+        from bench.tasks.detection import report
+        return report.sections(ctx)
 
     def trial_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks.detection import report as detection_report
-        return detection_report.timeline(ctx)
+        from bench.tasks.detection import report
+        return report.timeline(ctx)

@@ -274,5 +274,5 @@ class MultiTargetTask(Task):
         return Views(has_xy="plots_xy" in rec.arrays or "truths_xy" in rec.arrays)
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks.multitarget import report as multitarget_report
-        return multitarget_report.sections(ctx)
+        from bench.tasks.multitarget import report
+        return report.sections(ctx)

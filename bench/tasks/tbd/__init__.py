@@ -397,5 +397,5 @@ class TBDTask(Task):
         return Views(top=top, bottom=bottom, draws_scene=bool(images))
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks.tbd import report as tbd_report
-        return tbd_report.sections(ctx)
+        from bench.tasks.tbd import report
+        return report.sections(ctx)

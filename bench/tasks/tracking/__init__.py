@@ -256,6 +256,6 @@ class TrackingTask(Task):
         return Views(has_xy=any("estimate_xy" in rec.methods[m.label].arrays for m in layout.methods_of(self)))
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks.tracking import report as tracking_report
-        return tracking_report.sections(ctx)
+        from bench.tasks.tracking import report
+        return report.sections(ctx)
 
