@@ -37,6 +37,7 @@ import pandas as pd
 from bench.errors import ConfigError
 from bench.listing import CLAIMS_SUFFIX
 from bench.markdown import crossing_floors, fmt, fmt_db, snr50, table
+from bench.tables import csv_text, write_csv
 
 #: the columns of claims.csv, in order
 CLAIMS_COLUMNS = ["id", "claim", "where", "original", "english", "quantity", "value", "low", "high", "unit",
@@ -242,7 +243,6 @@ def _read_csv(text_or_path) -> pd.DataFrame:
 def csv_frame(df: pd.DataFrame) -> pd.DataFrame:
     """``df`` exactly as its CSV reads back, so claims evaluated at report time and
     from the committed CSVs are the same numbers."""
-    from bench.report import csv_text
     return _read_csv(io.StringIO(csv_text(df)))
 
 
@@ -621,11 +621,10 @@ def write_folder(folder: str | Path) -> Path:
     """Write claims.csv of a report folder from its committed tables (listed in its
     manifest, as ``bench report`` writes it): ``python -m bench.claims FOLDER...``."""
     from bench import runfolder
-    from bench.report import _write_csv
     folder = Path(folder)
     frame = evaluate_folder(folder)
     with runfolder.writing(folder):
-        _write_csv(frame, folder / "claims.csv")
+        write_csv(frame, folder / "claims.csv")
     return folder / "claims.csv"
 
 
