@@ -347,7 +347,9 @@ class Method(Component):
       against;
     * :meth:`work`: the work a batch is, in the method's own unit (trials by
       default; cells of a map, DP state transitions), for ``<unit>_per_second``;
-    * :attr:`perf_targets`: goals the performance report checks.
+    * :attr:`perf_targets`: goals the performance report checks;
+    * :meth:`least_cost`: what a run must at least move and compute, for its
+      fraction of the machine's limits.
     """
 
     #: the task this method performs (one of :data:`TASKS`)
@@ -411,6 +413,16 @@ class Method(Component):
         perf`` divides by the time to report ``<unit>_per_second``. The default:
         ("trials", the batch's trials)."""
         return "trials", float(batch.n)
+
+    def least_cost(self, batch: Batch, params, output) -> dict[str, float] | str | None:
+        """What :meth:`run` must at least do on ``batch`` whatever its implementation, given
+        ``output`` (what it returned there, so what it must write): ``{"bytes": n}`` (bytes
+        read and written at least once), ``{"float32_operations": n}`` or
+        ``"float64_operations"`` (the adds and maxima its algorithm cannot avoid), or
+        several; ``bench perf`` shows the time these take at the machine's measured limits
+        over the time measured (:mod:`bench.limits`). A string: why no honest model exists
+        (one phrase). None (the default): no model declared."""
+        return None
 
     def check_scenario(self, params, scenario_params) -> str | None:
         """Why this config cannot run on a scenario config with ``scenario_params``

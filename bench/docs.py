@@ -6,7 +6,8 @@ meaning, bounds and their reason: :func:`bench.params.describe_params`), its tas
 presets that run it and the papers they reproduce, its row of the committed ``bench perf``
 tables. From the repository: every committed report (``reports/NAME/report.md`` and the
 files it links), README.md as the home page and CONTRIBUTING.md, their links rewritten to
-the site's. From :func:`bench.cli.build_parser`: the command-line reference. Everything is
+the site's; a page of the presets with the wall time each committed report records. From
+:func:`bench.cli.build_parser`: the command-line reference. Everything is
 discovered when the site is built, so a new plugin or report has its page without an edit
 here.
 
@@ -115,11 +116,16 @@ def links(names, folder: str, page: str) -> str:
     return ", ".join(f"[{code(n)}]({relative(f'{folder}/{n}.md', page)})" for n in sorted(names)) or "–"
 
 
+def report_link(name: str, page: str) -> str:
+    """A link from ``page`` to the committed report of preset ``name``."""
+    return f"[{code(name)}]({relative(f'reports/{name}/index.md', page)})"
+
+
 def preset_links(runs: list[Preset], reports: set[str], page: str) -> str:
     """The presets of ``runs``, linked to their committed report when there is one, with the paper."""
     items = []
     for p in runs:
-        name = f"[{code(p.name)}]({relative(f'reports/{p.name}/index.md', page)})" if p.name in reports else code(p.name)
+        name = report_link(p.name, page) if p.name in reports else code(p.name)
         items.append(name + (f" (reproduces {text(p.paper)})" if p.paper else ""))
     return "; ".join(items) or "–"
 
@@ -155,12 +161,26 @@ def perf_rows(root: Path, csv_name: str, column: str, name: str, page: str) -> s
     return f"From {source} (one core; how it is measured: that page).\n\n{frame_table(rows)}"
 
 
+def base_docstrings(cls: type) -> list[str]:
+    """The docstrings ``cls`` inherits from its plugin's own base classes (a family's shared
+    model and formulas, e.g. the GO/SO-CFAR's closed-form Pfa), each under its class's name;
+    the harness's bases (``bench.core``) are left out, they state the protocol, not the plugin."""
+    parts, own = [], inspect.getdoc(cls)             # getdoc falls back to the nearest base's docstring
+    for base in cls.__mro__[1:]:
+        doc = base.__dict__.get("__doc__")
+        if doc and inspect.cleandoc(doc) != own and base.__module__.split(".")[0] not in ("bench", "builtins"):
+            parts += [f"### From {code(f'{base.__module__}.{base.__qualname__}')}", fenced(inspect.cleandoc(doc))]
+    return parts
+
+
 def component_page(kind: str, cls: type, page: str, facts: list[tuple[str, str]], perf: str) -> str:
-    """A method's or a scenario's page: its summary, ``facts`` (label, Markdown), docstring, parameters, speed."""
+    """A method's or a scenario's page: its summary, ``facts`` (label, Markdown), docstring
+    (and its base classes'), parameters, speed."""
     return "\n\n".join([
         f"# {text(cls.name)}", text(cls.summary()),
         facts_list(facts + [("class", code(f"{cls.__module__}.{cls.__qualname__}"))]),
         "## Description", f"The {kind}'s docstring, as written.", fenced(inspect.getdoc(cls) or ""),
+        *base_docstrings(cls),
         "## Parameters", "Set in a sweep's `params` table; `bench list -v` prints the same.", params_table(cls.Params),
         "## Performance", perf]) + "\n"
 
@@ -220,6 +240,46 @@ def report_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Pre
     return names
 
 
+def wall_time(report: Path) -> str:
+    """The wall time of the units of the run that made the committed ``report`` (report.md),
+    as its Provenance table states it; "–" when it states none."""
+    from bench.provenance import WALL_TIME_ROW
+
+    for line in report.read_text(encoding="utf-8").splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 2 and cells[0] == WALL_TIME_ROW:
+            return cells[1]
+    return "–"
+
+
+def presets_page(root: Path, all_presets: list[Preset], reports: list[str]) -> str:
+    """Every packaged preset: what it runs, the paper of its claims, its committed report and
+    that run's wall time (read from the report, never typed), and the commands that
+    regenerate the committed reports."""
+    page = "presets.md"
+    rows = [[report_link(p.name, page) if p.name in reports else code(p.name), text(p.description),
+             text(p.paper) if p.paper else "–",
+             wall_time(root / "reports" / p.name / "report.md") if p.name in reports else "–"]
+            for p in sorted(all_presets, key=lambda p: (not p.paper, p.name))]
+    regenerate = [f"for p in {' '.join(n for n in reports if n in {p.name for p in all_presets})}; do",
+                  "    bench run --preset $p --out reports/$p --fresh", "done"]
+    if (root / PERF_DIR / "report.md").is_file():
+        regenerate.append(f"bench perf --out {PERF_DIR}")
+    return "\n\n".join([
+        "# Presets",
+        "Packaged sweep files (`bench/presets/NAME.toml`): `bench run --preset NAME` runs one into "
+        "`runs/NAME/`. A paper preset's claims and notes sit beside it ([Sweep files, 'Presets and "
+        "their claims'](sweep-files.md#presets-and-their-claims)); its committed report opens with them. "
+        "The wall time is that of the units of the last `bench run` that wrote the committed report "
+        "(before its report and recording; a run that resumed, or re-ran only what an edit changed, "
+        "counts the units it ran), as the report's *Provenance* states it, on the machine it names.",
+        table(["preset (its committed report)", "what", "paper", "wall time of the units"], rows),
+        "## Regenerating the committed reports",
+        "One command per preset with a committed report (they are regenerated after a change that "
+        "alters results), then the speed tables:",
+        fenced("\n".join(regenerate), "sh")]) + "\n"
+
+
 def subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
     actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]   # noqa: SLF001 - argparse has no public accessor
     return dict(actions[0].choices) if actions else {}
@@ -253,6 +313,7 @@ def pages(root: str | Path) -> tuple[dict[str, str | Path], list]:
             published(root, repo_path, out)
     reports = report_pages(root, out, all_presets)
     plugin_pages(root, out, all_presets, set(reports))
+    out["presets.md"] = presets_page(root, all_presets, reports)
     out["cli.md"] = cli_page()
 
     def section(folder: str, names) -> list:
@@ -261,7 +322,7 @@ def pages(root: str | Path) -> tuple[dict[str, str | Path], list]:
     from bench import registry
     nav = [{"Tasks": section("tasks", registry.tasks())}, {"Methods": section("methods", registry.methods())},
            {"Scenarios": section("scenarios", registry.scenarios())},
-           {"Reports": ["reports/index.md"] + [{n: f"reports/{n}/index.md"} for n in reports]},
+           {"Presets": "presets.md"}, {"Reports": ["reports/index.md"] + [{n: f"reports/{n}/index.md"} for n in reports]},
            {"Command line": "cli.md"}]
     return out, nav
 

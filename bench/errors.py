@@ -1,6 +1,6 @@
 """Errors the harness reports to users as one line, never as a traceback.
 
-Each kind has its exit code (README, 'Commands'; ``bench --help``):
+Each kind has its exit code (docs/running.md, 'Exit codes'; ``bench --help``):
 
 * :class:`ConfigError`, exit 2: bad input, fixed by changing the command, the sweep
   file or the folder named (a sweep error, an ``--out`` under a regular file, a

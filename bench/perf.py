@@ -24,7 +24,12 @@ thread), so every rate is per core. Every method counts its work in its own unit
 CFAR map, DP state transitions), reported as ``<unit>_per_second`` beside
 ``trials_per_second``, and methods may declare ``Method.perf_targets``
 (``speedup``, ``<unit>_per_second``, ``seconds_per_trial``), which the report
-shows against the measurements. The plugin protocol (:mod:`bench.core`) gives
+shows against the measurements. Before any method, the machine's limits are
+measured the same way (:mod:`bench.limits`: memory bandwidth of a streaming
+copy, the SIMD add/max rate of a tight loop), and each row shows its fraction
+of them: the least time of what its run must at least move and compute
+(``Method.least_cost``) at those limits over the time measured, or why no
+honest model exists. The plugin protocol (:mod:`bench.core`) gives
 every one of these a default, read here as "not provided".
 
 Scene generation is measured too, in its own table: for every (scenario,
@@ -59,7 +64,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench import capabilities, registry
+from bench import capabilities, limits, registry
 from bench.errors import ConfigError
 from bench.markdown import code, fmt, table
 from bench.params import build_params
@@ -67,12 +72,14 @@ from bench.rng import EVALUATION, TrialRNG, stable_key
 
 PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "trials_per_second", "chunk",
                 "chunk_seconds_per_trial", "reference",
-                "reference_seconds_per_trial", "speedup", "peak_rss_mb"]
+                "reference_seconds_per_trial", "speedup", "limit_fraction", "limit", "limit_note", "peak_rss_mb"]
 SCENE_COLUMNS = ["scenario", "size", "trials", "seconds_per_trial", "peak_rss_mb", "skipped"]
 SEED = 20261121
 REPEATS = 3
 #: interleaved rounds of a method and its reference (each keeps its minimum)
 ROUNDS = 5
+#: a row's note when its method declares no least cost (``Method.least_cost`` returned None)
+NO_MODEL = "no model declared (`Method.least_cost`)"
 #: the environment of a measuring process: one thread per library, so a rate is per core
 ONE_CORE = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
 
@@ -152,7 +159,9 @@ def _measure(job: Job, scenario, scenario_params) -> dict:
     out = {"name": None, "work_unit": unit, "work_per_trial": float(count) / job.trials,
            "reference_seconds_per_trial": np.nan, "parts": {}}
     method.run(batch_of(1), params)
-    best = {"method": _cpu_seconds(lambda: method.run(batch, params))}
+    outputs = []
+    best = {"method": _cpu_seconds(lambda: outputs.append(method.run(batch, params)))}
+    out["least_cost"] = method.least_cost(batch, params, outputs.pop())
     out["peak_rss_mb"] = _peak_rss_mb()                  # before the reference adds its own
     ref = reference_of(method) if job.reference_trials else None
     if ref is not None:
@@ -217,9 +226,29 @@ def _environment(values: dict[str, str]):
 
 def _in_fresh_process(job: Job | SceneJob) -> dict:
     """``measure`` (or ``measure_scene``) in a fresh spawned process held to one core (:data:`ONE_CORE`)."""
+    return _spawned(measure_scene if isinstance(job, SceneJob) else measure, job)
+
+
+def _spawned(fn, *args) -> dict:
+    """``fn(*args)`` in a fresh spawned process held to one core (:data:`ONE_CORE`)."""
     ctx = multiprocessing.get_context("spawn")
     with _environment(ONE_CORE), cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
-        return pool.submit(measure_scene if isinstance(job, SceneJob) else measure, job).result()
+        return pool.submit(fn, *args).result()
+
+
+def machine_limits() -> dict:
+    """The machine's limits (:func:`bench.limits.measure_limits`), in a fresh process held to one core."""
+    return _spawned(limits.measure_limits)
+
+
+def limit_columns(cost, seconds: float, machine: dict) -> dict:
+    """A row's ``limit_fraction``, ``limit`` (the binding one's name) and ``limit_note`` (why
+    there is none) from a method's declared least cost of a call taking ``seconds``."""
+    if not isinstance(cost, dict):
+        return {"limit_fraction": np.nan, "limit": "",
+                "limit_note": cost or NO_MODEL}
+    fraction, binding = limits.limit_fraction(cost, seconds, machine)
+    return {"limit_fraction": fraction, "limit": binding, "limit_note": ""}
 
 
 def accepted_sizes(method_cls, scenario) -> dict:
@@ -335,6 +364,8 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
              progress=print) -> Path:
     rows, extra = [], []
     planned = jobs(methods, sizes)
+    progress("perf: the machine's limits (streaming copy, add/max loop)")
+    machine = machine_limits()
     for job in planned:
         progress(f"perf: {job.method} at {job.size} ({job.trials} trials)")
         m = _in_fresh_process(job)
@@ -344,13 +375,14 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
         references = [(m["name"] or "", m["reference_seconds_per_trial"])]
         references += [(f"{m['name']}, without its {cls.reference_parts[part]} (timed apart)", seconds)
                        for part, seconds in m["parts"].items()]
+        fraction = limit_columns(m["least_cost"], m["seconds_per_trial"] * job.trials, machine)
         for name, seconds in references:
             rows.append({"method": job.method, "size": job.size, "trials": job.trials,
                          "seconds_per_trial": m["seconds_per_trial"], "trials_per_second": 1.0 / m["seconds_per_trial"],
                          "chunk": job.chunk, "chunk_seconds_per_trial": m["chunk_seconds_per_trial"],
                          "reference": name, "reference_seconds_per_trial": seconds,
                          "speedup": seconds / m["seconds_per_trial"] if np.isfinite(seconds) else np.nan,
-                         "peak_rss_mb": m["peak_rss_mb"],
+                         **fraction, "peak_rss_mb": m["peak_rss_mb"],
                          f"{m['work_unit']}_per_second": m["work_per_trial"] / m["seconds_per_trial"]})
             extra.append(info)
     scenes = measure_scenes(scene_jobs(methods, sizes), progress)
@@ -358,7 +390,7 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
     if executors:
         plan = scaling_plan()
         scaling, sweep = executor_scaling(workers, progress, plan), f"Preset {code(plan.name)}: {plan.description}"
-    return write_report(Path(out_dir), perf_table(rows), extra, scaling, sweep, scenes)
+    return write_report(Path(out_dir), perf_table(rows), extra, scaling, sweep, scenes, machine)
 
 
 def perf_table(rows: list[dict]) -> pd.DataFrame:
@@ -480,16 +512,49 @@ def _chunk_text(row: dict) -> str:
     return f"{at_chunk * 1e3:.3g} ({int(row['chunk'])} trials; ×{at_chunk / row['seconds_per_trial']:.2g})"
 
 
+def _limits_text(machine: dict) -> str:
+    """The header's paragraph: the limits measured at the start of the run, and the fraction column."""
+    cache = machine.get("last_level_cache_bytes")
+    cache_text = f"the last-level cache's {cache / 2**20:.0f} MiB" if cache else "a last-level cache it could not read"
+    return (f"Machine limits, measured at the start of this run the same way (one core, fresh process, the "
+            f"minimum CPU time over {limits.ROUNDS} rounds; `limits.csv` holds them): memory bandwidth "
+            f"{machine['bytes_per_second'] / 1e9:.3g} GB/s (bytes read plus written by `np.copyto` of "
+            f"{machine['stream_bytes'] / 2**20:.0f} MiB into another array, no less than {cache_text}); add/max "
+            f"rate {machine['float32_operations_per_second'] / 1e9:.3g} G float32 and "
+            f"{machine['float64_operations_per_second'] / 1e9:.3g} G float64 operations/s (a compiled loop "
+            f"`acc[i] = max(acc[i], x[i] + c)` over {limits.IN_CACHE_BYTES >> 10} KiB arrays in the "
+            "first-level cache). The column \"of the machine's limit\" is the least time of what the method's "
+            "run must at least move and compute on the batch (`Method.least_cost`: bytes read and written "
+            "once, the adds and maxima its algorithm cannot avoid; each method's model is a comment at its "
+            "declaration) at these limits, the larger of the two (a roofline), over the time measured, with "
+            "the limit that binds; a batch whose data stay in a cache can pass 1 against memory bandwidth. "
+            "A row without an honest model says why in the notes below the table.")
+
+
+def _fraction_cell(row: dict, notes: list[str]) -> str:
+    """``0.12 (memory bandwidth)``, or a dash pointing at the note (added to ``notes``) saying why none."""
+    fraction = row.get("limit_fraction", np.nan)
+    if isinstance(fraction, float) and np.isfinite(fraction):
+        return f"{fraction:.2g} ({limits.LIMIT_NAMES[row['limit']]})"
+    note = row.get("limit_note")
+    note = note if isinstance(note, str) and note else NO_MODEL
+    if note not in notes:
+        notes.append(note)
+    return f"— (note {notes.index(note) + 1})"
+
+
 def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: pd.DataFrame | None,
-                 scaling_sweep: str = "", scenes: pd.DataFrame | None = None) -> Path:
-    """``perf.csv``, ``scene.csv`` and ``report.md``; ``scaling_sweep`` describes the sweep
-    ``scaling`` timed."""
+                 scaling_sweep: str = "", scenes: pd.DataFrame | None = None, machine: dict | None = None) -> Path:
+    """``perf.csv``, ``scene.csv``, ``limits.csv`` and ``report.md``; ``scaling_sweep`` describes the
+    sweep ``scaling`` timed, ``machine`` holds the limits measured (:func:`machine_limits`)."""
     from bench.provenance import provenance
     prepare_out(out_dir)
     _write_csv(perf, out_dir / "perf.csv")
     if scenes is not None:
         _write_csv(scenes, out_dir / "scene.csv")
-    rows, rates = [], rate_columns(perf)
+    if machine is not None:
+        _write_csv(pd.DataFrame([machine]), out_dir / "limits.csv")
+    rows, rates, notes = [], rate_columns(perf), []
     for row, info in zip(perf.to_dict("records"), extra):
         targets = info["targets"].get(row["size"], info["targets"].get("*", {}))
         rows.append([code(row["method"]), row["size"], row["trials"], f"{row['seconds_per_trial'] * 1e3:.3g}",
@@ -498,7 +563,8 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
                      row["reference"] or "–",
                      "–" if not np.isfinite(row["reference_seconds_per_trial"])
                      else f"{row['reference_seconds_per_trial'] * 1e3:.3g} ({info['reference_trials']} trials)",
-                     fmt(row["speedup"]), f"{row['peak_rss_mb']:.0f}", _target_text(targets, row)])
+                     fmt(row["speedup"]), _fraction_cell(row, notes), f"{row['peak_rss_mb']:.0f}",
+                     _target_text(targets, row)])
     parts = ["# Performance", "Written by `bench perf`; `perf.csv` holds the same numbers. One core per "
              "measurement (a fresh process, numba, OpenMP, MKL and OpenBLAS held to one thread); times are "
              f"the CPU time of that thread, the minimum over {ROUNDS} rounds in which the method and its "
@@ -510,9 +576,12 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
              "second, and each method's own work unit per second (`Method.work`: cells of a CFAR map, DP "
              "state transitions). Peak RSS is the whole measuring process's (interpreter and libraries "
              "included) before the reference runs.",
+             _limits_text(machine) if machine is not None else "",
              table(["method", "size", "trials", "ms per trial", "ms per trial at a preset's chunk",
                     *(f"{rate.removesuffix('_per_second')}/s per core" for rate in rates), "reference",
-                    "reference ms per trial", "speed-up", "peak RSS (MB)", "targets"], rows),
+                    "reference ms per trial", "speed-up", "of the machine's limit", "peak RSS (MB)", "targets"],
+                   rows),
+             "Notes: " + "; ".join(f"({i}) {note}" for i, note in enumerate(notes, 1)) if notes else "",
              "Sizes: " + "; ".join(sorted({f"{code(i['scenario'])} {r['size']} = {i['params'] or 'defaults'}"
                                           for r, i in zip(perf.to_dict("records"), extra)}))]
     if scenes is not None and len(scenes):
@@ -531,4 +600,4 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
                                                     ["load average (1, 5, 15 min) at the end", load]] +
                                           [[k, v] for k, v in prov.items()]))
     from bench.runfolder import write_text
-    return write_text(out_dir / "report.md", "\n\n".join(parts) + "\n")
+    return write_text(out_dir / "report.md", "\n\n".join(part for part in parts if part) + "\n")

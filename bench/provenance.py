@@ -6,6 +6,10 @@ import platform
 import time
 from pathlib import Path
 
+#: the label of the report's Provenance row that holds the wall time of the last run's units
+#: (written by bench.report, read back from a committed report by bench.docs)
+WALL_TIME_ROW = "wall time of the units in the last `bench run` (before report and recording)"
+
 
 def _versions() -> dict[str, str]:
     import importlib.metadata as md

@@ -23,6 +23,7 @@ from typing import ClassVar
 import numpy as np
 
 from bench.core import TRACKING, Batch, Method, TrackingOutput
+from methods._innovation_base import KALMAN_RECURSION
 from models.kalman import LinearGaussianModel
 from bench.params import param
 from models.kinematics import (KinematicModel, ca, cv, cv_components, embed_cv, kinematic_model_of, per_axis,
@@ -41,6 +42,9 @@ class KinematicTracker(Method):
     reference_trials: ClassVar[int | None] = 20
     #: the issue's goal: 50 times the per-trial filterpy loop
     perf_targets: ClassVar[dict] = {"*": {"speedup": 50.0}}
+
+    def least_cost(self, batch: Batch, params, output) -> str:
+        return KALMAN_RECURSION
 
     def run(self, batch: Batch, params) -> TrackingOutput:
         return self.track(batch, kinematic_model_of(batch.scene), params)

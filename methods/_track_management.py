@@ -210,6 +210,16 @@ class TrialBuffers:
         return cls(state=np.full((K, C, 4), np.nan), track_id=np.full((K, C), -1, np.int64),
                    status=np.zeros((K, C), np.int8), cov=np.full((K, C, 2, 2), np.nan))
 
+    def take(self, used: int) -> "TrialBuffers":
+        """A copy of the first ``used`` slots, and those slots emptied again here, so one
+        working buffer serves every trial of a run and each trial keeps only the slots it
+        used (not the table's capacity: ``max_tracks``)."""
+        kept = TrialBuffers(state=self.state[:, :used].copy(), track_id=self.track_id[:, :used].copy(),
+                            status=self.status[:, :used].copy(), cov=self.cov[:, :used].copy())
+        self.state[:, :used], self.track_id[:, :used] = np.nan, -1
+        self.status[:, :used], self.cov[:, :used] = 0, np.nan
+        return kept
+
 
 def assemble(trials: list[TrialBuffers], slots_used: list[int]) -> MultiTargetOutput:
     """Stack the trials' buffers, cut to J = the most slots any trial used (≥ 1)."""

@@ -214,6 +214,14 @@ class CfarMethod(Method):
         """("cells", range x Doppler cells x maps): the cells under test of the batch."""
         return "cells", float(np.prod(batch.z.shape[:1] + batch.z.shape[2:]))
 
+    def least_cost(self, batch: Batch, params, output: CellDetectionOutput) -> dict[str, float]:
+        """Bytes: every map read once (float32, :func:`maps_of`) and the statistic and noise
+        estimate maps written once; the windows' sums, selections and fits are not counted
+        (no floor of them holds for every CFAR here), so this is a memory-bandwidth floor."""
+        cells = float(np.prod(batch.z.shape[:1] + batch.z.shape[2:]))
+        return {"bytes": cells * np.dtype(np.float32).itemsize + output.statistic.nbytes
+                + output.noise_estimate.nbytes}
+
     def threshold_factors(self, params, pfa: float) -> dict[str, float]:
         """K per active dimension for ``pfa`` at the full window."""
         return {axis: self.axis_factor(params, pfa, axis) for axis in active_axes(params.dimension)}

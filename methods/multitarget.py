@@ -40,6 +40,10 @@ class _MultiTargetTracker(Method):
     def check_scenario(self, params, scenario_params) -> str | None:
         return check_speed_bound(params, scenario_params)
 
+    def least_cost(self, batch: Batch, params, output) -> str:
+        return ("gating, clusters and joint events follow the scene's plots and tracks: no floor of bytes or "
+                "add/max operations holds apart from the algorithm's own branching")
+
     def run(self, batch: Batch, params) -> MultiTargetOutput:
         scene = scene_of(batch)
         models = tracker_models(scene, params, FILTERS[params.filter], CONFIRMATIONS[params.confirmation])
@@ -48,13 +52,13 @@ class _MultiTargetTracker(Method):
         counters = np.zeros((n, kern.N_COUNTERS), np.int64)
         z = np.ascontiguousarray(batch.z, dtype=np.float64)
         n_plots = np.ascontiguousarray(scene.n_plots, dtype=np.int64)
+        buf = TrialBuffers.empty(K, params.max_tracks)     # the working buffer, emptied after each trial
         for i in range(n):                          # one compiled trial each (docs/architecture.md, 'Performance')
             tab = kern.new_table(params.max_tracks, P)
-            buf = TrialBuffers.empty(K, params.max_tracks)
             self.track_trial(z[i], n_plots[i], models, tab, buf)
             counters[i] = tab.counters
-            trials.append(buf)
             slots.append(int(tab.counters[kern.K_SLOTS]))
+            trials.append(buf.take(slots[-1]))
         self.last_trace = trace_of(counters)
         return assemble(trials, slots)
 

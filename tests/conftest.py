@@ -112,7 +112,7 @@ def small_sweep_text(trials=12, snr="[0, 8]", chunk=5, h0=60) -> str:
 def private_cache_home(tmp_path_factory):
     """``$XDG_CACHE_HOME`` of this test process and the ``bench`` processes it starts: a
     folder of its own, so the suite neither reads nor writes the user's cache (the ``bench
-    list`` cache, README 'Commands') and parallel workers never share one."""
+    list`` cache, docs/running.md 'Commands') and parallel workers never share one."""
     cache = tmp_path_factory.mktemp("cache-home")
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("XDG_CACHE_HOME", str(cache))

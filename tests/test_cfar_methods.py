@@ -150,3 +150,14 @@ def test_the_log_fit_keeps_the_noise_level_beside_bragg_lines():
            for family, level in levels.items()}                   # more than 3 dB off (or negative)
     assert off["log-polynomial"] < 0.15 and off["polynomial"] > 0.5, off
 
+
+
+@pytest.mark.parametrize("name", CFAR_METHODS)
+def test_the_least_cost_is_each_map_read_once_and_two_maps_written(name):
+    """``bench perf``'s memory floor of a CFAR run: the float32 maps read, statistic and noise estimate written."""
+    cls = registry.get_method(name)
+    batch = _batch(12.0, n=2)
+    method, params = cls(), cls.Params()
+    cost = method.least_cost(batch, params, method.run(batch, params))
+    map_bytes = batch.z[:, 0].size * 4
+    assert cost == {"bytes": 3 * map_bytes}

@@ -6,6 +6,7 @@ strict mkdocs build where the ``[docs]`` extra is installed."""
 import dataclasses
 import html
 import importlib.util
+import inspect
 import os
 import re
 import subprocess
@@ -16,8 +17,9 @@ import pytest
 
 from bench import registry
 from bench.cli import build_parser
-from bench.docs import main, pages, published, subcommands
+from bench.docs import base_docstrings, main, pages, published, presets, subcommands
 from bench.markdown import code, text
+from bench.provenance import WALL_TIME_ROW
 
 REPO = Path(__file__).resolve().parents[1]
 #: a relative link target of a Markdown page (external URLs and bare anchors left out)
@@ -95,6 +97,48 @@ def test_every_link_of_a_generated_page_resolves(site):
         for target in LINK.findall(page.read_text(encoding="utf-8")):
             resolved = os.path.normpath(page.parent.relative_to(site) / target)
             assert (site / resolved).is_file() or (REPO / "docs" / resolved).is_file(), f"{page}: {target}"
+
+
+def test_a_method_page_shows_the_docstrings_of_its_family_base_classes(site):
+    """A family's shared model (a base class in methods/) is on each member's page, the
+    harness's own bases (bench.core) are not."""
+    shown = 0
+    for name, cls in registry.methods().items():
+        page = (site / "methods" / f"{name}.md").read_text(encoding="utf-8")
+        for base in cls.__mro__[1:]:
+            doc = base.__dict__.get("__doc__")
+            if doc and base.__module__.startswith("methods") and inspect.cleandoc(doc) != inspect.getdoc(cls):
+                assert inspect.cleandoc(doc).splitlines()[0] in page, f"{name}: {base.__qualname__}"
+                shown += 1
+        assert "bench.core" not in "".join(base_docstrings(cls))
+    assert shown
+
+
+def test_the_presets_page_has_every_preset_and_the_wall_time_its_report_states(site):
+    page = (site / "presets.md").read_text(encoding="utf-8")
+    for preset in presets():
+        report = REPO / "reports" / preset.name / "report.md"
+        name = f"[{code(preset.name)}](reports/{preset.name}/index.md)" if report.is_file() else code(preset.name)
+        row = next(line for line in page.splitlines() if line.startswith(f"| {name} "))
+        stated = [line for line in report.read_text(encoding="utf-8").splitlines() if WALL_TIME_ROW in line] \
+            if report.is_file() else []
+        if stated:
+            wall = re.search(r"\| ([0-9.]+ s) +\|\s*$", stated[0]).group(1)
+            assert f"| {wall} " in row
+        else:
+            assert row.rstrip(" |").endswith("–")
+        regenerated = page.split("for p in ", 1)[1].split(";")[0].split()
+        assert (preset.name in regenerated) == report.is_file()
+
+
+def test_the_readme_shows_the_test_command_ci_runs():
+    """.ci/run runs the README's test command: the command it ends with is in the README's
+    shell block as written."""
+    command = (REPO / ".ci" / "run").read_text(encoding="utf-8").strip().splitlines()[-1]
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```sh\n(.*?)```", readme, re.S)
+    assert command.startswith("python -m pytest") and any(line.startswith(command + " ") or line == command
+                                                          for block in blocks for line in block.splitlines())
 
 
 def test_the_command_line_page_has_every_subcommand(site):

@@ -288,6 +288,49 @@ def test_the_filter_is_a_parameter_of_both_trackers_with_each_method_s_default()
         assert err < 3 * 100e3 * SIGMA[1]
 
 
+def test_a_trial_keeps_the_slots_it_used_and_the_working_buffer_is_emptied():
+    """``TrialBuffers.take``: a copy of the used slots; those slots empty again, the rest untouched."""
+    buf, empty = TrialBuffers.empty(3, 8), TrialBuffers.empty(3, 8)
+    rng = np.random.default_rng(3)
+    buf.state[:], buf.cov[:] = rng.normal(size=buf.state.shape), rng.normal(size=buf.cov.shape)
+    buf.track_id[:], buf.status[:] = rng.integers(0, 9, buf.track_id.shape), kern.CONFIRMED
+    before = TrialBuffers(*(np.copy(a) for a in (buf.state, buf.track_id, buf.status, buf.cov)))
+    kept = buf.take(5)
+    for name in ("state", "track_id", "status", "cov"):
+        np.testing.assert_array_equal(getattr(kept, name), getattr(before, name)[:, :5])
+        np.testing.assert_array_equal(getattr(buf, name)[:, :5], getattr(empty, name)[:, :5])
+        np.testing.assert_array_equal(getattr(buf, name)[:, 5:], getattr(before, name)[:, 5:])
+        assert not np.shares_memory(getattr(kept, name), getattr(buf, name))
+
+
+@pytest.mark.parametrize("method", [JpdaUkf, GnnEkf])
+def test_a_runs_memory_does_not_grow_with_the_table_capacity_per_trial(method):
+    """The outputs of a run hold the slots its trials used, not ``max_tracks`` per trial: the traced
+    peak at a 32-fold capacity grows by about one working buffer, not one per trial."""
+    import tracemalloc
+
+    from bench import registry
+    from bench.params import build_params
+    from bench.rng import TrialRNG
+
+    scenario = registry.get_scenario("hfswr-targets")
+    batch = scenario().generate(build_params(scenario.Params, scenario.small_params), 10.0, 12,
+                                TrialRNG(4, 0, 0, range(12)))
+    runs, peaks = [], []
+    for capacity in (64, 2048):
+        params = method.Params(max_tracks=capacity)
+        method().run(batch, params)                                   # compiled before it is traced
+        tracemalloc.start()
+        runs.append(method().run(batch, params))
+        peaks.append(tracemalloc.get_traced_memory()[1])
+        tracemalloc.stop()
+    for name in ("state", "track_id", "status", "position_covariance"):
+        np.testing.assert_array_equal(getattr(runs[0], name), getattr(runs[1], name))
+    one_buffer = TrialBuffers.empty(batch.z.shape[1], 2048)
+    per_capacity = sum(a.nbytes for a in (one_buffer.state, one_buffer.track_id, one_buffer.status, one_buffer.cov))
+    assert peaks[1] - peaks[0] < 2 * per_capacity < batch.n * per_capacity
+
+
 def test_compiled_measurement_model_equals_models_hfswr():
     rng = np.random.default_rng(5)
     x = np.column_stack([rng.uniform(-1e5, 1e5, 50), rng.normal(0, 10, 50), rng.uniform(1e4, 1e5, 50),

@@ -2,7 +2,9 @@
 
 import re
 
+import numpy as np
 import pandas as pd
+import pytest
 
 from bench import registry
 from bench.capabilities import fits
@@ -194,11 +196,100 @@ def test_a_reference_part_timed_apart_gets_a_second_row(monkeypatch, tmp_path):
             _burn(3e-3)
 
     monkeypatch.setitem(registry._METHODS, WithAPart.name, WithAPart)
-    monkeypatch.setattr(perf, "_in_fresh_process", perf.measure)          # in this process: no spawn
-    monkeypatch.setattr(perf, "measure_scenes", lambda jobs, progress: pd.DataFrame(columns=SCENE_COLUMNS))
+    _in_this_process(monkeypatch)
     perf.run_perf(tmp_path, methods=[WithAPart.name], progress=lambda _: None)
     rows = pd.read_csv(tmp_path / "perf.csv")
     assert rows.reference.tolist() == ["a loop", "a loop, without its set-up (timed apart)"]
     assert rows.seconds_per_trial.nunique() == 1                          # one method time, two references
     whole, less = rows.reference_seconds_per_trial * perf.jobs([WithAPart.name])[0].reference_trials   # per call
     assert 6e-3 <= whole - less < whole and less >= 3e-3
+
+
+#: limits of a made-up machine (``bench.limits.measure_limits``' keys)
+MACHINE = {"bytes_per_second": 1e10, "float32_operations_per_second": 4e10, "float64_operations_per_second": 2e10,
+           "stream_bytes": 1 << 28, "last_level_cache_bytes": 1 << 27}
+
+
+def _in_this_process(monkeypatch):
+    """``run_perf`` measuring in this process (no spawn), on :data:`MACHINE`'s limits, without scenes."""
+    from bench import perf
+
+    monkeypatch.setattr(perf, "_in_fresh_process", perf.measure)
+    monkeypatch.setattr(perf, "machine_limits", lambda: MACHINE)
+    monkeypatch.setattr(perf, "measure_scenes", lambda jobs, progress: pd.DataFrame(columns=SCENE_COLUMNS))
+
+
+def test_the_least_time_at_the_limits_is_the_larger_of_bytes_and_operations():
+    """A roofline: a cost's least time is its slowest kind of work at the machine's limits."""
+    from bench.limits import limit_fraction
+
+    assert limit_fraction({"bytes": 2e9}, 1.0, MACHINE) == (0.2, "bytes_per_second")
+    assert limit_fraction({"bytes": 2e9, "float32_operations": 2e10}, 1.0, MACHINE) == \
+        (0.5, "float32_operations_per_second")
+    assert limit_fraction({"float64_operations": 1e10}, 2.0, MACHINE) == (0.25, "float64_operations_per_second")
+
+
+def test_the_add_max_loop_computes_what_it_counts():
+    """The compute ceiling's loop does one add and one max per element and pass (so its count is honest)."""
+    from bench.limits import _add_max_kernel
+
+    x = np.linspace(-3.0, 1.0, 40, dtype=np.float32)
+    acc = np.zeros_like(x)
+    _add_max_kernel()(acc, x, np.arange(3, dtype=np.float32))
+    np.testing.assert_array_equal(acc, np.maximum(0, x + 2))
+
+
+def test_the_last_level_cache_is_the_largest_one_listed(tmp_path):
+    from bench.limits import last_level_cache_bytes
+
+    for index, size in enumerate(["48K", "2048K", "300M", "garbage"]):
+        (tmp_path / f"index{index}").mkdir()
+        (tmp_path / f"index{index}" / "size").write_text(size + "\n")
+    assert last_level_cache_bytes(tmp_path) == 300 << 20
+    assert last_level_cache_bytes(tmp_path / "absent") is None
+
+
+def test_a_rows_fraction_of_the_machine_limit_is_its_least_cost_over_its_time(monkeypatch, tmp_path):
+    """The limits measured are in the report's header and ``limits.csv``; a method declaring its least
+    cost gets its fraction with the binding limit, one giving a reason a dash and that reason as a note."""
+    from dataclasses import dataclass
+
+    from bench import perf
+    from bench.core import TRACKING, Method
+
+    registry.discover()
+
+    @dataclass(frozen=True)
+    class NoParams:
+        pass
+
+    class Streams(Method):
+        name, task, Params = "streams", TRACKING, NoParams
+
+        def run(self, batch, params):
+            _burn(2e-3)
+
+        def least_cost(self, batch, params, output):
+            return {"bytes": 1e6 * batch.n, "float64_operations": 1e3}
+
+    class Branches(Streams):
+        name = "branches"
+
+        def least_cost(self, batch, params, output):
+            return "it branches on the data"
+
+    for cls in (Streams, Branches):
+        monkeypatch.setitem(registry._METHODS, cls.name, cls)
+    _in_this_process(monkeypatch)
+    perf.run_perf(tmp_path, methods=[Streams.name, Branches.name], progress=lambda _: None)
+    rows = pd.read_csv(tmp_path / "perf.csv").set_index("method")
+    seconds = rows.loc["streams", "seconds_per_trial"]                 # per trial: 1e6 bytes at 1e10 B/s
+    assert rows.loc["streams", "limit_fraction"] == pytest.approx(1e-4 / seconds)
+    assert rows.loc["streams", "limit"] == "bytes_per_second"
+    assert pd.isna(rows.loc["branches", "limit_fraction"]) and rows.loc["branches", "limit_note"] == \
+        "it branches on the data"
+    text = re.sub(" +", " ", (tmp_path / "report.md").read_text())
+    assert "memory bandwidth 10 GB/s" in text and "40 G float32 and 20 G float64 operations/s" in text
+    assert f"| {1e-4 / seconds:.2g} (memory bandwidth) |" in text
+    assert "| — (note 1) |" in text and "Notes: (1) it branches on the data" in text
+    assert pd.read_csv(tmp_path / "limits.csv").iloc[0].to_dict() == MACHINE

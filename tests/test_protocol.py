@@ -86,3 +86,23 @@ def test_work_is_a_unit_and_a_positive_count(name, cls):
         unit, count = cls().work(batch, method_params)
         assert unit.isidentifier() and unit.endswith("s") and count > 0, (name, scenario.name, unit, count)
         break
+
+
+@pytest.mark.parametrize("name, cls", METHODS)
+def test_least_cost_is_work_of_known_kinds_or_a_reason(name, cls):
+    """``Method.least_cost`` on the small instance of the first scenario the method serves: positive
+    amounts of the kinds ``bench perf`` has a limit for, or a reason (a phrase), or None."""
+    from bench.limits import RESOURCES
+
+    for scenario in registry.scenarios().values():
+        params = build_params(scenario.Params, scenario.small_params)
+        method, method_params = cls(), cls.Params()
+        if not fits(cls, scenario, params) or method.check_scenario(method_params, params) is not None:
+            continue
+        batch = scenario().generate(params, float(scenario.perf_snr_db), 2, TrialRNG(1, 0, 0, range(2)))
+        cost = method.least_cost(batch, method_params, method.run(batch, method_params))
+        if isinstance(cost, dict):
+            assert cost and set(cost) <= set(RESOURCES) and all(v > 0 for v in cost.values()), (name, cost)
+        else:
+            assert cost is None or (isinstance(cost, str) and cost.strip()), (name, cost)
+        break

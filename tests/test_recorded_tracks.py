@@ -301,12 +301,11 @@ def test_a_traffic_sample_gives_real_turns():
 
 
 @pytest.mark.slow
-def test_the_readme_example_runs_the_builtin_methods_on_a_users_csv(tmp_path):
-    """README, 'Your own recorded tracks': its TOML as printed (fewer trials), a CSV beside
+def test_the_documented_example_runs_the_builtin_methods_on_a_users_csv(tmp_path):
+    """docs/recorded-tracks.md, the how-to: its TOML as printed (fewer trials), a CSV beside
     it, no harness edit: the trackers and a detector run, and the report draws a trial in the plane."""
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
-    section = readme.split("## Your own recorded tracks", 1)[1]
-    sweep = re.search(r"```toml\n(.*?)```", section, re.S).group(1)
+    page = (Path(__file__).parents[1] / "docs" / "recorded-tracks.md").read_text()
+    sweep = re.search(r"```toml\n(.*?)```", page, re.S).group(1)
     (tmp_path / "my.toml").write_text(sweep + 'trials = 6\n[calibration]\nh0_trials = 50\n[record]\ntrials = 1\n')
     small_params_on_a_csv(tmp_path)
     run_bench("run", "my.toml", "--out", "out", "--quiet", cwd=tmp_path, check=True)

@@ -1,7 +1,7 @@
 """What a user types and sees: --version, bench list's presets, did-you-mean, progress
 lines outside a terminal, resuming a finished run, bench view without a display, the
 default output folder (a fresh clone stays clean) and reading a recording into pandas
-as the README shows."""
+as docs/recordings.md shows."""
 
 import io
 import os
@@ -196,15 +196,15 @@ def test_a_fresh_clone_stays_clean_after_a_run(tmp_path, write_sweep):
     assert status.stdout == ""
 
 
-def test_readme_example_reads_a_trial_statistic_into_pandas(small_run, tmp_path, monkeypatch):
-    """The README's 'Reading a recording from Python' example, run as printed (in a folder
-    whose runs/small/ is the small sweep's run)."""
-    readme = (ROOT / "README.md").read_text()
-    example = readme.split("<!-- example: read-recording -->")[1].split("```python")[1].split("```")[0]
+def test_the_documented_example_reads_a_trial_statistic_into_pandas(small_run, tmp_path, monkeypatch):
+    """The 'Reading a recording from Python' example (docs/recordings.md), run as printed (in a
+    folder whose runs/small/ is the small sweep's run)."""
+    page = (ROOT / "docs" / "recordings.md").read_text()
+    example = page.split("<!-- example: read-recording -->")[1].split("```python")[1].split("```")[0]
     shutil.copytree(small_run, tmp_path / "runs" / "small", symlinks=True)
     monkeypatch.chdir(tmp_path)
     namespace: dict = {}
-    exec(compile(example.replace("runs/quick", "runs/small"), "README example", "exec"), namespace)
+    exec(compile(example.replace("runs/quick", "runs/small"), "docs/recordings.md example", "exec"), namespace)
     df = namespace["df"]
     assert len(df) > 10 and df["statistic"].notna().all()
     assert df["step"].is_monotonic_increasing

@@ -29,7 +29,7 @@ from bench.escapes import escape_controls
 from bench.markdown import code, fmt_db, text
 from bench.markdown import fmt as _fmt
 from bench.markdown import table as _table
-from bench.provenance import provenance
+from bench.provenance import WALL_TIME_ROW, provenance
 from bench.report.glance import comparisons_frame, glance
 from bench.report.html import interactive_figures, markdown_to_html
 from bench.report.render import comparisons_markdown, glance_markdown, render, section_macro
@@ -329,8 +329,7 @@ def _section_provenance(record: dict, store: Store, prov: dict) -> str:
             ["plan fingerprint", code(store.meta('fingerprint'))]]
     wall = store.meta("last_wall_seconds")
     if wall:
-        rows.append(["wall time of the units in the last `bench run` (before report and recording)",
-                     f"{float(wall):.1f} s"])
+        rows.append([WALL_TIME_ROW, f"{float(wall):.1f} s"])
     rows += [[text(k), text(v)] for k, v in prov.items()]
     return _section("provenance", "\n\n".join([_table(["", ""], rows), *_identities_text(record, store)]))
 

@@ -1,5 +1,5 @@
-"""Per-trial results do not depend on the batch (README: identical results whatever the
-workers and chunking; docs/architecture.md, 'Portable numbers').
+"""Per-trial results do not depend on the batch (docs/concepts.md: identical results whatever
+the workers and chunking; docs/architecture.md, 'Portable numbers').
 
 Random small sweeps — for every task, one of its scenarios (small instance) and one or two of
 its methods, null and SNR trials — run with a random chunk size (1, a divisor of the trials, a
