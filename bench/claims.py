@@ -11,7 +11,8 @@ the "Paper vs ours" table from the results and renders the preset's notes
 (``NAME.md``) and each claim's ``reason`` as Jinja2 templates filled from them:
 no number the run produces is ever typed.
 
-Quantities give (value, low, high): a 95% interval where the table has one.
+Quantities (:mod:`bench.quantities`) give (value, low, high): a 95% interval where the
+table has one.
 Crossings are the SNR at which a Pd column reaches a level, computed as the
 report's SNR-at-Pd tables compute them (:func:`bench.markdown.snr50`); a
 difference of two quantities has the conservative interval
@@ -23,7 +24,6 @@ here names a method, a scenario or a task: they are the claims file's data.
 
 from __future__ import annotations
 
-import io
 import math
 import re
 import tomllib
@@ -31,19 +31,19 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
 
-import numpy as np
 import pandas as pd
 
 from bench.errors import ConfigError
 from bench.listing import CLAIMS_SUFFIX
-from bench.markdown import crossing_floors, fmt, fmt_db, snr50, table
+from bench.markdown import fmt, fmt_db, table
+from bench.quantities import (ALL_LEVELS, INLINE, Missing, Tables, Value, csv_frame,  # noqa: F401 - importable from here
+                              describe, quantity, read_tables)
+from bench.tables import write_csv
 
 #: the columns of claims.csv, in order
 CLAIMS_COLUMNS = ["id", "claim", "where", "original", "english", "quantity", "value", "low", "high", "unit",
                   "verdict", "scope", "reason"]
 REPRODUCES, DOES_NOT, NOT_COMPARABLE, CONVERSION = "reproduces", "does not reproduce", "not comparable", "conversion"
-#: ``snr_db`` of a paired quantity over every level (comparisons.csv's blank ``snr_db``)
-ALL_LEVELS = "all"
 
 _ID = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")
 _CLAIM_KEYS = {"id", "claim", "where", "original", "english", "quantity", "unit", "expect", "value", "tolerance",
@@ -62,7 +62,6 @@ _KINDS = {
     "difference": ({"a", "b"}, set()),
     "ratio": ({"a", "b"}, set()),
 }
-_INLINE = ("difference", "ratio")        # kinds whose a and b are quantities themselves
 
 
 # ------------------------------------------------------------------ the file
@@ -136,7 +135,7 @@ def _quantity(q: Any, field: str) -> dict:
         raise ConfigError(f"{field}.scenario", "give scenario, or scenario_a and scenario_b, not both")
     for key in ("a", "b"):
         if key in q:
-            out[key] = _quantity(q[key], f"{field}.{key}") if kind in _INLINE else _text(q[key], f"{field}.{key}")
+            out[key] = _quantity(q[key], f"{field}.{key}") if kind in INLINE else _text(q[key], f"{field}.{key}")
     for key in ("config", "column", "scenario", "scenario_a", "scenario_b", "metric"):
         if key in q:
             _text(q[key], f"{field}.{key}")
@@ -214,209 +213,6 @@ def preset_claims(preset: str) -> ClaimsFile | None:
     import importlib.resources
     path = importlib.resources.files("bench") / "presets" / f"{preset}{CLAIMS_SUFFIX}"
     return parse(path.read_text(encoding="utf-8"), path.name) if path.is_file() else None
-
-
-# ------------------------------------------------------------------ the run's tables
-
-@dataclass(frozen=True)
-class Tables:
-    """The run's tables as written to CSV (and read back: :func:`read_tables`),
-    and the chance Pd every detector is calibrated to for equal-chance Pd
-    (the sweep's ``[calibration] chance_pd``: the floor of that Pd column)."""
-
-    summary: pd.DataFrame
-    comparisons: pd.DataFrame
-    calibration: pd.DataFrame
-    equal_chance: float
-
-
-def _read_csv(text_or_path) -> pd.DataFrame:
-    """A CSV as written by the report; pandas >= 3 parses floats round-trip (what
-    ``float_precision="round_trip"`` asked of earlier versions), so values are bit-exact."""
-    try:
-        return pd.read_csv(text_or_path)
-    except pd.errors.EmptyDataError:
-        return pd.DataFrame()
-
-
-def csv_frame(df: pd.DataFrame) -> pd.DataFrame:
-    """``df`` exactly as its CSV reads back, so claims evaluated at report time and
-    from the committed CSVs are the same numbers."""
-    from bench.report import csv_text
-    return _read_csv(io.StringIO(csv_text(df)))
-
-
-def read_tables(folder: str | Path) -> Tables:
-    """A report folder's committed tables: summary.csv, comparisons.csv,
-    calibration.csv and plan.toml's ``[calibration] chance_pd``."""
-    from bench.calibration import EQUAL_CHANCE_PD
-    folder = Path(folder)
-    frames = [_read_csv(folder / f"{name}.csv") if (folder / f"{name}.csv").exists() else pd.DataFrame()
-              for name in ("summary", "comparisons", "calibration")]
-    plan = tomllib.loads((folder / "plan.toml").read_text(encoding="utf-8")) if (folder / "plan.toml").exists() else {}
-    return Tables(*frames, float(plan.get("calibration", {}).get("chance_pd", EQUAL_CHANCE_PD)))
-
-
-# ------------------------------------------------------------------ quantities
-
-class Missing(Exception):
-    """A config or scenario config the claim names did not run."""
-
-
-@dataclass(frozen=True)
-class Value:
-    value: float
-    low: float = math.nan
-    high: float = math.nan
-    p: float = math.nan
-
-    def scaled(self, k: float) -> Value:
-        low, high = self.low * k, self.high * k
-        return Value(self.value * k, *((high, low) if k < 0 else (low, high)), self.p)
-
-
-def _scenario(df: pd.DataFrame, q: dict) -> str:
-    """The scenario config a quantity names, or the run's only one."""
-    if "scenario" in q:
-        if q["scenario"] not in set(df.scenario):
-            raise Missing(f"scenario config `{q['scenario']}`")
-        return q["scenario"]
-    scenarios = list(dict.fromkeys(df.scenario))
-    if len(scenarios) != 1:
-        raise ConfigError("scenario", f"the run has {len(scenarios)} scenario configs ({', '.join(scenarios)}): "
-                                      "name one")
-    return scenarios[0]
-
-
-def _rows(df: pd.DataFrame, q: dict, config_column: str, config: str) -> pd.DataFrame:
-    """The rows of ``config`` (in ``config_column``) on the quantity's scenario config."""
-    if df.empty or config not in set(df[config_column]):
-        raise Missing(f"`{config}`")
-    scenario = _scenario(df, q)
-    rows = df[(df.scenario == scenario) & (df[config_column] == config)]
-    if rows.empty:
-        raise Missing(f"`{config}` on `{scenario}`")
-    return rows
-
-
-def _column(columns, column: str) -> str:
-    if column not in columns:
-        raise ConfigError("column", f"no column {column!r} in the table")
-    return column
-
-
-def _interval_of(row: pd.Series, column: str) -> Value:
-    """``column`` of one row, with ``column_low`` / ``column_high`` where the table has
-    them (for a mean ``X_mean``, ``X_low`` / ``X_high``: summary.csv's ``delay_mean``)."""
-    stem = column[:-len("_mean")] if column.endswith("_mean") else column
-
-    def bound(side: str) -> float:
-        name = next((c for c in (f"{column}_{side}", f"{stem}_{side}") if c in row.index), None)
-        return float(row[name]) if name else math.nan
-    return Value(float(row[_column(row.index, column)]), bound("low"), bound("high"))
-
-
-def _summary(q: dict, t: Tables) -> Value:
-    rows = _rows(t.summary, q, "config", q["config"])
-    at = rows[np.isclose(rows.snr_db.astype(float), q["snr_db"])]
-    if at.empty:
-        raise ConfigError("snr_db", f"no level {q['snr_db']:g} dB for `{q['config']}` (levels: "
-                                    f"{', '.join(fmt_db(s) for s in rows.snr_db)})")
-    return _interval_of(at.iloc[0], q["column"])
-
-
-def _calibration(q: dict, t: Tables) -> Value:
-    return _interval_of(_rows(t.calibration, q, "method", q["config"]).iloc[0], q["column"])
-
-
-def _paired(q: dict, t: Tables) -> Value:
-    """comparisons.csv's row for (a, b), oriented so that value = mean(b) − mean(a)."""
-    df = t.comparisons
-    for config in (q["a"], q["b"]):
-        if df.empty or config not in set(df.config_a) | set(df.config_b):
-            raise Missing(f"`{config}`")
-    df = df[df.scenario == _scenario(df, q)]
-    metric = q.get("metric") or _task_metric(df, q)
-    snr = df.snr_db.isna() if q["snr_db"] == ALL_LEVELS else np.isclose(df.snr_db, q["snr_db"])
-    rows = df[snr & (df.metric == metric)]
-    same = rows[(rows.config_a == q["a"]) & (rows.config_b == q["b"])]
-    swapped = rows[(rows.config_a == q["b"]) & (rows.config_b == q["a"])]
-    if same.empty and swapped.empty:
-        raise ConfigError("snr_db", f"no comparison of `{q['a']}` and `{q['b']}` on {metric} at {q['snr_db']}")
-    r = (same if len(same) else swapped).iloc[0]
-    v = Value(float(r.difference), float(r.difference_low), float(r.difference_high), float(r.mcnemar_p))
-    return v if len(same) else v.scaled(-1.0)
-
-
-def _task_metric(df: pd.DataFrame, q: dict) -> str:
-    """The ranking metric of the task the pair belongs to (``Task.ranking_metric``)."""
-    from bench import registry
-    tasks = set(df[(df.config_a.isin([q["a"], q["b"]])) | (df.config_b.isin([q["a"], q["b"]]))].task)
-    if len(tasks) != 1:
-        raise ConfigError("metric", f"the pair belongs to {len(tasks)} tasks: name the metric")
-    return registry.get_task(tasks.pop()).ranking_metric
-
-
-def _crossing_value(crossing) -> Value:
-    """A :class:`bench.metrics.Crossing` as (value, low, high): NaN value unless fitted;
-    outside the swept range an open bound (±inf) on the far side."""
-    value = crossing.mid if crossing.kind == "fit" else math.nan
-    low = -math.inf if crossing.kind == "below" else crossing.low
-    high = math.inf if crossing.kind == "above" else crossing.high
-    return Value(value, low, high)
-
-
-def _crossing(q: dict, t: Tables) -> Value:
-    config, column = q["config"], q.get("column", "pd")
-    rows = _rows(t.summary, q, "config", config)
-    _column(rows.columns, column)
-    cal = t.calibration
-    chance = {config: float(r.chance_pd) for r in _rows(cal, q, "method", config).itertuples()} \
-        if not cal.empty and "chance_pd" in cal and config in set(cal.method) else {}
-    found = snr50(rows, column, crossing_floors(column, chance, t.equal_chance), q.get("level", 0.5))
-    return _crossing_value(found.crossing.iloc[0])
-
-
-def _minus(a: Value, b: Value) -> Value:
-    """a − b with the conservative interval [a.low − b.high, a.high − b.low]."""
-    return Value(a.value - b.value, a.low - b.high, a.high - b.low)
-
-
-def _crossing_difference(q: dict, t: Tables) -> Value:
-    side = (lambda s: {**q, "config": q[s], "scenario": q.get(f"scenario_{s}", q.get("scenario"))})
-    a, b = ({k: v for k, v in side(s).items() if v is not None} for s in ("a", "b"))
-    return _minus(_crossing(a, t), _crossing(b, t))
-
-
-def _ratio(a: Value, b: Value) -> Value:
-    """a / b for a positive denominator (b.low > 0), with the conservative interval: the
-    extremes of a's ends over b's ends (a may be of either sign); NaN ends where b's
-    interval reaches 0, where the ratio is unbounded."""
-    if not b.low > 0:
-        return Value(a.value / b.value, np.nan, np.nan)
-    ends = [a.low / b.low, a.low / b.high, a.high / b.low, a.high / b.high]
-    return Value(a.value / b.value, min(ends), max(ends))
-
-
-def quantity(q: dict, t: Tables) -> Value:
-    """The value of quantity ``q`` (validated by :func:`parse`) on the tables ``t``."""
-    kind = q["kind"]
-    if kind in _INLINE:
-        a, b = quantity(q["a"], t), quantity(q["b"], t)
-        with np.errstate(all="ignore"):
-            v = _minus(a, b) if kind == "difference" else _ratio(a, b)
-    else:
-        v = {"summary": _summary, "calibration": _calibration, "paired": _paired, "crossing": _crossing,
-             "crossing_difference": _crossing_difference}[kind](q, t)
-    return v.scaled(q["scale"]) if "scale" in q else v
-
-
-def describe(q: dict | None) -> str:
-    """A quantity as one line: ``crossing(config=..., column=pd_step)``."""
-    if q is None:
-        return ""
-    show = (lambda v: describe(v) if isinstance(v, dict) else f"{v:g}" if isinstance(v, float) else str(v))
-    return f"{q['kind']}({', '.join(f'{k}={show(v)}' for k, v in q.items() if k != 'kind')})"
 
 
 # ------------------------------------------------------------------ verdicts and results
@@ -621,11 +417,10 @@ def write_folder(folder: str | Path) -> Path:
     """Write claims.csv of a report folder from its committed tables (listed in its
     manifest, as ``bench report`` writes it): ``python -m bench.claims FOLDER...``."""
     from bench import runfolder
-    from bench.report import _write_csv
     folder = Path(folder)
     frame = evaluate_folder(folder)
     with runfolder.writing(folder):
-        _write_csv(frame, folder / "claims.csv")
+        write_csv(frame, folder / "claims.csv")
     return folder / "claims.csv"
 
 

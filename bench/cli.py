@@ -26,16 +26,9 @@ import traceback
 from pathlib import Path
 
 from bench import __version__
-from bench.errors import ConfigError, Fault, is_out_of_memory, os_fault, unknown_name
+from bench.errors import (EXIT_BAD_INPUT, EXIT_BUG, EXIT_ENVIRONMENT, EXIT_FAILED_UNITS, EXIT_IN_USE, EXIT_INTERRUPTED,
+                          EXIT_REGRESSION, ConfigError, Fault, is_out_of_memory, os_fault, unknown_name)
 from bench.listing import plugin_listing, preset_descriptions, presets
-
-EXIT_BUG = 1
-EXIT_BAD_INPUT = 2
-EXIT_ENVIRONMENT = 3
-EXIT_IN_USE = 4
-EXIT_INTERRUPTED = 130
-EXIT_REGRESSION = 5     # bench compare --fail-on-regression: a metric got significantly worse
-EXIT_FAILED_UNITS = 6   # bench run: some (unit, method config) runs failed (bench.failures)
 
 EXIT_CODES = f"""exit codes:
   0    done

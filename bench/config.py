@@ -1,20 +1,14 @@
-"""Sweep files: parsing, validation, grid expansion, the resolved plan.
+"""Sweep files: reading and checking the TOML into the resolved plan.
 
 A sweep file (TOML; its fields are described in docs/architecture.md,
 'Sweep files and presets') is validated completely before any work is done.
 Every problem raises :class:`~bench.errors.ConfigError` naming the field,
 e.g. ``methods[1].params.window: expected int >= 3, got -2``.
 
-Grids: in ``params`` (and ``scenario_params``) a list value is a grid axis and
-the Cartesian product of the axes is expanded, one config per combination. For
-a parameter whose type is itself a list (e.g. AR coefficients), a list of lists
-is the axis.
-
-A config's identity is a readable label in the style of benchopt:
-``cumulant[window=32]`` — the registry name plus the parameters the sweep set
-(for scenarios, only the grid axes: a single scenario config is its name).
-``plan.toml`` keeps each method's label, so re-running it gives the same
-identities and the same results.
+The result is a :class:`~bench.plan.Plan` (:mod:`bench.plan`: the plan's dataclasses,
+importable from here too); grid axes and config labels expand in :mod:`bench.grid`.
+``plan.toml`` keeps each method's label, so re-running it gives the same identities and
+the same results.
 
 Scenarios: either one ``scenario`` name with ``[scenario_params]``, or
 several ``[[scenarios]]`` tables, each with ``name``, ``params`` (grid axes
@@ -27,21 +21,20 @@ track-before-detect.
 
 from __future__ import annotations
 
-import itertools
 import math
 import os
 import re
 import dataclasses
 import tomllib
-from dataclasses import dataclass
-from functools import cached_property
 from pathlib import Path
 from typing import Any, Mapping
 
 from bench import capabilities, feasibility, registry
 from bench.errors import ConfigError
-from bench.params import PATH, as_float, build_params, field_types, is_tuple_field, params_as_dict, show
-from bench.rng import stable_key
+from bench.grid import MAX_CONFIGS, expand, label_problem, params_text_of_label
+from bench.params import as_float, show
+from bench.plan import (SNR_KEY_DIGITS, CalibrationConfig, ComponentConfig, Plan,  # noqa: F401 - importable from here
+                        ScenarioConfig, snr_key)
 
 #: trials per unit when a sweep sets no ``chunk``
 DEFAULT_CHUNK = 50
@@ -59,7 +52,6 @@ MAX_SNR_LEVELS = 1000
 MAX_ABS_SNR_DB = 200.0
 #: a sweep file is read only up to this size: a bigger one is refused before it is parsed
 MAX_SWEEP_BYTES = 1_000_000
-MAX_CONFIGS = 1000
 #: trial-runs (trials x SNR levels x configs) above which a sweep needs --yes
 LARGE_SWEEP_TRIAL_RUNS = 50_000_000
 #: longest per-unit time limit (``unit_timeout_s``): a week
@@ -70,188 +62,6 @@ MAX_UNIT_TIMEOUT_S = 7 * 24 * 3600.0
 MIN_PFA = 1e-300
 #: bounds of ``max_unit_memory_gb`` (GB = 2^30 bytes): a megabyte at least, a petabyte at most
 MIN_UNIT_MEMORY_GB, MAX_UNIT_MEMORY_GB = 0.001, 1e6
-#: significant digits of an SNR level in a unit's key (:func:`snr_key`): levels that
-#: agree to this many digits are one level, and a sweep listing two of them is refused
-SNR_KEY_DIGITS = 9
-
-
-def snr_key(snr_db: float | None) -> str:
-    """The canonical text of an SNR level, as in a unit's key (``"null"`` for the
-    null hypothesis): two levels are the same level exactly when their keys are
-    equal, which the sweep's duplicate check uses (:func:`_parse_snr`) and
-    :attr:`bench.runner.Unit.key` must use too."""
-    return "null" if snr_db is None else f"{snr_db:+.{SNR_KEY_DIGITS}g}"
-
-
-@dataclass(frozen=True)
-class ComponentConfig:
-    """One expanded config of a method or scenario."""
-
-    name: str
-    params: Any                 # the component's Params instance (all defaults filled)
-    label: str                  # the config's identity, e.g. "cumulant[window=32]"
-    params_text: str            # what distinguishes it, "window=32" (the ``params`` CSV column)
-
-    @property
-    def key(self) -> int:
-        """Stable integer identity, from the name and *all* resolved params (a data file
-        by its name: the random streams do not depend on the folder the data lives in)."""
-        values = {k: os.path.basename(v) if _is_path(self.params, k) else v
-                  for k, v in params_as_dict(self.params).items()}
-        return stable_key([self.name, values])
-
-
-@dataclass(frozen=True)
-class ScenarioConfig(ComponentConfig):
-    """A scenario config with the SNR levels and trials it is run at."""
-
-    snr_db: tuple[float, ...] = ()
-    trials: int = 0
-    tasks: tuple[str, ...] = ()
-
-
-@dataclass(frozen=True)
-class CalibrationConfig:
-    pfa: float = 0.01
-    mode: str = "empirical"
-    h0_trials: int = 2000
-    #: the chance Pd (fraction of null trials whose detection window alarms)
-    #: every detector is calibrated to for the equal-chance Pd definition
-    chance_pd: float = 0.05
-
-
-@dataclass(frozen=True)
-class Plan:
-    """The fully resolved sweep: what runs, with every default filled in."""
-
-    name: str
-    description: str
-    scenario: str               # the scenario name; "" for a [[scenarios]] list
-    scenarios: tuple[ScenarioConfig, ...]
-    trials: int
-    seed: int
-    snr_db: tuple[float, ...]
-    chunk: int
-    methods: tuple[ComponentConfig, ...]
-    calibration: CalibrationConfig
-    record_trials: int
-    source: str
-    method_tasks: tuple[str, ...] = ()   # task of each method config, in order
-    timeline_snr_db: float | None = None  # report: the recorded trial shown over time (None: highest SNR)
-    unit_timeout_s: float | None = None   # a unit running longer fails (timeout); None: no limit
-    #: the single-scenario form: the grid axes of ``scenario_params`` in the order the
-    #: sweep wrote them (the order of the labels), which plan.toml keeps
-    scenario_axes: tuple[str, ...] = ()
-    #: the sweep's ``max_unit_memory_gb`` when it set one (None: the machine's default)
-    max_unit_memory_gb: float | None = None
-    #: ``[[methods]]`` entries marked ``optional = true`` whose method is unavailable here
-    #: (a missing extra): (the entry as written, why), skipped; the report lists them
-    skipped_methods: tuple[tuple[dict, str], ...] = ()
-    #: (scenario config label, method config label, the method's reason) of the pairs its
-    #: ``check_scenario`` refuses while the method config runs on another scenario config
-    #: of the sweep: skipped, no units, no rows (:func:`bench.feasibility.check_pairs`)
-    skipped: tuple[tuple[str, str, str], ...] = ()
-
-    def pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
-        """The method configs that run on ``scenario``: those whose task it serves and whose
-        capabilities fit (:mod:`bench.capabilities`), less the skipped pairs."""
-        return [m for m in self.candidate_pairs(scenario) if (scenario.label, m.label) not in self._skipped_keys]
-
-    def candidate_pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
-        """The method configs whose task and capabilities fit ``scenario`` (before
-        their ``check_scenario``)."""
-        return [m for m in self.methods if (scenario.label, m.label) in self._fitting]
-
-    @cached_property
-    def _fitting(self) -> frozenset[tuple[str, str]]:
-        """(scenario config label, method config label) of the pairs whose task and
-        capabilities fit (:func:`bench.capabilities.fits`)."""
-        return frozenset((s.label, m.label) for s in self.scenarios for m in self.methods
-                         if capabilities.fits(registry.get_method(m.name), registry.get_scenario(s.name), s.params))
-
-    @property
-    def _skipped_keys(self) -> frozenset[tuple[str, str]]:
-        return frozenset((scenario, method) for scenario, method, _ in self.skipped)
-
-    @property
-    def trial_runs(self) -> int:
-        return sum(s.trials * len(s.snr_db) * len(self.pairs(s)) for s in self.scenarios)
-
-    def to_dict(self) -> dict[str, Any]:
-        """The plan as a sweep file that reproduces it (written as plan.toml)."""
-        head = {"name": self.name, "description": self.description}
-        if self.scenario:
-            head |= {"scenario": self.scenario, "trials": self.trials, "seed": self.seed,
-                     "snr_db": list(self.snr_db), "chunk": self.chunk,
-                     "scenario_params": _merge_scenario_grid(self.scenarios, self.scenario_axes)}
-        else:
-            head |= {"trials": self.trials, "seed": self.seed, "snr_db": list(self.snr_db),
-                     "chunk": self.chunk,
-                     "scenarios": [{"name": s.name, "label": s.label, "params": params_as_dict(s.params),
-                                    "snr_db": list(s.snr_db), "trials": s.trials} for s in self.scenarios]}
-        # written only when set, so plans without it keep their plan.toml
-        head |= {} if self.unit_timeout_s is None else {"unit_timeout_s": self.unit_timeout_s}
-        return head | {
-            "methods": [{"name": m.name, "label": m.label, "params": params_as_dict(m.params)}
-                        for m in self.methods] + [entry | {"optional": True} for entry, _ in self.skipped_methods],
-            "calibration": {"pfa": self.calibration.pfa, "mode": self.calibration.mode,
-                            "h0_trials": self.calibration.h0_trials}
-                           # written only when set, so plans without it keep their fingerprints
-                           | ({} if self.calibration.chance_pd == CalibrationConfig.chance_pd
-                              else {"chance_pd": self.calibration.chance_pd}),
-            "record": {"trials": self.record_trials}
-                      | ({} if self.timeline_snr_db is None else {"timeline_snr_db": self.timeline_snr_db}),
-        } | ({} if self.max_unit_memory_gb is None else {"max_unit_memory_gb": self.max_unit_memory_gb})
-
-    def fingerprint(self) -> str:
-        """Identity of the results a run of this plan produces (for resume): the
-        description and the memory limit do not change results."""
-        d = self.to_dict()
-        d.pop("description")
-        d.pop("unit_timeout_s", None)     # a time limit changes no result: a run may resume under another
-        d.pop("max_unit_memory_gb", None)
-        return f"{stable_key(d):016x}"
-
-
-def _format_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return repr(int(v)) if v.is_integer() and abs(v) < 1e15 else repr(v)
-    if isinstance(v, (list, tuple)):
-        return "(" + ",".join(_format_value(x) for x in v) + ")"
-    return str(v)
-
-
-def _label_value(params: Any, key: str) -> str:
-    """How a label writes parameter ``key``: a data file by its name alone (its folder
-    depends on where the sweep lives; the label must not)."""
-    value = getattr(params, key)
-    return os.path.basename(value) if _is_path(params, key) else _format_value(value)
-
-
-def _is_path(params: Any, key: str) -> bool:
-    return next(f for f in dataclasses.fields(params) if f.name == key).metadata.get("kind") == PATH
-
-
-def _merge_scenario_grid(configs: tuple[ComponentConfig, ...], axes: tuple[str, ...] = ()) -> dict[str, Any]:
-    """Scenario params of the plan: resolved values, lists where a grid varies.
-
-    Keys in declaration order, except that the grid axes (the keys that vary)
-    keep the order ``axes`` gives them (the sweep's): the order of the axes is
-    the order of the configs and of the names in their labels, so
-    ``bench run plan.toml`` gives the same labels and resumes the same units."""
-    dicts = [params_as_dict(c.params) for c in configs]
-    merged = {}
-    for key in dicts[0]:
-        values = [d[key] for d in dicts]
-        distinct = [v for i, v in enumerate(values) if v not in values[:i]]
-        merged[key] = distinct[0] if len(distinct) == 1 else distinct
-    varying = [k for k in merged if len(configs) > 1 and any(d[k] != dicts[0][k] for d in dicts)]
-    ordered = [k for k in axes if k in varying] + [k for k in varying if k not in axes]
-    slots = iter(ordered)                  # the varying keys' places, filled in the sweep's order
-    keys = [next(slots) if k in varying else k for k in merged]
-    return {k: merged[k] for k in keys}
 
 
 # --------------------------------------------------------------------------- checks
@@ -328,99 +138,6 @@ def _parse_snr(value: Any, field: str = "snr_db") -> tuple[float, ...]:
     return tuple(sorted(values))
 
 
-def _grid_axes(params_cls: type, values: Mapping[str, Any], field: str) -> list[list[tuple[str, Any]]]:
-    """Each parameter as a list of (name, value) choices (a grid axis)."""
-    axes = []
-    for key, value in values.items():
-        if not isinstance(key, str):
-            raise ConfigError(field, f"parameter names must be strings, got {key!r}")
-        try:
-            tuple_field = is_tuple_field(params_cls, key)
-        except KeyError:
-            tuple_field = False  # unknown names are reported by build_params
-        is_axis = isinstance(value, list) and (not tuple_field or (value and all(isinstance(v, list) for v in value)))
-        if is_axis:
-            if not value:
-                raise ConfigError(f"{field}.{key}", "empty list: a grid axis needs at least one value")
-            axes.append([(key, v) for v in value])
-        else:
-            axes.append([(key, value)])
-    return axes
-
-
-def _expand(name: str, params_cls: type, values: Mapping[str, Any], field: str, *,
-            identity: str = "explicit", base: str | None = None) -> list[ComponentConfig]:
-    """One config per grid point. ``identity`` says which parameters name a config:
-    ``"explicit"`` every parameter the sweep set (methods), ``"grid"`` only the
-    grid axes (scenarios: a single scenario config is just its name)."""
-    axes = _grid_axes(params_cls, values, field)
-    size = math.prod(len(a) for a in axes) if axes else 1
-    if size > MAX_CONFIGS:
-        raise ConfigError(field, f"grid of {size} configs; at most {MAX_CONFIGS}")
-    configs = []
-    for combo in itertools.product(*axes) if axes else [()]:
-        try:
-            params = build_params(params_cls, dict(combo), base)
-        except ConfigError as err:
-            raise err.within(field) from None
-        named = [k for (k, _), axis in zip(combo, axes) if identity == "explicit" or len(axis) > 1]
-        inner = ",".join(f"{k}={_label_value(params, k)}" for k in named)
-        configs.append(ComponentConfig(name, params, f"{name}[{inner}]" if inner else name, inner))
-    return configs
-
-
-def _split_top_level(text: str) -> list[str]:
-    """``text`` split at the commas outside parentheses (tuple values are "(a,b)")."""
-    parts, depth, start = [], 0, 0
-    for i, c in enumerate(text):
-        depth += (c == "(") - (c == ")")
-        if c == "," and depth == 0:
-            parts.append(text[start:i])
-            start = i + 1
-    return parts + [text[start:]]
-
-
-def _label_problem(name: str, label: str, params: Any, *, bare_means_defaults: bool) -> str | None:
-    """Why a user's ``label`` for a config of component ``name`` with ``params``
-    would misstate it (None if it does not): a label cannot look like another
-    config's. The generated labels are ``name`` and ``name[k=v,...]``, so a
-    label that is another component's name, or ``other[...]``, is refused; one
-    of the form ``name[k=v,...]`` must say the config's own values (as the
-    generated label would write them); a bare ``name`` (for a method, whose
-    generated label lists every parameter the sweep set) only the defaults."""
-    others = (set(registry.methods()) | set(registry.scenarios())) - {name}
-    match = re.fullmatch(r"([A-Za-z0-9][A-Za-z0-9_.\-]*)\[(.*)\]", label, re.DOTALL)
-    if match is None:
-        if label in others:
-            return f"{label!r} is the label of a {label} config; this is a {name} config"
-        if label == name and bare_means_defaults and params != type(params)():
-            changed = [k for k, v in params_as_dict(params).items() if v != params_as_dict(type(params)())[k]]
-            return (f"{label!r} is the label of the default {name} config, but this one sets "
-                    f"{', '.join(changed)}; name it otherwise (or {name}[...] with its values)")
-        return None
-    owner, inner = match.groups()
-    if owner != name:
-        return f"{label!r} looks like the label of a {owner} config; this is a {name} config" \
-            if owner in others else None
-    fields = field_types(type(params))
-    for part in _split_top_level(inner):        # free text ("dp-tbd[prewhiten]") says nothing checkable
-        key, eq, text = (x.strip() for x in part.partition("="))
-        if eq and key in fields:
-            actual = _label_value(params, key)
-            if text != actual:
-                return f"{label!r} says {key}={text}, but this config has {key}={actual}"[:300]
-    return None
-
-
-def _params_text_of_label(name: str, label: str) -> str:
-    """``window=32`` from ``cumulant[window=32]``; a free-form label is its own text."""
-    if label == name:
-        return ""
-    if label.startswith(f"{name}[") and label.endswith("]"):
-        return label[len(name) + 1:-1]
-    return label
-
-
 def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...], base: str | None = None
                    ) -> tuple[tuple[ComponentConfig, ...], tuple[str, ...], tuple[tuple[dict, str], ...]]:
     """The method configs, the sweep field (``methods[i]``) each comes from, and
@@ -448,7 +165,7 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...], base: str 
         cls = registry.get_method(entry["name"], f"{field}.name")
         _check_runs_somewhere(cls, scenarios, f"{field}.name")
         params = _expect_table(entry.get("params", {}), f"{field}.params")
-        expanded = _expand(cls.name, cls.Params, params, f"{field}.params", base=base)
+        expanded = expand(cls.name, cls.Params, params, f"{field}.params", base=base)
         if "label" in entry:
             label = entry["label"]
             if not isinstance(label, str) or not LABEL_PATTERN.match(label):
@@ -457,10 +174,10 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...], base: str 
             if len(expanded) != 1:
                 raise ConfigError(f"{field}.label", "a label names one config; remove the grid (list) values")
             c = expanded[0]
-            problem = _label_problem(c.name, label, c.params, bare_means_defaults=True)
+            problem = label_problem(c.name, label, c.params, bare_means_defaults=True)
             if problem:
                 raise ConfigError(f"{field}.label", problem)
-            expanded = [ComponentConfig(c.name, c.params, label, _params_text_of_label(c.name, label))]
+            expanded = [ComponentConfig(c.name, c.params, label, params_text_of_label(c.name, label))]
         for c in expanded:
             if c.label in seen:
                 raise ConfigError(field, f"config {c.label!r} repeats {seen[c.label]}")
@@ -506,14 +223,14 @@ def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, .
                       identity: str, label: Any = None, base: str | None = None) -> list[ScenarioConfig]:
     cls = registry.get_scenario(name, f"{field}.name" if field != "scenario_params" else "scenario")
     table = _expect_table(params, field)
-    expanded = _expand(cls.name, cls.Params, table, field, identity=identity, base=base)
+    expanded = expand(cls.name, cls.Params, table, field, identity=identity, base=base)
     if label is not None:
         if not isinstance(label, str) or not LABEL_PATTERN.match(label):
             raise ConfigError(field.replace(".params", ".label"), "expected letters, digits, spaces or "
                                                                   f"'_.,=+-[]()' (at most 200), got {label!r}"[:200])
         if len(expanded) != 1:
             raise ConfigError(field.replace(".params", ".label"), "a label names one config; remove the grid")
-        problem = _label_problem(cls.name, label, expanded[0].params, bare_means_defaults=False)
+        problem = label_problem(cls.name, label, expanded[0].params, bare_means_defaults=False)
         if problem:
             raise ConfigError(field.replace(".params", ".label"), problem)
         expanded = [ComponentConfig(cls.name, expanded[0].params, label, expanded[0].params_text)]

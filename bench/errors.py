@@ -10,7 +10,7 @@ Each kind has its exit code (docs/running.md, 'Exit codes'; ``bench --help``):
   same command resumes once the cause is fixed;
 * :class:`FolderInUse`, exit 4: another ``bench`` holds the run folder's lock.
 
-Not an error kind: ``bench run`` exits 6 (``bench.cli.EXIT_FAILED_UNITS``) when the run
+Not an error kind: ``bench run`` exits 6 (:data:`EXIT_FAILED_UNITS`) when the run
 folder holds failed (unit, method config) runs, after writing the report and one line
 per failing config on stderr (:mod:`bench.failures`).
 
@@ -25,6 +25,16 @@ import os
 import resource
 import shutil
 from pathlib import Path
+
+#: The exit codes of ``bench`` (``bench --help`` lists them: :data:`bench.cli.EXIT_CODES`),
+#: here so that any module can return one without importing the command line.
+EXIT_BUG = 1
+EXIT_BAD_INPUT = 2
+EXIT_ENVIRONMENT = 3
+EXIT_IN_USE = 4
+EXIT_INTERRUPTED = 130
+EXIT_REGRESSION = 5     # bench compare --fail-on-regression: a metric got significantly worse
+EXIT_FAILED_UNITS = 6   # bench run: some (unit, method config) runs failed (bench.failures)
 
 
 class ConfigError(ValueError):
@@ -60,7 +70,7 @@ def unknown_name(kind: str, name: str, known) -> str:
 class Fault(Exception):
     """The environment refused (file system, disk, store I/O): ``PATH: CAUSE``, exit 3."""
 
-    exit_code = 3
+    exit_code = EXIT_ENVIRONMENT
 
     def __init__(self, path: str | os.PathLike, problem: str):
         self.path, self.problem = str(path), problem
@@ -70,7 +80,7 @@ class Fault(Exception):
 class FolderInUse(Fault):
     """Another ``bench`` process holds the run folder's lock: exit 4."""
 
-    exit_code = 4
+    exit_code = EXIT_IN_USE
 
 
 #: errno values that mean "the path given cannot be used" (bad input, exit 2)

@@ -18,13 +18,10 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from bench import registry
 from bench.errors import ConfigError
-
-if TYPE_CHECKING:
-    from bench.config import Plan, ScenarioConfig
+from bench.plan import Plan, ScenarioConfig
 
 #: the default ``max_unit_memory_gb`` is this fraction of the machine's memory
 #: (:func:`machine_memory_bytes`); N workers hold up to N units at once

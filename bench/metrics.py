@@ -1,6 +1,6 @@
 """Generic statistics of the harness: intervals, bootstrap, RMSE, crossings.
 
-Every task's metrics (bench/tasks/*_metrics.py) are built from these; the
+Every task's metrics (bench/tasks/<task>/metrics.py) are built from these; the
 definitions are in docs/architecture.md, 'Metrics'.
 
 * proportions: Wilson score intervals (``scipy.stats.binomtest``);

@@ -295,21 +295,13 @@ def store_tables() -> set[str]:
     return set(re.findall(r"CREATE TABLE IF NOT EXISTS (\w+)", SCHEMA))
 
 
-def read_only_uri(db: Path) -> str:
-    """The SQLite URI that reads the store ``db`` without writing anything: ``mode=ro``, and
-    ``immutable=1`` when it has no write-ahead log (then the file alone holds every commit;
-    ``mode=ro`` alone would create ``-wal``/``-shm`` beside it, or fail on read-only media).
-    With a log (a run in progress, or one killed), ``mode=ro`` reads its commits too, on
-    read-only media as well."""
-    has_wal = os.path.exists(db.with_name(f"{db.name}-wal")) and os.path.exists(db.with_name(f"{db.name}-shm"))
-    return f"{db.absolute().as_uri()}?mode=ro" + ("" if has_wal else "&immutable=1")
-
-
 def check_store(db: Path, *, need_plan: bool = False) -> None:
     """Refuse (one line, exit 2) a ``results.sqlite`` that is not a bench store (garbage,
     truncated, a folder, a link, another program's SQLite file) without modifying it: read
     its header, then open it read-only (``immutable`` when it has no WAL, so no file is
     created beside it)."""
+    from bench.store import read_only_uri      # the store imports numpy and pandas: only here
+
     def refuse(why: str) -> ConfigError:
         return ConfigError(str(db), f"not a bench results store ({why}); move it away, or choose another folder")
     try:

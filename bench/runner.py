@@ -30,204 +30,25 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import capabilities, failures, registry, tomlw, warmup
+from bench import registry, tomlw, warmup
 from bench.calibration import EQUAL_CHANCE_PD, CalibrationResult, calibrate
-from bench.config import Plan, snr_key
-from bench.executors import (STOP_SIGNALS, SerialExecutor, UnitFailure, error_text, in_worker, make_executor,
-                             restore_handler)
+from bench.plan import Plan
+from bench.executors import STOP_SIGNALS, SerialExecutor, UnitFailure, make_executor, restore_handler
 from bench.identity import PREVIOUS, set_aside_changed
 from bench.progress import Progress
 from bench.provenance import provenance
 from bench.recording.record import TrialRecord
-from bench.rng import CALIBRATION, EVALUATION, TrialRNG
-from bench.store import MethodRun, Store, UnitResult
-from bench.tasks.base import RecordedScene
+from bench.store import Store, UnitResult
+from bench.units import Unit, UnitTask, execute_unit, failed_result, plan_units, unit_methods
 
 RUN_FILES = ("results.sqlite", "results.sqlite-wal", "results.sqlite-shm", "plan.toml", "trials.csv",
              "summary.csv", "calibration.csv", "steps.csv", "report.md", "recording.rrd")
-
-
-@dataclass(frozen=True)
-class Unit:
-    phase: str                  # "calibration" | "evaluation"
-    scenario_index: int
-    scenario_label: str
-    snr_db: float | None
-    trial_start: int
-    n: int
-
-    @property
-    def key(self) -> str:
-        return f"{self.phase}/{self.scenario_label}/{snr_key(self.snr_db)}/{self.trial_start:09d}+{self.n}"
-
-
-@dataclass
-class UnitTask:
-    """What a worker needs to run one unit."""
-
-    plan: Plan
-    unit: Unit
-    thresholds: dict[str, float | None] = field(default_factory=dict)   # evaluation only
-    methods: tuple[str, ...] | None = None     # only these method configs (--retry-failed); None: all
-    isolated: bool = False     # one method config run alone, after the whole unit failed to come back
 
 
 class Interrupted(Exception):
     def __init__(self, stored: int, total: int):
         super().__init__(f"interrupted: {stored} of {total} units are stored")
         self.stored, self.total = stored, total
-
-
-def _chunks(total: int, chunk: int):
-    for start in range(0, total, chunk):
-        yield start, min(chunk, total - start)
-
-
-def _task_of(method_config):
-    """The task (bench.tasks) of a method config."""
-    return registry.get_task(registry.get_method(method_config.name).task)
-
-
-def _calibrated(plan: Plan, sc) -> list:
-    """The method configs on scenario config ``sc`` whose task thresholds a statistic."""
-    return [m for m in plan.pairs(sc) if _task_of(m).calibrated]
-
-
-def plan_units(plan: Plan) -> tuple[list[Unit], list[Unit]]:
-    """Calibration units (null trials, only where some method needs a threshold)
-    and evaluation units, per scenario config at its own SNR levels and trials."""
-    calibration, evaluation = [], []
-    for i, sc in enumerate(plan.scenarios):
-        if _calibrated(plan, sc):
-            for start, n in _chunks(plan.calibration.h0_trials, plan.chunk):
-                calibration.append(Unit("calibration", i, sc.label, None, start, n))
-        for snr in sc.snr_db:
-            for start, n in _chunks(sc.trials, plan.chunk):
-                evaluation.append(Unit("evaluation", i, sc.label, snr, start, n))
-    return calibration, evaluation
-
-
-# ------------------------------------------------------------------ worker side
-
-_error_text = error_text
-
-
-def unit_methods(work: UnitTask) -> list:
-    """The method configs ``work`` runs: on a calibration unit those whose task is
-    calibrated, on an evaluation unit all that run on its scenario config; only
-    ``work.methods`` when it is set."""
-    plan, unit = work.plan, work.unit
-    sc = plan.scenarios[unit.scenario_index]
-    methods = _calibrated(plan, sc) if unit.phase == "calibration" else plan.pairs(sc)
-    return [mc for mc in methods if work.methods is None or mc.label in work.methods]
-
-
-def failed_result(work: UnitTask, cause: str, trace: str | None = None) -> UnitResult:
-    """``work``'s unit with every method config it runs failed for ``cause`` (stored like any
-    result, with the traceback ``trace`` if any: a re-run skips it, ``--retry-failed`` runs it again)."""
-    unit = work.unit
-    return UnitResult(unit.key, unit.phase, unit.scenario_label, unit.snr_db, unit.trial_start, unit.n, 0.0,
-                      runs=[MethodRun(mc.label, 0.0, error=cause, traceback=trace) for mc in unit_methods(work)])
-
-
-def _let_through(exc: BaseException) -> bool:
-    """A Ctrl-C in the driver (the serial executor) stops the run; anything else a plugin
-    raises — SystemExit included, and KeyboardInterrupt in a worker, where no user can
-    type it — is the failure of a unit."""
-    return isinstance(exc, KeyboardInterrupt) and not in_worker()
-
-
-def _measurements_xy(batch, i: int):
-    """Trial ``i``'s measurements in the plane: the scene's ``measurements_xy``,
-    else the first two components of point measurements ``z`` (n, K, m >= 2);
-    None for other measurements (scalars, frames)."""
-    z_xy = batch.scene.measurements_xy
-    if z_xy is not None:
-        return z_xy[i]
-    return batch.z[i][:, :2] if batch.z.ndim == 3 and batch.z.shape[-1] >= 2 else None
-
-
-def _truth_xy(batch, i: int):
-    """Trial ``i``'s truth as drawn in the plane (K, 2) for a single-target truth (n, K, d)
-    (:meth:`bench.core.Scene.drawn_xy`); None for a set of targets (n, K, T, d), which its
-    task draws itself."""
-    return batch.scene.drawn_xy(batch.truth[i], batch.t) if batch.truth.ndim == 3 else None
-
-
-def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict, tasks) -> bytes:
-    """Trial ``i`` as the record the driver draws: the harness's truth and
-    measurements, what each of ``tasks`` keeps of the scene, the methods' traces."""
-    sc = plan.scenarios[unit.scenario_index]
-    scene = RecordedScene.union(task.recorded_scene(batch, i) for task in tasks)
-    rec = TrialRecord(sc.label, unit.snr_db, int(batch.trials[i]), batch.t, truth_xy=_truth_xy(batch, i),
-                      measurements_xy=_measurements_xy(batch, i), methods=traces, arrays=scene.arrays,
-                      images=scene.images, info=scene.info)
-    valid = batch.scene.valid_steps
-    return (rec if valid is None else rec.at_steps(valid[i])).to_bytes()
-
-
-def execute_unit(work: UnitTask) -> UnitResult:
-    """Generate one unit's batch, run every method config on it, evaluate."""
-    registry.discover()
-    plan, unit = work.plan, work.unit
-    sc = plan.scenarios[unit.scenario_index]
-    domain = CALIBRATION if unit.phase == "calibration" else EVALUATION
-    rng = TrialRNG(plan.seed, domain, sc.key, range(unit.trial_start, unit.trial_start + unit.n))
-    methods = unit_methods(work)
-    t0 = time.perf_counter()
-    scenario_cls = None
-    try:
-        scenario_cls = registry.get_scenario(sc.name)
-        batch = scenario_cls().generate(sc.params, unit.snr_db, unit.n, rng)
-        realised = batch.scene.realised_snr_db
-        common = {"trial": np.asarray(batch.trials, np.int64), "seed": rng.seed_values(),
-                  "realised_snr_db": np.asarray(np.full(unit.n, np.nan) if realised is None else realised, float)}
-        recorded = [i for i, t in enumerate(batch.trials) if t < plan.record_trials] \
-            if unit.phase == "evaluation" else []
-    except BaseException as exc:  # noqa: BLE001 - the scenario's failure: every method config's on this unit
-        if _let_through(exc):
-            raise
-        cause, trace = failures.describe(exc, scenario_cls)
-        return failed_result(work, f"the scenario failed to generate the unit: {cause}", trace)
-    result = UnitResult(unit.key, unit.phase, sc.label, unit.snr_db, unit.trial_start, unit.n,
-                        time.perf_counter() - t0)
-    result.common = common
-    traces: dict[int, dict] = {i: {} for i in recorded}
-    for mc in methods:
-        method_cls = registry.get_method(mc.name)
-        run = MethodRun(mc.label, 0.0)
-        t1 = time.perf_counter()
-        try:
-            task = registry.get_task(method_cls.task)
-            task.check_scene(batch)
-            capabilities.check_batch(method_cls, batch)
-            method = method_cls()
-            if unit.phase == "evaluation" and task.calibrated and work.thresholds.get(mc.label) is None:
-                raise RuntimeError("no threshold: the calibration of this method failed")
-            out = task.check_output(method.run(batch, mc.params), batch)
-            if unit.phase == "calibration":
-                run.null_values = task.null_values(batch, out)
-                run.null_peaks = task.null_peaks(batch, out)
-                run.null_cells = task.null_cells(batch, out)
-                run.nominal_threshold = float(method.nominal_threshold(mc.params, plan.calibration.pfa, batch))
-            else:
-                threshold = work.thresholds.get(mc.label)
-                threshold = float("nan") if threshold is None else float(threshold)
-                run.metrics = task.trial_metrics(batch, out, threshold)
-                run.metrics["threshold"] = np.full(unit.n, threshold)
-                for i in recorded:
-                    traces[i][mc.label] = task.recorded_method(batch, out, i, threshold)
-        except BaseException as exc:  # noqa: BLE001 - one method's failure never stops the others
-            if _let_through(exc):
-                raise
-            run.error, run.traceback = failures.describe(exc, method_cls)
-        run.seconds = time.perf_counter() - t1
-        result.runs.append(run)
-    tasks = list(dict.fromkeys(_task_of(mc) for mc in methods))
-    result.records = [(int(batch.trials[i]), _trial_record(plan, unit, batch, i, traces[i], tasks))
-                      for i in recorded]
-    result.snr_definition = batch.scene.snr_definition
-    return result
 
 
 # ------------------------------------------------------------------ driver side

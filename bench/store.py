@@ -28,6 +28,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 import sqlite3
 import time
 import zipfile
@@ -148,6 +149,16 @@ def damaged(path: str | Path, why: str) -> ConfigError:
     return ConfigError(str(path), f"damaged bench results store ({why}); move it away, or choose another folder")
 
 
+def read_only_uri(db: Path) -> str:
+    """The SQLite URI that reads the store ``db`` without writing anything: ``mode=ro``, and
+    ``immutable=1`` when it has no write-ahead log (then the file alone holds every commit;
+    ``mode=ro`` alone would create ``-wal``/``-shm`` beside it, or fail on read-only media).
+    With a log (a run in progress, or one killed), ``mode=ro`` reads its commits too, on
+    read-only media as well."""
+    has_wal = os.path.exists(db.with_name(f"{db.name}-wal")) and os.path.exists(db.with_name(f"{db.name}-shm"))
+    return f"{db.absolute().as_uri()}?mode=ro" + ("" if has_wal else "&immutable=1")
+
+
 class Store:
     """Writes are transactions (``BEGIN IMMEDIATE``: a check and the write that depends
     on it see one state of the store, whoever else writes)."""
@@ -157,7 +168,6 @@ class Store:
         #: the identities units and runs are stamped with as they are saved (use_identities)
         self.stamps: dict[str, dict[str, str]] = {"scenarios": {}, "methods": {}}
         if read_only:       # bench compare: reads, and creates or changes no file (works on read-only media)
-            from bench.runfolder import read_only_uri
             try:
                 self.db = sqlite3.connect(read_only_uri(self.path), uri=True, timeout=30, isolation_level=None)
             except sqlite3.Error as exc:

@@ -19,8 +19,9 @@ import os
 import sys
 
 from bench import registry
-from bench.config import Plan
+from bench.plan import Plan
 from bench.progress import say
+from bench.units import Unit, UnitTask, calibrated_configs, execute_unit
 
 __all__ = ["cache_is_cold", "warm_up_tasks", "run_warm_up", "COMPILING"]
 
@@ -67,12 +68,10 @@ def warm_up_tasks(plan: Plan, announce: str | None = None) -> list:
     each method's kernels compile in one process, with the types a sweep passes them.
     ``announce``: the marker file whose creation elects the one process that says it
     compiles (None: silent)."""
-    from bench.runner import Unit, UnitTask, _calibrated
-
     zero = {m.label: 0.0 for m in plan.methods}
     tasks = []
     for i, sc in enumerate(plan.scenarios):
-        calibrated = {m.label for m in _calibrated(plan, sc)}
+        calibrated = {m.label for m in calibrated_configs(plan, sc)}
         for mc in plan.pairs(sc):
             units = [UnitTask(plan, Unit("calibration", i, sc.label, None, 0, 1), methods=(mc.label,))] \
                 if mc.label in calibrated else []
@@ -104,8 +103,6 @@ def run_warm_up(units_announce) -> None:
     """In a worker: run one pair's warm-up units and drop their results (their failures are the
     real units' to report). With ``announce`` (:func:`warm_up_tasks`), the first kernel numba
     compiles (not one it loads from the cache: numba's ``numba:compile`` event) says so."""
-    from bench.runner import execute_unit
-
     units, announce = units_announce
     if announce is None or _announced:
         for unit in units:

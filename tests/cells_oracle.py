@@ -1,6 +1,6 @@
 """The ideal (known-noise) cell detector, as a test oracle of the cell-detection
 task: it thresholds z / N with N the scene's true noise-plus-clutter power of
-each cell (bench/tasks/cells_metrics.py, 'the ideal detector'). For exponential
+each cell (bench/tasks/cells/metrics.py, 'the ideal detector'). For exponential
 noise P(z / N >= x) = exp(-x), so its statistic -log10 of that, x log10(e),
 is exactly the nominal significance and its nominal threshold -log10(pfa) has
 per-cell Pfa exactly pfa in every clutter region. Registered through an entry

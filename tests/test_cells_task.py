@@ -17,7 +17,7 @@ from bench.calibration import calibrate, cell_order_statistics
 from bench.core import Batch, SceneError
 from bench.tasks.base import OutputError
 from bench.tasks.cells import CellDetectionOutput, CellDetectionTask, MapScene
-from bench.tasks.cells_metrics import (PAIRED_GROUP, REGION_NAMES, cell_trial_metrics, guard_mask, ideal_pd, ideal_snr_at_pd,
+from bench.tasks.cells.metrics import (PAIRED_GROUP, REGION_NAMES, cell_trial_metrics, guard_mask, ideal_pd, ideal_snr_at_pd,
                                        summarise_cells)
 
 HERE = Path(__file__).resolve().parent
@@ -222,7 +222,7 @@ def test_oracle_recording_has_the_maps(oracle_run):
 def test_a_threshold_just_above_a_capped_statistic_declares_nothing():
     """The calibration reads the statistic in float64: a threshold just above a
     float32 cap (e.g. 300) must not be rounded down onto it."""
-    from bench.tasks.cells_metrics import declared_cells
+    from bench.tasks.cells.metrics import declared_cells
 
     stat = np.array([299.0, 300.0, 2.5], np.float32)
     assert declared_cells(stat, np.nextafter(300.0, np.inf)).tolist() == [False, False, False]

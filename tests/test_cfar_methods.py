@@ -12,7 +12,7 @@ from bench import registry
 from bench.errors import ConfigError
 from bench.params import build_params
 from bench.rng import TrialRNG
-from bench.tasks.cells_metrics import REGION_NAMES
+from bench.tasks.cells.metrics import REGION_NAMES
 from models import cfar
 
 CFAR_METHODS = ("ca-cfar", "os-cfar", "go-cfar", "so-cfar", "regression-cfar", "region-adaptive")

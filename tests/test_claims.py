@@ -333,7 +333,7 @@ def _report_folders() -> list[tuple[str, Path]]:
 
 @pytest.mark.parametrize("name, folder", _report_folders(), ids=lambda x: getattr(x, "name", x))
 def test_committed_claims_csv_is_regenerated_identical_from_the_committed_csvs(name, folder):
-    from bench.report import csv_text
+    from bench.tables import csv_text
     committed = folder / "claims.csv"
     assert committed.exists(), (f"{folder.relative_to(ROOT)} has no committed claims.csv (written when the "
                                 f"report is regenerated: bench run --preset {name} --out {folder.relative_to(ROOT)})")

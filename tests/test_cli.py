@@ -27,13 +27,13 @@ SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials
                    "false_switch_rate", "false_switch_low", "false_switch_high", "q_quiet_mean", "q_maneuver_mean",
                    "q_maneuver_low", "q_maneuver_high",
                    "rmse_all_mean", "rmse_all_low", "rmse_all_high", "snr_offset_unit_innovation_db",
-                   # cell detection (bench/tasks/cells_metrics.py), appended after the earlier tasks'
+                   # cell detection (bench/tasks/cells/metrics.py), appended after the earlier tasks'
                    "false_alarms_per_map", "false_alarms_per_map_low", "false_alarms_per_map_high",
                    *(f"{kind}_{region}{end}" for region in ("homogeneous", "bragg", "interference", "clutter_edge",
                                                             "clutter_edge_quiet", "clutter_edge_raised")
                      for kind in ("pd", "pfa") for end in ("", "_low", "_high")),
                    "pd_paired", "pd_paired_low", "pd_paired_high", "targets_per_map", "swerling",
-                   # multi-target tracking (bench/tasks/multitarget_metrics.py)
+                   # multi-target tracking (bench/tasks/multitarget/metrics.py)
                    "scene_pd", "clutter_per_scan", "gospa_cutoff_m", "gospa_order",
                    *(f"{m}_{end}" for m in ("gospa", "gospa_loc", "gospa_missed", "gospa_false", "ospa",
                                             "false_track_rate", "track_breaks", "id_switches", "purity", "init_delay")

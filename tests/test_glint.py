@@ -265,7 +265,7 @@ def test_invalid_line_of_sight_noise_names_the_field():
 def test_derived_spherical_components_are_scored_per_step():
     """The tracking task scores range, bearing and elevation (the paper's Fig. 4
     components) from the scenario's ``derived_components``, against the truth's."""
-    from bench.tasks.tracking_metrics import tracking_trial_metrics
+    from bench.tasks.tracking.metrics import tracking_trial_metrics
     from scenarios.glint import spherical_components
     rng = np.random.default_rng(0)
     truth = np.concatenate([rng.uniform(100, 1000, (4, 5, 3)), rng.normal(size=(4, 5, 3))], axis=-1)

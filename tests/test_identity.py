@@ -332,8 +332,8 @@ def test_a_data_path_is_read_from_the_sweep_folder_and_labelled_by_its_name(tmp_
     resolved = build_params(_PathParams, {"data": "d/x.csv"}, tmp_path)
     assert resolved.data == str(tmp_path / "d" / "x.csv")
     assert build_params(_PathParams, {"data": resolved.data}).data == resolved.data    # a resolved plan
-    from bench.config import ComponentConfig, _label_value
-    assert _label_value(resolved, "data") == "x.csv"
+    from bench.plan import ComponentConfig, label_value
+    assert label_value(resolved, "data") == "x.csv"
     moved = build_params(_PathParams, {"data": "/somewhere/else/x.csv"})
     assert ComponentConfig("s", resolved, "s", "").key == ComponentConfig("s", moved, "s", "").key
 

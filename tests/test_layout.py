@@ -56,3 +56,66 @@ def test_the_checker_sees_imports_inside_functions_and_relative_imports(tmp_path
     module = tmp_path / "m.py"
     module.write_text("from . import x\n\ndef f():\n    import scenarios.glint as g\n")
     assert imported_modules(module, "methods") == {"methods", "methods.x", "scenarios.glint"}
+
+
+# ------------------------------------------------------------------ no import circles
+
+def module_name(path: Path) -> str:
+    """``bench/report/compare.py`` -> ``bench.report.compare``; a package's ``__init__.py`` is the package."""
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def import_graph(paths) -> dict[str, set[str]]:
+    """Module -> the modules of ours it imports (anywhere: at the top, in a function, under
+    TYPE_CHECKING). ``from a.b import c`` imports ``a.b``, and ``a.b.c`` when that is a module."""
+    names = {module_name(p): p for p in paths}
+    return {name: {m for m in imported_names(path.read_text(encoding="utf-8"), name, path.name == "__init__.py")
+                   if m in names and m != name}
+            for name, path in names.items()}
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of two modules or more (Tarjan's algorithm,
+    iterative): each is a set of modules that import one another in a circle."""
+    index, low, on_stack, stack, found = {}, {}, set(), [], []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root), on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is None:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    component = []
+                    while not component or component[-1] != node:
+                        component.append(stack.pop())
+                        on_stack.discard(component[-1])
+                    if len(component) > 1:
+                        found.append(sorted(component))
+            elif child not in index:
+                index[child] = low[child] = len(index)
+                stack.append(child), on_stack.add(child)
+                work.append((child, iter(sorted(graph[child]))))
+            elif child in on_stack:
+                low[node] = min(low[node], index[child])
+    return found
+
+
+def test_no_import_circles_among_our_modules():
+    graph = import_graph([path for package in PACKAGES for path in modules(package)])
+    assert "bench.tasks.cells.metrics" in graph["bench.tasks.cells"]       # the graph sees packages' modules
+    found = circles(graph)
+    assert not found, "import circles (break each by moving what both sides need below them):\n" + "\n".join(
+        " <-> ".join(component) for component in found)
+
+
+def test_the_circle_finder_sees_long_circles_and_only_circles():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": {"e"}, "f": {"g"}, "g": {"f"}}
+    assert sorted(circles(graph)) == [["a", "b", "c"], ["f", "g"]]

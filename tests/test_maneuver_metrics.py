@@ -1,9 +1,9 @@
-"""The tracking task's maneuver metrics (bench/tasks/tracking_metrics.py) on hand-made
+"""The tracking task's maneuver metrics (bench/tasks/tracking/metrics.py) on hand-made
 errors, masks and switch traces whose values are known exactly."""
 
 import numpy as np
 
-from bench.tasks.tracking_metrics import ONSET_WINDOW_STEPS, maneuver_trial_metrics
+from bench.tasks.tracking.metrics import ONSET_WINDOW_STEPS, maneuver_trial_metrics
 
 
 def _case():

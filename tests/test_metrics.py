@@ -6,7 +6,7 @@ from scipy import stats
 
 from bench.calibration import calibrate, empirical_threshold
 from bench.metrics import crossing, snr_at_pd
-from bench.tasks.detection_metrics import detection_trial_metrics
+from bench.tasks.detection.metrics import detection_trial_metrics
 
 
 def test_detection_metrics_follow_the_definitions():

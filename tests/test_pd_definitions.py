@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 
 from bench.calibration import EQUAL_CHANCE_PD, calibrate
-from bench.tasks.detection_metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
+from bench.tasks.detection.metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
 
 
 def test_window_alarm_fraction_and_step_average_pd():

@@ -7,8 +7,8 @@ import pytest
 from bench.config import parse_sweep
 from bench.errors import ConfigError
 from bench.metrics import per_step_rmse, time_averaged_rmse
-from bench.tasks.tbd_metrics import cell_centres_m, summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
-from bench.tasks.tracking_metrics import summarise_tracking, tracking_trial_metrics
+from bench.tasks.tbd.metrics import cell_centres_m, summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
+from bench.tasks.tracking.metrics import summarise_tracking, tracking_trial_metrics
 
 GRID = {"rows": 10, "cols": 10, "cell_m": 100.0, "x_min_m": 1000.0, "y_min_m": 2000.0}
 

@@ -36,6 +36,7 @@ from bench.report.render import comparisons_markdown, glance_markdown, render, s
 from bench.recording import TrialRecord, write_recording
 from bench.runner import calibrations
 from bench.store import Store
+from bench.tables import write_csv
 from bench.tasks import ReportContext, summary_columns
 
 TRIAL_KEYS = ["scenario", "method", "config", "params", "snr_db", "trial", "seed", "realised_snr_db",
@@ -46,15 +47,6 @@ RECORDING_KEYS = ("scenario", "method", "snr_db", "n_trials")
 
 def _write_text(path: Path, text: str) -> None:
     runfolder.write_text(path, text)
-
-
-def csv_text(df: pd.DataFrame) -> str:
-    """A table as every CSV of a run is written (floats in full: they read back bit-exact)."""
-    return df.to_csv(index=False, float_format=None, lineterminator="\n")
-
-
-def _write_csv(df: pd.DataFrame, path: Path) -> None:
-    _write_text(path, csv_text(df))
 
 
 def _scenario_order(record: dict) -> dict[str, int]:
@@ -472,14 +464,14 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     evaluation, paper_vs_ours = _paper_vs_ours(   # the paper-vs-ours table leads a preset's sections
         record.get("source", ""), {"summary": summary, "comparisons": comparisons, "calibration": calibration},
         sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD))
-    _write_csv(trials, out_dir / "trials.csv")
-    _write_csv(summary, out_dir / "summary.csv")
-    _write_csv(calibration, out_dir / "calibration.csv")
+    write_csv(trials, out_dir / "trials.csv")
+    write_csv(summary, out_dir / "summary.csv")
+    write_csv(calibration, out_dir / "calibration.csv")
     if not steps.empty:
-        _write_csv(steps, out_dir / "steps.csv")
-    _write_csv(comparisons, out_dir / "comparisons.csv")
+        write_csv(steps, out_dir / "steps.csv")
+    write_csv(comparisons, out_dir / "comparisons.csv")
     if evaluation is not None:
-        _write_csv(evaluation.frame(), out_dir / "claims.csv")
+        write_csv(evaluation.frame(), out_dir / "claims.csv")
     fig_dir = out_dir / "figures"
     title = sweep["name"]
     contexts = _task_contexts(present, task_of, summary, trials, steps, series, cals, records, store, out_dir, sweep)

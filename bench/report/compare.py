@@ -51,8 +51,7 @@ import pandas as pd
 
 from bench import registry
 from bench.calibration import EQUAL_CHANCE_PD
-from bench.cli import EXIT_REGRESSION
-from bench.errors import ConfigError
+from bench.errors import EXIT_REGRESSION, ConfigError
 from bench.escapes import escape_controls
 from bench.markdown import code, fmt, fmt_db, table, text
 from bench.metrics import CONFIDENCE, mcnemar_exact, paired_difference, stratified_mean, unpaired_difference

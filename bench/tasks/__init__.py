@@ -1,9 +1,9 @@
 """The tasks of the harness: what maneuver detection, tracking,
 track-before-detect and multi-target tracking each mean to it (docs/architecture.md, 'Tasks').
 
-Each task is a :class:`~bench.tasks.base.Task` in its own module, with its
-metrics (``*_metrics.py``) and report sections (``*_report.py``, imported only
-when a report is written) next to it. :func:`bench.registry.tasks` lists the
+Each task is a :class:`~bench.tasks.base.Task` in its own package's ``__init__.py``,
+with its metrics (``metrics.py``) and report sections (``report.py``, imported only
+when a report is written) in the package. :func:`bench.registry.tasks` lists the
 built-ins below, then the tasks of the entry-point group ``bench.tasks``; a
 new task touches its own module and the scenarios and methods that serve it,
 nothing in the harness.

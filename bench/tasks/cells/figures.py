@@ -11,7 +11,7 @@ import pandas as pd
 
 from bench.figures import STYLES, _legend_outside, _save, plt
 from bench.recording.record import TrialRecord
-from bench.tasks.cells_metrics import ideal_pd
+from bench.tasks.cells.metrics import ideal_pd
 
 _REGION_COLORS = ["0.55", "tab:blue", "tab:orange", "tab:green", "tab:purple"]
 

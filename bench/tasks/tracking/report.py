@@ -20,7 +20,7 @@ from bench.markdown import code, fmt, fmt_db, fmt_interval, table, text
 from bench.metrics import bootstrap_mean_interval
 from bench.recording.paths import entity_name as slug
 from bench.tasks.base import ReportContext
-from bench.tasks.tracking_metrics import ONSET_WINDOW_STEPS
+from bench.tasks.tracking.metrics import ONSET_WINDOW_STEPS
 
 
 def _reference_snr(g: pd.DataFrame) -> float:

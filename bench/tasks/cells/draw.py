@@ -17,7 +17,7 @@ from bench.recording.layout import TRUTH_COLOR, TrialLayout
 from bench.recording.paths import rerun_path
 from bench.recording.record import MethodTrace, TrialRecord
 from bench.tasks.base import RecordedScene
-from bench.tasks.cells_metrics import declared_cells
+from bench.tasks.cells.metrics import declared_cells
 from bench.tasks.tbd import cell_pixels
 
 _MAP_COLORMAP = "viridis"

@@ -10,7 +10,7 @@ threshold is ``-log10(pfa)``. The harness calibrates that threshold per cell
 (``nominal``: as is; ``empirical``: the threshold whose pooled per-cell
 exceedance rate on null maps is the requested Pfa, from the null maps' order
 statistics, :func:`bench.calibration.cell_calibration`), then scores targets
-and false alarms per clutter region (:mod:`bench.tasks.cells_metrics`;
+and false alarms per clutter region (:mod:`bench.tasks.cells.metrics`;
 docs/architecture.md, 'Tasks' and 'Metrics').
 
 Its scenarios put a :class:`MapScene` on the batch: the clutter-region label
@@ -45,7 +45,7 @@ from bench.calibration import cell_order_statistics
 from bench.core import Batch, Scene, has_shape, require
 from bench.recording.record import MethodTrace
 from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, check_range
-from bench.tasks.cells_metrics import REGION_NAMES, SUMMARY_COLUMNS, cell_trial_metrics, summarise_cells
+from bench.tasks.cells.metrics import REGION_NAMES, SUMMARY_COLUMNS, cell_trial_metrics, summarise_cells
 
 __all__ = ["CELL_DETECTION", "REGION_NAMES", "CellDetectionOutput", "CellDetectionTask", "MapScene"]
 
@@ -209,11 +209,11 @@ class CellDetectionTask(Task):
                                   guard_cells=sc.guard_cells, swerling=sc.swerling)
 
     def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:
-        from bench.tasks.cells_draw import recorded_scene
+        from bench.tasks.cells.draw import recorded_scene
         return recorded_scene(batch, i)
 
     def recorded_method(self, batch: Batch, out: CellDetectionOutput, i: int, threshold: float) -> MethodTrace:
-        from bench.tasks.cells_draw import recorded_method
+        from bench.tasks.cells.draw import recorded_method
         return recorded_method(batch, out, i, threshold)
 
     # -------------------------------------------------------------- driver side
@@ -222,13 +222,13 @@ class CellDetectionTask(Task):
         return summarise_cells(trials, series)
 
     def log_trial(self, stream, layout, rec) -> None:
-        from bench.tasks.cells_draw import log_trial
+        from bench.tasks.cells.draw import log_trial
         log_trial(self, stream, layout, rec)
 
     def views(self, layout, rec):
-        from bench.tasks.cells_draw import views
+        from bench.tasks.cells.draw import views
         return views(self, layout, rec)
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks import cells_report
-        return cells_report.sections(ctx)
+        from bench.tasks.cells import report
+        return report.sections(ctx)

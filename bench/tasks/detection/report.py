@@ -19,7 +19,7 @@ from bench import figures
 from bench.markdown import code, crossing_difference, crossing_floors, crossing_text, fmt, fmt_db, snr50, table
 from bench.store import Store
 from bench.tasks.base import ReportContext
-from bench.tasks.detection_metrics import roc_curve
+from bench.tasks.detection.metrics import roc_curve
 
 
 def sections(ctx: ReportContext) -> list[str]:

@@ -7,7 +7,7 @@ per region, the masking of paired targets, ROC curves at the reference SNR,
 which detector wins where (with intervals), a paired comparison of every
 config with the others over the whole map, and one RD map with each
 detector's detections (the HFSWR chapter's Fig. 6.24). Definitions in
-:mod:`bench.tasks.cells_metrics`. Imported only when a report is written.
+:mod:`bench.tasks.cells.metrics`. Imported only when a report is written.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from bench.markdown import code, fmt, fmt_crossing, fmt_interval, table, text
 from bench.metrics import bootstrap_mean_interval, snr_at_pd
 from bench.recording.record import TrialRecord
 from bench.tasks.base import ReportContext
-from bench.tasks.cells_figures import map_detections, pd_panels, roc_panels
-from bench.tasks.cells_metrics import (PAIRED_GROUP, REGION_NAMES, ideal_pd, ideal_snr_at_pd, ratio_with_interval,
+from bench.tasks.cells.figures import map_detections, pd_panels, roc_panels
+from bench.tasks.cells.metrics import (PAIRED_GROUP, REGION_NAMES, ideal_pd, ideal_snr_at_pd, ratio_with_interval,
                                        slug)
 
 #: the reference SNR is the lowest level at which the ideal detector reaches this Pd
@@ -266,7 +266,7 @@ def sections(ctx: ReportContext) -> list[str]:
              "Definitions: a target is detected when its cell's statistic reaches the threshold; a false alarm "
              "is a declared cell outside every target's guard box; Pd per clutter region counts isolated "
              "targets, *paired* the targets with a close neighbour; the ideal detector knows each cell's noise "
-             "power (bench/tasks/cells_metrics.py)."]
+             "power (bench/tasks/cells/metrics.py)."]
     reference = {}
     for sc, scene in summary.groupby("scenario", sort=False):
         scene = scene.sort_values(["config", "snr_db"], kind="stable")

@@ -3,7 +3,7 @@
 A detector returns a :class:`~bench.core.DetectionOutput`; the harness
 calibrates its threshold on the null trials' statistic after warm-up, then
 scores detection, delay and false alarms around the maneuver onset
-(:mod:`bench.tasks.detection_metrics`; docs/architecture.md, 'Tasks' and
+(:mod:`bench.tasks.detection.metrics`; docs/architecture.md, 'Tasks' and
 'Metrics'). The chance detection rate and the equal-chance Pd follow Song,
 Ji & Gao 2004 (the cumulant detector's paper) in reading Pd per window.
 
@@ -33,7 +33,7 @@ from bench.recording.layout import TrialLayout
 from bench.recording.paths import rerun_path
 from bench.recording.record import MethodTrace, TrialRecord, check_shape
 from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task
-from bench.tasks.detection_metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
+from bench.tasks.detection.metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
 
 __all__ = ["DetectionScene", "DetectionTask", "method_trace"]
 
@@ -288,9 +288,9 @@ class DetectionTask(Task):
         return Views(top=[top])
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks import detection_report
-        return detection_report.sections(ctx)
+        from bench.tasks.detection import report
+        return report.sections(ctx)
 
     def trial_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks import detection_report
-        return detection_report.timeline(ctx)
+        from bench.tasks.detection import report
+        return report.timeline(ctx)

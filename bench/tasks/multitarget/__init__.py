@@ -3,7 +3,7 @@ against the truths with GOSPA and track-level metrics; no threshold.
 
 A multi-target tracker returns a :class:`MultiTargetOutput`: per scan, a set of
 track slots with a state, an identity and a status (tentative, confirmed,
-terminated). Only confirmed tracks are scored (:mod:`bench.tasks.multitarget_metrics`:
+terminated). Only confirmed tracks are scored (:mod:`bench.tasks.multitarget.metrics`:
 GOSPA with its localisation / missed / false decomposition, OSPA, initiation
 delay, false tracks, breaks, identity switches, purity; docs/architecture.md,
 'Tasks'), as the HFSWR tracking chapter ("目标检测与跟踪方法, 海洋遥感技术应用")
@@ -36,7 +36,7 @@ from bench.recording.layout import TrialLayout
 from bench.recording.record import MethodTrace, TrialRecord
 from bench.tasks.base import (OutputError, RecordedScene, ReportContext, Task, check_covariance, check_estimate,
                               time_series)
-from bench.tasks.multitarget_metrics import (MEANS, SCENE_COLUMNS, multitarget_steps, multitarget_trial_metrics,
+from bench.tasks.multitarget.metrics import (MEANS, SCENE_COLUMNS, multitarget_steps, multitarget_trial_metrics,
                                              summarise_multitarget)
 
 __all__ = ["MULTI_TARGET", "STATUS", "MultiTargetOutput", "MultiTargetScene", "MultiTargetTask"]
@@ -210,7 +210,7 @@ class MultiTargetTask(Task):
     ranking_label = "time-averaged GOSPA (m)"
     curve_column = "gospa_mean"
     recording_charts = (("gospa_mean", "GOSPA (m)"), ("false_track_rate_mean", "false tracks per hour"))
-    scene_entities = ("truths", "plots")                 # bench/tasks/multitarget_recording.py draws them
+    scene_entities = ("truths", "plots")                 # bench/tasks/multitarget/draw.py draws them
     method_entities = ("tracks", "gates", "track_lines")
 
     # -------------------------------------------------------------- worker side
@@ -264,7 +264,7 @@ class MultiTargetTask(Task):
         return multitarget_steps(series).assign(n_trials=len(trials))
 
     def log_trial(self, stream, layout: TrialLayout, rec: TrialRecord) -> None:
-        from bench.tasks import multitarget_recording as draw
+        from bench.tasks.multitarget import draw
         draw.log_scene(stream, layout, rec)
         t = np.asarray(rec.t, dtype=np.float64)
         for m in layout.methods_of(self):
@@ -274,5 +274,5 @@ class MultiTargetTask(Task):
         return Views(has_xy="plots_xy" in rec.arrays or "truths_xy" in rec.arrays)
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks import multitarget_report
-        return multitarget_report.sections(ctx)
+        from bench.tasks.multitarget import report
+        return report.sections(ctx)

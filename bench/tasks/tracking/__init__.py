@@ -2,7 +2,7 @@
 
 A tracker returns a :class:`~bench.core.TrackingOutput`; the harness scores
 position RMSE, divergence and NEES per trial and per step
-(:mod:`bench.tasks.tracking_metrics`; docs/architecture.md, 'Tasks'), as the
+(:mod:`bench.tasks.tracking.metrics`; docs/architecture.md, 'Tasks'), as the
 glint paper (Viterbi vs EKF under glint noise) compares its trackers.
 
 A recorded trial keeps, per tracker, the position estimate (drawn as a track
@@ -35,14 +35,14 @@ from bench.recording.layout import TrialLayout
 from bench.recording.record import MethodTrace, TrialRecord, check_shape
 from bench.tasks.base import (OutputError, RecordedScene, ReportContext, Task, check_covariance, check_estimate,
                               check_finite, check_range, time_series)
-from bench.tasks.tracking_metrics import (SWITCH_TRACES, maneuver_trial_metrics, summarise_tracking,
+from bench.tasks.tracking.metrics import (SWITCH_TRACES, maneuver_trial_metrics, summarise_tracking,
                                           tracking_steps, tracking_trial_metrics)
 
 __all__ = ["TrackingScene", "TrackingTask", "method_trace", "scene"]
 
 _GLINT_COLOR = (255, 40, 90)
 
-#: The traces the metrics score (:data:`~bench.tasks.tracking_metrics.SWITCH_TRACES`) and the
+#: The traces the metrics score (:data:`~bench.tasks.tracking.metrics.SWITCH_TRACES`) and the
 #: values they can take: a value outside is an impossible output, the method's failure.
 SCORED_TRACES = {"mode": (0.0, 1.0, "the maneuver mode's probability, or 1 where it is in use"),
                  "switch": (0.0, 1.0, "a switch decision, 0 or 1"),
@@ -256,6 +256,6 @@ class TrackingTask(Task):
         return Views(has_xy=any("estimate_xy" in rec.methods[m.label].arrays for m in layout.methods_of(self)))
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks import tracking_report
-        return tracking_report.sections(ctx)
+        from bench.tasks.tracking import report
+        return report.sections(ctx)
 

@@ -5,7 +5,7 @@ A TBD method returns a :class:`~bench.core.TBDOutput`; the harness calibrates
 the scene threshold on null scenes (empirical quantile or a Gumbel fit,
 Johnston & Krishnamurthy, IEEE TAES 38(1), 2002), reads the same threshold
 per cell on the null value maps, and scores detection and position error
-(:mod:`bench.tasks.tbd_metrics`; docs/architecture.md, 'Tasks'), as the
+(:mod:`bench.tasks.tbd.metrics`; docs/architecture.md, 'Tasks'), as the
 multi-frame DP-TBD paper and Tonissen & Evans (IEEE TAES 32(4), 1996) do.
 
 Its scenarios put a :class:`TBDScene` on the batch: the :class:`Grid`, the
@@ -47,7 +47,7 @@ from bench.recording.layout import TRUTH_COLOR, MethodLayout, TrialLayout
 from bench.recording.paths import rerun_path
 from bench.recording.record import MethodTrace, TrialRecord, check_shape
 from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, time_series
-from bench.tasks.tbd_metrics import summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
+from bench.tasks.tbd.metrics import summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
 
 __all__ = ["GRID_KEYS", "Grid", "TBDScene", "TBDTask", "method_trace", "scene"]
 
@@ -397,5 +397,5 @@ class TBDTask(Task):
         return Views(top=top, bottom=bottom, draws_scene=bool(images))
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks import tbd_report
-        return tbd_report.sections(ctx)
+        from bench.tasks.tbd import report
+        return report.sections(ctx)
