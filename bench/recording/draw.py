@@ -36,7 +36,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from bench.recording.layout import MEASUREMENT_COLOR, TRUTH_COLOR, TrialLayout
+from bench.recording.layout import MEASUREMENT_COLOR, NEUTRAL_COLOR, TRUTH_COLOR, TrialLayout
 from bench.recording.paths import rerun_path
 from bench.recording.record import Quantised, TrialRecord
 
@@ -181,7 +181,7 @@ def log_colour_scale(stream, image_path: str, q: Quantised, colormap: str) -> No
     stream.log(rerun_path(f"{image_path}/{COLOUR_SCALE}/values"),
                rr.Points2D([[bar_w + 0.5, 0.5], [bar_w + 0.5, height / 2], [bar_w + 0.5, height - 0.5]],
                            labels=[f"{v:.3g}" for v in values], radii=[rr.components.Radius.ui_points(0.5)],
-                           colors=[(230, 230, 230)], show_labels=True), static=True)
+                           colors=[NEUTRAL_COLOR], show_labels=True), static=True)
 
 
 def log_image_series(stream, path: str, q: Quantised, t: np.ndarray, colormap: str, extra: dict | None = None) -> None:

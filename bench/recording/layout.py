@@ -18,14 +18,18 @@ from typing import Any
 from bench.recording.paths import entity_root, method_entity_names
 from bench.recording.record import TrialRecord
 
-__all__ = ["MEASUREMENT_COLOR", "PALETTE", "TRUTH_COLOR", "MethodLayout", "TrialLayout", "method_colors", "trial_layout"]
+__all__ = ["MEASUREMENT_COLOR", "NEUTRAL_COLOR", "PALETTE", "TRUTH_COLOR", "MethodLayout", "TrialLayout", "method_colors", "trial_layout"]
 
-# tab10: distinct on the viewer's dark background.
+# tab10 with its grey replaced by teal (grey is the truth's): distinct on the viewer's dark
+# (native) and light (web, by default) themes alike.
 PALETTE = [
     (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-    (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
+    (140, 86, 75), (227, 119, 194), (0, 128, 128), (188, 189, 34), (23, 190, 207),
 ]
-TRUTH_COLOR = (230, 230, 230)
+#: the truth's and the colour scales' labels: a mid grey, readable on both themes (a light
+#: grey vanishes on the web viewer's light theme)
+NEUTRAL_COLOR = (140, 140, 140)
+TRUTH_COLOR = NEUTRAL_COLOR
 MEASUREMENT_COLOR = (255, 200, 60)
 
 
