@@ -69,6 +69,7 @@ from bench.errors import ConfigError
 from bench.markdown import code, fmt, table
 from bench.params import build_params
 from bench.rng import EVALUATION, TrialRNG, stable_key
+from bench.tables import write_csv
 
 PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "trials_per_second", "chunk",
                 "chunk_seconds_per_trial", "reference",
@@ -467,11 +468,6 @@ def _target_text(targets: dict, row: dict) -> str:
     return "; ".join(checks) or "–"
 
 
-def _write_csv(df: pd.DataFrame, path: Path) -> None:
-    from bench.runfolder import write_text      # whole, under a unique temporary name
-    write_text(path, df.to_csv(index=False, lineterminator="\n"))
-
-
 def prepare_out(out_dir: Path) -> Path:
     """Check and create the output folder before anything is measured: one line (exit 2)
     when it is a file or lies under one, exit 3 when the machine refuses."""
@@ -549,11 +545,11 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
     sweep ``scaling`` timed, ``machine`` holds the limits measured (:func:`machine_limits`)."""
     from bench.provenance import provenance
     prepare_out(out_dir)
-    _write_csv(perf, out_dir / "perf.csv")
+    write_csv(perf, out_dir / "perf.csv")
     if scenes is not None:
-        _write_csv(scenes, out_dir / "scene.csv")
+        write_csv(scenes, out_dir / "scene.csv")
     if machine is not None:
-        _write_csv(pd.DataFrame([machine]), out_dir / "limits.csv")
+        write_csv(pd.DataFrame([machine]), out_dir / "limits.csv")
     rows, rates, notes = [], rate_columns(perf), []
     for row, info in zip(perf.to_dict("records"), extra):
         targets = info["targets"].get(row["size"], info["targets"].get("*", {}))
