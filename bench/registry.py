@@ -10,7 +10,8 @@ A plugin module registers its classes with the decorators::
         ...
 
 :func:`discover` imports every module of the ``methods`` and ``scenarios``
-packages and every entry point of the groups ``bench.methods`` and
+packages and of their family folders (``methods/tbd/``; a name starting with ``_``
+is a helper and left out) and every entry point of the groups ``bench.methods`` and
 ``bench.scenarios`` (third-party packages). Tasks (:mod:`bench.tasks`) are
 the built-ins and the entry points of the group ``bench.tasks``. The built-ins
 come first (tasks, scenarios, methods), then the entry points (tasks before the
@@ -161,6 +162,9 @@ def _import_package_modules(package: str) -> None:
         return
     for info in pkgutil.iter_modules(pkg.__path__, prefix=f"{package}."):
         if info.name.rsplit(".", 1)[-1].startswith("_"):
+            continue
+        if info.ispkg:               # a family folder (methods/tbd/): its modules, in turn
+            _import_package_modules(info.name)
             continue
         try:
             importlib.import_module(info.name)

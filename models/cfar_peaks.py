@@ -5,7 +5,7 @@ The HFSWR detection chain (hfswr-cfar-mn-jpda-ukf in the shared papers,
 sec. 1 "CFAR检测") combines the CFAR result "with the result of a peak
 detection" (结合峰值检测的结果) and prints no neighbourhood: the box of
 +-half_range range and +-half_doppler Doppler cells is our parameter
-(:mod:`methods.cfar`).
+(:mod:`methods.cfar.detectors`).
 """
 
 from __future__ import annotations

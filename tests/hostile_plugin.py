@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 from bench.core import MANEUVER_DETECTION, Method
 from bench.params import param
-from methods.innovation import Innovation
+from methods.maneuver.innovation import Innovation
 
 
 def _misbehaves(batch):

@@ -1,4 +1,4 @@
-"""The CFAR methods on rd-map batches (methods/cfar.py): the SciPy references
+"""The CFAR methods on rd-map batches (methods/cfar/detectors.py): the SciPy references
 give the same output, a strong target is detected by every detector, bad
 parameters are refused with the field named, the threshold factors are the
 closed forms'."""

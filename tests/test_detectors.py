@@ -10,8 +10,8 @@ from bench.params import build_params
 from bench.registry import get_method
 from bench.rng import TrialRNG
 from bench.windows import sliding_sum
-from methods.cumulant import Cumulant, window_third_moment
-from methods.innovation import Innovation, fading_sum, fading_valid_from
+from methods.maneuver.cumulant import Cumulant, window_third_moment
+from methods.maneuver.innovation import Innovation, fading_sum, fading_valid_from
 from models.kalman import innovations
 from scenarios.cv_turn_cv import CvTurnCv
 
@@ -156,7 +156,7 @@ def paper_steps_loop(x: np.ndarray, M: int) -> np.ndarray:
 
 from hypothesis import given, settings, strategies as st  # noqa: E402
 
-from methods.cumulant import lagged_deviation, sample_normalised_cumulant  # noqa: E402
+from methods.maneuver.cumulant import lagged_deviation, sample_normalised_cumulant  # noqa: E402
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)

@@ -11,9 +11,9 @@ from bench.errors import ConfigError
 from bench.params import build_params
 from bench.registry import get_method, get_task
 from bench.rng import CALIBRATION, TrialRNG
-from methods.cusum import Cusum, page_cusum, reference_cusum
-from methods import glr as glr_module
-from methods.glr import JUMPS, Glr, glr_statistic, jump_response, reference_glr, signatures
+from methods.maneuver.cusum import Cusum, page_cusum, reference_cusum
+from methods.maneuver import glr as glr_module
+from methods.maneuver.glr import JUMPS, Glr, glr_statistic, jump_response, reference_glr, signatures
 from models.kalman import (LinearGaussianModel, covariance_sequence, filterpy_innovations, kalman_filter,
                            steady_state)
 from scenarios.cv_turn_cv import CvTurnCv, cv_model, dwna_gain

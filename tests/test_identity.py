@@ -382,10 +382,10 @@ def test_a_store_without_identities_is_rerun_and_its_results_kept_aside(tmp_path
 
 def test_identities_follow_the_plugins_own_modules_only():
     from bench.identity import code_identity
-    cumulant = dict(code_identity("methods.cumulant").modules)
-    assert {"methods.cumulant", "methods._innovation_base", "models.kalman"} <= set(cumulant)
+    cumulant = dict(code_identity("methods.maneuver.cumulant").modules)
+    assert {"methods.maneuver.cumulant", "methods.maneuver.base", "models.kalman"} <= set(cumulant)
     assert not any(m.split(".")[0] in ("bench", "numpy", "scipy") for m in cumulant)
-    assert code_identity("methods.cumulant").hash != code_identity("methods.innovation").hash
+    assert code_identity("methods.maneuver.cumulant").hash != code_identity("methods.maneuver.innovation").hash
 
 
 def test_plan_toml_lists_the_identities(tmp_path):
@@ -424,8 +424,8 @@ def test_a_code_identity_follows_edits_of_the_plugin_and_of_what_it_imports_only
 
 
 def test_a_name_in_a_module_that_fails_to_import_is_not_a_module(tmp_path, monkeypatch):
-    """``from methods.stonesoup_peer import X`` scanned in a module whose peer lacks its extra:
-    locating ``methods.stonesoup_peer.X`` imports the peer, which raises; the scan must go on."""
+    """``from methods.multitarget.stonesoup_peer import X`` scanned in a module whose peer lacks its extra:
+    locating ``methods.multitarget.stonesoup_peer.X`` imports the peer, which raises; the scan must go on."""
     from bench import identity
     (tmp_path / "brokenpkg").mkdir()
     (tmp_path / "brokenpkg" / "__init__.py").write_text("")

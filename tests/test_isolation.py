@@ -16,7 +16,7 @@ from bench.recording import TrialRecord
 from bench.report import build_outputs
 from bench.runner import plan_record, run_sweep
 from bench.store import Store
-from methods.innovation import Innovation
+from methods.maneuver.innovation import Innovation
 
 
 class Fragile(Method):

@@ -14,8 +14,8 @@ from bench.core import Batch
 from bench.params import build_params
 from bench.rng import TrialRNG
 from bench.tasks.tracking import TrackingScene
-from methods._kinematic_base import ca_model, cv_model, cv_prior, linear_model
-from methods.imm import IMMCVCA, filterpy_imm, imm_filter
+from methods.kinematic.base import ca_model, cv_model, cv_prior, linear_model
+from methods.kinematic.imm import IMMCVCA, filterpy_imm, imm_filter
 from models.kalman import kalman_filter, whiten
 from models.kinematics import (KinematicModel, ca, current_statistical_input, current_statistical_variance,
                                per_axis, position_index, singer, state_labels)

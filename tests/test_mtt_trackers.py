@@ -17,9 +17,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from methods import _mtt_kernels as kern
-from methods._jpda import jpda_marginals
-from methods._track_management import (
+from methods.multitarget import kernels as kern
+from methods.multitarget.jpda import jpda_marginals
+from methods.multitarget.track_management import (
     CONFIRMATIONS,
     EkfTrackerParams,
     TrackerParams,
@@ -27,7 +27,7 @@ from methods._track_management import (
     UkfTrackerParams,
     tracker_models,
 )
-from methods.multitarget import GnnEkf, JpdaUkf, gnn_assignment
+from methods.multitarget.trackers import GnnEkf, JpdaUkf, gnn_assignment
 from models.hfswr import measure, measure_jacobian, measurement_residual, plot_to_cartesian
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=8)
@@ -357,7 +357,7 @@ def test_gnn_assignment_minimises_the_gated_distance_and_leaves_ungated_tracks_e
 def test_stonesoup_peer_tracks_a_lone_target():
     """The peer confirms one target in no clutter and follows it within the noise."""
     pytest.importorskip("stonesoup")
-    from methods.stonesoup_peer import StoneSoupJpda
+    from methods.multitarget.stonesoup_peer import StoneSoupJpda
     from tests.test_mtt_trackers import _peer_batch
 
     batch, truth = _peer_batch()

@@ -11,9 +11,9 @@ from bench.errors import ConfigError
 from bench.params import build_params
 from bench.registry import get_method
 from bench.rng import TrialRNG
-from methods import _tbd_pf_kernels
-from methods.dp_tbd import DpTbd
-from methods.pf_tbd import PfTbd, particle_split, residual_predictors
+from methods.tbd import pf_kernels as _tbd_pf_kernels
+from methods.tbd.dp_tbd import DpTbd
+from methods.tbd.pf_tbd import PfTbd, particle_split, residual_predictors
 from scenarios.tbd_grid import TbdGrid
 
 
@@ -46,7 +46,7 @@ def test_residual_predictors_of_white_and_ar_noise():
     betas, var = residual_predictors(scene(None, n=1, noise="white"))
     assert np.array_equal(betas, np.zeros((3, 2))) and np.allclose(var, 1.0)
     betas, var = residual_predictors(scene(None, n=1))
-    # the default AR(3): beta = (1.545, -0.711), sigma_c^2 = 0.0915 (methods.dp_tbd.DpTbdMf)
+    # the default AR(3): beta = (1.545, -0.711), sigma_c^2 = 0.0915 (methods.tbd.dp_tbd.DpTbdMf)
     assert betas[2] == pytest.approx([1.545, -0.711], abs=1e-3) and var[2] == pytest.approx(0.0915, abs=1e-4)
     assert betas[0].tolist() == [0.0, 0.0] and var[0] == pytest.approx(1.0) and betas[1, 1] == 0.0
 

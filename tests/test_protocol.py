@@ -11,8 +11,8 @@ from bench.core import Method, Scenario
 from bench.params import build_params
 from bench.perf import reference_of, scaling_plan
 from bench.rng import TrialRNG
-from methods import _innovation_base
-from methods._innovation_base import InnovationDetector
+from methods.maneuver import base as _innovation_base
+from methods.maneuver.base import InnovationDetector
 
 METHODS = list(registry.methods().items())
 

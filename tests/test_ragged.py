@@ -25,7 +25,7 @@ from bench.metrics import per_step_rmse, time_averaged_rmse
 from bench.recording.record import MethodTrace, TrialRecord
 from bench.tasks.tracking import TrackingScene
 from bench.tasks.tracking.metrics import tracking_trial_metrics
-from methods.kinematic_kf import ConstantVelocityKF
+from methods.kinematic.kinematic_kf import ConstantVelocityKF
 from models.kalman import LinearGaussianModel, kalman_filter
 from models.kinematics import KinematicModel, position_index, state_labels
 from tests.kinematic_plugin import install, load

@@ -337,7 +337,7 @@ def test_the_memory_estimate_follows_the_array_sizes():
 def test_viterbi_refinement_ends_for_every_accepted_position_levels():
     """position_levels = 3 doubled the step each stage (4 / (Lp - 1) = 2) and 5 kept it,
     so the loop never ended, its list growing; now every odd value in [3, 1001] ends."""
-    from methods.viterbi import MAX_REFINEMENT_STAGES, refinement_steps
+    from methods.glint.viterbi import MAX_REFINEMENT_STAGES, refinement_steps
     V = registry.get_method("viterbi")
     meta = {f.name: f.metadata for f in dataclasses.fields(V.Params)}["position_levels"]
     for Lp in range(meta["ge"], meta["le"] + 1, 2):
@@ -359,7 +359,7 @@ def test_viterbi_runs_at_every_accepted_position_levels():
 
 def test_viterbi_results_at_seven_levels_and_more_are_unchanged():
     """The halving applies to 3 and 5 levels only: the grids of 7 and more are the old ones."""
-    from methods.viterbi import refinement_steps
+    from methods.glint.viterbi import refinement_steps
     for Lp in (7, 9, 41, 1001):
         old = [np.array([37.0, 2.0])]
         while old[-1][0] > 0.01:

@@ -13,8 +13,8 @@ from bench.params import build_params
 from bench.registry import PluginError
 from bench.rng import TrialRNG
 
-PEERS = {"methods.stonesoup_peer": "stonesoup-jpda", "methods.stonesoup_gmphd": "stonesoup-gmphd",
-         "methods.stonesoup_mht": "stonesoup-mfa"}
+PEERS = {"methods.multitarget.stonesoup_peer": "stonesoup-jpda", "methods.multitarget.stonesoup_gmphd": "stonesoup-gmphd",
+         "methods.multitarget.stonesoup_mht": "stonesoup-mfa"}
 
 
 @pytest.mark.parametrize("module, name", PEERS.items())
@@ -36,11 +36,11 @@ def test_the_mfa_peer_without_ortools_is_unavailable_with_the_reason(monkeypatch
     unavailable, its reason Stone Soup's line naming the package."""
     pytest.importorskip("stonesoup")
     for loaded in [m for m in sys.modules if m.startswith("stonesoup.dataassociator.mfa")
-                   or m == "ortools" or m.startswith("ortools.")] + ["methods.stonesoup_mht"]:
+                   or m == "ortools" or m.startswith("ortools.")] + ["methods.multitarget.stonesoup_mht"]:
         monkeypatch.delitem(sys.modules, loaded, raising=False)
     monkeypatch.setitem(sys.modules, "ortools", None)
     with pytest.raises(PluginError, match=r"\[peers\] extra.*'ortools'") as err:
-        importlib.import_module("methods.stonesoup_mht")
+        importlib.import_module("methods.multitarget.stonesoup_mht")
     assert err.value.name == "stonesoup-mfa"
 
 

@@ -10,13 +10,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import methods.viterbi as vit
+import methods.glint.viterbi as vit
 from bench.core import TrackingOutput
 from bench.params import build_params
 from bench.registry import get_method
 from bench.rng import TrialRNG
-from methods.ekf import EKF, ekf_filter, filterpy_ekf, noise_covariance
-from methods.viterbi import Viterbi, expand, max_plus_step, trellis_step
+from methods.glint.ekf import EKF, ekf_filter, filterpy_ekf, noise_covariance
+from methods.glint.viterbi import Viterbi, expand, max_plus_step, trellis_step
 from scenarios.glint import Glint
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=4)

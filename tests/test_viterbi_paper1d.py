@@ -13,12 +13,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import methods._viterbi_paper1d as vit
+import methods.glint.viterbi_paper1d as vit
 from bench.errors import ConfigError
 from bench.params import build_params
 from bench.rng import TrialRNG
-from methods._viterbi_paper1d import Component, paper_1d_component
-from methods.viterbi import Viterbi
+from methods.glint.viterbi_paper1d import Component, paper_1d_component
+from methods.glint.viterbi import Viterbi
 from models.spherical import measurement_jacobian, spherical
 from scenarios.glint import Glint
 

@@ -65,7 +65,7 @@ def test_the_dispatcher_scan_passes_over_a_module_global_that_refuses_every_attr
     attribute lookup raises (``isinstance`` asks it for ``__class__``): the kernels are still found."""
     import types
 
-    from methods import _mtt_kernels
+    from methods.multitarget import kernels as _mtt_kernels
     swig_like = types.ModuleType("swig_like")
     swig_like.cvar = _SwigGlobals()
     monkeypatch.setitem(sys.modules, "swig_like", swig_like)

@@ -11,7 +11,7 @@ from bench.errors import ConfigError
 from bench.params import build_params
 from bench.rng import TrialRNG
 from bench.windows import sliding_sum
-from methods.wavelet import (Wavelet, causal_coefficients, first_step, null_threshold, support,
+from methods.maneuver.wavelet import (Wavelet, causal_coefficients, first_step, null_threshold, support,
                              valid_from, wavelet_statistic)
 from models.kalman import innovations
 

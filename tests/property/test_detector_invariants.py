@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 from bench.core import Batch
 from bench.params import build_params
 from bench.rng import TrialRNG
-from methods.cumulant import Cumulant, third_moment_null_variance, window_third_moment
-from methods.innovation import Innovation
+from methods.maneuver.cumulant import Cumulant, third_moment_null_variance, window_third_moment
+from methods.maneuver.innovation import Innovation
 from models.kalman import LinearGaussianFilter, LinearGaussianModel, innovations
 from scenarios.cv_turn_cv import CvTurnCv
 

@@ -17,8 +17,8 @@ from hypothesis import strategies as st
 
 from bench.params import build_params
 from bench.rng import TrialRNG
-from methods.ekf import EKF
-from methods.viterbi import Viterbi, expand, trellis_step, viterbi_path
+from methods.glint.ekf import EKF
+from methods.glint.viterbi import Viterbi, expand, trellis_step, viterbi_path
 from models.glint import (
     gauss_laplace_logpdf,
     gaussian_logpdf,

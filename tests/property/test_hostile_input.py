@@ -241,7 +241,7 @@ def _bad_label(draw):
 
 
 def _bad_method_name(draw):
-    name = draw(st.one_of(st.sampled_from(PATH_LIKE + ["methods.innovation", "innovation.py", "Innovation", HUGE,
+    name = draw(st.one_of(st.sampled_from(PATH_LIKE + ["methods.maneuver.innovation", "innovation.py", "Innovation", HUGE,
                                                         "os.system", "__import__('os')"]),
                           st.text(max_size=30).filter(lambda t: t not in ("innovation", "cumulant", "wavelet"))))
 

@@ -42,7 +42,7 @@ from bench.params import param
 from bench.report import build_outputs
 from bench.report.html import _body, safe_url
 from bench.runner import plan_record, run_sweep
-from methods.innovation import Innovation
+from methods.maneuver.innovation import Innovation
 from scenarios.cv_turn_cv import CvTurnCv
 
 FRAGMENTS = [

@@ -22,8 +22,8 @@ from bench.tasks.tbd import Grid, TBDScene
 from bench.errors import ConfigError
 from bench.params import build_params
 from bench.rng import TrialRNG
-from methods._tbd_reference import reference_dp_tbd
-from methods.dp_tbd import DpTbd, DpTbdMf, turn_log_density
+from methods.tbd.reference import reference_dp_tbd
+from methods.tbd.dp_tbd import DpTbd, DpTbdMf, turn_log_density
 from models.ar_noise import ar_autocovariance
 from scenarios.tbd_grid import TbdGrid
 
