@@ -70,9 +70,9 @@ import numba
 import numpy as np
 import scipy.optimize
 
-from models.cfar_peaks import _local_maxima_row, local_maxima, local_maxima_scipy, with_peaks  # noqa: F401
-from models.cfar_halves import HALVES, halves_log_survival, halves_mu, inverse_counts
-from models.order_statistic import (_os_kth_axis1, _os_kth_lines, _os_log_denominators, _os_log_survival,
+from radarbench.models.cfar_peaks import _local_maxima_row, local_maxima, local_maxima_scipy, with_peaks  # noqa: F401
+from radarbench.models.cfar_halves import HALVES, halves_log_survival, halves_mu, inverse_counts
+from radarbench.models.order_statistic import (_os_kth_axis1, _os_kth_lines, _os_log_denominators, _os_log_survival,
                                     selection_networks)
 
 #: the cap of the significance -log10 Pfa: Pfa = 1e-300, the smallest the calibration accepts

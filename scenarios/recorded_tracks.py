@@ -16,19 +16,19 @@ import numpy as np
 import pandas as pd
 from scipy.signal import savgol_filter
 
-from bench.batched import matvec
-from bench.capabilities import VALID_STEP_MASKS
-from bench.core import MANEUVER_DETECTION, TRACKING, Batch, Scenario
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_scenario
-from bench.tasks.detection import DetectionScene
-from bench.tasks.tracking import TrackingScene
-from models.geodesy import geodetic_to_enu
-from models.kalman import LinearGaussianFilter, steady_state
-from models.kinematics import KinematicModel, per_axis, position_index, state_labels
-from scenarios.cv_turn_cv import cv_model
-from scenarios.maneuvering import MIN_NOISE_M, NOISE_WHY
+from radarbench.bench.batched import matvec
+from radarbench.bench.capabilities import VALID_STEP_MASKS
+from radarbench.bench.core import MANEUVER_DETECTION, TRACKING, Batch, Scenario
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_scenario
+from radarbench.bench.tasks.detection import DetectionScene
+from radarbench.bench.tasks.tracking import TrackingScene
+from radarbench.models.geodesy import geodetic_to_enu
+from radarbench.models.kalman import LinearGaussianFilter, steady_state
+from radarbench.models.kinematics import KinematicModel, per_axis, position_index, state_labels
+from radarbench.scenarios.cv_turn_cv import cv_model
+from radarbench.scenarios.maneuvering import MIN_NOISE_M, NOISE_WHY
 
 MAX_STEPS = 10_000
 #: a file's columns: the track and the time, then planar metres or geodetic degrees

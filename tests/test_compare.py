@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.cli import EXIT_REGRESSION, main
+from radarbench.bench.cli import EXIT_REGRESSION, main
 from conftest import small_sweep_text
 
 OTHER_METHODS = """

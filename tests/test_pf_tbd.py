@@ -6,15 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from bench.core import TBD
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.registry import get_method
-from bench.rng import TrialRNG
-from methods.tbd import pf_kernels as _tbd_pf_kernels
-from methods.tbd.dp_tbd import DpTbd
-from methods.tbd.pf_tbd import PfTbd, particle_split, residual_predictors
-from scenarios.tbd_grid import TbdGrid
+from radarbench.bench.core import TBD
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.registry import get_method
+from radarbench.bench.rng import TrialRNG
+from radarbench.methods.tbd import pf_kernels as _tbd_pf_kernels
+from radarbench.methods.tbd.dp_tbd import DpTbd
+from radarbench.methods.tbd.pf_tbd import PfTbd, particle_split, residual_predictors
+from radarbench.scenarios.tbd_grid import TbdGrid
 
 
 def scene(snr_db, n=3, seed=11, **values):

@@ -15,17 +15,17 @@ import zlib
 import numpy as np
 import pytest
 
-import methods.tbd.alongtrack as alongtrack
-import methods.tbd.kernels as kernels
-import methods.tbd.mf_kernels as mf_kernels
+import radarbench.methods.tbd.alongtrack as alongtrack
+import radarbench.methods.tbd.kernels as kernels
+import radarbench.methods.tbd.mf_kernels as mf_kernels
 import tbd_kernels_oracle as oracle   # beside this file: the previous kernels, frozen
-from bench.core import Batch
-from bench.params import build_params
-from bench.rng import TrialRNG
-from bench.tasks.tbd import Grid, TBDScene
-from methods.tbd import dp_tbd
-from methods.tbd.dp_tbd import LOG_UNIFORM_ANGLE, DpTbd, DpTbdMf
-from scenarios.tbd_grid import TbdGrid
+from radarbench.bench.core import Batch
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.tasks.tbd import Grid, TBDScene
+from radarbench.methods.tbd import dp_tbd
+from radarbench.methods.tbd.dp_tbd import LOG_UNIFORM_ANGLE, DpTbd, DpTbdMf
+from radarbench.scenarios.tbd_grid import TbdGrid
 
 
 def frames_batch(z, gamma=(1.0, 0.0, 0.0)):

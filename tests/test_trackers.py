@@ -10,14 +10,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import methods.glint.viterbi as vit
-from bench.core import TrackingOutput
-from bench.params import build_params
-from bench.registry import get_method
-from bench.rng import TrialRNG
-from methods.glint.ekf import EKF, ekf_filter, filterpy_ekf, noise_covariance
-from methods.glint.viterbi import Viterbi, expand, max_plus_step, trellis_step
-from scenarios.glint import Glint
+import radarbench.methods.glint.viterbi as vit
+from radarbench.bench.core import TrackingOutput
+from radarbench.bench.params import build_params
+from radarbench.bench.registry import get_method
+from radarbench.bench.rng import TrialRNG
+from radarbench.methods.glint.ekf import EKF, ekf_filter, filterpy_ekf, noise_covariance
+from radarbench.methods.glint.viterbi import Viterbi, expand, max_plus_step, trellis_step
+from radarbench.scenarios.glint import Glint
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=4)
 
@@ -155,7 +155,7 @@ def test_disturbance_levels():
 
 
 def test_viterbi_params_validation():
-    from bench.errors import ConfigError
+    from radarbench.bench.errors import ConfigError
     with pytest.raises(ConfigError) as err:
         build_params(Viterbi.Params, {"velocity_levels": 20})
     assert err.value.field == "velocity_levels"

@@ -40,13 +40,13 @@ from functools import partial
 
 import numpy as np
 
-from bench.core import Batch, Method
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_method
-from bench.tasks.cells import CELL_DETECTION, CellDetectionOutput
-from methods.cfar import reference as _cfar_reference
-from models import cfar, cfar_halves, cfar_regression
+from radarbench.bench.core import Batch, Method
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.bench.tasks.cells import CELL_DETECTION, CellDetectionOutput
+from radarbench.methods.cfar import reference as _cfar_reference
+from radarbench.models import cfar, cfar_halves, cfar_regression
 
 #: the longest reference half-window (cells per side); the axis must hold it (checked per scenario)
 MAX_REFERENCE = 256

@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.ndimage
 
-from bench.tasks.cells import CellDetectionOutput
-from models import cfar, cfar_halves, cfar_regression
+from radarbench.bench.tasks.cells import CellDetectionOutput
+from radarbench.models import cfar, cfar_halves, cfar_regression
 
 AXIS = {"range": 1, "doppler": 2}
 

@@ -6,12 +6,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.batched import inner, matmul, matvec
-from bench.core import TRACKING, Batch, Method, TrackingOutput
-from bench.params import param
-from bench.registry import register_method
-from models.glint import GlintModel, glint_model_of
-from models.spherical import measure, measurement_jacobian, measurement_residual
+from radarbench.bench.batched import inner, matmul, matvec
+from radarbench.bench.core import TRACKING, Batch, Method, TrackingOutput
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.models.glint import GlintModel, glint_model_of
+from radarbench.models.spherical import measure, measurement_jacobian, measurement_residual
 
 
 @dataclass(frozen=True)

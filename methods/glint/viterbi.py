@@ -8,14 +8,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.core import TRACKING, Batch, Method, TrackingOutput
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_method
-from methods.glint.viterbi_paper1d import paper_1d_track
-from models.glint import GlintModel, glint_logpdf, glint_model_of
-from models.kalman import LinearGaussianModel, covariance_sequence
-from models.spherical import measure, measurement_residual
+from radarbench.bench.core import TRACKING, Batch, Method, TrackingOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.methods.glint.viterbi_paper1d import paper_1d_track
+from radarbench.models.glint import GlintModel, glint_logpdf, glint_model_of
+from radarbench.models.kalman import LinearGaussianModel, covariance_sequence
+from radarbench.models.spherical import measure, measurement_residual
 
 try:                                    # numba is optional: NumPy versions are the fallback
     import numba

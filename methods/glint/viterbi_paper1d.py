@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from models.glint import GlintModel, glint_logpdf
-from models.spherical import measurement_jacobian, spherical, wrap_angle
+from radarbench.models.glint import GlintModel, glint_logpdf
+from radarbench.models.spherical import measurement_jacobian, spherical, wrap_angle
 
 try:                                    # numba is optional: NumPy versions are the fallback
     import numba

@@ -8,13 +8,13 @@ from functools import partial
 import numpy as np
 import scipy.stats
 
-from bench.batched import inner, matmul, matvec
-from bench.core import TRACKING, Batch, Method, TrackingOutput
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_method
-from models.kalman import predict_batched, update_where
-from models.kinematics import KinematicModel, kinematic_model_of
+from radarbench.bench.batched import inner, matmul, matvec
+from radarbench.bench.core import TRACKING, Batch, Method, TrackingOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.models.kalman import predict_batched, update_where
+from radarbench.models.kinematics import KinematicModel, kinematic_model_of
 
 #: the largest state dimension M (lagged positions) and polynomial order N
 MAX_STATE_DIM = 12

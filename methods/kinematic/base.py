@@ -22,11 +22,11 @@ from typing import ClassVar
 
 import numpy as np
 
-from bench.core import TRACKING, Batch, Method, TrackingOutput
-from methods.maneuver.base import KALMAN_RECURSION
-from models.kalman import LinearGaussianModel
-from bench.params import param
-from models.kinematics import (KinematicModel, ca, cv, cv_components, embed_cv, kinematic_model_of, per_axis,
+from radarbench.bench.core import TRACKING, Batch, Method, TrackingOutput
+from radarbench.methods.maneuver.base import KALMAN_RECURSION
+from radarbench.models.kalman import LinearGaussianModel
+from radarbench.bench.params import param
+from radarbench.models.kinematics import (KinematicModel, ca, cv, cv_components, embed_cv, kinematic_model_of, per_axis,
                                position_measurement)
 
 SIGMA_WHY = "from a millimetre per second squared to 100 g"

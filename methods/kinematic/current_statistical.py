@@ -7,13 +7,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.core import Batch, TrackingOutput
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_method
-from methods.kinematic.base import SIGMA_WHY, KinematicTracker, output
-from models.kalman import predict_batched, update_where
-from models.kinematics import (KinematicModel, current_statistical_input, current_statistical_variance, per_axis,
+from radarbench.bench.core import Batch, TrackingOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.methods.kinematic.base import SIGMA_WHY, KinematicTracker, output
+from radarbench.models.kalman import predict_batched, update_where
+from radarbench.models.kinematics import (KinematicModel, current_statistical_input, current_statistical_variance, per_axis,
                                singer)
 
 AMAX_WHY = "from 0.1 m/s^2 to 100 g; above the largest acceleration the target can have"

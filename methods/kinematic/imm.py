@@ -9,13 +9,13 @@ from functools import partial
 import numba
 import numpy as np
 
-from bench.core import Batch, TrackingOutput
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_method
-from methods.kinematic.base import KinematicTracker, ca_noise_param, cv_ca_modes, cv_noise_param, output
-from models.kalman import LinearGaussianModel, predict_batched, update_where
-from models.kinematics import KinematicModel
+from radarbench.bench.core import Batch, TrackingOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.methods.kinematic.base import KinematicTracker, ca_noise_param, cv_ca_modes, cv_noise_param, output
+from radarbench.models.kalman import LinearGaussianModel, predict_batched, update_where
+from radarbench.models.kinematics import KinematicModel
 
 
 @dataclass(frozen=True)

@@ -8,13 +8,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.core import Batch, TrackingOutput
-from bench.params import param
-from bench.registry import register_method
-from methods.kinematic.base import (SIGMA_WHY, KinematicTracker, ca_model, ca_noise_param, cv_model, cv_noise_param,
+from radarbench.bench.core import Batch, TrackingOutput
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.methods.kinematic.base import (SIGMA_WHY, KinematicTracker, ca_model, ca_noise_param, cv_model, cv_noise_param,
                                     cv_prior, linear_model, output, pad_cv)
-from models.kalman import LinearGaussianModel, filterpy_track, kalman_filter
-from models.kinematics import KinematicModel, singer
+from radarbench.models.kalman import LinearGaussianModel, filterpy_track, kalman_filter
+from radarbench.models.kinematics import KinematicModel, singer
 
 
 class _LinearTracker(KinematicTracker):

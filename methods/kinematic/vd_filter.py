@@ -10,12 +10,12 @@ import numba
 import numpy as np
 from scipy import stats
 
-from bench.core import Batch, TrackingOutput
-from bench.params import param
-from bench.registry import register_method
-from methods.kinematic.base import SIGMA_WHY, KinematicTracker, ca_noise_param, cv_ca_modes, cv_noise_param, output
-from models.kalman import LinearGaussianModel, inverse_logdet, predict_one, small_inverse_into, update_one, update_scratch
-from models.kinematics import KinematicModel
+from radarbench.bench.core import Batch, TrackingOutput
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.methods.kinematic.base import SIGMA_WHY, KinematicTracker, ca_noise_param, cv_ca_modes, cv_noise_param, output
+from radarbench.models.kalman import LinearGaussianModel, inverse_logdet, predict_one, small_inverse_into, update_one, update_scratch
+from radarbench.models.kinematics import KinematicModel
 
 LEVEL_WHY = "a test level: a probability away from 0 and 1"
 

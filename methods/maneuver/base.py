@@ -17,8 +17,8 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Method
-from models.kalman import InnovationSequence, LinearGaussianFilter, innovations, reference_innovations
+from radarbench.bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Method
+from radarbench.models.kalman import InnovationSequence, LinearGaussianFilter, innovations, reference_innovations
 
 #: why a Kalman filter's run has no model of its least cost (``Method.least_cost``, ``bench perf``)
 KALMAN_RECURSION = ("a Kalman recursion: its least work is multiply-adds of small matrices step after step, "

@@ -8,13 +8,13 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.stats
 
-from bench.core import Batch, DetectionOutput
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_method
-from bench.windows import sliding_sum
-from methods.maneuver.base import MAX_WINDOW_STEPS, InnovationDetector, sidak_level, steps_problem
-from models.kalman import InnovationSequence
+from radarbench.bench.core import Batch, DetectionOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.bench.windows import sliding_sum
+from radarbench.methods.maneuver.base import MAX_WINDOW_STEPS, InnovationDetector, sidak_level, steps_problem
+from radarbench.models.kalman import InnovationSequence
 
 
 def window_lengths(steps: int, M: int) -> np.ndarray:

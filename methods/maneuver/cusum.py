@@ -6,13 +6,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.core import Batch, DetectionOutput
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_method
-from methods.maneuver.base import InnovationDetector, reference_filter
-from methods.maneuver.glr import JUMPS, MAX_GLR_WINDOW, Glr
-from models.kalman import InnovationSequence, reference_innovations
+from radarbench.bench.core import Batch, DetectionOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.methods.maneuver.base import InnovationDetector, reference_filter
+from radarbench.methods.maneuver.glr import JUMPS, MAX_GLR_WINDOW, Glr
+from radarbench.models.kalman import InnovationSequence, reference_innovations
 
 #: the per-step scores the sum accumulates
 SCORES = ("nis", "glr")

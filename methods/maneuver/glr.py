@@ -8,12 +8,12 @@ from typing import Iterator
 import numpy as np
 import scipy.stats
 
-from bench.batched import matvec
-from bench.core import Batch, DetectionOutput
-from bench.params import param
-from bench.registry import register_method
-from methods.maneuver.base import InnovationDetector, reference_filter, steps_problem
-from models.kalman import InnovationSequence, LinearGaussianModel, covariance_sequence, filterpy_steps
+from radarbench.bench.batched import matvec
+from radarbench.bench.core import Batch, DetectionOutput
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.methods.maneuver.base import InnovationDetector, reference_filter, steps_problem
+from radarbench.models.kalman import InnovationSequence, LinearGaussianModel, covariance_sequence, filterpy_steps
 
 #: the jumps tested: a step in each measured component's acceleration or velocity
 JUMPS = ("acceleration", "velocity")

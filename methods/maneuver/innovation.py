@@ -8,13 +8,13 @@ import numpy as np
 import scipy.signal
 import scipy.stats
 
-from bench.core import Batch, DetectionOutput
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_method
-from bench.windows import sliding_sum
-from methods.maneuver.base import MAX_WINDOW_STEPS, InnovationDetector, steps_problem
-from models.kalman import InnovationSequence
+from radarbench.bench.core import Batch, DetectionOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.bench.windows import sliding_sum
+from radarbench.methods.maneuver.base import MAX_WINDOW_STEPS, InnovationDetector, steps_problem
+from radarbench.models.kalman import InnovationSequence
 
 #: the fading-memory statistic counts as formed once the weight of the
 #: missing (pre-start) past is below this fraction of its steady total

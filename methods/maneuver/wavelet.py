@@ -9,12 +9,12 @@ import numpy as np
 import pywt
 import scipy.stats
 
-from bench.core import Batch, DetectionOutput
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_method
-from methods.maneuver.base import InnovationDetector, sidak_level, steps_problem
-from models.kalman import InnovationSequence
+from radarbench.bench.core import Batch, DetectionOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.methods.maneuver.base import InnovationDetector, sidak_level, steps_problem
+from radarbench.models.kalman import InnovationSequence
 
 MODES = ("decimated", "sliding")
 COEFFICIENTS = ("approximation", "detail", "both")

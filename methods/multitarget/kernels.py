@@ -73,8 +73,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from methods.multitarget.jpda import jpda_marginals
-from models.ukf import (
+from radarbench.methods.multitarget.jpda import jpda_marginals
+from radarbench.models.ukf import (
     inverse_and_logdet,
     kalman_gain,
     sigma_points,

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.stats
 
-from bench.registry import PluginError
+from radarbench.bench.registry import PluginError
 
 try:
     from stonesoup.hypothesiser.distance import DistanceHypothesiser
@@ -29,10 +29,10 @@ try:
 except ImportError as exc:     # the [peers] extra is missing: the method is unavailable, named, with the reason
     raise PluginError(f'needs the [peers] extra (pip install -e ".[peers]"): {exc}', name="stonesoup-gmphd") from exc
 
-from bench.params import param  # noqa: E402 - after the guarded imports
-from bench.registry import register_method  # noqa: E402
-from methods.multitarget import kernels as kern  # noqa: E402
-from methods.multitarget.track_management import (  # noqa: E402
+from radarbench.bench.params import param  # noqa: E402 - after the guarded imports
+from radarbench.bench.registry import register_method  # noqa: E402
+from radarbench.methods.multitarget import kernels as kern  # noqa: E402
+from radarbench.methods.multitarget.track_management import (  # noqa: E402
     LAMBDA_FLOOR,
     TrialBuffers,
     alpha_param,
@@ -40,8 +40,8 @@ from methods.multitarget.track_management import (  # noqa: E402
     gate_probability_param,
     kappa_param,
 )
-from methods.multitarget.stonesoup_peer import StoneSoupPeer, _Slots, ukf_parts  # noqa: E402
-from models.hfswr import cv_process_noise, cv_transition  # noqa: E402
+from radarbench.methods.multitarget.stonesoup_peer import StoneSoupPeer, _Slots, ukf_parts  # noqa: E402
+from radarbench.models.hfswr import cv_process_noise, cv_transition  # noqa: E402
 
 #: the ``cardinality`` parameter: Stone Soup's point-process updaters
 UPDATERS = {"phd": PHDUpdater, "lcc": LCCUpdater}

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from bench.registry import PluginError
+from radarbench.bench.registry import PluginError
 
 try:
     from stonesoup.dataassociator.mfa import MFADataAssociator   # imports OR-Tools
@@ -24,10 +24,10 @@ try:
 except ImportError as exc:     # the [peers] extra is missing: the method is unavailable, named, with the reason
     raise PluginError(f'needs the [peers] extra (pip install -e ".[peers]"): {exc}', name="stonesoup-mfa") from exc
 
-from bench.params import param  # noqa: E402 - after the guarded imports
-from bench.registry import register_method  # noqa: E402
-from methods.multitarget.track_management import LAMBDA_FLOOR, TrackerParams  # noqa: E402
-from methods.multitarget.stonesoup_peer import InitiatedPeer  # noqa: E402
+from radarbench.bench.params import param  # noqa: E402 - after the guarded imports
+from radarbench.bench.registry import register_method  # noqa: E402
+from radarbench.methods.multitarget.track_management import LAMBDA_FLOOR, TrackerParams  # noqa: E402
+from radarbench.methods.multitarget.stonesoup_peer import InitiatedPeer  # noqa: E402
 
 
 @dataclass(frozen=True)

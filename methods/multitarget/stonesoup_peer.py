@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from bench.registry import PluginError
+from radarbench.bench.registry import PluginError
 
 try:
     from stonesoup.base import Property
@@ -37,11 +37,11 @@ try:
 except ImportError as exc:     # the [peers] extra is missing: the method is unavailable, named, with the reason
     raise PluginError(f'needs the [peers] extra (pip install -e ".[peers]"): {exc}', name="stonesoup-jpda") from exc
 
-from bench.core import Batch, Method  # noqa: E402 - after the guarded imports
-from bench.registry import register_method  # noqa: E402
-from bench.tasks.multitarget import MULTI_TARGET, MultiTargetOutput
-from methods.multitarget import kernels as kern
-from methods.multitarget.track_management import (
+from radarbench.bench.core import Batch, Method  # noqa: E402 - after the guarded imports
+from radarbench.bench.registry import register_method  # noqa: E402
+from radarbench.bench.tasks.multitarget import MULTI_TARGET, MultiTargetOutput
+from radarbench.methods.multitarget import kernels as kern
+from radarbench.methods.multitarget.track_management import (
     LAMBDA_FLOOR,
     TrackerParams,
     TrialBuffers,
@@ -50,7 +50,7 @@ from methods.multitarget.track_management import (
     scene_of,
     tracker_models,
 )
-from models.hfswr import measure, plot_to_cartesian
+from radarbench.models.hfswr import measure, plot_to_cartesian
 
 
 class HFSWRTransition(LinearGaussianTransitionModel):

@@ -18,13 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.stats
 
-from bench.core import Batch
-from bench.errors import ConfigError
-from bench.params import param
-from bench.tasks.multitarget import MultiTargetOutput, MultiTargetScene
-from methods.multitarget import kernels as kern
-from models.hfswr import cv_process_noise, cv_transition
-from models.ukf import merwe_weights
+from radarbench.bench.core import Batch
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.tasks.multitarget import MultiTargetOutput, MultiTargetScene
+from radarbench.methods.multitarget import kernels as kern
+from radarbench.models.hfswr import cv_process_noise, cv_transition
+from radarbench.models.ukf import merwe_weights
 
 #: the smallest clutter density used in logarithms (λ = 0: every gated plot is a target's)
 LAMBDA_FLOOR = 1e-300

@@ -8,11 +8,11 @@ from typing import ClassVar
 import numpy as np
 import scipy.optimize
 
-from bench.core import Batch, Method
-from bench.registry import register_method
-from bench.tasks.multitarget import MULTI_TARGET, MultiTargetOutput
-from methods.multitarget import kernels as kern
-from methods.multitarget.track_management import (
+from radarbench.bench.core import Batch, Method
+from radarbench.bench.registry import register_method
+from radarbench.bench.tasks.multitarget import MULTI_TARGET, MultiTargetOutput
+from radarbench.methods.multitarget import kernels as kern
+from radarbench.methods.multitarget.track_management import (
     CONFIRMATIONS,
     FILTERS,
     EkfTrackerParams,
@@ -114,7 +114,7 @@ class JpdaUkf(_MultiTargetTracker):
         """The Stone Soup peer on the same batch with the same parameters
         (``bench perf``'s baseline; :mod:`methods.multitarget.stonesoup_peer`), the CPU
         seconds of its initiator in :attr:`reference_part_seconds`."""
-        from methods.multitarget.stonesoup_peer import StoneSoupJpda
+        from radarbench.methods.multitarget.stonesoup_peer import StoneSoupJpda
 
         peer = StoneSoupJpda()
         out = peer.run(batch, params)

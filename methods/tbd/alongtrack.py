@@ -38,14 +38,14 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from methods.tbd.kernels import (
+from radarbench.methods.tbd.kernels import (
     NEG_INF,
     _check_finite,
     _fill,
     _first_argmax_2d,
     _fmax,
 )
-from methods.tbd.mf_kernels import (
+from radarbench.methods.tbd.mf_kernels import (
     _checkpoint_slots,
     _common_maxima,
     _heading_classes,

@@ -25,14 +25,14 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.special
 
-from bench.core import TBD, Batch, Method, TBDOutput
-from bench.params import param
-from bench.registry import register_method
-from methods.tbd import alongtrack as _tbd_alongtrack
-from methods.tbd import kernels as _tbd_kernels
-from methods.tbd import mf_kernels as _tbd_mf_kernels
-from methods.tbd.reference import numpy_dp_tbd
-from models.ar_noise import ar_autocovariance, ar_innovation_std, stationary_predictors
+from radarbench.bench.core import TBD, Batch, Method, TBDOutput
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.methods.tbd import alongtrack as _tbd_alongtrack
+from radarbench.methods.tbd import kernels as _tbd_kernels
+from radarbench.methods.tbd import mf_kernels as _tbd_mf_kernels
+from radarbench.methods.tbd.reference import numpy_dp_tbd
+from radarbench.models.ar_noise import ar_autocovariance, ar_innovation_std, stationary_predictors
 
 #: the largest window radius supported: (2q + 1)^2 <= 127 displacements, the
 #: most an int8 can number (the reference kernels' backpointers)

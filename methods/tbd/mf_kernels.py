@@ -13,7 +13,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from methods.tbd.kernels import (
+from radarbench.methods.tbd.kernels import (
     NEG_INF,
     _check_finite,
     _copy_rows,

@@ -36,7 +36,7 @@ import math
 import numba
 import numpy as np
 
-from methods.tbd.kernels import _check_finite
+from radarbench.methods.tbd.kernels import _check_finite
 
 #: draws per particle and frame (see the module docstring)
 SLOTS = 8

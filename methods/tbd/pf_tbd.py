@@ -20,13 +20,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.core import TBD, Batch, Method, TBDOutput
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_method
-from methods.tbd import pf_kernels as _tbd_pf_kernels
-from methods.tbd.reference import reference_pf_tbd
-from methods.tbd.dp_tbd import (
+from radarbench.bench.core import TBD, Batch, Method, TBDOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.methods.tbd import pf_kernels as _tbd_pf_kernels
+from radarbench.methods.tbd.reference import reference_pf_tbd
+from radarbench.methods.tbd.dp_tbd import (
     MAX_SPEED_M_S,
     ConditionalLLR,
     _frames32,

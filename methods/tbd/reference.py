@@ -98,7 +98,7 @@ def reference_pf_tbd(frames, keys, geometry, model, betas, variances, flags):
     """(score (n,), track (n, K, 2)) of the particle-filter TBD (:class:`methods.tbd.pf_tbd.PfTbd`),
     the arguments of :func:`methods.tbd.pf_kernels.pf_tbd`, written with NumPy arrays over the
     particles, one trial and one frame at a time, on the same counter-based draws."""
-    from methods.tbd.pf_kernels import RESAMPLE_SLOT, draws
+    from radarbench.methods.tbd.pf_kernels import RESAMPLE_SLOT, draws
 
     frames = np.asarray(frames)
     n, K, H, W = frames.shape

@@ -10,7 +10,7 @@ from hypothesis import given, settings, seed
 from hypothesis import strategies as st
 from scipy import stats
 
-from methods.kinematic.ar_adaptive import (ar_adaptive_filter, ar_coefficients, exactness_constraints, kinematic_map,
+from radarbench.methods.kinematic.ar_adaptive import (ar_adaptive_filter, ar_coefficients, exactness_constraints, kinematic_map,
                                  lag_map, matched_noise)
 
 

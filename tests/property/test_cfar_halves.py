@@ -12,7 +12,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from models import cfar, cfar_halves
+from radarbench.models import cfar, cfar_halves
 from tests.property.test_cfar_properties import CELLS, LINE, PFA, _assert_binomial, _independent_cells, _noise
 
 window = st.tuples(st.integers(1, 16), st.integers(0, 3))

@@ -18,7 +18,7 @@ import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from models import cfar
+from radarbench.models import cfar
 
 LEVEL = 1.0 - 1e-6
 PFA = 0.01

@@ -19,8 +19,8 @@ import scipy.special
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from models import cfar, cfar_regression
-from models.cfar_regression import Curve
+from radarbench.models import cfar, cfar_regression
+from radarbench.models.cfar_regression import Curve
 from tests.property.test_cfar_properties import CELLS, PFA, _assert_binomial, _noise
 
 
