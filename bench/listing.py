@@ -40,7 +40,7 @@ from radarbench.bench.escapes import escape_controls
 __all__ = ["plugin_listing", "preset_descriptions", "presets"]
 
 #: The packages whose sources the plugin listing depends on.
-PACKAGES = ("bench", "methods", "scenarios", "models")
+PACKAGES = ("radarbench.bench", "radarbench.methods", "radarbench.scenarios", "radarbench.models")
 ENTRY_POINT_GROUPS = ("bench.tasks", "bench.scenarios", "bench.methods")
 #: a paper's claims beside its preset: ``bench/presets/NAME`` + this (:mod:`bench.claims`)
 CLAIMS_SUFFIX = ".claims.toml"

@@ -79,12 +79,25 @@ def replace_old_package(old: str) -> None:
 
 
 def _importer_level() -> int:
-    """The stack level of the frame that wrote the import (past importlib's own frames)."""
+    """The stack level, for :func:`warnings.warn` called by :func:`_warn`, of the module that
+    wrote the import: past this file's frames; the import system's own frames are skipped by
+    :mod:`warnings` itself, so they are not counted."""
     frame, level = sys._getframe(1), 1
-    while frame is not None and (frame.f_code.co_filename.startswith("<frozen importlib")
-                                 or frame.f_code.co_filename == __file__):
-        frame, level = frame.f_back, level + 1
-    return level
+    while True:
+        frame = frame.f_back
+        while frame is not None and _import_system(frame):
+            frame = frame.f_back
+        if frame is None:
+            return level
+        level += 1
+        if frame.f_code.co_filename != __file__:
+            return level
+
+
+def _import_system(frame) -> bool:
+    """A frame :mod:`warnings` skips when it counts ``stacklevel`` (importlib's bootstrap)."""
+    filename = frame.f_code.co_filename
+    return "importlib" in filename and "_bootstrap" in filename
 
 
 def install() -> None:
