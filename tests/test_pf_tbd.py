@@ -11,7 +11,7 @@ from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import get_method
 from radarbench.bench.rng import TrialRNG
-from radarbench.methods.tbd import pf_kernels as _tbd_pf_kernels
+from radarbench.methods.tbd import pf_kernels
 from radarbench.methods.tbd.dp_tbd import DpTbd
 from radarbench.methods.tbd.pf_tbd import PfTbd, particle_split, residual_predictors
 from radarbench.scenarios.tbd_grid import TbdGrid
@@ -102,13 +102,13 @@ def test_draws_are_uniform_and_shared_by_kernel_and_reference():
     """The counter-based uniforms (SplitMix64 outputs) are the same in NumPy and numba,
     lie in (0, 1) and are uniform: a chi-square test on 10 bins of 10^5 draws
     (9 degrees of freedom: 27.9 is the 0.999 quantile)."""
-    key = _tbd_pf_kernels.trial_keys(3, [17])[0]
+    key = pf_kernels.trial_keys(3, [17])[0]
     index = np.arange(100_000, dtype=np.uint64)
-    u = _tbd_pf_kernels.draws(key, 4, index, 2, 100_000)
+    u = pf_kernels.draws(key, 4, index, 2, 100_000)
     assert 0.0 < u.min() and u.max() < 1.0
     counts = np.bincount((u * 10).astype(int), minlength=10)
     chi2 = ((counts - 10_000) ** 2 / 10_000).sum()
     assert chi2 < 27.9
-    compiled = [_tbd_pf_kernels._draw(key, 4, int(i), 2, 100_000) for i in (0, 1, 99_999)]
+    compiled = [pf_kernels._draw(key, 4, int(i), 2, 100_000) for i in (0, 1, 99_999)]
     assert compiled == [u[0], u[1], u[99_999]]
-    assert len(set(_tbd_pf_kernels.trial_keys(0, range(1000)).tolist())) == 1000
+    assert len(set(pf_kernels.trial_keys(0, range(1000)).tolist())) == 1000

@@ -11,7 +11,7 @@ from radarbench.bench.core import Method, Scenario
 from radarbench.bench.params import build_params
 from radarbench.bench.perf import reference_of, scaling_plan
 from radarbench.bench.rng import TrialRNG
-from radarbench.methods.maneuver import base as _innovation_base
+from radarbench.methods.maneuver import base as innovation_base
 from radarbench.methods.maneuver.base import InnovationDetector
 
 METHODS = list(registry.methods().items())
@@ -59,7 +59,7 @@ def test_innovation_detectors_share_the_filterpy_reference(monkeypatch):
         raise AssertionError("the reference must not run the batched filter")
 
     # the reference calls the filterpy loop itself: with the batched filter gone it still runs
-    monkeypatch.setattr(_innovation_base, "innovations", batched)
+    monkeypatch.setattr(innovation_base, "innovations", batched)
     for cls in detectors:
         name, run = reference_of(cls())
         assert name == InnovationDetector.reference_name if cls.name not in own_loop else "filterpy" in name

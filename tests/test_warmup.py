@@ -65,12 +65,12 @@ def test_the_dispatcher_scan_passes_over_a_module_global_that_refuses_every_attr
     attribute lookup raises (``isinstance`` asks it for ``__class__``): the kernels are still found."""
     import types
 
-    from radarbench.methods.multitarget import kernels as _mtt_kernels
+    from radarbench.methods.multitarget import kernels as mtt_kernels
     swig_like = types.ModuleType("swig_like")
     swig_like.cvar = _SwigGlobals()
     monkeypatch.setitem(sys.modules, "swig_like", swig_like)
     found = list(warmup._cached_dispatchers())
-    assert _mtt_kernels.predict_all in found
+    assert mtt_kernels.predict_all in found
 
 @pytest.mark.slow
 def test_a_cold_cache_is_compiled_once_and_said_so_a_warm_one_silently(tmp_path):

@@ -45,7 +45,7 @@ from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_method
 from radarbench.bench.tasks.cells import CELL_DETECTION, CellDetectionOutput
-from radarbench.methods.cfar import reference as _cfar_reference
+from radarbench.methods.cfar import reference
 from radarbench.models import cfar, cfar_halves, cfar_regression
 
 #: the longest reference half-window (cells per side); the axis must hold it (checked per scenario)
@@ -271,7 +271,7 @@ class CaCfar(CfarMethod):
         return window_output(self, maps_of(batch), "ca", params)
 
     def reference_run(self, batch: Batch, params) -> CellDetectionOutput:
-        return _cfar_reference.ca(maps_of(batch), params)
+        return reference.ca(maps_of(batch), params)
 
     def axis_factor(self, params, pfa: float, axis: str) -> float:
         return cfar.ca_threshold_factor(pfa, 2 * getattr(params, f"reference_{axis}"))
@@ -317,7 +317,7 @@ class OsCfar(CfarMethod):
         return window_output(self, maps_of(batch), "os", params)
 
     def reference_run(self, batch: Batch, params) -> CellDetectionOutput:
-        return _cfar_reference.os(maps_of(batch), params)
+        return reference.os(maps_of(batch), params)
 
     def axis_factor(self, params, pfa: float, axis: str) -> float:
         return cfar.os_threshold_factor(pfa, 2 * getattr(params, f"reference_{axis}"), getattr(params, f"k_{axis}"))
@@ -369,7 +369,7 @@ class HalvesCfar(CfarMethod):
         return window_output(self, maps_of(batch), self.detector, params)
 
     def reference_run(self, batch: Batch, params) -> CellDetectionOutput:
-        return _cfar_reference.halves(maps_of(batch), params, self.detector)
+        return reference.halves(maps_of(batch), params, self.detector)
 
     def axis_factor(self, params, pfa: float, axis: str) -> float:
         L = getattr(params, f"reference_{axis}")
@@ -451,7 +451,7 @@ class RegressionCfar(CfarMethod):
         return finish(self, maps, per_axis, params.dimension, params, keep)
 
     def reference_run(self, batch: Batch, params) -> CellDetectionOutput:
-        return _cfar_reference.regression(maps_of(batch), params)
+        return reference.regression(maps_of(batch), params)
 
     def check_scenario(self, params, scenario_params) -> str | None:
         return regression_problem(params.order, params.dimension, scenario_params)

@@ -28,9 +28,7 @@ import scipy.special
 from radarbench.bench.core import TBD, Batch, Method, TBDOutput
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_method
-from radarbench.methods.tbd import alongtrack as _tbd_alongtrack
-from radarbench.methods.tbd import kernels as _tbd_kernels
-from radarbench.methods.tbd import mf_kernels as _tbd_mf_kernels
+from radarbench.methods.tbd import alongtrack, kernels, mf_kernels
 from radarbench.methods.tbd.reference import numpy_dp_tbd
 from radarbench.models.ar_noise import ar_autocovariance, ar_innovation_std, stationary_predictors
 
@@ -165,7 +163,7 @@ class DpTbd(Method):
             z = prewhiten(z, batch)
         q = window_radius(params.max_speed_m_s, batch)
         score, track, value = _outputs(z)
-        _tbd_kernels.dp_tbd(z, q, score, track, value)
+        kernels.dp_tbd(z, q, score, track, value)
         return TBDOutput(score=score, track=track, value=value)
 
     def reference_run(self, batch: Batch, params) -> TBDOutput:
@@ -558,11 +556,11 @@ class DpTbdMf(Method):
             (a0,), (b0,) = coef0, const0
             a1, b1 = (x[1] for x in llr.planes(llr.c_frame1(), llr.var_first))
             a2, b2 = (x[3] for x in llr.planes(llr.c_frame2(), llr.var))
-            _tbd_alongtrack.dp_tbd_mf_along_track(
+            alongtrack.dp_tbd_mf_along_track(
                 z, q, lp, np.float32(LOG_UNIFORM_ANGLE), np.float32(llr.beta_first), np.float32(llr.beta1),
                 np.float32(llr.beta2), a0, b0, a1, b1, a2, b2, score, track, value)
             return TBDOutput(score=score, track=track, value=value)
-        _tbd_mf_kernels.dp_tbd_mf(z, q, lp, np.float32(LOG_UNIFORM_ANGLE),
+        mf_kernels.dp_tbd_mf(z, q, lp, np.float32(LOG_UNIFORM_ANGLE),
                                np.float32(llr.beta_first), np.array([llr.beta1, llr.beta2], np.float32),
                                coef0, const0, coef1, const1, coef2, const2, score, track, value)
         return TBDOutput(score=score, track=track, value=value)

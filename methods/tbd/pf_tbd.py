@@ -24,7 +24,7 @@ from radarbench.bench.core import TBD, Batch, Method, TBDOutput
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_method
-from radarbench.methods.tbd import pf_kernels as _tbd_pf_kernels
+from radarbench.methods.tbd import pf_kernels
 from radarbench.methods.tbd.reference import reference_pf_tbd
 from radarbench.methods.tbd.dp_tbd import (
     MAX_SPEED_M_S,
@@ -160,13 +160,13 @@ class PfTbd(Method):
         birth_proposal: str = param("measurement", "birth cells drawn among the cells whose residual "
                                                    "reaches birth_threshold ('measurement', Rutten et al.) "
                                                    "or uniformly over the grid ('uniform', Salmond & Birch)",
-                                    choices=_tbd_pf_kernels.PROPOSALS)
+                                    choices=pf_kernels.PROPOSALS)
         birth_threshold: float = param(2.5, "residual threshold of the measurement proposal, in units of "
                                             "the residual's std sigma_c", ge=0.0, le=10.0,
                                        why="0 keeps half the cells; beyond 10 no noise cell ever reaches "
                                            "it (the proposal falls back to uniform)")
         resampling: str = param("systematic", "resampling scheme of the N_c survivors",
-                                choices=_tbd_pf_kernels.RESAMPLERS)
+                                choices=pf_kernels.RESAMPLERS)
         max_speed_m_s: float = param(150.0, "birth velocity prior: uniform in |vx|, |vy| <= this (m/s)",
                                      gt=0.0, le=MAX_SPEED_M_S,
                                      why="a speed (> 0) up to Mach 30, as the DP methods' window")
@@ -191,7 +191,7 @@ class PfTbd(Method):
 
     def run(self, batch: Batch, params) -> TBDOutput:
         score, track = np.empty(batch.n), np.empty((batch.n, batch.steps, 2), np.int64)
-        _tbd_pf_kernels.pf_tbd(_frames32(batch), *self._kernel_arguments(batch, params), score, track)
+        pf_kernels.pf_tbd(_frames32(batch), *self._kernel_arguments(batch, params), score, track)
         return TBDOutput(score=score, track=track)
 
     def reference_run(self, batch: Batch, params) -> TBDOutput:
@@ -211,9 +211,9 @@ class PfTbd(Method):
                           params.max_speed_m_s, params.accel_std_m_s2, params.snr_min_db, params.snr_max_db,
                           params.amplitude_walk_db * math.log(10.0) / 20.0, math.sqrt(variances[0]),
                           params.birth_threshold])
-        flags = np.array([_tbd_pf_kernels.PROPOSALS.index(params.birth_proposal),
-                          _tbd_pf_kernels.RESAMPLERS.index(params.resampling)], np.int64)
-        return _tbd_pf_kernels.trial_keys(params.seed, batch.trials), geometry, model, betas, variances, flags
+        flags = np.array([pf_kernels.PROPOSALS.index(params.birth_proposal),
+                          pf_kernels.RESAMPLERS.index(params.resampling)], np.int64)
+        return pf_kernels.trial_keys(params.seed, batch.trials), geometry, model, betas, variances, flags
 
     def work(self, batch: Batch, params) -> tuple[str, float]:
         """Particle updates: particles x frames per trial."""

@@ -18,7 +18,8 @@ from hypothesis import strategies as st
 from radarbench.bench.params import build_params
 from radarbench.bench.rng import TrialRNG
 from radarbench.methods.glint.ekf import EKF
-from radarbench.methods.glint.viterbi import Viterbi, expand, trellis_step, viterbi_path
+from radarbench.methods.glint.trellis import expand, trellis_step, viterbi_path
+from radarbench.methods.glint.viterbi import Viterbi
 from radarbench.models.glint import (
     gauss_laplace_logpdf,
     gaussian_logpdf,
