@@ -12,7 +12,7 @@ regression CFAR suppresses ionospheric interference and low-speed clutter
 to some degree, but in homogeneous regions detects worse than CA and OS";
 and "segment the RD map first, identify the clutter regions, then choose
 the CFAR method suited to each"). The maths (windows, kernels, closed forms,
-the regression fit) is in :mod:`models.cfar` and :mod:`models.cfar_regression`;
+the regression fit) is in :mod:`models.cfar` and :mod:`models.cfar.regression`;
 the straightforward SciPy
 implementations ``bench perf`` times them against are in
 :mod:`methods.cfar.reference`.
@@ -46,7 +46,8 @@ from radarbench.bench.params import param
 from radarbench.bench.registry import register_method
 from radarbench.bench.tasks.cells import CELL_DETECTION, CellDetectionOutput
 from radarbench.methods.cfar import reference
-from radarbench.models import cfar, cfar_halves, cfar_regression
+from radarbench.models import cfar
+from radarbench.models.cfar import halves, regression
 
 #: the longest reference half-window (cells per side); the axis must hold it (checked per scenario)
 MAX_REFERENCE = 256
@@ -90,7 +91,7 @@ def _order(default: int):
 def _family():
     return param("log-polynomial", "curve family: log-polynomial (least squares in the log power, "
                                    "ours) or polynomial (in the linear power, ours); the document prints none",
-                 choices=cfar_regression.FAMILIES)
+                 choices=regression.FAMILIES)
 
 
 def _iterations():
@@ -105,9 +106,9 @@ def _exclusion():
                  why="at least the noise level itself; up to 30 dB above it")
 
 
-def curve_of(params) -> cfar_regression.Curve:
+def curve_of(params) -> regression.Curve:
     """The regression curve of a method's parameters (``family``, ``order``, ``iterations``, ``exclusion_factor``)."""
-    return cfar_regression.Curve(params.family, params.order, params.iterations, params.exclusion_factor)
+    return regression.Curve(params.family, params.order, params.iterations, params.exclusion_factor)
 
 
 def _k(axis: str):
@@ -354,7 +355,7 @@ class HalvesCfar(CfarMethod):
 
     (I the regularised incomplete beta function, o the other half; at
     n_l = n_r = n, Pfa_SO = 2 sum_{k<n} C(n - 1 + k, k) (2 + T/n)^(-(n + k)) and
-    Pfa_GO = 2 (1 + T/n)^(-n) - Pfa_SO; :mod:`models.cfar_halves`), and the
+    Pfa_GO = 2 (1 + T/n)^(-n) - Pfa_SO; :mod:`models.cfar.halves`), and the
     statistic is S = -log10 Pfa(x / mu) per cell; T for a Pfa by root-finding.
     """
 
@@ -373,11 +374,11 @@ class HalvesCfar(CfarMethod):
 
     def axis_factor(self, params, pfa: float, axis: str) -> float:
         L = getattr(params, f"reference_{axis}")
-        return cfar_halves.halves_threshold_factor(pfa, L, L, self.detector == "go")
+        return halves.halves_threshold_factor(pfa, L, L, self.detector == "go")
 
     def axis_factors(self, params, pfa: float, M: int, axis: str) -> np.ndarray:
         left, right = cfar.window_counts(M, getattr(params, f"reference_{axis}"), getattr(params, f"guard_{axis}"))
-        return cfar_halves.halves_factor_along(pfa, left, right, self.detector == "go")
+        return halves.halves_factor_along(pfa, left, right, self.detector == "go")
 
 
 @register_method
@@ -411,14 +412,14 @@ class RegressionCfar(CfarMethod):
     default: strong narrow clutter lines barely lift it) or in the linear
     power ("polynomial", the ablation), optionally refitted without the
     cells far above the noise level (``iterations``, ``exclusion_factor``;
-    :func:`models.cfar_regression.regression_fit`). The noise level is the
+    :func:`models.cfar.regression.regression_fit`). The noise level is the
     fit corrected by the mean of the fitted variable over the cells it
     keeps (exp(fit + gamma) for the plain log fit), so it is unbiased in
     homogeneous noise.
 
     Nominal significance: derived, not calibrated, from each cell's
     leverage under homogeneous exponential noise
-    (:func:`models.cfar_regression.significance`): exact for the linear
+    (:func:`models.cfar.regression.significance`): exact for the linear
     family at order 0 without robust iterations, approximate otherwise.
     Measured on 400 x 64 lines of 256 homogeneous cells (measured / nominal
     Pfa at 1e-2, 1e-3, 1e-4; about +-4 % sampling error at 1e-4), order 4:
@@ -446,7 +447,7 @@ class RegressionCfar(CfarMethod):
     def run(self, batch: Batch, params) -> CellDetectionOutput:
         maps = maps_of(batch)
         keep = cfar.local_maxima(maps, params.peak_range, params.peak_doppler)     # the significance is paid there only
-        per_axis = {axis: cfar_regression.regression_cfar(maps, curve_of(params), axis, keep)
+        per_axis = {axis: regression.regression_cfar(maps, curve_of(params), axis, keep)
                     for axis in active_axes(params.dimension)}
         return finish(self, maps, per_axis, params.dimension, params, keep)
 
@@ -465,11 +466,11 @@ class RegressionCfar(CfarMethod):
     def threshold_factors(self, params, pfa: float, cells: int = 256) -> dict[str, float]:
         """K at the mean leverage (order + 1)/M of a line of M = ``cells`` cells."""
         h = (params.order + 1) / cells
-        return {axis: cfar_regression.threshold_factor(pfa, h, curve_of(params))
+        return {axis: regression.threshold_factor(pfa, h, curve_of(params))
                 for axis in active_axes(params.dimension)}
 
     def axis_factors(self, params, pfa: float, M: int, axis: str) -> np.ndarray:
-        return cfar_regression.factor_along(pfa, M, curve_of(params))
+        return regression.factor_along(pfa, M, curve_of(params))
 
 
 @register_method
@@ -536,7 +537,7 @@ class RegionAdaptive(CfarMethod):
         """(significance, noise estimate) of one detector over the whole maps
         (the regression's significance only where ``keep``: the kept cells of its regions)."""
         if detector == "regression":
-            per_axis = {axis: cfar_regression.regression_cfar(maps, curve_of(params), axis, keep)
+            per_axis = {axis: regression.regression_cfar(maps, curve_of(params), axis, keep)
                         for axis in active_axes(params.regression_dimension)}
             return cfar.combine(per_axis, params.regression_dimension)
         per_axis = {}

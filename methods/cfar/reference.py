@@ -20,7 +20,9 @@ import numpy as np
 import scipy.ndimage
 
 from radarbench.bench.tasks.cells import CellDetectionOutput
-from radarbench.models import cfar, cfar_halves, cfar_regression
+from radarbench.models import cfar
+from radarbench.models.cfar import halves as cfar_halves
+from radarbench.models.cfar import regression as cfar_regression
 
 AXIS = {"range": 1, "doppler": 2}
 
@@ -80,7 +82,7 @@ def os_axis(maps: np.ndarray, L: int, g: int, k: int, axis: str) -> tuple[np.nda
 def halves_axis(maps: np.ndarray, L: int, g: int, axis: str, detector: str) -> tuple[np.ndarray, np.ndarray]:
     """(mu, S) of GO- or SO-CFAR along ``axis``: each half's sum and in-map count by
     correlation with its own footprint, the larger/smaller mean (an empty half:
-    the other's), the closed form by ``scipy.special.betainc`` (:func:`models.cfar_halves.halves_pfa`)."""
+    the other's), the closed form by ``scipy.special.betainc`` (:func:`models.cfar.halves.halves_pfa`)."""
     means, counts = [], []
     M = maps.shape[AXIS[axis]]
     for side in (slice(0, L), slice(L + 2 * g + 1, None)):     # leading half, lagging half

@@ -1,4 +1,4 @@
-"""CFAR detectors on homogeneous exponential noise (models/cfar.py): the
+"""CFAR detectors on homogeneous exponential noise (models/cfar/__init__.py): the
 measured Pfa at the nominal threshold factor equals the closed form, the
 decisions are scale-invariant, and the kernels equal a direct loop.
 

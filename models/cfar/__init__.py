@@ -18,7 +18,7 @@ compared with U0 = K mu:
   (将参考单元中N(N=2L)个信号的值排序,取出其中第k个最小值xk,xk即为噪声估计值μ).
 
 The third detector, the adaptive regression CFAR, fits a curve instead of
-a window: :mod:`models.cfar_regression`.
+a window: :mod:`models.cfar.regression`.
 
 The CA text says the register holds N = 2L + 1 cells and averages "the N
 reference cells"; the register of 2L + 1 includes the cell under test, so
@@ -48,7 +48,7 @@ threshold serves every detector, window and dimension. S is capped at
 
 GO and SO (the larger or smaller of the two half-windows' means, our
 baselines beside the chapter's detectors) share CA's windows and running
-sums; their maths is in :mod:`models.cfar_halves`.
+sums; their maths is in :mod:`models.cfar.halves`.
 
 All kernels take a batch of maps with a leading trial axis; the per-axis
 ones run along axis 1 of a (P, A, B) array (the Doppler axis on the
@@ -56,8 +56,8 @@ transposed maps), and :func:`window_cfar` runs a detector in one fused pass
 per map (CA, GO, SO streamed row by row, :func:`_sum_cfar_rows`; OS,
 :func:`_os_cfar_fused`), bit-identical to its composed steps
 (:func:`window_cfar_composed`, the readable oracle). The order-statistic
-machinery is in :mod:`models.order_statistic`, the peak detection in
-:mod:`models.cfar_peaks` (re-exported here). Single-threaded and free of
+machinery is in :mod:`models.cfar.order_statistic`, the peak detection in
+:mod:`models.cfar.peaks` (re-exported here). Single-threaded and free of
 shared state (parallelism comes from the harness's worker processes; ``bench
 perf`` measures one core).
 """
@@ -70,9 +70,9 @@ import numba
 import numpy as np
 import scipy.optimize
 
-from radarbench.models.cfar_peaks import _local_maxima_row, local_maxima, local_maxima_scipy, with_peaks  # noqa: F401
-from radarbench.models.cfar_halves import HALVES, halves_log_survival, halves_mu, inverse_counts
-from radarbench.models.order_statistic import (_os_kth_axis1, _os_kth_lines, _os_log_denominators, _os_log_survival,
+from radarbench.models.cfar.peaks import _local_maxima_row, local_maxima, local_maxima_scipy, with_peaks  # noqa: F401
+from radarbench.models.cfar.halves import HALVES, halves_log_survival, halves_mu, inverse_counts
+from radarbench.models.cfar.order_statistic import (_os_kth_axis1, _os_kth_lines, _os_log_denominators, _os_log_survival,
                                     selection_networks)
 
 #: the cap of the significance -log10 Pfa: Pfa = 1e-300, the smallest the calibration accepts
@@ -201,7 +201,7 @@ SUM_DETECTORS = ("ca",) + HALVES
 def _window_mean(detector, c_hi, c_lo, c_lhi, c_llo, inv, inv_l, inv_r):
     """mu of one cell from four prefix sums: the right half c_hi - c_lo, the left
     c_lhi - c_llo; CA their mean (the sum in this order, so the kernels agree bit
-    for bit), GO/SO the larger/smaller half mean (:func:`models.cfar_halves.halves_mu`)."""
+    for bit), GO/SO the larger/smaller half mean (:func:`models.cfar.halves.halves_mu`)."""
     if detector == CA:
         return (c_hi - c_lo + c_lhi - c_llo) * inv
     return halves_mu(c_lhi - c_llo, c_hi - c_lo, inv_l, inv_r, detector == GO)
@@ -277,8 +277,8 @@ def window_noise(maps: np.ndarray, detector: str, L: int, g: int, k: int, axis: 
 
 @numba.njit(cache=True, inline="always")
 def _window_sig(detector, t, N, k, log_den):
-    """-log10 Pfa(t) of CA (N = N'), OS (:func:`models.order_statistic._os_log_survival`,
-    N = N', k = k') or GO/SO (:func:`models.cfar_halves.halves_log_survival`,
+    """-log10 Pfa(t) of CA (N = N'), OS (:func:`models.cfar.order_statistic._os_log_survival`,
+    N = N', k = k') or GO/SO (:func:`models.cfar.halves.halves_log_survival`,
     N, k = the halves' n_left, n_right)."""
     if detector == CA:
         return _ca_sig(t, N)
@@ -372,7 +372,7 @@ def _axis_windows(detector: str, windows: dict, sizes: dict) -> tuple[dict, dict
     """The two per-cell window arrays of each axis the closed forms take
     (:func:`_window_sig`): CA ({axis: N'}, {axis: N'}), OS ({axis: N'}, {axis: k'}),
     GO/SO ({axis: n_left}, {axis: n_right}), and the log-denominator table of
-    :func:`models.order_statistic._os_log_survival`, of the windows
+    :func:`models.cfar.order_statistic._os_log_survival`, of the windows
     ``{axis: (L, g, k)}`` on axes of ``sizes`` ``{axis: M}`` cells."""
     counts, ranks, full = {}, {}, 1
     for axis, (L, g, k) in windows.items():
@@ -419,7 +419,7 @@ def ca_cfar(maps: np.ndarray, L: int, g: int, axis: str) -> tuple[np.ndarray, np
 def halves_cfar(maps: np.ndarray, detector: str, L: int, g: int, axis: str) -> tuple[np.ndarray, np.ndarray]:
     """GO- or SO-CFAR (``detector`` "go", "so") along ``axis`` of maps (n, R, D):
     (mu, S) (n, R, D) float32, mu the larger/smaller half-window mean, S =
-    -log10 Pfa(x / mu; n_left, n_right) (:mod:`models.cfar_halves`)."""
+    -log10 Pfa(x / mu; n_left, n_right) (:mod:`models.cfar.halves`)."""
     maps = np.ascontiguousarray(maps, dtype=np.float32)
     mu = window_noise(maps, detector, L, g, 0, axis)
     return mu, window_significance(maps, detector, {axis: (L, g, 0)}, {axis: mu}, axis)
@@ -474,7 +474,7 @@ def _row_scratch(D):
 def _finish_row(x, i, scratch, half_range, half_doppler, mu_r, n_r, k_r, mu_d, n_d, k_d, use_r, use_d, both,
                 detector, log_den, statistic, noise):
     """Row i of a map x (R, D) once its noise estimates ``mu_r``, ``mu_d`` (D,)
-    are known: its local maxima by row views (:func:`models.cfar_peaks._local_maxima_row`;
+    are known: its local maxima by row views (:func:`models.cfar.peaks._local_maxima_row`;
     none when both half-widths are 0), the significance at the kept cells
     (:func:`_row_significance`, the range window (n_r, k_r) of row i), the
     estimates combined (:func:`_combine_row`), into the rows ``statistic``, ``noise``."""
@@ -594,7 +594,7 @@ def _sum_cfar_rows(x, detector, use_r, use_d, both, window_r, window_d, n_r, k_r
     i + g + L + 1 in a ring of 2(g + L) + 2 rows (row j of the prefix in ring
     row j mod its length), row i's range estimate from four of them; the row's
     own Doppler prefix sums and its Doppler estimate; its local maxima by row
-    views (:func:`models.cfar_peaks._local_maxima_row`); the significance at
+    views (:func:`models.cfar.peaks._local_maxima_row`); the significance at
     the kept cells; the estimates combined. The same sums in the same order as
     the composition (:func:`_sum_mean_lines` along each axis), so the result is
     bit-identical. ``window`` = (L, g, 1/N', 1/n_left, 1/n_right per cell)."""
