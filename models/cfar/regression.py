@@ -57,7 +57,7 @@ import scipy.integrate
 import scipy.optimize
 import scipy.special
 
-from radarbench.models.cfar import MAX_SIGNIFICANCE
+from radarbench.models.cfar.windows import MAX_SIGNIFICANCE
 
 FAMILIES = ("log-polynomial", "polynomial")
 _LOG10 = math.log(10.0)
