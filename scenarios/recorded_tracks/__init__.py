@@ -1,20 +1,19 @@
 """Scenario ``recorded-tracks``: segments of recorded trajectories (a user's CSV or
 Parquet file, or the real aircraft of the ``traffic`` package's sample data) as the
-truth, measured in Gaussian noise at the SNR level; tracking and maneuver detection."""
+truth, measured in Gaussian noise at the SNR level; tracking and maneuver detection.
+
+The scenario is here; reading and checking the files in :mod:`.files`, the span bank it
+draws segments from in :mod:`.bank`."""
 
 from __future__ import annotations
 
-import functools
-import math
 import os
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
 import pandas as pd
-from scipy.signal import savgol_filter
 
 from radarbench.bench.batched import matvec
 from radarbench.bench.capabilities import VALID_STEP_MASKS
@@ -24,31 +23,19 @@ from radarbench.bench.params import param
 from radarbench.bench.registry import register_scenario
 from radarbench.bench.tasks.detection import DetectionScene
 from radarbench.bench.tasks.tracking import TrackingScene
-from radarbench.models.geodesy import geodetic_to_enu
 from radarbench.models.kalman import LinearGaussianFilter, steady_state
 from radarbench.models.kinematics import KinematicModel, per_axis, position_index, state_labels
 from radarbench.scenarios.cv_turn_cv import cv_model
 from radarbench.scenarios.maneuvering import MIN_NOISE_M, NOISE_WHY
+from radarbench.scenarios.recorded_tracks.bank import bank_of, is_ragged, maneuver_threshold, replays, source_text
+from radarbench.scenarios.recorded_tracks.files import PLANAR, PLANAR_MEAS, TIME, TRACK, check_sample_name, sample_file
+
 
 MAX_STEPS = 10_000
-#: a file's columns: the track and the time, then planar metres or geodetic degrees
-TRACK, TIME = "track", "time_s"
-PLANAR = ("x_m", "y_m")
-GEODETIC = ("latitude", "longitude")
-ALTITUDE = "altitude_m"
-#: recorded measurements (``measurements = "recorded"``): the same form as the truth's columns
-PLANAR_MEAS = ("x_meas_m", "y_meas_m")
-GEODETIC_MEAS = ("latitude_meas", "longitude_meas")
 #: where measurements come from (RecordedTracks, 'Measurements')
 MEASUREMENTS = ("synthetic", "recorded")
 #: the measurement-noise std of bench perf's racetracks (write_racetracks; m)
 PERF_NOISE_M = 30.0
-#: a ``traffic`` sample: "<category>/<name>", a file traffic/data/samples/<category>/<name>.json.gz
-SAMPLE_NAME = re.compile(r"[a-z0-9_]+/[a-z0-9_]+")
-SAMPLES_DIR = "traffic/data/samples"
-INSTALL_HINT = "pip install '.[data]' (the traffic package, whose wheel holds the samples)"
-FEET_M = 0.3048
-EPOCH = pd.Timestamp(0, tz="UTC")
 #: real turns out of the box: VOR calibration flights (circles and racetracks)
 DEFAULT_SAMPLES = ("calibration/ajaccio", "calibration/bornholm", "calibration/cardiff", "calibration/kiruna",
                    "calibration/munich", "calibration/nice", "calibration/toulouse", "calibration/vienna")
@@ -72,302 +59,6 @@ CV_COMPONENTS = [0, 1, 3, 4]
 class RecordedTrackScene(TrackingScene, DetectionScene):
     """A tracking scene and a detection scene at once: the trackers read the kinematic
     model, the detectors the reference filter (one batch serves both tasks)."""
-
-
-def sample_file(name: str) -> Path:
-    """The installed ``traffic`` sample ``name`` ("calibration/ajaccio"), found through the
-    package's metadata without importing it (its import is heavy); ConfigError naming
-    what to install when the package is absent."""
-    from importlib.metadata import PackageNotFoundError, distribution
-    check_sample_name(name)
-    try:
-        path = Path(distribution("traffic").locate_file(f"{SAMPLES_DIR}/{name}.json.gz"))
-    except PackageNotFoundError:
-        raise ConfigError("traffic_samples", f"the traffic samples need the optional extra: {INSTALL_HINT}") from None
-    if not path.is_file():
-        raise ConfigError("traffic_samples", f"no sample {name!r} in the installed traffic package ({path})")
-    return path
-
-
-def check_sample_name(name: str) -> None:
-    if not SAMPLE_NAME.fullmatch(name):
-        raise ConfigError("traffic_samples", f"{name!r} is not a sample name <category>/<name>, "
-                          "e.g. 'calibration/ajaccio'")
-
-
-def read_sample(name: str) -> pd.DataFrame:
-    """A ``traffic`` sample as a table of this module's columns: the aircraft (icao24) is
-    the track, altitude feet to metres; rows without a position (messages that carried
-    none) and repeated times are dropped."""
-    raw = pd.read_json(sample_file(name), compression="gzip")
-    table = pd.DataFrame({TRACK: name + ":" + raw["icao24"].astype(str),
-                          TIME: (pd.to_datetime(raw["timestamp"], utc=True) - EPOCH).dt.total_seconds(),
-                          GEODETIC[0]: raw["latitude"], GEODETIC[1]: raw["longitude"],
-                          ALTITUDE: pd.to_numeric(raw.get("altitude"), errors="coerce") * FEET_M})
-    table = table.dropna(subset=list(GEODETIC)).sort_values([TRACK, TIME], kind="stable")
-    return table.drop_duplicates([TRACK, TIME]).fillna({ALTITUDE: 0.0})
-
-
-def read_file(path: str) -> pd.DataFrame:
-    """A user's CSV, or Parquet (``.parquet``/``.pq``, with pyarrow), as read."""
-    if path.lower().endswith((".parquet", ".pq")):
-        try:
-            import pyarrow  # noqa: F401
-        except ImportError:
-            raise ConfigError("path", f"{path}: reading Parquet needs pyarrow (pip install pyarrow), "
-                              "or give a CSV") from None
-        return pd.read_parquet(path)
-    try:
-        return pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
-        raise ConfigError("path", f"{path}: not a readable CSV ({str(err).splitlines()[0]})") from None
-
-
-def checked_tracks(table: pd.DataFrame, where: str, recorded: bool = False) -> pd.DataFrame:
-    """The table's tracks as (track, time_s, east, north) in metres, and with ``recorded``
-    the recorded measurements (meas_east, meas_north) in the same frame, or a ConfigError
-    naming ``where`` (the file) and the first problem: a missing column, a non-numeric or
-    NaN value, too few points in a track, times not increasing within a track."""
-    planar = any(c in table for c in PLANAR)
-    columns = [TRACK, TIME, *(PLANAR if planar else GEODETIC)]
-    missing = [c for c in columns if c not in table]
-    if missing:
-        raise ConfigError("path", f"{where}: missing column(s) {', '.join(missing)} (needs {TRACK}, {TIME} and "
-                          f"{' and '.join(PLANAR)} in metres or {' and '.join(GEODETIC)} in degrees)")
-    measured = list(PLANAR_MEAS if planar else GEODETIC_MEAS) if recorded else []
-    missing = [c for c in measured if c not in table]
-    if missing:
-        raise ConfigError("path", f"{where}: missing column(s) {', '.join(missing)}: measurements = 'recorded' "
-                          f"replays them (with {' and '.join(columns[2:])}, the truth)")
-    if table.empty:
-        raise ConfigError("path", f"{where}: no rows")
-    values = {}
-    for c in columns[1:] + measured + ([ALTITUDE] if not planar and ALTITUDE in table else []):
-        col = _numbers(table[c])
-        bad = ~np.isfinite(col)
-        if bad.any():
-            row = int(np.argmax(bad))
-            raise ConfigError("path", f"{where}: column {c} has {int(bad.sum())} missing or non-numeric "
-                              f"value(s), the first in track {table[TRACK].iloc[row]!r} at row {row + 1}")
-        values[c] = col
-    tracks = table[TRACK].astype(str).to_numpy()
-    _check_times(tracks, values[TIME], where)
-    out = pd.DataFrame({TRACK: tracks, TIME: values[TIME]})
-    for prefix, pair in (("", columns[2:]), ("meas_", measured)):
-        if pair:
-            out[prefix + "east"], out[prefix + "north"] = _in_metres(tracks, values, pair, planar)
-    return out
-
-
-def _in_metres(tracks, values: dict, pair, planar: bool) -> tuple[np.ndarray, np.ndarray]:
-    """East and north (m) of the columns ``pair`` (planar metres as they are; latitude and
-    longitude in each track's tangent plane at its first *truth* point, so truth and
-    recorded measurements share the frame)."""
-    if planar:
-        return values[pair[0]], values[pair[1]]
-    return _local_plane(tracks, values[pair[0]], values[pair[1]], values.get(ALTITUDE, np.zeros(len(tracks))),
-                        values[GEODETIC[0]], values[GEODETIC[1]])
-
-
-def _numbers(column: pd.Series) -> np.ndarray:
-    """A column as floats, NaN where not a number; timestamps (a Parquet file's datetime
-    column) as seconds since the Unix epoch."""
-    if pd.api.types.is_datetime64_any_dtype(column):
-        seconds = (column.dt.tz_localize("UTC") if column.dt.tz is None else column) - EPOCH
-        return seconds.dt.total_seconds().to_numpy(float)
-    return pd.to_numeric(column, errors="coerce").to_numpy(float)
-
-
-def _check_times(tracks: np.ndarray, t: np.ndarray, where: str) -> None:
-    """Each track has two points at least, at strictly increasing times (rows in order)."""
-    ids, first, counts = np.unique(tracks, return_index=True, return_counts=True)
-    short = counts < 2
-    if short.any():
-        raise ConfigError("path", f"{where}: track {ids[short][0]!r} has {counts[short][0]} point(s); a track "
-                          "needs two at least")
-    same_track = tracks[1:] == tracks[:-1]
-    back = same_track & (np.diff(t) <= 0)
-    if back.any():
-        row = int(np.argmax(back)) + 1
-        raise ConfigError("path", f"{where}: time does not increase within track {tracks[row]!r} at row "
-                          f"{row + 1} ({t[row - 1]:g} s, then {t[row]:g} s); sort each track by time")
-    if len(ids) != 1 + int(np.count_nonzero(~same_track)):
-        raise ConfigError("path", f"{where}: the rows of a track are not contiguous (track {ids[0]!r} or "
-                          "another comes back after other tracks); group the rows by track")
-
-
-def _local_plane(tracks, lat, lon, alt, lat_ref, lon_ref) -> tuple[np.ndarray, np.ndarray]:
-    """East and north (m) of each track in the tangent plane at its first point of
-    ``lat_ref``, ``lon_ref`` (:func:`models.geodesy.geodetic_to_enu`; height 0 at the reference)."""
-    east, north = np.empty(len(tracks)), np.empty(len(tracks))
-    starts = np.flatnonzero(np.r_[True, tracks[1:] != tracks[:-1]])
-    for a, b in zip(starts, np.r_[starts[1:], len(tracks)]):      # per track (a handful), not per point
-        enu = geodetic_to_enu(lat[a:b], lon[a:b], alt[a:b], lat_ref[a], lon_ref[a], 0.0)
-        east[a:b], north[a:b] = enu[:, 0], enu[:, 1]
-    return east, north
-
-
-@dataclass(frozen=True)
-class Bank:
-    """Every track resampled on the scenario's grid, spans concatenated: position,
-    velocity, acceleration (M, 2) each, the maneuver indicator (M,) (False at a
-    missing step), whether each step was recorded (M,), and the first
-    step of every segment with a maneuver onset at ``onset_step`` (``onsets``) or
-    without a maneuver (``quiet``)."""
-    pos: np.ndarray
-    vel: np.ndarray
-    acc: np.ndarray
-    maneuvering: np.ndarray
-    onsets: np.ndarray
-    quiet: np.ndarray
-    spans: int
-    #: (M,) bool: False at the steps inside a masked gap (``masked_gap_s``) and, replaying, at
-    #: the steps without a recorded measurement; True elsewhere
-    valid: np.ndarray
-    #: (M, 2) replaying: the recorded measurement of each step (NaN where none); else None
-    z: np.ndarray | None = None
-
-
-def _span_states(t: np.ndarray, xy: np.ndarray, dt: float, window: int) -> np.ndarray:
-    """(k, 3, 2) position, velocity, acceleration on the grid t0 + dt j inside the span: the
-    recorded positions interpolated linearly onto the grid, then a Savitzky-Golay filter of
-    ``window`` steps (a local least-squares cubic, its value and first two derivatives)."""
-    grid = t[0] + dt * np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
-    on_grid = np.stack([np.interp(grid, t, xy[:, axis]) for axis in range(2)], axis=-1)
-    return np.stack([savgol_filter(on_grid, window, 3, deriv=order, delta=dt, axis=0, mode="interp")
-                     for order in range(3)], axis=1)
-
-
-def _gap_steps(t: np.ndarray, dt: float, steps: int, max_gap_s: float) -> np.ndarray:
-    """(steps,) bool: the grid steps t0 + dt j strictly inside a recorded gap over
-    ``max_gap_s`` (no point of the track near them: missing, not interpolated)."""
-    grid = t[0] + dt * np.arange(steps)
-    after = np.clip(np.searchsorted(t, grid, side="right"), 1, len(t) - 1)   # t[after - 1] <= grid < t[after]
-    return (grid > t[after - 1]) & (grid < t[after]) & (t[after] - t[after - 1] > max_gap_s)
-
-
-def _on_grid(t: np.ndarray, z: np.ndarray, dt: float, steps: int) -> np.ndarray:
-    """(steps, 2) recorded measurements on the grid t0 + dt j: each sample on its nearest
-    step, the first sample where two fall on one step, NaN on a step with none."""
-    step = np.rint((t - t[0]) / dt).astype(np.int64)
-    keep = step < steps                                  # the grid ends at or before the last sample
-    first = np.unique(step[keep], return_index=True)[1]  # times increase: the earliest sample of each step
-    out = np.full((steps, 2), np.nan)
-    out[step[keep][first]] = z[keep][first]
-    return out
-
-
-def maneuver_size(states: np.ndarray, measure: str) -> np.ndarray:
-    """(M,) per step: |a| (m/s^2), or the turn rate |v x a| / |v|^2 in deg/s (0 below 1 m/s,
-    where a heading is not defined: a hovering helicopter does not turn)."""
-    (vx, vy), (ax, ay) = states[:, 1].T, states[:, 2].T
-    if measure == "acceleration":
-        return np.hypot(ax, ay)
-    speed_sq = vx * vx + vy * vy
-    rate = np.abs(vx * ay - vy * ax) / np.maximum(speed_sq, 1.0)
-    return np.where(speed_sq >= 1.0, np.rad2deg(rate), 0.0)
-
-
-def maneuver_threshold(p) -> float:
-    return p.maneuver_threshold_m_s2 if p.maneuver_measure == "acceleration" else p.turn_rate_threshold_deg_s
-
-
-def smoothing_steps(p) -> int:
-    """The Savitzky-Golay window in steps: ``smoothing_s`` rounded to an odd count, five at least."""
-    return max(5, 2 * int(round(p.smoothing_s / p.dt_s / 2.0)) + 1)
-
-
-def _runs_at_least(flags: np.ndarray, boundary: np.ndarray, length: int) -> np.ndarray:
-    """``flags`` with its runs of True shorter than ``length`` steps cleared; a run ends at a
-    span boundary (``boundary`` True at each span's first step)."""
-    start = flags & (boundary | ~np.r_[False, flags[:-1]])
-    run_id = np.cumsum(start) * flags
-    sizes = np.bincount(run_id)
-    return flags & (sizes[run_id] >= length)
-
-
-def build_bank(p) -> Bank:
-    """The resampled tracks of config ``p`` and the segments a trial can draw
-    (docstring of :class:`RecordedTracks`)."""
-    table = load_tracks(p)
-    window = smoothing_steps(p)
-    parts, boundary, recorded, measured = [], [], [], []
-    for _, track in table.groupby(TRACK, sort=False):
-        t, xy = track[TIME].to_numpy(), track[["east", "north"]].to_numpy()
-        z = track[["meas_east", "meas_north"]].to_numpy() if replays(p) else None
-        cuts = np.flatnonzero(np.diff(t) > max(p.max_gap_s, p.masked_gap_s)) + 1
-        for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(t)]):
-            if t[b - 1] - t[a] >= (max(p.steps, window) - 1) * p.dt_s:
-                states = _span_states(t[a:b], xy[a:b], p.dt_s, window)
-                parts.append(states)
-                boundary.append(np.r_[True, np.zeros(len(states) - 1, bool)])
-                recorded.append(~_gap_steps(t[a:b], p.dt_s, len(states), p.max_gap_s))
-                if z is not None:
-                    measured.append(_on_grid(t[a:b], z[a:b], p.dt_s, len(states)))
-    if not parts:
-        ends = f"masked_gap_s = {p.masked_gap_s:g} s" if masks_gaps(p) else f"max_gap_s = {p.max_gap_s:g} s"
-        raise ConfigError("steps", f"{source_text(p)}: no {'' if masks_gaps(p) else 'gap-free '}span (gaps over "
-                          f"{ends} end one) lasts steps x dt_s = {p.steps} x {p.dt_s:g} s")
-    states, first, valid = np.concatenate(parts), np.concatenate(boundary), np.concatenate(recorded)
-    # a maneuver is seen on the steps the track has: the straight line across a gap is no evidence
-    maneuvering = _runs_at_least((maneuver_size(states, p.maneuver_measure) >= maneuver_threshold(p)) & valid,
-                                 first, p.min_maneuver_steps)
-    z = np.concatenate(measured) if measured else None
-    if z is not None:                       # a step without a measurement is missing, as one in a gap
-        valid = valid & ~np.isnan(z[:, 0])
-    onsets, quiet = _segment_starts(maneuvering, first, valid, p.steps, p.onset_step)
-    return Bank(pos=states[:, 0], vel=states[:, 1], acc=states[:, 2], maneuvering=maneuvering,
-                onsets=onsets, quiet=quiet, spans=len(parts), valid=valid, z=z)
-
-
-def _segment_starts(maneuvering: np.ndarray, first: np.ndarray, valid: np.ndarray, K: int, onset: int):
-    """First steps of the K-step segments inside one span that start at a recorded step:
-    those whose steps before ``onset`` are quiet and whose step ``onset`` maneuvers (so
-    was recorded), and those quiet throughout."""
-    M = len(maneuvering)
-    span_id = np.cumsum(first)
-    s = np.arange(max(M - K + 1, 0))
-    inside = (span_id[s] == span_id[s + K - 1]) & valid[s]
-    busy = np.r_[0, np.cumsum(maneuvering)]                       # maneuvering steps before each index
-    quiet_before = busy[s + onset] - busy[s] == 0
-    quiet_all = busy[s + K] - busy[s] == 0
-    return s[inside & quiet_before & maneuvering[s + onset]], s[inside & quiet_all]
-
-
-def masks_gaps(p) -> bool:
-    """Whether config ``p`` keeps the gaps over ``max_gap_s`` (up to ``masked_gap_s``) in a
-    span, their steps missing."""
-    return p.masked_gap_s > 0.0
-
-
-def replays(p) -> bool:
-    """Whether config ``p`` replays the file's recorded measurements."""
-    return p.measurements == "recorded"
-
-
-def is_ragged(p) -> bool:
-    """Whether the trials of config ``p`` may miss steps: masked gaps, lengths under ``steps``,
-    or replayed measurements (a step may have none)."""
-    return masks_gaps(p) or 0 < p.min_steps < p.steps or replays(p)
-
-
-def source_text(p) -> str:
-    return p.path or "traffic samples " + ", ".join(p.traffic_samples)
-
-
-def load_tracks(p) -> pd.DataFrame:
-    """The config's tracks (track, time_s, east, north), checked (:func:`checked_tracks`)."""
-    if p.path:
-        return checked_tracks(read_file(p.path), p.path, replays(p))
-    return pd.concat([checked_tracks(read_sample(name), f"traffic sample {name}", replays(p))
-                      for name in p.traffic_samples], ignore_index=True)
-
-
-@functools.lru_cache(maxsize=8)
-def bank_of(p) -> Bank:
-    """:func:`build_bank` once per config and process: a worker reads the file once for
-    all its units and trials (params are frozen, hence hashable)."""
-    return build_bank(p)
 
 
 @register_scenario
