@@ -104,7 +104,7 @@ def _limited(limit_mb: int, *args, cwd: Path, env=None) -> subprocess.CompletedP
     and fails."""
     env = {**(env or os.environ), "OPENBLAS_NUM_THREADS": "1", "PYTHONFAULTHANDLER": "1"}
     command = (f"ulimit -v {limit_mb * 1024}; "
-               f"exec timeout -s ABRT 120 {sys.executable} -m bench " + " ".join(map(str, args)))
+               f"exec timeout -s ABRT 120 {sys.executable} -m radarbench.bench " + " ".join(map(str, args)))
     proc = subprocess.run(["bash", "-c", command], cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
     if proc.returncode in (124, 134, -6) and "Fatal Python error: Aborted" in proc.stderr:
         stack = proc.stderr.split("Current thread", 1)[-1].split("\n\n", 1)[0]
