@@ -41,9 +41,9 @@ def run_both(monkeypatch, cls, batch, params):
     """(new, oracle) outputs of one method on one batch."""
     new = cls().run(batch, params)
     with monkeypatch.context() as m:
-        m.setattr(dp_tbd, "_tbd_kernels", oracle)
-        m.setattr(dp_tbd, "_tbd_mf_kernels", oracle)
-        m.setattr(dp_tbd, "_tbd_alongtrack", oracle)
+        m.setattr(dp_tbd, "kernels", oracle)
+        m.setattr(dp_tbd, "mf_kernels", oracle)
+        m.setattr(dp_tbd, "alongtrack", oracle)
         old = cls().run(batch, params)
     return new, old
 
