@@ -7,6 +7,11 @@ computes metrics (:mod:`bench.metrics`) and writes reports and Rerun
 recordings (:mod:`bench.report`, :mod:`bench.recording`).
 """
 
+if not __name__.startswith("radarbench."):   # imported by its old name from a checkout: the new package
+    from radarbench import _compat           # instead, with a deprecation warning (radarbench/_compat.py)
+    _compat.replace_old_package(__name__)
+
+
 import os
 
 __version__ = "0.1.0"

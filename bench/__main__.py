@@ -1,5 +1,5 @@
 import sys
 
-from bench.cli import main
+from radarbench.bench.cli import main
 
 sys.exit(main())

@@ -13,8 +13,8 @@ import os
 import signal
 import sys
 
-import bench.runner  # noqa: F401
-from bench import registry
+import radarbench.bench.runner  # noqa: F401
+from radarbench.bench import registry
 
 PR_SET_PDEATHSIG = 1
 

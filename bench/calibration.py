@@ -39,7 +39,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 
-from bench.metrics import binomial_interval, clustered_rate_interval
+from radarbench.bench.metrics import binomial_interval, clustered_rate_interval
 
 #: the default chance Pd (fraction of null trials with an alarm in the detection
 #: window) that every detector is calibrated to for ``pd_equal_chance``

@@ -33,12 +33,12 @@ from typing import Any, Mapping
 
 import pandas as pd
 
-from bench.errors import ConfigError
-from bench.listing import CLAIMS_SUFFIX
-from bench.markdown import fmt, fmt_db, table
-from bench.quantities import (ALL_LEVELS, INLINE, Missing, Tables, Value, csv_frame,  # noqa: F401 - importable from here
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.listing import CLAIMS_SUFFIX
+from radarbench.bench.markdown import fmt, fmt_db, table
+from radarbench.bench.quantities import (ALL_LEVELS, INLINE, Missing, Tables, Value, csv_frame,  # noqa: F401 - importable from here
                               describe, quantity, read_tables)
-from bench.tables import write_csv
+from radarbench.bench.tables import write_csv
 
 #: the columns of claims.csv, in order
 CLAIMS_COLUMNS = ["id", "claim", "where", "original", "english", "quantity", "value", "low", "high", "unit",
@@ -211,7 +211,7 @@ def load(path: str | Path) -> ClaimsFile:
 def preset_claims(preset: str) -> ClaimsFile | None:
     """The packaged claims of preset ``preset`` (``bench/presets/NAME.claims.toml``), if any."""
     import importlib.resources
-    path = importlib.resources.files("bench") / "presets" / f"{preset}{CLAIMS_SUFFIX}"
+    path = importlib.resources.files("radarbench.bench") / "presets" / f"{preset}{CLAIMS_SUFFIX}"
     return parse(path.read_text(encoding="utf-8"), path.name) if path.is_file() else None
 
 
@@ -319,7 +319,7 @@ def _result(q: dict | None, t: Tables, unit: str = "") -> Result:
 
 
 def _environment():
-    from bench.report.render import environment
+    from radarbench.bench.report.render import environment
     return environment()
 
 
@@ -415,8 +415,8 @@ def claims_markdown(evaluation: Evaluation, notes: str = "") -> str:
 
 def write_folder(folder: str | Path) -> Path:
     """Write claims.csv of a report folder from its committed tables (listed in its
-    manifest, as ``bench report`` writes it): ``python -m bench.claims FOLDER...``."""
-    from bench import runfolder
+    manifest, as ``bench report`` writes it): ``python -m radarbench.bench.claims FOLDER...``."""
+    from radarbench.bench import runfolder
     folder = Path(folder)
     frame = evaluate_folder(folder)
     with runfolder.writing(folder):
@@ -437,7 +437,7 @@ def evaluate_folder(folder: str | Path, file: ClaimsFile | None = None) -> pd.Da
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m bench.claims FOLDER...``: claims.csv of each report folder from its CSVs."""
+    """``python -m radarbench.bench.claims FOLDER...``: claims.csv of each report folder from its CSVs."""
     import sys
     for folder in (sys.argv[1:] if argv is None else argv):
         try:

@@ -25,10 +25,10 @@ import sys
 import traceback
 from pathlib import Path
 
-from bench import __version__
-from bench.errors import (EXIT_BAD_INPUT, EXIT_BUG, EXIT_ENVIRONMENT, EXIT_FAILED_UNITS, EXIT_IN_USE, EXIT_INTERRUPTED,
+from radarbench.bench import __version__
+from radarbench.bench.errors import (EXIT_BAD_INPUT, EXIT_BUG, EXIT_ENVIRONMENT, EXIT_FAILED_UNITS, EXIT_IN_USE, EXIT_INTERRUPTED,
                           EXIT_REGRESSION, ConfigError, Fault, is_out_of_memory, os_fault, unknown_name)
-from bench.listing import plugin_listing, preset_descriptions, presets
+from radarbench.bench.listing import plugin_listing, preset_descriptions, presets
 
 EXIT_CODES = f"""exit codes:
   0    done
@@ -147,7 +147,7 @@ def cmd_list(args) -> int:
 
 
 def _load_plan(args):
-    from bench.config import load_sweep, parse_sweep_text
+    from radarbench.bench.config import load_sweep, parse_sweep_text
     if args.preset:
         source = f"preset {args.preset}"
         try:
@@ -179,21 +179,21 @@ def _check_arguments(args) -> None:
 
 
 def _workers(args) -> int:
-    from bench.executors import default_workers
+    from radarbench.bench.executors import default_workers
     return args.workers or default_workers()
 
 
 def _check_executor(args) -> None:
     """Executor options, checked before anything is written."""
     if args.executor == "dask":
-        from bench.executors import require_dask
+        from radarbench.bench.executors import require_dask
         require_dask()
 
 
 def _stored_units(plan, out_dir: Path) -> tuple[int, int]:
     """(units stored in ``out_dir``, units of the plan)."""
-    from bench.runner import plan_units
-    from bench.store import Store
+    from radarbench.bench.runner import plan_units
+    from radarbench.bench.store import Store
     total = sum(map(len, plan_units(plan)))
     if not (out_dir / "results.sqlite").exists():
         return 0, total
@@ -218,13 +218,13 @@ def _store_errors(out_dir: Path):
     try:
         yield
     except sqlite3.Error as exc:
-        from bench.store import store_fault
+        from radarbench.bench.store import store_fault
         raise store_fault(out_dir / "results.sqlite", exc) from None
 
 
 def cmd_run(args) -> int:
     _check_arguments(args)
-    from bench import runfolder
+    from radarbench.bench import runfolder
     _check_executor(args)
     plan = _load_plan(args)
     if plan.skipped and not args.quiet:
@@ -250,13 +250,13 @@ def cmd_run(args) -> int:
 
 def _run_locked(args, plan, out_dir: Path, command: str) -> int:
     """The run, in the locked folder."""
-    from bench import registry
-    from bench.progress import Progress
-    from bench.report import build_outputs
-    from bench.runner import Interrupted, plan_record, run_sweep, write_plan_toml
+    from radarbench.bench import registry
+    from radarbench.bench.progress import Progress
+    from radarbench.bench.report import build_outputs
+    from radarbench.bench.runner import Interrupted, plan_record, run_sweep, write_plan_toml
     viewer = None
     if args.viewer:
-        from bench.recording import LiveViewer
+        from radarbench.bench.recording import LiveViewer
         tasks = {m.label: registry.get_task(task) for m, task in zip(plan.methods, plan.method_tasks)}
         try:
             viewer = LiveViewer(tasks=tasks, application_id=plan.name,
@@ -266,7 +266,7 @@ def _run_locked(args, plan, out_dir: Path, command: str) -> int:
             raise ConfigError("--viewer", str(exc)) from None
     on_result = None
     if viewer is not None:
-        from bench.recording import TrialRecord
+        from radarbench.bench.recording import TrialRecord
 
         def on_result(result):
             viewer.log_records([TrialRecord.from_bytes(b) for _, b in result.records])
@@ -296,8 +296,8 @@ def _run_locked(args, plan, out_dir: Path, command: str) -> int:
 
 def _failures_exit(out_dir: Path, command: str) -> int:
     """0, or after a summary of the stored failures on stderr, :data:`EXIT_FAILED_UNITS`."""
-    from bench.failures import failed, summary_lines
-    from bench.store import Store
+    from radarbench.bench.failures import failed, summary_lines
+    from radarbench.bench.store import Store
     store = Store(out_dir / "results.sqlite")
     try:
         runs = store.runs()
@@ -317,9 +317,9 @@ def _failures_exit(out_dir: Path, command: str) -> int:
 
 
 def cmd_report(args) -> int:
-    from bench import runfolder
-    from bench.progress import Progress
-    from bench.report import build_outputs
+    from radarbench.bench import runfolder
+    from radarbench.bench.progress import Progress
+    from radarbench.bench.report import build_outputs
     out_dir = Path(args.dir)
     if args.tracebacks:
         return _print_tracebacks(out_dir)
@@ -335,10 +335,10 @@ def cmd_report(args) -> int:
 
 def _print_tracebacks(out_dir: Path) -> int:
     """``bench report DIR --tracebacks``: the stored tracebacks, read-only."""
-    from bench import runfolder
-    from bench.escapes import escape_controls
-    from bench.failures import traceback_text
-    from bench.store import Store
+    from radarbench.bench import runfolder
+    from radarbench.bench.escapes import escape_controls
+    from radarbench.bench.failures import traceback_text
+    from radarbench.bench.store import Store
     if not (out_dir / runfolder.STORE).is_file():
         raise ConfigError("", f"{out_dir} has no {runfolder.STORE} (not a bench run folder)")
     runfolder.check_store(out_dir / runfolder.STORE, need_plan=True)
@@ -351,18 +351,18 @@ def _print_tracebacks(out_dir: Path) -> int:
 
 
 def cmd_view(args) -> int:
-    from bench.recording.serve import view
+    from radarbench.bench.recording.serve import view
     return view(Path(args.dir), web=args.web, port=args.port, renderer=args.renderer)
 
 
 def cmd_compare(args) -> int:
-    from bench.report.compare import run_compare
+    from radarbench.bench.report.compare import run_compare
     return run_compare(args.run_a, args.run_b, args.out, args.fail_on_regression)
 
 
 def cmd_perf(args) -> int:
-    from bench import registry
-    from bench.perf import check_sizes, prepare_out, run_perf
+    from radarbench.bench import registry
+    from radarbench.bench.perf import check_sizes, prepare_out, run_perf
     known = set(registry.methods())
     for name in args.methods or []:
         if name not in known:
@@ -400,7 +400,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)   # before any heavy import: argument errors answer at once
         if args.command != "list":
-            from bench.executors import sigterm_as_interrupt
+            from radarbench.bench.executors import sigterm_as_interrupt
             restore_sigterm = sigterm_as_interrupt()   # SIGTERM ends a command as Ctrl-C does (exit 130)
         return COMMANDS[args.command](args)
     except ConfigError as err:

@@ -29,11 +29,11 @@ import tomllib
 from pathlib import Path
 from typing import Any, Mapping
 
-from bench import capabilities, feasibility, registry
-from bench.errors import ConfigError
-from bench.grid import MAX_CONFIGS, expand, label_problem, params_text_of_label
-from bench.params import as_float, show
-from bench.plan import (SNR_KEY_DIGITS, CalibrationConfig, ComponentConfig, Plan,  # noqa: F401 - importable from here
+from radarbench.bench import capabilities, feasibility, registry
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.grid import MAX_CONFIGS, expand, label_problem, params_text_of_label
+from radarbench.bench.params import as_float, show
+from radarbench.bench.plan import (SNR_KEY_DIGITS, CalibrationConfig, ComponentConfig, Plan,  # noqa: F401 - importable from here
                         ScenarioConfig, snr_key)
 
 #: trials per unit when a sweep sets no ``chunk``

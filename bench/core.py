@@ -30,7 +30,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from bench.params import PATH
+from radarbench.bench.params import PATH
 
 MANEUVER_DETECTION = "maneuver-detection"
 TRACKING = "tracking"

@@ -12,7 +12,7 @@ discovered when the site is built, so a new plugin or report has its page withou
 here.
 
 ``mkdocs build`` adds the pages to the site through ``docs/hooks.py`` (named by mkdocs.yml),
-writing nothing into the clone; ``python -m bench.docs OUT_DIR`` writes them into a folder.
+writing nothing into the clone; ``python -m radarbench.bench.docs OUT_DIR`` writes them into a folder.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from bench.markdown import code, frame_table, table, text
+from radarbench.bench.markdown import code, frame_table, table, text
 
 #: repository files published under another site path (the rest keep theirs; docs/ is the site's root)
 RENAMED = {"README.md": "index.md", "CONTRIBUTING.md": "contributing.md"}
@@ -92,8 +92,8 @@ def presets() -> list[Preset]:
     real-trajectories' samples of an optional extra, which building the docs must not need)."""
     import tomllib
 
-    from bench.claims import preset_claims
-    from bench.listing import presets as preset_files
+    from radarbench.bench.claims import preset_claims
+    from radarbench.bench.listing import presets as preset_files
 
     out = []
     for name, path in preset_files().items():
@@ -136,7 +136,7 @@ def facts_list(facts: list[tuple[str, str]]) -> str:
 
 
 def params_table(params_cls: type) -> str:
-    from bench.params import describe_params
+    from radarbench.bench.params import describe_params
 
     rows = [[code(name), text(ptype), code(repr(default)), text(doc)]
             for name, ptype, default, doc in describe_params(params_cls)]
@@ -161,6 +161,11 @@ def perf_rows(root: Path, csv_name: str, column: str, name: str, page: str) -> s
     return f"From {source} (one core; how it is measured: that page).\n\n{frame_table(rows)}"
 
 
+def _harness_or_builtin(module: str) -> bool:
+    harness = __name__.rpartition(".")[0]            # this package, whatever name it is imported by
+    return module == "builtins" or module == harness or module.startswith(harness + ".")
+
+
 def base_docstrings(cls: type) -> list[str]:
     """The docstrings ``cls`` inherits from its plugin's own base classes (a family's shared
     model and formulas, e.g. the GO/SO-CFAR's closed-form Pfa), each under its class's name;
@@ -168,7 +173,7 @@ def base_docstrings(cls: type) -> list[str]:
     parts, own = [], inspect.getdoc(cls)             # getdoc falls back to the nearest base's docstring
     for base in cls.__mro__[1:]:
         doc = base.__dict__.get("__doc__")
-        if doc and inspect.cleandoc(doc) != own and base.__module__.split(".")[0] not in ("bench", "builtins"):
+        if doc and inspect.cleandoc(doc) != own and not _harness_or_builtin(base.__module__):
             parts += [f"### From {code(f'{base.__module__}.{base.__qualname__}')}", fenced(inspect.cleandoc(doc))]
     return parts
 
@@ -187,8 +192,8 @@ def component_page(kind: str, cls: type, page: str, facts: list[tuple[str, str]]
 
 def plugin_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Preset], reports: set[str]) -> None:
     """The task, method and scenario pages, and an index of each kind."""
-    from bench import registry
-    from bench.capabilities import fits
+    from radarbench.bench import registry
+    from radarbench.bench.capabilities import fits
 
     methods, scenarios, tasks = registry.methods(), registry.scenarios(), registry.tasks()
     for name, cls in methods.items():
@@ -215,8 +220,8 @@ def plugin_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Pre
                                     ("scenarios", "Scenarios", scenarios)):
         rows = [[f"[{code(n)}]({n}.md)", text(c.summary())] for n, c in table_of.items()]
         index = [f"# {title}", f"Every {folder[:-1]} registered when this site was built.", table([folder[:-1], "what"], rows)]
-        missing = [u for u in registry.unavailable()             # "methods.x", "bench.methods:x" -> "methods"
-                   if re.split(r"[.:]", u.source.removeprefix("bench."))[0] == folder]
+        missing = [u for u in registry.unavailable()             # "radarbench.methods.x", "bench.methods:x" -> "methods"
+                   if re.split(r"[.:]", u.source.removeprefix("radarbench.").removeprefix("bench."))[0] == folder]
         if missing:
             index += ["Plugins that could not be registered in the environment that built this site:",
                       table(["plugin", "why"], [[code(u.name or u.source), text(u.error)] for u in missing])]
@@ -243,7 +248,7 @@ def report_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Pre
 def wall_time(report: Path) -> str:
     """The wall time of the units of the run that made the committed ``report`` (report.md),
     as its Provenance table states it; "–" when it states none."""
-    from bench.provenance import WALL_TIME_ROW
+    from radarbench.bench.provenance import WALL_TIME_ROW
 
     for line in report.read_text(encoding="utf-8").splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
@@ -292,7 +297,7 @@ def help_text(parser: argparse.ArgumentParser) -> str:
 
 
 def cli_page() -> str:
-    from bench.cli import build_parser
+    from radarbench.bench.cli import build_parser
 
     parser = build_parser()
     parts = ["# Command line", "The `bench` command's `--help` and each subcommand's, generated from its parser.",
@@ -319,7 +324,7 @@ def pages(root: str | Path) -> tuple[dict[str, str | Path], list]:
     def section(folder: str, names) -> list:
         return [f"{folder}/index.md"] + [{n: f"{folder}/{n}.md"} for n in names]
 
-    from bench import registry
+    from radarbench.bench import registry
     nav = [{"Tasks": section("tasks", registry.tasks())}, {"Methods": section("methods", registry.methods())},
            {"Scenarios": section("scenarios", registry.scenarios())},
            {"Presets": "presets.md"}, {"Reports": ["reports/index.md"] + [{n: f"reports/{n}/index.md"} for n in reports]},
@@ -348,8 +353,8 @@ def folder_problem(out_dir: Path, root: Path) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m bench.docs OUT_DIR [--root REPO]``: the generated pages into OUT_DIR."""
-    parser = argparse.ArgumentParser(prog="python -m bench.docs", description=__doc__.splitlines()[0])
+    """``python -m radarbench.bench.docs OUT_DIR [--root REPO]``: the generated pages into OUT_DIR."""
+    parser = argparse.ArgumentParser(prog="python -m radarbench.bench.docs", description=__doc__.splitlines()[0])
     parser.add_argument("out_dir", help="folder to write the pages into (created if absent)")
     parser.add_argument("--root", default=".", help="the repository's root (default: the current folder)")
     args = parser.parse_args(argv)

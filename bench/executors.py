@@ -40,7 +40,7 @@ from multiprocessing.connection import wait as _wait
 from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
-from bench.errors import ConfigError
+from radarbench.bench.errors import ConfigError
 
 #: the signals the driver handles and the workers ignore
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -300,7 +300,7 @@ class LocalExecutor:
 
     def _spawn(self) -> _Worker:
         for attempt in range(5):
-            _start_forkserver(["bench._forkserver"])        # again if someone killed it
+            _start_forkserver(["radarbench.bench._forkserver"])        # again if someone killed it
             parent, child = self._ctx.Pipe(duplex=True)
             proc = self._ctx.Process(target=_worker_main, args=(child,), name="bench-worker")
             try:
@@ -454,7 +454,7 @@ class DaskExecutor:
             # and when the nanny restarts one; the driver alone handles it.
             import dask
 
-            _start_forkserver(["bench._forkserver", "distributed"])
+            _start_forkserver(["radarbench.bench._forkserver", "distributed"])
             # allowed-failures 0: a unit whose worker dies comes back at once (imap_unordered
             # runs it again, alone), rather than after killing three more workers.
             self._config = dask.config.set({"distributed.worker.multiprocessing-method": "forkserver",
@@ -654,8 +654,8 @@ def _client(address: str, timeout: str):
 def worker_environment() -> dict[str, str]:
     """What must match between the driver and a worker for results to be the same: the
     harness version and the registered plugins (importing them warms the worker up)."""
-    import bench
-    from bench import registry
+    from radarbench import bench
+    from radarbench.bench import registry
 
     missing = ", ".join(u.source for u in registry.unavailable()) or "-"
     return {"bench": bench.__version__, "methods": ", ".join(registry.methods()),

@@ -19,9 +19,9 @@ import math
 import os
 from pathlib import Path
 
-from bench import registry
-from bench.errors import ConfigError
-from bench.plan import Plan, ScenarioConfig
+from radarbench.bench import registry
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.plan import Plan, ScenarioConfig
 
 #: the default ``max_unit_memory_gb`` is this fraction of the machine's memory
 #: (:func:`machine_memory_bytes`); N workers hold up to N units at once

@@ -18,7 +18,7 @@ PNG_COMPRESS_LEVEL = 1
 
 def _save(fig, path: Path) -> Path:
     """Write ``fig`` to ``path`` whole (:func:`bench.runfolder.atomic_output`)."""
-    from bench import runfolder
+    from radarbench.bench import runfolder
     try:
         runfolder.folder_for(path.parent)
         with runfolder.atomic_output(path) as (f, _):

@@ -5,10 +5,10 @@ A config's **identity** is a short hash of
 
 * its plugin's **code**: the source of the plugin's module and of every module it
   imports, transitively, from its own code — for a plugin beside the harness (the
-  built-ins: ``methods/X.py`` with the ``models/`` and ``methods/_*.py`` modules it
-  imports) the modules under the same folder of ``sys.path``, the harness itself
-  (``bench/``) and installed packages left out; for a plugin installed from a
-  distribution, the modules of that distribution's packages, and its name and version;
+  built-ins: ``methods/tbd/dp_tbd.py`` with the ``models/`` and ``methods/tbd/`` modules it
+  imports) the modules under the same folder of ``sys.path``, installed packages left out;
+  for a plugin installed from a distribution, the modules of that distribution's packages,
+  and its name and version; the harness itself (``bench/``) left out of both;
 * the content of the **data files** it reads (:meth:`bench.core.Component.data_files`:
   by default the values of its ``kind="path"`` parameters);
 * the versions of the numeric libraries (:data:`LIBRARIES`).
@@ -116,10 +116,11 @@ class Scope:
     packages: frozenset[str] = frozenset()
 
     def owns(self, name: str, path: Path) -> bool:
+        if path.is_relative_to(_HARNESS):
+            return False
         if self.packages:
             return name.split(".")[0] in self.packages
-        return (self.root is not None and path.is_relative_to(self.root) and not path.is_relative_to(_HARNESS)
-                and not _INSTALLED & set(path.parts))
+        return self.root is not None and path.is_relative_to(self.root) and not _INSTALLED & set(path.parts)
 
 
 @functools.lru_cache(maxsize=1)
@@ -159,6 +160,17 @@ def _scan_module(name: str, file: Path, _mtime_ns: int, _size: int) -> tuple[str
     return digest(data), frozenset(".".join(n.split(".")[:i]) for n in imported if n for i in range(1, n.count(".") + 2))
 
 
+def _search_folder(module: str, path: Path) -> Path:
+    """The folder of sys.path the plugin's top-level package (or module) lives in, found from
+    the top-level package's own file: a package may hold folders that are not in it (in a
+    checkout, radarbench's subpackages are the folders beside it; radarbench/__init__.py)."""
+    top = module.split(".")[0]
+    top_file = path if top == module else _module_file(top)
+    if top_file is None:                      # a namespace package: no file of its own
+        return path.parents[module.count(".") + (path.name == "__init__.py")]
+    return top_file.parents[1] if top_file.name == "__init__.py" else top_file.parent
+
+
 @dataclass(frozen=True)
 class CodeIdentity:
     hash: str
@@ -173,8 +185,7 @@ def code_identity(module: str) -> CodeIdentity:
         return CodeIdentity("unknown", "", ())
     top = module.split(".")[0]
     dist, packages = _distribution(top, path)
-    # the folder of sys.path the plugin's top-level package (or module) lives in
-    scope = Scope(path.parents[module.count(".") + (path.name == "__init__.py")], packages)
+    scope = Scope(_search_folder(module, path), packages)
     sources: dict[str, str] = {}
     todo = [(module, path)]
     while todo:
@@ -206,7 +217,7 @@ def config_identity(cls: type, params, code: CodeIdentity | None = None) -> dict
 
 def plan_identities(plan) -> dict[str, dict[str, dict]]:
     """``{"scenarios": {label: identity}, "methods": {label: identity}}`` of a plan's configs."""
-    from bench import registry
+    from radarbench.bench import registry
     codes: dict[str, CodeIdentity] = {}
 
     def of(cls: type, params) -> dict:
@@ -242,8 +253,8 @@ def set_aside_changed(store, plan, out_dir: Path, quiet: bool = False) -> dict[s
     they no longer match into ``out_dir/previous/`` (:meth:`bench.store.Store.set_aside`),
     saying so in one line; returns the (unit -> method configs) runs to compute again (the
     units set aside whole are simply no longer stored)."""
-    from bench import runfolder
-    from bench.store import Store
+    from radarbench.bench import runfolder
+    from radarbench.bench.store import Store
 
     store.use_identities(plan_identities(plan))
     units, runs = store.stale()

@@ -35,12 +35,12 @@ import tempfile
 import tomllib
 from pathlib import Path
 
-from bench.escapes import escape_controls
+from radarbench.bench.escapes import escape_controls
 
 __all__ = ["plugin_listing", "preset_descriptions", "presets"]
 
 #: The packages whose sources the plugin listing depends on.
-PACKAGES = ("bench", "methods", "scenarios", "models")
+PACKAGES = ("radarbench.bench", "radarbench.methods", "radarbench.scenarios", "radarbench.models")
 ENTRY_POINT_GROUPS = ("bench.tasks", "bench.scenarios", "bench.methods")
 #: a paper's claims beside its preset: ``bench/presets/NAME`` + this (:mod:`bench.claims`)
 CLAIMS_SUFFIX = ".claims.toml"
@@ -49,7 +49,7 @@ CLAIMS_SUFFIX = ".claims.toml"
 def presets() -> dict[str, object]:
     """Preset name -> its packaged sweep file (``bench/presets/NAME.toml``; a paper's
     claims beside it, ``NAME.claims.toml``, are not a sweep)."""
-    root = importlib.resources.files("bench") / "presets"
+    root = importlib.resources.files("radarbench.bench") / "presets"
     return {p.name[:-5]: p for p in sorted(root.iterdir(), key=lambda p: p.name)
             if p.name.endswith(".toml") and not p.name.endswith(CLAIMS_SUFFIX)}
 
@@ -93,7 +93,7 @@ def fingerprint() -> str:
     """A digest that changes whenever the plugin listing could."""
     import importlib.metadata
 
-    from bench import __version__
+    from radarbench.bench import __version__
 
     digest = hashlib.sha256(f"{__version__}\n{sys.executable}\n{sys.version}\n".encode())
     for package in PACKAGES:
@@ -166,9 +166,9 @@ def _write_cached(path: Path, text: str) -> None:
 
 def _render(verbose: bool) -> str:
     """The plugin listing from the registry (imports every plugin)."""
-    from bench import registry
-    from bench.capabilities import CAPABILITIES
-    from bench.params import describe_params
+    from radarbench.bench import registry
+    from radarbench.bench.capabilities import CAPABILITIES
+    from radarbench.bench.params import describe_params
 
     lines = ["tasks:"]
     lines += [f"  {name:<20} {task.summary()}" for name, task in registry.tasks().items()]
@@ -203,7 +203,7 @@ def plugin_listing(verbose: bool = False) -> str:
 
     A process that has already imported the plugins (or registered one in-process, as
     tests do) lists its registry as it is, without the cache."""
-    from bench import registry
+    from radarbench.bench import registry
 
     folder = None if registry.discovered() else _cache_dir()
     path = folder / f"list-{fingerprint()}{'-v' if verbose else ''}.json" \

@@ -15,8 +15,8 @@ import re
 import numpy as np
 import pandas as pd
 
-from bench.escapes import escape_controls
-from bench.metrics import Crossing, fit_crossing, snr_at_pd
+from radarbench.bench.escapes import escape_controls
+from radarbench.bench.metrics import Crossing, fit_crossing, snr_at_pd
 
 
 def fmt(x, digits: int = 3) -> str:

@@ -33,7 +33,7 @@ import os
 import typing
 from typing import Any, Mapping
 
-from bench.errors import ConfigError
+from radarbench.bench.errors import ConfigError
 
 #: the ``kind`` of a parameter that names a data file
 PATH = "path"

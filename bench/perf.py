@@ -64,12 +64,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench import capabilities, limits, registry
-from bench.errors import ConfigError
-from bench.markdown import code, fmt, table
-from bench.params import build_params
-from bench.rng import EVALUATION, TrialRNG, stable_key
-from bench.tables import write_csv
+from radarbench.bench import capabilities, limits, registry
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.markdown import code, fmt, table
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import EVALUATION, TrialRNG, stable_key
+from radarbench.bench.tables import write_csv
 
 PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "trials_per_second", "chunk",
                 "chunk_seconds_per_trial", "reference",
@@ -310,8 +310,8 @@ def preset_chunks() -> dict[str, int]:
     Read from the presets' TOML as written (resolving a plan would read their data files)."""
     import tomllib
 
-    from bench.config import DEFAULT_CHUNK
-    from bench.listing import presets
+    from radarbench.bench.config import DEFAULT_CHUNK
+    from radarbench.bench.listing import presets
 
     out: dict[str, int] = {}
     for path in presets().values():
@@ -418,8 +418,8 @@ def scaling_plan():
     (the harness names no plugin itself)."""
     import importlib.resources
 
-    from bench.config import parse_sweep_text
-    path = importlib.resources.files("bench") / "presets" / f"{SCALING_PRESET}.toml"
+    from radarbench.bench.config import parse_sweep_text
+    path = importlib.resources.files("radarbench.bench") / "presets" / f"{SCALING_PRESET}.toml"
     return parse_sweep_text(path.read_bytes(), f"preset {SCALING_PRESET}")
 
 
@@ -428,7 +428,7 @@ def executor_scaling(workers: int, progress=print, plan=None) -> pd.DataFrame:
     :func:`scaling_plan`) per executor (units only, no report)."""
     import tempfile
 
-    from bench.runner import plan_record, run_sweep
+    from radarbench.bench.runner import plan_record, run_sweep
     plan = scaling_plan() if plan is None else plan
     rows = []
     for executor, n in (("local", 1), ("local", workers), ("dask", workers)):
@@ -471,8 +471,8 @@ def _target_text(targets: dict, row: dict) -> str:
 def prepare_out(out_dir: Path) -> Path:
     """Check and create the output folder before anything is measured: one line (exit 2)
     when it is a file or lies under one, exit 3 when the machine refuses."""
-    from bench.errors import ConfigError
-    from bench.runfolder import folder_for, probe
+    from radarbench.bench.errors import ConfigError
+    from radarbench.bench.runfolder import folder_for, probe
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError("--out", f"{out_dir} exists and is not a folder")
@@ -543,7 +543,7 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
                  scaling_sweep: str = "", scenes: pd.DataFrame | None = None, machine: dict | None = None) -> Path:
     """``perf.csv``, ``scene.csv``, ``limits.csv`` and ``report.md``; ``scaling_sweep`` describes the
     sweep ``scaling`` timed, ``machine`` holds the limits measured (:func:`machine_limits`)."""
-    from bench.provenance import provenance
+    from radarbench.bench.provenance import provenance
     prepare_out(out_dir)
     write_csv(perf, out_dir / "perf.csv")
     if scenes is not None:
@@ -595,5 +595,5 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
                                                     ["python", platform.python_version()],
                                                     ["load average (1, 5, 15 min) at the end", load]] +
                                           [[k, v] for k, v in prov.items()]))
-    from bench.runfolder import write_text
+    from radarbench.bench.runfolder import write_text
     return write_text(out_dir / "report.md", "\n\n".join(part for part in parts if part) + "\n")

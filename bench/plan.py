@@ -18,9 +18,9 @@ from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
-from bench import capabilities, registry
-from bench.params import PATH, params_as_dict
-from bench.rng import stable_key
+from radarbench.bench import capabilities, registry
+from radarbench.bench.params import PATH, params_as_dict
+from radarbench.bench.rng import stable_key
 
 #: significant digits of an SNR level in a unit's key (:func:`snr_key`): levels that
 #: agree to this many digits are one level, and a sweep listing two of them is refused

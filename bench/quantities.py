@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.errors import ConfigError
-from bench.markdown import crossing_floors, fmt_db, snr50
-from bench.tables import csv_text
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.markdown import crossing_floors, fmt_db, snr50
+from radarbench.bench.tables import csv_text
 
 #: ``snr_db`` of a paired quantity over every level (comparisons.csv's blank ``snr_db``)
 ALL_LEVELS = "all"
@@ -63,7 +63,7 @@ def csv_frame(df: pd.DataFrame) -> pd.DataFrame:
 def read_tables(folder: str | Path) -> Tables:
     """A report folder's committed tables: summary.csv, comparisons.csv,
     calibration.csv and plan.toml's ``[calibration] chance_pd``."""
-    from bench.calibration import EQUAL_CHANCE_PD
+    from radarbench.bench.calibration import EQUAL_CHANCE_PD
     folder = Path(folder)
     frames = [_read_csv(folder / f"{name}.csv") if (folder / f"{name}.csv").exists() else pd.DataFrame()
               for name in ("summary", "comparisons", "calibration")]
@@ -164,7 +164,7 @@ def _paired(q: dict, t: Tables) -> Value:
 
 def _task_metric(df: pd.DataFrame, q: dict) -> str:
     """The ranking metric of the task the pair belongs to (``Task.ranking_metric``)."""
-    from bench import registry
+    from radarbench.bench import registry
     tasks = set(df[(df.config_a.isin([q["a"], q["b"]])) | (df.config_b.isin([q["a"], q["b"]]))].task)
     if len(tasks) != 1:
         raise ConfigError("metric", f"the pair belongs to {len(tasks)} tasks: name the metric")

@@ -2,7 +2,7 @@
 
 A plugin module registers its classes with the decorators::
 
-    from bench.registry import register_method
+    from radarbench.bench.registry import register_method
 
     @register_method
     class Innovation(Method):
@@ -10,7 +10,8 @@ A plugin module registers its classes with the decorators::
         ...
 
 :func:`discover` imports every module of the ``methods`` and ``scenarios``
-packages and every entry point of the groups ``bench.methods`` and
+packages and of their family folders (``methods/tbd/``; a name starting with ``_``
+is a helper and left out) and every entry point of the groups ``bench.methods`` and
 ``bench.scenarios`` (third-party packages). Tasks (:mod:`bench.tasks`) are
 the built-ins and the entry points of the group ``bench.tasks``. The built-ins
 come first (tasks, scenarios, methods), then the entry points (tasks before the
@@ -37,10 +38,10 @@ import traceback
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from bench.errors import ConfigError, is_out_of_memory, unknown_name
+from radarbench.bench.errors import ConfigError, is_out_of_memory, unknown_name
 
 if TYPE_CHECKING:  # pragma: no cover - typing only; bench.core (NumPy) is imported on discovery
-    from bench.core import Method, Scenario
+    from radarbench.bench.core import Method, Scenario
 
 _METHODS: dict[str, type[Method]] = {}
 _SCENARIOS: dict[str, type[Scenario]] = {}
@@ -92,7 +93,7 @@ def _register(table: dict, cls: type, kind: str) -> type:
 
 def _check_params(cls: type, kind: str) -> None:
     """Params a dataclass that keeps the parameter convention (bench.params.declaration_problem)."""
-    from bench.params import declaration_problem
+    from radarbench.bench.params import declaration_problem
 
     name = getattr(cls, "name", cls.__qualname__)
     if not dataclasses.is_dataclass(getattr(cls, "Params", None)):
@@ -127,7 +128,7 @@ def register_scenario(cls: type[Scenario]) -> type[Scenario]:
 
 def register_task(cls: type) -> type:
     """Register a :class:`bench.tasks.base.Task` subclass (one instance serves every run)."""
-    from bench.tasks.base import Task
+    from radarbench.bench.tasks.base import Task
 
     if not (isinstance(cls, type) and issubclass(cls, Task)):
         raise PluginError(f"{cls!r} is not a Task subclass")
@@ -161,6 +162,9 @@ def _import_package_modules(package: str) -> None:
         return
     for info in pkgutil.iter_modules(pkg.__path__, prefix=f"{package}."):
         if info.name.rsplit(".", 1)[-1].startswith("_"):
+            continue
+        if info.ispkg:               # a family folder (methods/tbd/): its modules, in turn
+            _import_package_modules(info.name)
             continue
         try:
             importlib.import_module(info.name)
@@ -197,8 +201,8 @@ def _load_entry_points(group: str) -> None:
 
 
 def _register_class(obj, group: str) -> None:
-    from bench.core import Method, Scenario
-    from bench.tasks.base import Task
+    from radarbench.bench.core import Method, Scenario
+    from radarbench.bench.tasks.base import Task
 
     if not isinstance(obj, type):
         return                       # a module: its decorators registered what it holds
@@ -233,8 +237,8 @@ def discover() -> None:
         return
     _DISCOVERED = True
     _builtin_tasks()
-    _import_package_modules("scenarios")
-    _import_package_modules("methods")
+    _import_package_modules("radarbench.scenarios")
+    _import_package_modules("radarbench.methods")
     _discover_tasks()
     _load_entry_points("bench.scenarios")
     _load_entry_points("bench.methods")
@@ -245,7 +249,7 @@ def _builtin_tasks() -> None:
     if _BUILTIN_TASKS_DONE:
         return
     _BUILTIN_TASKS_DONE = True
-    from bench.tasks import BUILTIN_TASKS
+    from radarbench.bench.tasks import BUILTIN_TASKS
 
     for cls in BUILTIN_TASKS:
         register_task(cls)

@@ -35,7 +35,7 @@ import stat
 from pathlib import Path, PurePosixPath
 from typing import IO, Iterator
 
-from bench.errors import ConfigError, Fault, FolderInUse, os_fault
+from radarbench.bench.errors import ConfigError, Fault, FolderInUse, os_fault
 
 LOCK = ".bench.lock"
 MANIFEST = "bench-manifest.txt"
@@ -291,7 +291,7 @@ def folder_for(path: str | os.PathLike) -> Path:
 
 def store_tables() -> set[str]:
     """The tables of a bench store (:data:`bench.store.SCHEMA`)."""
-    from bench.store import SCHEMA
+    from radarbench.bench.store import SCHEMA
     return set(re.findall(r"CREATE TABLE IF NOT EXISTS (\w+)", SCHEMA))
 
 
@@ -300,7 +300,7 @@ def check_store(db: Path, *, need_plan: bool = False) -> None:
     truncated, a folder, a link, another program's SQLite file) without modifying it: read
     its header, then open it read-only (``immutable`` when it has no WAL, so no file is
     created beside it)."""
-    from bench.store import read_only_uri      # the store imports numpy and pandas: only here
+    from radarbench.bench.store import read_only_uri      # the store imports numpy and pandas: only here
 
     def refuse(why: str) -> ConfigError:
         return ConfigError(str(db), f"not a bench results store ({why}); move it away, or choose another folder")
@@ -352,7 +352,7 @@ def check_store(db: Path, *, need_plan: bool = False) -> None:
 
 def _check_plan_json(db: Path, text) -> None:
     """A stored plan that is not a JSON object is a damaged store (exit 2, every command)."""
-    from bench.store import damaged
+    from radarbench.bench.store import damaged
     try:
         ok = isinstance(json.loads(text), dict)
     except (TypeError, ValueError) as exc:

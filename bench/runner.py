@@ -30,16 +30,16 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import registry, tomlw, warmup
-from bench.calibration import EQUAL_CHANCE_PD, CalibrationResult, calibrate
-from bench.plan import Plan
-from bench.executors import STOP_SIGNALS, SerialExecutor, UnitFailure, make_executor, restore_handler
-from bench.identity import PREVIOUS, set_aside_changed
-from bench.progress import Progress
-from bench.provenance import provenance
-from bench.recording.record import TrialRecord
-from bench.store import Store, UnitResult
-from bench.units import Unit, UnitTask, execute_unit, failed_result, plan_units, unit_methods
+from radarbench.bench import registry, tomlw, warmup
+from radarbench.bench.calibration import EQUAL_CHANCE_PD, CalibrationResult, calibrate
+from radarbench.bench.plan import Plan
+from radarbench.bench.executors import STOP_SIGNALS, SerialExecutor, UnitFailure, make_executor, restore_handler
+from radarbench.bench.identity import PREVIOUS, set_aside_changed
+from radarbench.bench.progress import Progress
+from radarbench.bench.provenance import provenance
+from radarbench.bench.recording.record import TrialRecord
+from radarbench.bench.store import Store, UnitResult
+from radarbench.bench.units import Unit, UnitTask, execute_unit, failed_result, plan_units, unit_methods
 
 RUN_FILES = ("results.sqlite", "results.sqlite-wal", "results.sqlite-shm", "plan.toml", "trials.csv",
              "summary.csv", "calibration.csv", "steps.csv", "report.md", "recording.rrd")
@@ -367,5 +367,5 @@ def write_plan_toml(path: Path, plan: Plan, command: str, identities: dict | Non
     body = {**plan.to_dict(), "provenance": {"command": command, "fingerprint": plan.fingerprint(),
                                              **provenance(), "identities": identities}}
     text = "# Resolved plan written by bench; `bench run plan.toml` reproduces the results.\n" + tomlw.dumps(body)
-    from bench.runfolder import write_text      # whole, a unique temporary name, listed in the manifest
+    from radarbench.bench.runfolder import write_text      # whole, a unique temporary name, listed in the manifest
     write_text(path, text)

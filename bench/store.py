@@ -39,7 +39,7 @@ from typing import Iterator
 import numpy as np
 import pandas as pd
 
-from bench.errors import ConfigError, Fault, space_hint
+from radarbench.bench.errors import ConfigError, Fault, space_hint
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -122,7 +122,7 @@ def bytes_to_columns(b: bytes) -> dict[str, np.ndarray]:
 def _merge_record(old: bytes, new: bytes, labels: set[str], order: list[str]) -> bytes:
     """A stored trial record with the traces of method configs ``labels`` taken from ``new``
     (kept in plan order, as an uninterrupted run writes them)."""
-    from bench.recording import TrialRecord
+    from radarbench.bench.recording import TrialRecord
 
     rec, fresh = TrialRecord.from_bytes(old), TrialRecord.from_bytes(new)
     traces = {**rec.methods, **{k: v for k, v in fresh.methods.items() if k in labels}}

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench import runfolder
+from radarbench.bench import runfolder
 
 
 def csv_text(df) -> str:

@@ -13,13 +13,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bench import capabilities, failures, registry
-from bench.plan import Plan, snr_key
-from bench.executors import in_worker
-from bench.recording.record import TrialRecord
-from bench.rng import CALIBRATION, EVALUATION, TrialRNG
-from bench.store import MethodRun, UnitResult
-from bench.tasks.base import RecordedScene
+from radarbench.bench import capabilities, failures, registry
+from radarbench.bench.plan import Plan, snr_key
+from radarbench.bench.executors import in_worker
+from radarbench.bench.recording.record import TrialRecord
+from radarbench.bench.rng import CALIBRATION, EVALUATION, TrialRNG
+from radarbench.bench.store import MethodRun, UnitResult
+from radarbench.bench.tasks.base import RecordedScene
 
 
 @dataclass(frozen=True)

@@ -18,10 +18,10 @@ from __future__ import annotations
 import os
 import sys
 
-from bench import registry
-from bench.plan import Plan
-from bench.progress import say
-from bench.units import Unit, UnitTask, calibrated_configs, execute_unit
+from radarbench.bench import registry
+from radarbench.bench.plan import Plan
+from radarbench.bench.progress import say
+from radarbench.bench.units import Unit, UnitTask, calibrated_configs, execute_unit
 
 __all__ = ["cache_is_cold", "warm_up_tasks", "run_warm_up", "COMPILING"]
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.docs import pages
+from radarbench.bench.docs import pages
 
 _generated: dict = {}
 

@@ -20,4 +20,9 @@ documented fields, validated when built (docs/architecture.md, 'Scenes').
 Models import neither :mod:`methods` nor :mod:`scenarios`; of the harness, only its public field checks (:mod:`bench.core`).
 """
 
-import bench  # noqa: E402,F401 - the portable target (bench/__init__.py) before numpy or numba is imported
+if not __name__.startswith("radarbench."):   # imported by its old name from a checkout: the new package
+    from radarbench import _compat           # instead, with a deprecation warning (radarbench/_compat.py)
+    _compat.replace_old_package(__name__)
+
+
+from radarbench import bench  # noqa: E402,F401 - the portable target (bench/__init__.py) before numpy or numba is imported

@@ -48,8 +48,8 @@ import numpy as np
 import scipy.special
 import scipy.stats
 
-from bench.core import require, require_arrays
-from models.spherical import MEASUREMENT_LABELS
+from radarbench.bench.core import require, require_arrays
+from radarbench.models.spherical import MEASUREMENT_LABELS
 
 GLINT_MODELS = ("mixture", "additive")
 

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from models.spherical import wrap_angle
+from radarbench.models.spherical import wrap_angle
 
 __all__ = ["MEASUREMENT_LABELS", "POSITION_INDEX", "STATE_LABELS", "VELOCITY_INDEX", "angle_difference",
            "cv_process_noise", "cv_transition", "measure", "measure_jacobian", "measurement_residual",

@@ -34,8 +34,8 @@ import numba
 import numpy as np
 import scipy.linalg
 
-from bench.batched import inner, matvec
-from bench.core import require, require_arrays
+from radarbench.bench.batched import inner, matvec
+from radarbench.bench.core import require, require_arrays
 
 
 @dataclass(frozen=True, eq=False)

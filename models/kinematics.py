@@ -43,7 +43,7 @@ from functools import cached_property
 import numpy as np
 import scipy.linalg
 
-from bench.core import require, require_arrays
+from radarbench.bench.core import require, require_arrays
 
 #: components per axis of the scenario's state
 AXIS_STATE = ("", "v", "a")

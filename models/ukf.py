@@ -30,7 +30,7 @@ through its differences from Z_0 (:func:`unscented_mean`), so a plot near the
 ±π cut is handled.
 
 Everything here is a numba function on one track's arrays, called from the
-trackers' compiled scan loop (``methods/_mtt_kernels.py``); :func:`merwe_weights`
+trackers' compiled scan loop (``methods/multitarget/kernels.py``); :func:`merwe_weights`
 is plain NumPy (computed once per run). docs/architecture.md, 'Models'.
 """
 

@@ -8,13 +8,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.batched import matvec
-from bench.core import MANEUVER_DETECTION, Batch, Scenario
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_scenario
-from bench.tasks.detection import DetectionScene
-from models.kalman import LinearGaussianFilter, LinearGaussianModel, kalman_filter, steady_state
+from radarbench.bench.batched import matvec
+from radarbench.bench.core import MANEUVER_DETECTION, Batch, Scenario
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_scenario
+from radarbench.bench.tasks.detection import DetectionScene
+from radarbench.models.kalman import LinearGaussianFilter, LinearGaussianModel, kalman_filter, steady_state
 
 #: indices of x and y in the state [x, vx, y, vy]
 POSITION_INDEX = (0, 2)

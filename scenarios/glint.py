@@ -8,14 +8,14 @@ from typing import ClassVar
 
 import numpy as np
 
-from bench.batched import matvec
-from bench.core import TRACKING, Batch, Scenario
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_scenario
-from bench.tasks.tracking import TrackingScene
-from models.glint import GLINT_MODELS, GlintModel, glint_variance
-from models.spherical import MEASURED, MEASUREMENT_LABELS, los_basis, spherical, wrap_angle
+from radarbench.bench.batched import matvec
+from radarbench.bench.core import TRACKING, Batch, Scenario
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_scenario
+from radarbench.bench.tasks.tracking import TrackingScene
+from radarbench.models.glint import GLINT_MODELS, GlintModel, glint_variance
+from radarbench.models.spherical import MEASURED, MEASUREMENT_LABELS, los_basis, spherical, wrap_angle
 
 #: state components, in order (metres, m/s; x east, y north, z up)
 STATE_LABELS = ("x", "y", "z", "vx", "vy", "vz")

@@ -9,13 +9,13 @@ from typing import ClassVar
 
 import numpy as np
 
-from bench.batched import matvec
-from bench.core import Batch, Scenario
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_scenario
-from bench.tasks.multitarget import CLUTTER, MULTI_TARGET, PADDING, MultiTargetScene
-from models.hfswr import POSITION_INDEX, cv_gain, cv_transition, measure, wrap_angle
+from radarbench.bench.batched import matvec
+from radarbench.bench.core import Batch, Scenario
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_scenario
+from radarbench.bench.tasks.multitarget import CLUTTER, MULTI_TARGET, PADDING, MultiTargetScene
+from radarbench.models.hfswr import POSITION_INDEX, cv_gain, cv_transition, measure, wrap_angle
 
 #: the smallest noise stds a config may reach (reference or scaled by the SNR): below them the
 #: trackers' innovation covariances lose definiteness in float64 at HFSWR ranges (100 km)

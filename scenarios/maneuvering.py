@@ -9,13 +9,13 @@ from typing import ClassVar
 
 import numpy as np
 
-from bench.batched import matvec
-from bench.core import TRACKING, Batch, Scenario
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_scenario
-from bench.tasks.tracking import TrackingScene
-from models.kinematics import KinematicModel, per_axis, position_index, singer, state_labels
+from radarbench.bench.batched import matvec
+from radarbench.bench.core import TRACKING, Batch, Scenario
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_scenario
+from radarbench.bench.tasks.tracking import TrackingScene
+from radarbench.models.kinematics import KinematicModel, per_axis, position_index, singer, state_labels
 
 MAX_STEPS = 10_000
 MIN_NOISE_M = 1e-3

@@ -19,12 +19,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.core import Batch, Scenario
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_scenario
-from bench.tasks.cells import CELL_DETECTION, REGION_NAMES, MapScene
-from models.rd_map import (LAYOUT_BYTES_PER_CELL, RegionLevels, background_power, label_regions, place_targets,
+from radarbench.bench.core import Batch, Scenario
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_scenario
+from radarbench.bench.tasks.cells import CELL_DETECTION, REGION_NAMES, MapScene
+from radarbench.models.rd_map import (LAYOUT_BYTES_PER_CELL, RegionLevels, background_power, label_regions, place_targets,
                            target_cell_power)
 
 SNR_DEFINITION = (

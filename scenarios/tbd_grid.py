@@ -16,12 +16,12 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from bench.core import TBD, Batch, Scenario
-from bench.errors import ConfigError
-from bench.params import param
-from bench.registry import register_scenario
-from bench.tasks.tbd import Grid, TBDScene
-from models.ar_noise import ar_autocovariance, ar_innovation_std, ar_stationarity_problem, stationary_predictors
+from radarbench.bench.core import TBD, Batch, Scenario
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_scenario
+from radarbench.bench.tasks.tbd import Grid, TBDScene
+from radarbench.models.ar_noise import ar_autocovariance, ar_innovation_std, ar_stationarity_problem, stationary_predictors
 
 #: the paper's surveillance area (m): x and y ranges
 PAPER_X_RANGE_M = (150e3, 200e3)

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.params import param
-from bench.core import Method
-from bench.tasks.cells import CELL_DETECTION, CellDetectionOutput
+from radarbench.bench.params import param
+from radarbench.bench.core import Method
+from radarbench.bench.tasks.cells import CELL_DETECTION, CellDetectionOutput
 
 LOG10_E = float(np.log10(np.e))
 

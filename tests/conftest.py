@@ -5,7 +5,7 @@ writes must write under ``tmp_path``/``tmp_path_factory``, which are per worker.
 session-scoped fixture runs once per worker process.
 """
 
-import bench  # noqa: F401 - first: the portable target (bench/__init__.py) precedes numpy's import
+from radarbench import bench  # noqa: F401 - first: the portable target (bench/__init__.py) precedes numpy's import
 import os
 import shutil
 import subprocess
@@ -58,8 +58,8 @@ def parse_sweep_or_skip(sweep: dict, source: str):
     """``bench.config.parse_sweep``, or skip the test when the sweep reads data of an optional
     extra not installed here (its one line says what to install, e.g. the [data] extra's
     traffic samples for the real-trajectories preset)."""
-    from bench.config import parse_sweep
-    from bench.errors import ConfigError
+    from radarbench.bench.config import parse_sweep
+    from radarbench.bench.errors import ConfigError
     try:
         return parse_sweep(sweep, source)
     except ConfigError as err:
@@ -70,7 +70,7 @@ def parse_sweep_or_skip(sweep: dict, source: str):
 
 def run_bench(*args, cwd=None, timeout=300, check=False):
     """Drive the CLI as a user would: a subprocess, text output."""
-    proc = subprocess.run([sys.executable, "-m", "bench", *map(str, args)], cwd=cwd, capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "radarbench.bench", *map(str, args)], cwd=cwd, capture_output=True,
                           text=True, timeout=timeout)
     if check and proc.returncode != 0:
         raise AssertionError(f"bench {' '.join(map(str, args))} failed ({proc.returncode}):\n{proc.stderr}")

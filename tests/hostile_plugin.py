@@ -27,9 +27,9 @@ import sys
 import time
 from dataclasses import dataclass
 
-from bench.core import MANEUVER_DETECTION, Method
-from bench.params import param
-from methods.innovation import Innovation
+from radarbench.bench.core import MANEUVER_DETECTION, Method
+from radarbench.bench.params import param
+from radarbench.methods.maneuver.innovation import Innovation
 
 
 def _misbehaves(batch):
@@ -74,7 +74,7 @@ class Crash(Method):
 SCENARIOS = '''
 import os
 
-from scenarios.cv_turn_cv import CvTurnCv
+from radarbench.scenarios.cv_turn_cv import CvTurnCv
 
 
 class BrokenCv(CvTurnCv):
@@ -96,7 +96,7 @@ sys.exit(0)
 DUPLICATE = '''
 from dataclasses import dataclass
 
-from bench.core import MANEUVER_DETECTION, Method
+from radarbench.bench.core import MANEUVER_DETECTION, Method
 
 
 class Impostor(Method):
@@ -113,7 +113,7 @@ class Impostor(Method):
 BAD_TASK = '''
 from dataclasses import dataclass
 
-from bench.core import Method
+from radarbench.bench.core import Method
 
 
 class BadTask(Method):

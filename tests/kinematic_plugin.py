@@ -21,10 +21,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from bench.core import TRACKING, Batch, Scenario
-from bench.params import param
-from bench.tasks.tracking import TrackingScene
-from models.kinematics import KinematicModel, position_index, state_labels
+from radarbench.bench.core import TRACKING, Batch, Scenario
+from radarbench.bench.params import param
+from radarbench.bench.tasks.tracking import TrackingScene
+from radarbench.models.kinematics import KinematicModel, position_index, state_labels
 
 
 class CvReplay(Scenario):

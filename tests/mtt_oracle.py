@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.core import Method
-from bench.params import param
-from bench.tasks.multitarget import MULTI_TARGET, MultiTargetOutput
+from radarbench.bench.core import Method
+from radarbench.bench.params import param
+from radarbench.bench.tasks.multitarget import MULTI_TARGET, MultiTargetOutput
 
 
 def _run_starts(present: np.ndarray) -> np.ndarray:

@@ -30,7 +30,7 @@ ROW_KEYS = ["scenario", "config", "snr_db"]
 
 def optional_methods() -> set[str]:
     """Methods the quick preset marks ``optional`` (behind an extra)."""
-    preset = tomllib.loads((importlib.resources.files("bench") / "presets" / "quick.toml").read_text())
+    preset = tomllib.loads((importlib.resources.files("radarbench.bench") / "presets" / "quick.toml").read_text())
     return {m["name"] for m in preset["methods"] if m.get("optional")}
 
 
@@ -50,7 +50,7 @@ def summary_digest(summary_csv: Path) -> str:
 
 def run_quick(out: Path) -> Path:
     """Run the quick preset into ``out``; its summary.csv."""
-    subprocess.run([sys.executable, "-m", "bench", "run", "--preset", "quick", "--out", str(out), "--quiet"],
+    subprocess.run([sys.executable, "-m", "radarbench.bench", "run", "--preset", "quick", "--out", str(out), "--quiet"],
                    check=True)
     return out / "summary.csv"
 

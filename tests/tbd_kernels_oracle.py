@@ -1,6 +1,6 @@
 """Frozen copy of the DP-TBD numba kernels as they were before the max-only
-forward pass: the bit-for-bit oracle of :mod:`methods._tbd_kernels` and
-:mod:`methods._tbd_alongtrack` (``tests/test_tbd_kernels_identity.py``).
+forward pass: the bit-for-bit oracle of :mod:`methods.tbd.kernels` and
+:mod:`methods.tbd.alongtrack` (``tests/test_tbd_kernels_identity.py``).
 
 These kernels compute the maximum *and* the first argmax of every transition
 in the forward pass and store int8 backpointers (K, D, H, W). They are kept
@@ -345,7 +345,7 @@ def _max_into(src, m, length):  # pragma: no cover - compiled
 def dp_tbd_mf(z, q, lp, lp_first, beta_2, beta_3, coef0, const0, coef1, const1, coef2, const2,
               score, track, value):  # pragma: no cover - compiled
     """Second-order (cell, displacement) DP-TBD with the conditional LLR, all
-    trials; outputs written in place. See :class:`methods.dp_tbd.DpTbdMf`.
+    trials; outputs written in place. See :class:`methods.tbd.dp_tbd.DpTbdMf`.
 
     Frame 0: J_0(x) = Lambda_0(x) (coef0/const0: one plane).
     Frame 1: J_1(x, d) = Lambda_1(x; [d = 0]) + lp_first + J_0(x - d)
@@ -471,7 +471,7 @@ def _best_predecessor(g, lp, m, arg):  # pragma: no cover - compiled
 def dp_tbd_mf_along_track(z, q, lp, lp_first, rho1, beta1, beta2, a0, b0, a1, b1, a2, b2,
                           score, track, value):  # pragma: no cover - compiled
     """Second-order DP-TBD with the along-track Gaussian term, all trials;
-    outputs written in place. See :class:`methods.dp_tbd.DpTbdMf`.
+    outputs written in place. See :class:`methods.tbd.dp_tbd.DpTbdMf`.
 
     J_0(x) = a0 z_0(x) + b0
     J_1(x, d) = a1 (z_1(x) - rho1 z_0(x - d)) + b1 + lp_first + J_0(x - d)

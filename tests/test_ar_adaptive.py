@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from bench import registry
-from bench.params import build_params
-from bench.rng import TrialRNG
+from radarbench.bench import registry
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
 
 
 def _batch(n=6, snr=0.0, **params):
@@ -59,7 +59,7 @@ def test_refuses_too_few_steps_and_bad_orders():
     cls = registry.get_method("ar-adaptive")
     scen = build_params(registry.get_scenario("maneuvering-1d").Params, {"steps": 4, "maneuver_start_s": 1.0})
     assert "steps" in cls().check_scenario(cls.Params(), scen)
-    from bench.errors import ConfigError
+    from radarbench.bench.errors import ConfigError
     with pytest.raises(ConfigError, match="order_high"):
         build_params(cls.Params, {"order_low": 2, "order_high": 2})
     with pytest.raises(ConfigError, match="order_high"):

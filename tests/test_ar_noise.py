@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from models.ar_noise import (ar_autocovariance, ar_innovation_std, ar_roots, ar_stationarity_problem,
+from radarbench.models.ar_noise import (ar_autocovariance, ar_innovation_std, ar_roots, ar_stationarity_problem,
                              stationary_predictors)
 
 DEFAULT_AR = (-2.0, 1.7, -0.64)      # the tbd-grid default

@@ -5,9 +5,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.calibration import EXACT_CELL_RANKS, cell_calibration, cell_exceedances, cell_order_statistics, cell_ranks
-from bench.config import parse_sweep_text
-from bench.errors import ConfigError
+from radarbench.bench.calibration import EXACT_CELL_RANKS, cell_calibration, cell_exceedances, cell_order_statistics, cell_ranks
+from radarbench.bench.config import parse_sweep_text
+from radarbench.bench.errors import ConfigError
 
 
 @given(cells=st.integers(1, 5000))

@@ -13,11 +13,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.calibration import calibrate, cell_order_statistics
-from bench.core import Batch, SceneError
-from bench.tasks.base import OutputError
-from bench.tasks.cells import CellDetectionOutput, CellDetectionTask, MapScene
-from bench.tasks.cells.metrics import (PAIRED_GROUP, REGION_NAMES, cell_trial_metrics, guard_mask, ideal_pd, ideal_snr_at_pd,
+from radarbench.bench.calibration import calibrate, cell_order_statistics
+from radarbench.bench.core import Batch, SceneError
+from radarbench.bench.tasks.base import OutputError
+from radarbench.bench.tasks.cells import CellDetectionOutput, CellDetectionTask, MapScene
+from radarbench.bench.tasks.cells.metrics import (PAIRED_GROUP, REGION_NAMES, cell_trial_metrics, guard_mask, ideal_pd, ideal_snr_at_pd,
                                        summarise_cells)
 
 HERE = Path(__file__).resolve().parent
@@ -166,7 +166,7 @@ trials = 1
 @pytest.fixture(scope="module")
 def oracle_run(tmp_path_factory):
     """``bench run`` of the known-noise oracle on a small rd-map (Swerling 1)."""
-    from scenarios.rd_map import RdMap
+    from radarbench.scenarios.rd_map import RdMap
 
     tmp = tmp_path_factory.mktemp("oracle")
     site = tmp / "site"
@@ -179,7 +179,7 @@ def oracle_run(tmp_path_factory):
     (tmp / "sweep.toml").write_text(SWEEP.format(params=params))
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(site), *filter(None, [env.get("PYTHONPATH")])])
-    run = subprocess.run([sys.executable, "-m", "bench", "run", str(tmp / "sweep.toml"), "--out", str(tmp / "run"),
+    run = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", str(tmp / "sweep.toml"), "--out", str(tmp / "run"),
                           "--workers", "1", "--quiet"], env=env, capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr
     return tmp / "run"
@@ -210,7 +210,7 @@ def test_oracle_end_to_end_pfa_and_pd_match_the_closed_forms(oracle_run):
 def test_oracle_recording_has_the_maps(oracle_run):
     from rerun.chunk import RrdReader
 
-    from bench.recording import entity_root, rerun_path
+    from radarbench.bench.recording import entity_root, rerun_path
 
     paths = set(RrdReader(oracle_run / "recording.rrd").store().schema().entity_paths())
     root = entity_root("rd-map", 16.0, 0)
@@ -222,7 +222,7 @@ def test_oracle_recording_has_the_maps(oracle_run):
 def test_a_threshold_just_above_a_capped_statistic_declares_nothing():
     """The calibration reads the statistic in float64: a threshold just above a
     float32 cap (e.g. 300) must not be rounded down onto it."""
-    from bench.tasks.cells.metrics import declared_cells
+    from radarbench.bench.tasks.cells.metrics import declared_cells
 
     stat = np.array([299.0, 300.0, 2.5], np.float32)
     assert declared_cells(stat, np.nextafter(300.0, np.inf)).tolist() == [False, False, False]

@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from models import cfar
+from radarbench.models import cfar
 
 
 @st.composite

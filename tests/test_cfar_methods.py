@@ -1,4 +1,4 @@
-"""The CFAR methods on rd-map batches (methods/cfar.py): the SciPy references
+"""The CFAR methods on rd-map batches (methods/cfar/detectors.py): the SciPy references
 give the same output, a strong target is detected by every detector, bad
 parameters are refused with the field named, the threshold factors are the
 closed forms'."""
@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from bench import registry
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.rng import TrialRNG
-from bench.tasks.cells.metrics import REGION_NAMES
-from models import cfar
+from radarbench.bench import registry
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.tasks.cells.metrics import REGION_NAMES
+from radarbench.models import cfar
 
 CFAR_METHODS = ("ca-cfar", "os-cfar", "go-cfar", "so-cfar", "regression-cfar", "region-adaptive")
 

@@ -20,13 +20,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import claims
-from bench.errors import ConfigError
-from bench.listing import CLAIMS_SUFFIX, presets
-from bench.markdown import fmt, fmt_db
+from radarbench.bench import claims
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.listing import CLAIMS_SUFFIX, presets
+from radarbench.bench.markdown import fmt, fmt_db
 
 ROOT = Path(__file__).resolve().parents[1]
-PRESETS_DIR = importlib.resources.files("bench") / "presets"
+PRESETS_DIR = importlib.resources.files("radarbench.bench") / "presets"
 CLAIM_FILES = sorted(p.name[:-len(CLAIMS_SUFFIX)] for p in PRESETS_DIR.iterdir() if p.name.endswith(CLAIMS_SUFFIX))
 
 GOOD = """
@@ -216,7 +216,7 @@ def test_a_config_that_did_not_run_makes_the_claim_not_comparable():
 
 
 def test_crossing_is_the_reports_probit_and_a_difference_is_conservative():
-    from bench.markdown import snr50
+    from radarbench.bench.markdown import snr50
     snr = np.arange(-10.0, 11.0, 2.0)
     a = _summary("a", 1 / (1 + np.exp(-(snr + 3))), snr=snr)
     b = _summary("b", 1 / (1 + np.exp(-(snr - 2))), snr=snr)
@@ -302,7 +302,7 @@ def test_claims_csv_has_the_schemas_columns():
 def test_bench_report_writes_claims_csv_and_the_table(small_run_copy, monkeypatch):
     """A preset run with a claims file: claims.csv (listed in the manifest) and the table
     where the notes were, the notes rendered after it."""
-    from bench import report, runfolder
+    from radarbench.bench import report, runfolder
     text = GOOD.replace("A paper", "Small 2026").replace("a-beats-b", "single-step-leads").replace(
         'a = "b", b = "a"', 'a = "innovation[window=1]", b = "innovation[window=5]"')
     monkeypatch.setattr(report, "_preset_name", lambda source: "small")
@@ -333,7 +333,7 @@ def _report_folders() -> list[tuple[str, Path]]:
 
 @pytest.mark.parametrize("name, folder", _report_folders(), ids=lambda x: getattr(x, "name", x))
 def test_committed_claims_csv_is_regenerated_identical_from_the_committed_csvs(name, folder):
-    from bench.tables import csv_text
+    from radarbench.bench.tables import csv_text
     committed = folder / "claims.csv"
     assert committed.exists(), (f"{folder.relative_to(ROOT)} has no committed claims.csv (written when the "
                                 f"report is regenerated: bench run --preset {name} --out {folder.relative_to(ROOT)})")
@@ -386,8 +386,8 @@ def parameters(folder: Path, file: claims.ClaimsFile | None) -> set[str]:
     ``[calibration] chance_pd`` default included), the harness's fixed settings (95%
     intervals, the crossing level), and the paper's own printed numbers (the claims'
     ``where``, ``original``, ``english``, ``value``, ``min``, ``max``, ``tolerance``, ``level``)."""
-    from bench.calibration import EQUAL_CHANCE_PD
-    from bench.metrics import CONFIDENCE
+    from radarbench.bench.calibration import EQUAL_CHANCE_PD
+    from radarbench.bench.metrics import CONFIDENCE
     plan = tomllib.loads((folder / "plan.toml").read_text(encoding="utf-8"))
     plan.pop("provenance", None)
     values = _numbers(plan) + [plan.get("calibration", {}).get("chance_pd", EQUAL_CHANCE_PD), CONFIDENCE, 0.5]
@@ -403,7 +403,7 @@ def run_values(folder: Path, file: claims.ClaimsFile | None) -> tuple[set[str], 
     """What the run produced, as the report prints it: (3 significant digits, dB to 0.1).
     Every number of summary/comparisons/calibration.csv (dB columns also to 0.1), every
     claim and named quantity, and every config's SNR at Pd = 0.5 under each Pd column."""
-    from bench.markdown import crossing_floors, snr50
+    from radarbench.bench.markdown import crossing_floors, snr50
     tables = claims.read_tables(folder)
     plain, db = set(), set()
     for df in (tables.summary, tables.comparisons, tables.calibration):
@@ -471,7 +471,7 @@ def test_no_note_or_reason_types_a_number_the_run_produces(name):
 
 
 def test_a_claim_the_tables_cannot_answer_stops_the_report_before_anything_is_written(small_run_copy, monkeypatch):
-    from bench import report
+    from radarbench.bench import report
     text = GOOD.replace('kind = "paired", a = "b", b = "a", snr_db = "all"',
                         'kind = "summary", config = "innovation[window=1]", snr_db = 0, column = "no_such_column"')
     monkeypatch.setattr(report, "_preset_name", lambda source: "small")

@@ -10,8 +10,8 @@ import time
 import pandas as pd
 import pytest
 
-from bench import registry
-from bench.tasks import summary_columns
+from radarbench.bench import registry
+from radarbench.bench.tasks import summary_columns
 
 #: summary.csv's columns with the built-in tasks, in the order readers have always found them.
 SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials", "pd", "pd_low", "pd_high",
@@ -87,7 +87,7 @@ def _check_recording(rrd, trials):
     import numpy as np
     from rerun.chunk import RrdReader
 
-    from bench.recording import entity_root, method_entity_names, rerun_path
+    from radarbench.bench.recording import entity_root, method_entity_names, rerun_path
 
     reader = RrdReader(rrd)
     paths = set(reader.store().schema().entity_paths())
@@ -180,7 +180,7 @@ def test_interrupted_run_resumes_to_the_uninterrupted_results(bench_cli, uninter
     sweep, whole = uninterrupted
     part = tmp_path / "part"
     # a session of its own, so the signal goes to the whole group as a terminal's Ctrl-C does
-    proc = subprocess.Popen([sys.executable, "-m", "bench", "run", str(sweep), "--out", str(part), "--workers",
+    proc = subprocess.Popen([sys.executable, "-m", "radarbench.bench", "run", str(sweep), "--out", str(part), "--workers",
                              str(workers), "--quiet", "--no-record"], stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=_as_from_a_terminal)
     deadline = time.monotonic() + 120
@@ -209,7 +209,7 @@ CALIBRATION_UNITS = 50
 
 def _start(sweep, out, workers):
     # a session of its own, so the signal goes to the whole group as a terminal's Ctrl-C does
-    return subprocess.Popen([sys.executable, "-m", "bench", "run", str(sweep), "--out", str(out), "--workers",
+    return subprocess.Popen([sys.executable, "-m", "radarbench.bench", "run", str(sweep), "--out", str(out), "--workers",
                              str(workers), "--quiet", "--no-record"], stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=_as_from_a_terminal)
 

@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.cli import EXIT_REGRESSION, main
+from radarbench.bench.cli import EXIT_REGRESSION, main
 from conftest import small_sweep_text
 
 OTHER_METHODS = """
@@ -258,7 +258,7 @@ def test_compare_works_on_a_read_only_file_system(runs, tmp_path):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parents[1]),
                                                         *filter(None, [os.environ.get("PYTHONPATH")])])}
     script = (f"mount --bind {media} {media} && mount -o remount,bind,ro {media} && "
-              f"! touch {media}/probe 2>/dev/null && exec {sys.executable} -m bench compare {media}/a {media}/b")
+              f"! touch {media}/probe 2>/dev/null && exec {sys.executable} -m radarbench.bench compare {media}/a {media}/b")
     proc = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True, env=env,
                           timeout=120)
     assert proc.returncode == 0, proc.stderr

@@ -2,8 +2,8 @@
 
 import pytest
 
-from bench.config import parse_sweep, parse_sweep_text
-from bench.errors import ConfigError
+from radarbench.bench.config import parse_sweep, parse_sweep_text
+from radarbench.bench.errors import ConfigError
 
 
 def sweep(**over):
@@ -37,7 +37,7 @@ def test_snr_range_is_inclusive_and_sorted():
 def test_defaults_are_filled_and_plan_round_trips_as_a_sweep():
     import tomllib
 
-    from bench import tomlw
+    from radarbench.bench import tomlw
     plan = parse_sweep(sweep())
     again = parse_sweep(tomllib.loads(tomlw.dumps(plan.to_dict())))
     assert again.fingerprint() == plan.fingerprint()

@@ -7,12 +7,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bench import registry
-from bench.capabilities import CAPABILITIES, fits, missing
-from bench.core import Scene
-from bench.params import build_params
-from bench.rng import TrialRNG
-from bench.registry import get_task
+from radarbench.bench import registry
+from radarbench.bench.capabilities import CAPABILITIES, fits, missing
+from radarbench.bench.core import Scene
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.registry import get_task
 from tests.test_recorded_tracks import small_params_on_a_csv
 
 

@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from bench.core import SceneError
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.registry import get_scenario
-from bench.rng import TrialRNG
-from bench.tasks.detection import DetectionScene
-from models.kalman import LinearGaussianFilter, innovations, steady_state
-from scenarios.cv_turn_cv import (CvTurnCv, cv_model, deterministic_track,
+from radarbench.bench.core import SceneError
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.registry import get_scenario
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.tasks.detection import DetectionScene
+from radarbench.models.kalman import LinearGaussianFilter, innovations, steady_state
+from radarbench.scenarios.cv_turn_cv import (CvTurnCv, cv_model, deterministic_track,
                                   filter_response, maneuver_power)
 
 DEFAULT = build_params(CvTurnCv.Params, {})

@@ -15,11 +15,11 @@ from pathlib import Path
 
 import pytest
 
-from bench import registry
-from bench.cli import build_parser
-from bench.docs import base_docstrings, main, pages, published, presets, subcommands
-from bench.markdown import code, text
-from bench.provenance import WALL_TIME_ROW
+from radarbench.bench import registry
+from radarbench.bench.cli import build_parser
+from radarbench.bench.docs import base_docstrings, main, pages, published, presets, subcommands
+from radarbench.bench.markdown import code, text
+from radarbench.bench.provenance import WALL_TIME_ROW
 
 REPO = Path(__file__).resolve().parents[1]
 #: a relative link target of a Markdown page (external URLs and bare anchors left out)
@@ -107,7 +107,7 @@ def test_a_method_page_shows_the_docstrings_of_its_family_base_classes(site):
         page = (site / "methods" / f"{name}.md").read_text(encoding="utf-8")
         for base in cls.__mro__[1:]:
             doc = base.__dict__.get("__doc__")
-            if doc and base.__module__.startswith("methods") and inspect.cleandoc(doc) != inspect.getdoc(cls):
+            if doc and base.__module__.startswith("radarbench.methods") and inspect.cleandoc(doc) != inspect.getdoc(cls):
                 assert inspect.cleandoc(doc).splitlines()[0] in page, f"{name}: {base.__qualname__}"
                 shown += 1
         assert "bench.core" not in "".join(base_docstrings(cls))

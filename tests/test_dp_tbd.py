@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 import scipy.integrate
 
-from bench.core import TBD, Batch, TBDOutput
-from bench.tasks.tbd import Grid, TBDScene
-from bench.params import build_params
-from bench.registry import get_method
-from bench.rng import TrialRNG
-from methods._tbd_reference import numpy_dp_tbd, reference_dp_tbd
-from methods.dp_tbd import (
+from radarbench.bench.core import TBD, Batch, TBDOutput
+from radarbench.bench.tasks.tbd import Grid, TBDScene
+from radarbench.bench.params import build_params
+from radarbench.bench.registry import get_method
+from radarbench.bench.rng import TrialRNG
+from radarbench.methods.tbd.reference import numpy_dp_tbd, reference_dp_tbd
+from radarbench.methods.tbd.dp_tbd import (
     LOG_UNIFORM_ANGLE,
     ConditionalLLR,
     DpTbd,
@@ -23,7 +23,7 @@ from methods.dp_tbd import (
     turn_log_density,
     window_radius,
 )
-from scenarios.tbd_grid import TbdGrid
+from radarbench.scenarios.tbd_grid import TbdGrid
 
 
 def scene(snr_db, n=2, seed=3, **values):
@@ -209,7 +209,7 @@ def lag1_correlation(x):
 
 
 def test_prewhiten_makes_the_ar_cells_white_with_unit_variance():
-    from methods.dp_tbd import prewhiten
+    from radarbench.methods.tbd.dp_tbd import prewhiten
     batch = scene(None, n=4, seed=11, frames=20)          # 4 x 20 x 32 x 32 null frames
     z = batch.z
     N = z[:, 1:].size                                      # 77 824 lag-1 pairs
@@ -224,7 +224,7 @@ def test_prewhiten_makes_the_ar_cells_white_with_unit_variance():
 
 
 def test_prewhiten_of_white_noise_divides_by_sigma_and_default_is_unchanged():
-    from methods.dp_tbd import prewhiten
+    from radarbench.methods.tbd.dp_tbd import prewhiten
     batch = scene(6.0, n=2, seed=5, noise="white", frames=8)
     np.testing.assert_allclose(prewhiten(batch.z, batch), batch.z, rtol=1e-6)
     raw = DpTbd().run(batch, build_params(DpTbd.Params, {}))
@@ -242,7 +242,7 @@ def test_concentration_zero_is_a_uniform_turn_prior():
 def test_along_track_term_is_the_3d_minus_2d_gaussian_log_ratio(gamma):
     from scipy.stats import multivariate_normal as mvn
 
-    from methods.dp_tbd import along_track_llr
+    from radarbench.methods.tbd.dp_tbd import along_track_llr
     g = np.asarray(gamma)
     G3 = g[np.abs(np.subtract.outer(np.arange(3), np.arange(3)))]
     s = 1.7
@@ -260,7 +260,7 @@ def test_along_track_term_is_the_3d_minus_2d_gaussian_log_ratio(gamma):
 
 def brute_force_along_track(z, gamma, s, lp, q):
     """(best score, best track) by enumerating every path on a tiny scene."""
-    from methods.dp_tbd import along_track_llr
+    from radarbench.methods.tbd.dp_tbd import along_track_llr
     K, H, W = z.shape
     disp = displacements(q)
     D = len(disp)

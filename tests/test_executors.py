@@ -5,8 +5,8 @@ import sys
 
 import pytest
 
-from bench.cli import main
-from bench.store import MethodRun, Store, UnitResult
+from radarbench.bench.cli import main
+from radarbench.bench.store import MethodRun, Store, UnitResult
 
 # (run name, bench run options, chunk): every one must give the trials.csv of the first
 RUNS = [
@@ -41,7 +41,7 @@ def test_a_lost_worker_s_unit_is_run_again_and_yielded_once(tmp_path):
     """A worker dies while it holds a unit: dask runs the unit on another worker (the
     nanny restarts the dead one); every unit comes back exactly once."""
     pytest.importorskip("distributed")
-    from bench.executors import DaskExecutor
+    from radarbench.bench.executors import DaskExecutor
     marker = str(tmp_path / "died")
 
     def unit(i):                      # a closure: dask ships it by value to the workers
@@ -66,7 +66,7 @@ def test_under_dask_only_the_unit_that_kills_its_worker_fails(tmp_path):
     """Dask fails every unit of a worker that dies (``KilledWorker``): the units beside the
     culprit are run again alone and come back; the culprit alone yields a failure."""
     pytest.importorskip("distributed")
-    from bench.executors import DaskExecutor, UnitFailure
+    from radarbench.bench.executors import DaskExecutor, UnitFailure
 
     def unit(i):
         import os as _os
@@ -89,9 +89,9 @@ def test_under_dask_only_the_unit_that_kills_its_worker_fails(tmp_path):
 def test_workers_that_differ_from_the_driver_are_refused(monkeypatch):
     """Workers must run the driver's harness and plugins, or results would silently differ."""
     pytest.importorskip("distributed")
-    import bench
-    from bench.errors import ConfigError
-    from bench.executors import DaskExecutor
+    from radarbench import bench
+    from radarbench.bench.errors import ConfigError
+    from radarbench.bench.executors import DaskExecutor
     monkeypatch.setattr(bench, "__version__", "0.0.0-driver")          # the workers keep the real one
     with pytest.raises(ConfigError, match="differs from this machine: bench '.*' \\(here '0.0.0-driver'\\)"):
         DaskExecutor(1)
@@ -148,7 +148,7 @@ def test_scheduler_needs_the_dask_executor(write_sweep, tmp_path, capsys):
 
 def test_an_unreachable_scheduler_is_one_line(write_sweep, tmp_path, monkeypatch, capsys):
     pytest.importorskip("distributed")
-    from bench import executors
+    from radarbench.bench import executors
     monkeypatch.setattr(executors.DaskExecutor, "connect_timeout", "1s")
     code, err = _run_main(["run", str(write_sweep()), "--out", str(tmp_path / "out"), "--executor", "dask",
                            "--scheduler", "tcp://127.0.0.1:9", "--quiet", "--no-record"], capsys)

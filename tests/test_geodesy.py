@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from models.geodesy import WGS84_A_M, WGS84_F, geodetic_to_ecef, geodetic_to_enu
+from radarbench.models.geodesy import WGS84_A_M, WGS84_F, geodetic_to_ecef, geodetic_to_enu
 
 #: the polar radius b = a (1 - f)
 B_M = WGS84_A_M * (1.0 - WGS84_F)

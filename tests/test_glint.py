@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from bench.core import SceneError
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.registry import get_scenario
-from bench.rng import TrialRNG
-from bench.tasks.tracking import TrackingScene
-from models.glint import GlintModel
-from models.spherical import los_basis, measure, measurement_residual, spherical
-from scenarios.glint import (POSITION_INDEX, STATE_LABELS, Glint, discretisation, spherical_components,
+from radarbench.bench.core import SceneError
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.registry import get_scenario
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.tasks.tracking import TrackingScene
+from radarbench.models.glint import GlintModel
+from radarbench.models.spherical import los_basis, measure, measurement_residual, spherical
+from radarbench.scenarios.glint import (POSITION_INDEX, STATE_LABELS, Glint, discretisation, spherical_components,
                              transition_matrices)
 
 
@@ -212,9 +212,9 @@ def test_paper_parameters_as_printed():
     import math
     import tomllib
 
-    from bench.params import build_params
+    from radarbench.bench.params import build_params
 
-    sweep = tomllib.loads((importlib.resources.files("bench") / "presets" / "glint-tracking.toml").read_text())
+    sweep = tomllib.loads((importlib.resources.files("radarbench.bench") / "presets" / "glint-tracking.toml").read_text())
     entry = next(s for s in sweep["scenarios"] if s.get("label") == "paper-passive")
     p = build_params(Glint.Params, entry["params"])
     m = Glint.model(p, 0.0)
@@ -255,8 +255,8 @@ def test_line_of_sight_process_noise_drives_the_truth():
 
 
 def test_invalid_line_of_sight_noise_names_the_field():
-    from bench.errors import ConfigError
-    from bench.params import build_params
+    from radarbench.bench.errors import ConfigError
+    from radarbench.bench.params import build_params
 
     with pytest.raises(ConfigError, match="process_noise_los_m_s2"):
         build_params(Glint.Params, {"process_noise_los_m_s2": [1.0, 2.0]})
@@ -265,8 +265,8 @@ def test_invalid_line_of_sight_noise_names_the_field():
 def test_derived_spherical_components_are_scored_per_step():
     """The tracking task scores range, bearing and elevation (the paper's Fig. 4
     components) from the scenario's ``derived_components``, against the truth's."""
-    from bench.tasks.tracking.metrics import tracking_trial_metrics
-    from scenarios.glint import spherical_components
+    from radarbench.bench.tasks.tracking.metrics import tracking_trial_metrics
+    from radarbench.scenarios.glint import spherical_components
     rng = np.random.default_rng(0)
     truth = np.concatenate([rng.uniform(100, 1000, (4, 5, 3)), rng.normal(size=(4, 5, 3))], axis=-1)
     estimate = truth.copy()

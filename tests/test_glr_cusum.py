@@ -6,17 +6,17 @@ import pytest
 import scipy.stats
 from hypothesis import given, settings, strategies as st
 
-from bench.core import DetectionOutput
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.registry import get_method, get_task
-from bench.rng import CALIBRATION, TrialRNG
-from methods.cusum import Cusum, page_cusum, reference_cusum
-from methods import glr as glr_module
-from methods.glr import JUMPS, Glr, glr_statistic, jump_response, reference_glr, signatures
-from models.kalman import (LinearGaussianModel, covariance_sequence, filterpy_innovations, kalman_filter,
+from radarbench.bench.core import DetectionOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.registry import get_method, get_task
+from radarbench.bench.rng import CALIBRATION, TrialRNG
+from radarbench.methods.maneuver.cusum import Cusum, page_cusum, reference_cusum
+from radarbench.methods.maneuver import glr as glr_module
+from radarbench.methods.maneuver.glr import JUMPS, Glr, glr_statistic, jump_response, reference_glr, signatures
+from radarbench.models.kalman import (LinearGaussianModel, covariance_sequence, filterpy_innovations, kalman_filter,
                            steady_state)
-from scenarios.cv_turn_cv import CvTurnCv, cv_model, dwna_gain
+from radarbench.scenarios.cv_turn_cv import CvTurnCv, cv_model, dwna_gain
 from tests.test_detectors import batch, run  # noqa: F401 - the 10 dB batch fixture, shared
 from tests.test_kalman import random_model
 

@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from bench.core import SceneError
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.registry import get_scenario
-from bench.rng import TrialRNG
-from bench.tasks.multitarget import CLUTTER, PADDING, MultiTargetScene
-from models.hfswr import (cv_process_noise, cv_transition, measure, measure_jacobian, measurement_residual,
+from radarbench.bench.core import SceneError
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.registry import get_scenario
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.tasks.multitarget import CLUTTER, PADDING, MultiTargetScene
+from radarbench.models.hfswr import (cv_process_noise, cv_transition, measure, measure_jacobian, measurement_residual,
                           plot_to_cartesian)
-from scenarios.hfswr_targets import HFSWRTargets, swerling1_pd
+from radarbench.scenarios.hfswr_targets import HFSWRTargets, swerling1_pd
 
 
 def make(snr_db=15.0, n=8, seed=3, trials=None, **values):

@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench import registry
-from bench.config import parse_sweep
-from bench.core import Method
-from bench.errors import ConfigError
-from bench.params import build_params, declaration_problem, param
+from radarbench.bench import registry
+from radarbench.bench.config import parse_sweep
+from radarbench.bench.core import Method
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params, declaration_problem, param
 from tests.test_task_plugin import METHOD as TASK_PLUGIN_METHOD
 from tests.test_task_plugin import SCENARIO as TASK_PLUGIN_SCENARIO
 from tests.test_task_plugin import TASK
@@ -54,8 +54,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from bench.core import Method
-from bench.params import param
+from radarbench.bench.core import Method
+from radarbench.bench.params import param
 
 
 class SmoothedArgMax(Method):
@@ -80,7 +80,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.core import Method
+from radarbench.bench.core import Method
 
 
 class Broken(Method):
@@ -103,8 +103,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.core import Method
-from bench.params import param
+from radarbench.bench.core import Method
+from radarbench.bench.params import param
 
 
 class Unbounded(Method):
@@ -185,7 +185,7 @@ def loop(tmp_path):
 
 
 def _bench(env, cwd, *args):
-    return subprocess.run([sys.executable, "-m", "bench", *map(str, args)], env=env, cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "radarbench.bench", *map(str, args)], env=env, cwd=cwd,
                           capture_output=True, text=True, timeout=300)
 
 
@@ -332,7 +332,7 @@ def test_a_data_path_is_read_from_the_sweep_folder_and_labelled_by_its_name(tmp_
     resolved = build_params(_PathParams, {"data": "d/x.csv"}, tmp_path)
     assert resolved.data == str(tmp_path / "d" / "x.csv")
     assert build_params(_PathParams, {"data": resolved.data}).data == resolved.data    # a resolved plan
-    from bench.plan import ComponentConfig, label_value
+    from radarbench.bench.plan import ComponentConfig, label_value
     assert label_value(resolved, "data") == "x.csv"
     moved = build_params(_PathParams, {"data": "/somewhere/else/x.csv"})
     assert ComponentConfig("s", resolved, "s", "").key == ComponentConfig("s", moved, "s", "").key
@@ -346,8 +346,8 @@ SMALL = {"name": "id", "scenario": "cv-turn-cv", "trials": 4, "seed": 1, "snr_db
 def test_a_store_without_identities_is_rerun_and_its_results_kept_aside(tmp_path):
     """An earlier bench's store (no identity columns): every unit is unknown, re-run once,
     with one line saying so; the old results go to previous/ and equal the new ones."""
-    from bench.runner import plan_record, run_sweep
-    from bench.store import SCHEMA, Store
+    from radarbench.bench.runner import plan_record, run_sweep
+    from radarbench.bench.store import SCHEMA, Store
     plan = parse_sweep(SMALL)
     out = tmp_path / "run"
     run_sweep(plan, out, plan_record=plan_record(plan, "t"), executor="serial", quiet=True).close()
@@ -381,16 +381,16 @@ def test_a_store_without_identities_is_rerun_and_its_results_kept_aside(tmp_path
 
 
 def test_identities_follow_the_plugins_own_modules_only():
-    from bench.identity import code_identity
-    cumulant = dict(code_identity("methods.cumulant").modules)
-    assert {"methods.cumulant", "methods._innovation_base", "models.kalman"} <= set(cumulant)
+    from radarbench.bench.identity import code_identity
+    cumulant = dict(code_identity("radarbench.methods.maneuver.cumulant").modules)
+    assert {"radarbench.methods.maneuver.cumulant", "radarbench.methods.maneuver.base", "radarbench.models.kalman"} <= set(cumulant)
     assert not any(m.split(".")[0] in ("bench", "numpy", "scipy") for m in cumulant)
-    assert code_identity("methods.cumulant").hash != code_identity("methods.innovation").hash
+    assert code_identity("radarbench.methods.maneuver.cumulant").hash != code_identity("radarbench.methods.maneuver.innovation").hash
 
 
 def test_plan_toml_lists_the_identities(tmp_path):
     import tomllib
-    from bench.runner import plan_record, run_sweep, write_plan_toml
+    from radarbench.bench.runner import plan_record, run_sweep, write_plan_toml
     plan = parse_sweep(SMALL)
     store = run_sweep(plan, tmp_path, plan_record=plan_record(plan, "t"), executor="serial", quiet=True)
     write_plan_toml(tmp_path / "plan.toml", plan, "t", store.stamps)
@@ -405,7 +405,7 @@ def test_a_code_identity_follows_edits_of_the_plugin_and_of_what_it_imports_only
     identity; an edit of a module it does not import does not."""
     import importlib
 
-    from bench.identity import code_identity
+    from radarbench.bench.identity import code_identity
     pkg = tmp_path / "idpkg"
     pkg.mkdir()
     (pkg / "__init__.py").write_text("")
@@ -424,9 +424,9 @@ def test_a_code_identity_follows_edits_of_the_plugin_and_of_what_it_imports_only
 
 
 def test_a_name_in_a_module_that_fails_to_import_is_not_a_module(tmp_path, monkeypatch):
-    """``from methods.stonesoup_peer import X`` scanned in a module whose peer lacks its extra:
-    locating ``methods.stonesoup_peer.X`` imports the peer, which raises; the scan must go on."""
-    from bench import identity
+    """``from methods.multitarget.stonesoup_peer import X`` scanned in a module whose peer lacks its extra:
+    locating ``methods.multitarget.stonesoup_peer.X`` imports the peer, which raises; the scan must go on."""
+    from radarbench.bench import identity
     (tmp_path / "brokenpkg").mkdir()
     (tmp_path / "brokenpkg" / "__init__.py").write_text("")
     (tmp_path / "brokenpkg" / "peer.py").write_text("raise RuntimeError('needs an extra')\n")

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
-from models.kalman import (LinearGaussianFilter, LinearGaussianModel, covariance_sequence, innovations,
+from radarbench.models.kalman import (LinearGaussianFilter, LinearGaussianModel, covariance_sequence, innovations,
                            kalman_filter, reference_innovations, steady_state, whiten)
 
 
@@ -62,7 +62,7 @@ def test_steady_state_is_limit_of_recursion(setup):
 def test_covariance_sequence_memo_is_exact_and_private(setup, monkeypatch):
     """The memoised sequence is bit for bit the recursion's; each call gets its own arrays (a caller
     writing one changes nothing for the next); another P0 or step count is another entry."""
-    import models.kalman as kalman
+    import radarbench.models.kalman as kalman
 
     model, _, _, P0 = setup
     monkeypatch.setattr(kalman, "_covariance_memo", type(kalman._covariance_memo)())

@@ -9,17 +9,17 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from bench import registry
-from bench.core import Batch
-from bench.params import build_params
-from bench.rng import TrialRNG
-from bench.tasks.tracking import TrackingScene
-from methods._kinematic_base import ca_model, cv_model, cv_prior, linear_model
-from methods.imm import IMMCVCA, filterpy_imm, imm_filter
-from models.kalman import kalman_filter, whiten
-from models.kinematics import (KinematicModel, ca, current_statistical_input, current_statistical_variance,
+from radarbench.bench import registry
+from radarbench.bench.core import Batch
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.tasks.tracking import TrackingScene
+from radarbench.methods.kinematic.base import ca_model, cv_model, cv_prior, linear_model
+from radarbench.methods.kinematic.imm import IMMCVCA, filterpy_imm, imm_filter
+from radarbench.models.kalman import kalman_filter, whiten
+from radarbench.models.kinematics import (KinematicModel, ca, current_statistical_input, current_statistical_variance,
                                per_axis, position_index, singer, state_labels)
-from scenarios.maneuvering import Maneuvering
+from radarbench.scenarios.maneuvering import Maneuvering
 
 BASELINES = ("cv-kf", "ca-kf", "singer", "current-statistical", "vd-filter", "imm-cv-ca")
 #: two-sided probability outside the sampling intervals
@@ -174,7 +174,7 @@ def test_singer_closed_form_and_limits():
 @pytest.mark.parametrize("alpha_dt", [0.2, 0.999, 1.001, 5.0])
 def test_singer_van_loan_and_closed_form_agree(alpha_dt):
     """Van Loan (used up to alpha T = 1) and Singer's closed form (beyond) are the same Q."""
-    from models.kinematics import _singer_closed_form
+    from radarbench.models.kinematics import _singer_closed_form
     dt = 0.5
     F, Q = singer(dt, alpha_dt / dt, 3.0)
     F2, Q2 = _singer_closed_form(dt, alpha_dt / dt, 3.0)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.identity import imported_names
+from radarbench.bench.identity import imported_names
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("bench", "methods", "models", "scenarios")
@@ -25,10 +25,15 @@ FORBIDDEN = {
 }
 
 
+#: the import package the folders are installed under (pyproject.toml's package-dir)
+NEW_PACKAGE = "radarbench."
+
+
 def imported_modules(path: Path, package: str) -> set[str]:
-    """Absolute dotted names a module of ``package`` imports (``from a.b import c``:
-    ``a.b`` and ``a.b.c``, since ``c`` may be a module)."""
-    return imported_names(path.read_text(encoding="utf-8"), f"{package}.{path.stem}")
+    """Dotted names, by folder (``radarbench.models.kalman`` -> ``models.kalman``), a module
+    of ``package`` imports (``from a.b import c``: ``a.b`` and ``a.b.c``, since ``c`` may be a module)."""
+    names = imported_names(path.read_text(encoding="utf-8"), f"{NEW_PACKAGE}{package}.{path.stem}")
+    return {name.removeprefix(NEW_PACKAGE) for name in names}
 
 
 def modules(package: str) -> list[Path]:
@@ -70,7 +75,8 @@ def import_graph(paths) -> dict[str, set[str]]:
     """Module -> the modules of ours it imports (anywhere: at the top, in a function, under
     TYPE_CHECKING). ``from a.b import c`` imports ``a.b``, and ``a.b.c`` when that is a module."""
     names = {module_name(p): p for p in paths}
-    return {name: {m for m in imported_names(path.read_text(encoding="utf-8"), name, path.name == "__init__.py")
+    return {name: {m for m in (i.removeprefix(NEW_PACKAGE) for i in imported_names(
+                path.read_text(encoding="utf-8"), NEW_PACKAGE + name, path.name == "__init__.py"))
                    if m in names and m != name}
             for name, path in names.items()}
 
@@ -119,3 +125,21 @@ def test_no_import_circles_among_our_modules():
 def test_the_circle_finder_sees_long_circles_and_only_circles():
     graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": {"e"}, "f": {"g"}, "g": {"f"}}
     assert sorted(circles(graph)) == [["a", "b", "c"], ["f", "g"]]
+
+
+# ------------------------------------------------------------------ one import package
+
+def test_the_wheel_lists_every_package_folder():
+    """pyproject.toml names the packages one by one (package-dir maps each folder under
+    radarbench): a new family folder missing from the list would be left out of the wheel."""
+    import tomllib
+
+    setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
+    folders = {NEW_PACKAGE + module_name(init) for package in PACKAGES
+               for init in (ROOT / package).rglob("__init__.py")} | {NEW_PACKAGE.strip(".")}
+    listed = set(setuptools["packages"])
+    assert folders <= listed, sorted(folders - listed)
+    mapped = {name: ROOT / folder for name, folder in setuptools["package-dir"].items()}
+    for name in listed:
+        parent = max((m for m in mapped if name == m or name.startswith(m + ".")), key=len)
+        assert (mapped[parent] / name.removeprefix(parent).strip(".").replace(".", "/")).is_dir(), name

@@ -3,7 +3,7 @@ errors, masks and switch traces whose values are known exactly."""
 
 import numpy as np
 
-from bench.tasks.tracking.metrics import ONSET_WINDOW_STEPS, maneuver_trial_metrics
+from radarbench.bench.tasks.tracking.metrics import ONSET_WINDOW_STEPS, maneuver_trial_metrics
 
 
 def _case():

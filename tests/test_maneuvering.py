@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from bench.core import SceneError
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.rng import TrialRNG
-from bench.tasks.tracking import TrackingScene
-from models.kinematics import KinematicModel, singer
-from scenarios.maneuvering import Maneuvering
+from radarbench.bench.core import SceneError
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.tasks.tracking import TrackingScene
+from radarbench.models.kinematics import KinematicModel, singer
+from radarbench.scenarios.maneuvering import Maneuvering
 
 #: two-sided probability outside the sampling intervals (never flaky at fixed seeds, still tight)
 P_OUT = 1e-6

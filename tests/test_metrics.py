@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from bench.calibration import calibrate, empirical_threshold
-from bench.metrics import crossing, snr_at_pd
-from bench.tasks.detection.metrics import detection_trial_metrics
+from radarbench.bench.calibration import calibrate, empirical_threshold
+from radarbench.bench.metrics import crossing, snr_at_pd
+from radarbench.bench.tasks.detection.metrics import detection_trial_metrics
 
 
 def test_detection_metrics_follow_the_definitions():
@@ -57,13 +57,13 @@ def test_crossing_interpolates_and_reports_missing():
 
 
 def test_wilson_interval_matches_scipy_on_integer_counts():
-    from bench.metrics import binomial_interval, wilson_interval
+    from radarbench.bench.metrics import binomial_interval, wilson_interval
     for k, n in [(0, 50), (3, 50), (10, 1000), (999, 1000)]:
         np.testing.assert_allclose(wilson_interval(k / n, n), binomial_interval(k, n), rtol=1e-12, atol=1e-15)
 
 
 def test_clustered_rate_interval_widens_for_clustered_alarms():
-    from bench.metrics import binomial_interval, clustered_rate_interval
+    from radarbench.bench.metrics import binomial_interval, clustered_rate_interval
     steps = np.full(200, 50)
     spread = np.r_[np.ones(100), np.zeros(100)]          # 100 alarms, one per trial
     clustered = np.r_[np.full(10, 10.0), np.zeros(190)]  # 100 alarms in 10 trials
@@ -77,8 +77,8 @@ def test_calibration_pfa_intervals_are_counted_over_trials():
     """A window statistic's exceedances cluster within a trial: the calibration table's
     interval over trials is wider than Wilson's on pooled steps; with one value per
     trial (TBD scene scores) it is Wilson's exactly."""
-    from bench.calibration import exceedance_interval
-    from bench.metrics import binomial_interval
+    from radarbench.bench.calibration import exceedance_interval
+    from radarbench.bench.metrics import binomial_interval
     rng = np.random.default_rng(3)
     n, K, M = 300, 100, 16
     x = rng.chisquare(1, (n, K + M))

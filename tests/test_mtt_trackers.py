@@ -17,9 +17,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from methods import _mtt_kernels as kern
-from methods._jpda import jpda_marginals
-from methods._track_management import (
+from radarbench.methods.multitarget import kernels as kern
+from radarbench.methods.multitarget.jpda import jpda_marginals
+from radarbench.methods.multitarget.track_management import (
     CONFIRMATIONS,
     EkfTrackerParams,
     TrackerParams,
@@ -27,8 +27,8 @@ from methods._track_management import (
     UkfTrackerParams,
     tracker_models,
 )
-from methods.multitarget import GnnEkf, JpdaUkf, gnn_assignment
-from models.hfswr import measure, measure_jacobian, measurement_residual, plot_to_cartesian
+from radarbench.methods.multitarget.trackers import GnnEkf, JpdaUkf, gnn_assignment
+from radarbench.models.hfswr import measure, measure_jacobian, measurement_residual, plot_to_cartesian
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=8)
 SIGMA = np.array([300.0, math.radians(1.0), 0.2])
@@ -309,9 +309,9 @@ def test_a_runs_memory_does_not_grow_with_the_table_capacity_per_trial(method):
     peak at a 32-fold capacity grows by about one working buffer, not one per trial."""
     import tracemalloc
 
-    from bench import registry
-    from bench.params import build_params
-    from bench.rng import TrialRNG
+    from radarbench.bench import registry
+    from radarbench.bench.params import build_params
+    from radarbench.bench.rng import TrialRNG
 
     scenario = registry.get_scenario("hfswr-targets")
     batch = scenario().generate(build_params(scenario.Params, scenario.small_params), 10.0, 12,
@@ -357,7 +357,7 @@ def test_gnn_assignment_minimises_the_gated_distance_and_leaves_ungated_tracks_e
 def test_stonesoup_peer_tracks_a_lone_target():
     """The peer confirms one target in no clutter and follows it within the noise."""
     pytest.importorskip("stonesoup")
-    from methods.stonesoup_peer import StoneSoupJpda
+    from radarbench.methods.multitarget.stonesoup_peer import StoneSoupJpda
     from tests.test_mtt_trackers import _peer_batch
 
     batch, truth = _peer_batch()
@@ -369,8 +369,8 @@ def test_stonesoup_peer_tracks_a_lone_target():
 
 
 def _peer_batch():
-    from bench.core import Batch
-    from bench.tasks.multitarget import MultiTargetScene
+    from radarbench.bench.core import Batch
+    from radarbench.bench.tasks.multitarget import MultiTargetScene
 
     K = 12
     truth, z = _target(11, K)

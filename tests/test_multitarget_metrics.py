@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.tasks.multitarget.metrics import (gospa_assignment, multitarget_trial_metrics, pairwise_distances,
+from radarbench.bench.tasks.multitarget.metrics import (gospa_assignment, multitarget_trial_metrics, pairwise_distances,
                                              summarise_multitarget)
 
 

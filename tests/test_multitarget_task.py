@@ -7,17 +7,17 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import registry
-from bench.config import parse_sweep
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.recording import TrialRecord
-from bench.report import build_outputs
-from bench.rng import TrialRNG
-from bench.runner import plan_record, run_sweep
-from bench.tasks.base import OutputError
-from bench.tasks.multitarget import MultiTargetOutput, MultiTargetTask
-from scenarios.hfswr_targets import HFSWRTargets
+from radarbench.bench import registry
+from radarbench.bench.config import parse_sweep
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.recording import TrialRecord
+from radarbench.bench.report import build_outputs
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.runner import plan_record, run_sweep
+from radarbench.bench.tasks.base import OutputError
+from radarbench.bench.tasks.multitarget import MultiTargetOutput, MultiTargetTask
+from radarbench.scenarios.hfswr_targets import HFSWRTargets
 from tests.mtt_oracle import OracleTracker
 
 
@@ -138,8 +138,8 @@ def _check_recording(folder):
     import pyarrow as pa
     from rerun.chunk import RrdReader
 
-    from bench.recording.paths import entity_root, rerun_path
-    from bench.store import Store
+    from radarbench.bench.recording.paths import entity_root, rerun_path
+    from radarbench.bench.store import Store
 
     store = Store(folder / "results.sqlite")
     rec = next(r for r in map(TrialRecord.from_bytes, store.records()) if "pd=0.9" in r.scenario)

@@ -3,8 +3,8 @@
 import numpy as np
 import pandas as pd
 
-from bench.calibration import EQUAL_CHANCE_PD, calibrate
-from bench.tasks.detection.metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
+from radarbench.bench.calibration import EQUAL_CHANCE_PD, calibrate
+from radarbench.bench.tasks.detection.metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
 
 
 def test_window_alarm_fraction_and_step_average_pd():

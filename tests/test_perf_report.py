@@ -6,9 +6,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import registry
-from bench.capabilities import fits
-from bench.perf import PERF_COLUMNS, SCENE_COLUMNS, accepted_sizes, jobs, scene_jobs, write_report
+from radarbench.bench import registry
+from radarbench.bench.capabilities import fits
+from radarbench.bench.perf import PERF_COLUMNS, SCENE_COLUMNS, accepted_sizes, jobs, scene_jobs, write_report
 
 
 def test_scene_jobs_cover_every_scenarios_sizes():
@@ -37,9 +37,9 @@ def test_a_size_reading_a_file_is_timed_on_one_its_scenario_writes(monkeypatch):
     from dataclasses import dataclass
     from pathlib import Path
 
-    from bench import perf
-    from bench.core import Scenario
-    from bench.errors import ConfigError
+    from radarbench.bench import perf
+    from radarbench.bench.core import Scenario
+    from radarbench.bench.errors import ConfigError
 
     registry.discover()
     written = []
@@ -93,9 +93,9 @@ def test_each_method_is_timed_on_a_scenario_it_accepts(monkeypatch):
     ``check_scenario`` accepts, never on one it refuses (generic: no scenario is named)."""
     from dataclasses import dataclass
 
-    from bench.core import TRACKING, Method
-    from bench.params import build_params
-    from bench.perf import jobs
+    from radarbench.bench.core import TRACKING, Method
+    from radarbench.bench.params import build_params
+    from radarbench.bench.perf import jobs
 
     registry.discover()
     tracking = [s for s in registry.scenarios().values() if TRACKING in s.tasks]
@@ -136,7 +136,7 @@ def _perf_rows():
 def test_perf_csv_has_a_rate_column_per_work_unit(tmp_path):
     """Every row has trials_per_second; each other work unit (``Method.work``) gets its
     ``<unit>_per_second`` column, empty for methods counting another unit."""
-    from bench.perf import perf_table, rate_columns
+    from radarbench.bench.perf import perf_table, rate_columns
 
     registry.discover()
     perf = perf_table(_perf_rows())
@@ -174,8 +174,8 @@ def test_a_reference_part_timed_apart_gets_a_second_row(monkeypatch, tmp_path):
     the whole reference, and the reference less the CPU seconds it reported for the part."""
     from dataclasses import dataclass
 
-    from bench import perf
-    from bench.core import TRACKING, Method
+    from radarbench.bench import perf
+    from radarbench.bench.core import TRACKING, Method
 
     registry.discover()
 
@@ -212,7 +212,7 @@ MACHINE = {"bytes_per_second": 1e10, "float32_operations_per_second": 4e10, "flo
 
 def _in_this_process(monkeypatch):
     """``run_perf`` measuring in this process (no spawn), on :data:`MACHINE`'s limits, without scenes."""
-    from bench import perf
+    from radarbench.bench import perf
 
     monkeypatch.setattr(perf, "_in_fresh_process", perf.measure)
     monkeypatch.setattr(perf, "machine_limits", lambda: MACHINE)
@@ -221,7 +221,7 @@ def _in_this_process(monkeypatch):
 
 def test_the_least_time_at_the_limits_is_the_larger_of_bytes_and_operations():
     """A roofline: a cost's least time is its slowest kind of work at the machine's limits."""
-    from bench.limits import limit_fraction
+    from radarbench.bench.limits import limit_fraction
 
     assert limit_fraction({"bytes": 2e9}, 1.0, MACHINE) == (0.2, "bytes_per_second")
     assert limit_fraction({"bytes": 2e9, "float32_operations": 2e10}, 1.0, MACHINE) == \
@@ -231,7 +231,7 @@ def test_the_least_time_at_the_limits_is_the_larger_of_bytes_and_operations():
 
 def test_the_add_max_loop_computes_what_it_counts():
     """The compute ceiling's loop does one add and one max per element and pass (so its count is honest)."""
-    from bench.limits import _add_max_kernel
+    from radarbench.bench.limits import _add_max_kernel
 
     x = np.linspace(-3.0, 1.0, 40, dtype=np.float32)
     acc = np.zeros_like(x)
@@ -240,7 +240,7 @@ def test_the_add_max_loop_computes_what_it_counts():
 
 
 def test_the_last_level_cache_is_the_largest_one_listed(tmp_path):
-    from bench.limits import last_level_cache_bytes
+    from radarbench.bench.limits import last_level_cache_bytes
 
     for index, size in enumerate(["48K", "2048K", "300M", "garbage"]):
         (tmp_path / f"index{index}").mkdir()
@@ -254,8 +254,8 @@ def test_a_rows_fraction_of_the_machine_limit_is_its_least_cost_over_its_time(mo
     cost gets its fraction with the binding limit, one giving a reason a dash and that reason as a note."""
     from dataclasses import dataclass
 
-    from bench import perf
-    from bench.core import TRACKING, Method
+    from radarbench.bench import perf
+    from radarbench.bench.core import TRACKING, Method
 
     registry.discover()
 

@@ -6,15 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from bench.core import TBD
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.registry import get_method
-from bench.rng import TrialRNG
-from methods import _tbd_pf_kernels
-from methods.dp_tbd import DpTbd
-from methods.pf_tbd import PfTbd, particle_split, residual_predictors
-from scenarios.tbd_grid import TbdGrid
+from radarbench.bench.core import TBD
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.registry import get_method
+from radarbench.bench.rng import TrialRNG
+from radarbench.methods.tbd import pf_kernels
+from radarbench.methods.tbd.dp_tbd import DpTbd
+from radarbench.methods.tbd.pf_tbd import PfTbd, particle_split, residual_predictors
+from radarbench.scenarios.tbd_grid import TbdGrid
 
 
 def scene(snr_db, n=3, seed=11, **values):
@@ -46,7 +46,7 @@ def test_residual_predictors_of_white_and_ar_noise():
     betas, var = residual_predictors(scene(None, n=1, noise="white"))
     assert np.array_equal(betas, np.zeros((3, 2))) and np.allclose(var, 1.0)
     betas, var = residual_predictors(scene(None, n=1))
-    # the default AR(3): beta = (1.545, -0.711), sigma_c^2 = 0.0915 (methods.dp_tbd.DpTbdMf)
+    # the default AR(3): beta = (1.545, -0.711), sigma_c^2 = 0.0915 (methods.tbd.dp_tbd.DpTbdMf)
     assert betas[2] == pytest.approx([1.545, -0.711], abs=1e-3) and var[2] == pytest.approx(0.0915, abs=1e-4)
     assert betas[0].tolist() == [0.0, 0.0] and var[0] == pytest.approx(1.0) and betas[1, 1] == 0.0
 
@@ -102,13 +102,13 @@ def test_draws_are_uniform_and_shared_by_kernel_and_reference():
     """The counter-based uniforms (SplitMix64 outputs) are the same in NumPy and numba,
     lie in (0, 1) and are uniform: a chi-square test on 10 bins of 10^5 draws
     (9 degrees of freedom: 27.9 is the 0.999 quantile)."""
-    key = _tbd_pf_kernels.trial_keys(3, [17])[0]
+    key = pf_kernels.trial_keys(3, [17])[0]
     index = np.arange(100_000, dtype=np.uint64)
-    u = _tbd_pf_kernels.draws(key, 4, index, 2, 100_000)
+    u = pf_kernels.draws(key, 4, index, 2, 100_000)
     assert 0.0 < u.min() and u.max() < 1.0
     counts = np.bincount((u * 10).astype(int), minlength=10)
     chi2 = ((counts - 10_000) ** 2 / 10_000).sum()
     assert chi2 < 27.9
-    compiled = [_tbd_pf_kernels._draw(key, 4, int(i), 2, 100_000) for i in (0, 1, 99_999)]
+    compiled = [pf_kernels._draw(key, 4, int(i), 2, 100_000) for i in (0, 1, 99_999)]
     assert compiled == [u[0], u[1], u[99_999]]
-    assert len(set(_tbd_pf_kernels.trial_keys(0, range(1000)).tolist())) == 1000
+    assert len(set(pf_kernels.trial_keys(0, range(1000)).tolist())) == 1000

@@ -7,16 +7,16 @@ import tomllib
 import pandas as pd
 import pytest
 
-from bench import registry, tomlw
-from bench.config import parse_sweep
-from bench.listing import presets
+from radarbench.bench import registry, tomlw
+from radarbench.bench.config import parse_sweep
+from radarbench.bench.listing import presets
 from tests.conftest import parse_sweep_or_skip
 
 PRESETS = sorted(presets())
 
 
 def _preset(name: str) -> dict:
-    return tomllib.loads((importlib.resources.files("bench") / "presets" / f"{name}.toml").read_text())
+    return tomllib.loads((importlib.resources.files("radarbench.bench") / "presets" / f"{name}.toml").read_text())
 
 
 @pytest.mark.parametrize("name", PRESETS)
@@ -136,7 +136,7 @@ def test_glint_tracking_preset_at_reduced_size(bench_cli, tmp_path):
 @pytest.mark.slow
 def test_cfar_preset_smoke(bench_cli, tmp_path):
     """The CFAR preset's scenario configs, detectors and calibration on small maps, few maps and levels."""
-    from scenarios.rd_map import RdMap
+    from radarbench.scenarios.rd_map import RdMap
 
     sweep = _preset("cfar")
     sweep.update(trials=6, chunk=6, snr_db=[8, 24])

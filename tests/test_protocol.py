@@ -5,14 +5,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from bench import registry
-from bench.capabilities import fits
-from bench.core import Method, Scenario
-from bench.params import build_params
-from bench.perf import reference_of, scaling_plan
-from bench.rng import TrialRNG
-from methods import _innovation_base
-from methods._innovation_base import InnovationDetector
+from radarbench.bench import registry
+from radarbench.bench.capabilities import fits
+from radarbench.bench.core import Method, Scenario
+from radarbench.bench.params import build_params
+from radarbench.bench.perf import reference_of, scaling_plan
+from radarbench.bench.rng import TrialRNG
+from radarbench.methods.maneuver import base as innovation_base
+from radarbench.methods.maneuver.base import InnovationDetector
 
 METHODS = list(registry.methods().items())
 
@@ -59,7 +59,7 @@ def test_innovation_detectors_share_the_filterpy_reference(monkeypatch):
         raise AssertionError("the reference must not run the batched filter")
 
     # the reference calls the filterpy loop itself: with the batched filter gone it still runs
-    monkeypatch.setattr(_innovation_base, "innovations", batched)
+    monkeypatch.setattr(innovation_base, "innovations", batched)
     for cls in detectors:
         name, run = reference_of(cls())
         assert name == InnovationDetector.reference_name if cls.name not in own_loop else "filterpy" in name
@@ -92,7 +92,7 @@ def test_work_is_a_unit_and_a_positive_count(name, cls):
 def test_least_cost_is_work_of_known_kinds_or_a_reason(name, cls):
     """``Method.least_cost`` on the small instance of the first scenario the method serves: positive
     amounts of the kinds ``bench perf`` has a limit for, or a reason (a phrase), or None."""
-    from bench.limits import RESOURCES
+    from radarbench.bench.limits import RESOURCES
 
     for scenario in registry.scenarios().values():
         params = build_params(scenario.Params, scenario.small_params)

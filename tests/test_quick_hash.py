@@ -5,7 +5,7 @@ After a change that moves numbers on purpose: ``python -m tests.quick_hash --upd
 import pandas as pd
 import pytest
 
-import bench
+from radarbench import bench
 from tests.quick_hash import committed_digest, library_versions, run_quick, summary_digest
 
 

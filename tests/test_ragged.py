@@ -15,19 +15,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench import registry
-from bench.capabilities import VALID_STEP_MASKS, fits
-from bench.cli import main
-from bench.config import parse_sweep
-from bench.core import Batch
-from bench.errors import ConfigError
-from bench.metrics import per_step_rmse, time_averaged_rmse
-from bench.recording.record import MethodTrace, TrialRecord
-from bench.tasks.tracking import TrackingScene
-from bench.tasks.tracking.metrics import tracking_trial_metrics
-from methods.kinematic_kf import ConstantVelocityKF
-from models.kalman import LinearGaussianModel, kalman_filter
-from models.kinematics import KinematicModel, position_index, state_labels
+from radarbench.bench import registry
+from radarbench.bench.capabilities import VALID_STEP_MASKS, fits
+from radarbench.bench.cli import main
+from radarbench.bench.config import parse_sweep
+from radarbench.bench.core import Batch
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.metrics import per_step_rmse, time_averaged_rmse
+from radarbench.bench.recording.record import MethodTrace, TrialRecord
+from radarbench.bench.tasks.tracking import TrackingScene
+from radarbench.bench.tasks.tracking.metrics import tracking_trial_metrics
+from radarbench.methods.kinematic.kinematic_kf import ConstantVelocityKF
+from radarbench.models.kalman import LinearGaussianModel, kalman_filter
+from radarbench.models.kinematics import KinematicModel, position_index, state_labels
 from tests.kinematic_plugin import install, load
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=6, database=None)
@@ -203,7 +203,7 @@ def test_an_outside_ragged_scenario_runs_end_to_end(tmp_path):
     on it with no edit, every trial scored over its own steps."""
     env = install(tmp_path / "site")
     (tmp_path / "run.toml").write_text(RUN)
-    run = subprocess.run([sys.executable, "-m", "bench", "run", str(tmp_path / "run.toml"), "--out",
+    run = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", str(tmp_path / "run.toml"), "--out",
                           str(tmp_path / "out"), "--workers", "1", "--quiet"], env=env, capture_output=True,
                          text=True, timeout=600)
     assert run.returncode == 0, run.stderr
@@ -217,7 +217,7 @@ def test_an_outside_ragged_scenario_runs_end_to_end(tmp_path):
 def test_a_ragged_batch_from_an_undeclared_config_fails_the_methods_that_do_not_handle_it():
     """The run-time guard behind ``requires``: a method that does not handle masks never
     runs on NaN padding, whatever the scenario declared."""
-    from bench.capabilities import check_batch
+    from radarbench.bench.capabilities import check_batch
 
     z = np.zeros((2, 5, 1))
     valid = np.ones((2, 5), bool)

@@ -4,13 +4,13 @@ says, the null, common random numbers, validation."""
 import numpy as np
 import pytest
 
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.registry import get_scenario
-from bench.rng import TrialRNG
-from bench.tasks.cells import CELL_DETECTION, REGION_NAMES, MapScene
-from models.rd_map import REGION_LEVEL_DB, background_power
-from scenarios.rd_map import RdMap
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.registry import get_scenario
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.tasks.cells import CELL_DETECTION, REGION_NAMES, MapScene
+from radarbench.models.rd_map import REGION_LEVEL_DB, background_power
+from radarbench.scenarios.rd_map import RdMap
 
 SMALL = RdMap.small_params
 

@@ -12,15 +12,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import registry
-from bench.capabilities import VALID_STEP_MASKS, fits
-from bench.core import Batch
-from bench.errors import ConfigError
-from bench.identity import config_identity
-from bench.params import build_params
-from bench.rng import TrialRNG
-from bench.tasks.tracking import TrackingScene
-from scenarios.recorded_tracks import RecordedTracks
+from radarbench.bench import registry
+from radarbench.bench.capabilities import VALID_STEP_MASKS, fits
+from radarbench.bench.core import Batch
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.identity import config_identity
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.tasks.tracking import TrackingScene
+from radarbench.scenarios.recorded_tracks import RecordedTracks
 from tests.conftest import run_bench
 
 SPEED = 100.0                     # m/s
@@ -104,7 +104,7 @@ def test_truth_is_the_recorded_motion_with_the_onset_at_onset_step(csv):
 def test_turn_rate_marks_turns_and_not_speed_changes():
     """maneuver_size on three states (position, velocity, acceleration per axis): a turn at
     3 deg/s and 100 m/s, a speed change along the track, a hover (no heading)."""
-    from scenarios.recorded_tracks import maneuver_size
+    from radarbench.scenarios.recorded_tracks.bank import maneuver_size
     turn = [[0, 0], [SPEED, 0], [0, SPEED * TURN]]
     speeding_up = [[0, 0], [SPEED, 0], [3.0, 0]]
     hover = [[0, 0], [0.1, 0], [0, 3.0]]
@@ -118,7 +118,7 @@ def test_the_turn_rate_measure_finds_the_same_turns(csv):
     batch = generate(p, 10.0)
     mask = batch.scene.maneuver_mask
     assert not mask[:, :p.onset_step].any() and mask[:, p.onset_step].all()
-    from scenarios.recorded_tracks import maneuver_size
+    from radarbench.scenarios.recorded_tracks.bank import maneuver_size
     states = batch.truth.reshape(*batch.truth.shape[:2], 2, 3).transpose(0, 1, 3, 2).reshape(-1, 3, 2)
     rate = maneuver_size(states, "turn-rate").reshape(mask.shape)
     assert np.median(rate[mask]) == pytest.approx(3.0, rel=0.1)
@@ -148,7 +148,7 @@ def test_geodetic_columns_are_converted_to_metres(tmp_path):
                           "altitude_m": 3000.0})
     path = tmp_path / "geo.csv"
     table.to_csv(path, index=False)
-    from scenarios.recorded_tracks import checked_tracks
+    from radarbench.scenarios.recorded_tracks.files import checked_tracks
     enu = checked_tracks(pd.read_csv(path), str(path))
     np.testing.assert_allclose(enu["east"], (6_378_137.0 + 3000.0) * np.sin(np.deg2rad(1e-3 * t)), atol=1e-6)
     assert np.abs(enu["north"]).max() < 1.0

@@ -12,7 +12,7 @@ import pandas as pd
 import pyarrow as pa
 import pytest
 
-from bench.recording import (
+from radarbench.bench.recording import (
     LiveViewer,
     Quantised,
     TrialRecord,
@@ -23,10 +23,10 @@ from bench.recording import (
     snr_part,
     write_recording,
 )
-from bench.tasks import RecordedScene, detection, tbd, tracking
-from bench.tasks.detection import DetectionTask
-from bench.tasks.tbd import TBDTask
-from bench.tasks.tracking import TrackingTask
+from radarbench.bench.tasks import RecordedScene, detection, tbd, tracking
+from radarbench.bench.tasks.detection import DetectionTask
+from radarbench.bench.tasks.tbd import TBDTask
+from radarbench.bench.tasks.tracking import TrackingTask
 
 K = 50
 CUM = "cumulant[window=32]"
@@ -272,7 +272,7 @@ def test_rrd_verify(rrd):
 
 
 def test_failed_write_leaves_nothing(tmp_path, records, monkeypatch):
-    from bench.recording import sinks
+    from radarbench.bench.recording import sinks
 
     def boom(*_a, **_k):
         raise RuntimeError("boom")
@@ -293,7 +293,7 @@ def test_empty_recording(tmp_path):
 
 
 def test_live_viewer_without_display_raises_one_line(monkeypatch):
-    from bench.recording import sinks
+    from radarbench.bench.recording import sinks
 
     monkeypatch.setattr(sinks, "has_display", lambda: False)
     with pytest.raises(RuntimeError) as err:
@@ -672,7 +672,7 @@ def test_live_viewer_logs_tasks_like_the_file_writer(tmp_path, task_records, tas
 
 def test_workers_import_neither_rerun_nor_matplotlib():
     """What a worker imports (the runner, every task, the record) stays light."""
-    code = ("import sys, bench.runner, bench.tasks, bench.recording; from bench import registry; "
+    code = ("import sys, radarbench.bench.runner, radarbench.bench.tasks, radarbench.bench.recording; from radarbench.bench import registry; "
             "registry.discover(); print(sorted(m for m in ('rerun', 'matplotlib') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
     assert out.stdout.strip() == "[]", out.stdout + out.stderr

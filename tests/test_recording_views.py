@@ -6,12 +6,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.recording import blueprint as bp
-from bench.recording.layout import PALETTE, TrialLayout, method_colors
-from bench.recording.summary import informative_snr, legend_corner, snr_axis, summary_charts, summary_markdown
-from bench.tasks.detection import DetectionTask
-from bench.tasks.tbd import TBDTask
-from bench.tasks.tracking import TrackingTask
+from radarbench.bench.recording import blueprint as bp
+from radarbench.bench.recording.layout import PALETTE, TrialLayout, method_colors
+from radarbench.bench.recording.summary import informative_snr, legend_corner, snr_axis, summary_charts, summary_markdown
+from radarbench.bench.tasks.detection import DetectionTask
+from radarbench.bench.tasks.tbd import TBDTask
+from radarbench.bench.tasks.tracking import TrackingTask
 
 DET, TRK, TBD = DetectionTask(), TrackingTask(), TBDTask()
 
@@ -142,9 +142,9 @@ def test_legend_headroom_is_above_the_data():
 @pytest.fixture
 def detection_rrd(tmp_path):
     """A detection trial with an onset, drawn to a file."""
-    from bench.recording import write_recording
-    from bench.recording.record import TrialRecord
-    from bench.tasks import detection
+    from radarbench.bench.recording import write_recording
+    from radarbench.bench.recording.record import TrialRecord
+    from radarbench.bench.tasks import detection
 
     k = 60
     t = np.arange(k, dtype=float)
@@ -160,7 +160,7 @@ def detection_rrd(tmp_path):
 def test_the_onset_is_marked_above_the_data(detection_rrd):
     from rerun.chunk import RrdReader
 
-    from bench.recording.paths import entity_root, rerun_path
+    from radarbench.bench.recording.paths import entity_root, rerun_path
 
     onset = rerun_path(f"{entity_root('cv', 0.0, 0)}/nis/onset")
     chunks = RrdReader(detection_rrd).stream().filter(content=onset, is_static=False,

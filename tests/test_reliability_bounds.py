@@ -15,10 +15,10 @@ import re
 import numpy as np
 import pytest
 
-from bench import registry
-from bench.errors import ConfigError
-from bench.listing import plugin_listing
-from bench.params import build_params
+from radarbench.bench import registry
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.listing import plugin_listing
+from radarbench.bench.params import build_params
 
 registry.discover()
 
@@ -216,7 +216,7 @@ def _old_place_targets(labels, names, *, per_region, pairs, pair_offset, spacing
 def test_the_vectorised_layout_search_places_every_target_where_the_loop_did(chunks, monkeypatch):
     """The same cells, flags and shortfall as the loop it replaces, on random label maps
     (tiny chunks: the growth and the early stop on maps this small)."""
-    import models.rd_map as rd
+    import radarbench.models.rd_map as rd
     monkeypatch.setattr(rd, "_SCAN_CHUNK", chunks[0])
     monkeypatch.setattr(rd, "_SCAN_CHUNK_MAX", chunks[1])
     names = ("homogeneous", "bragg", "interference", "clutter-edge")
@@ -241,14 +241,14 @@ HUGE_MAP = {"range_cells": 4096, "doppler_cells": 16384, "targets_per_region": 6
 def test_a_huge_map_above_the_memory_limit_is_refused_before_any_layout_search(monkeypatch):
     """The issue's case ran > 420 s and reached 4.4 GB before the memory check: now the
     memory check comes first and the layout is never built."""
-    import models.rd_map as rd
+    import radarbench.models.rd_map as rd
     from tests.test_reliability_validation import refused, sweep, toml
 
     def no_layout(*args, **kwargs):
         raise AssertionError("the layout was searched before the memory check")
     monkeypatch.setattr(rd, "background_power", no_layout)
     monkeypatch.setattr(rd, "place_targets", no_layout)
-    import scenarios.rd_map as scenario
+    import radarbench.scenarios.rd_map as scenario
     monkeypatch.setattr(scenario, "background_power", no_layout)
     monkeypatch.setattr(scenario, "place_targets", no_layout)
     scenario.scene_layout.cache_clear()
@@ -281,7 +281,7 @@ def test_a_large_map_without_room_is_refused_in_one_pass(tmp_path):
 
 
 def test_the_memory_estimate_of_a_map_counts_its_layout():
-    from models.rd_map import LAYOUT_BYTES_PER_CELL
+    from radarbench.models.rd_map import LAYOUT_BYTES_PER_CELL
     S = registry.get_scenario("rd-map")
     p = build_params(S.Params, HUGE_MAP)
     assert S().unit_memory_bytes(p, 2) == (48 + LAYOUT_BYTES_PER_CELL) * 4096 * 16384

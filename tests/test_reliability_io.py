@@ -24,9 +24,9 @@ from pathlib import Path
 
 import pytest
 
-from bench import runfolder, tomlw
-from bench.cli import main
-from bench.store import MethodRun, Store, UnitResult
+from radarbench.bench import runfolder, tomlw
+from radarbench.bench.cli import main
+from radarbench.bench.store import MethodRun, Store, UnitResult
 
 TINY = """
 name = "tiny"
@@ -64,7 +64,7 @@ def bench(*args, timeout=120, limit: int | None = None, wrap: list[str] | None =
         if limit is not None:
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
             resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
-    cmd = [*(wrap or []), sys.executable, "-m", "bench", *map(str, args)]
+    cmd = [*(wrap or []), sys.executable, "-m", "radarbench.bench", *map(str, args)]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, preexec_fn=pre, **kw)
 
 
@@ -139,7 +139,7 @@ def test_out_under_a_regular_file_or_with_a_too_long_name_is_one_line(clean, tmp
 
 
 def test_perf_out_on_a_file_is_refused_before_measuring(tmp_path, monkeypatch):
-    from bench import perf
+    from radarbench.bench import perf
 
     def measured(*_, **__):
         raise AssertionError("bench perf measured before it checked --out")
@@ -297,7 +297,7 @@ def test_a_second_run_on_a_live_run_folder_says_it_is_in_use(clean, tmp_path):
     sweep, whole = clean
     other = tiny(tmp_path / "other.toml", trials=6)
     out = tmp_path / "run"
-    a = subprocess.Popen([sys.executable, "-m", "bench", "run", str(sweep), "--out", str(out), "--workers", "1",
+    a = subprocess.Popen([sys.executable, "-m", "radarbench.bench", "run", str(sweep), "--out", str(out), "--workers", "1",
                           "--quiet", "--no-record"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60
@@ -501,7 +501,7 @@ def test_report_on_a_foreign_sqlite_file_refuses_before_modifying_it(tmp_path, j
 
 def test_a_refused_run_leaves_no_folder_behind(tmp_path, monkeypatch):
     """A run that fails before storing anything in a folder it created removes that folder."""
-    from bench import runner
+    from radarbench.bench import runner
     monkeypatch.setattr(runner, "make_executor", lambda *a, **k: (_ for _ in ()).throw(
         OSError(28, "No space left on device", str(tmp_path / "x"))))
     out = tmp_path / "new"
@@ -520,7 +520,7 @@ def _controls(text: str) -> list[str]:
 
 
 def test_the_writers_escape_control_characters():
-    from bench.report import escape_controls
+    from radarbench.bench.report import escape_controls
     text = tomlw.dumps({"description": HOSTILE, "nested": {"k": HOSTILE}})
     assert not _controls(text)
     assert tomllib.loads(text) == {"description": HOSTILE, "nested": {"k": HOSTILE}}

@@ -18,14 +18,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench import registry
-from bench.cli import main
-from bench.core import TrackingOutput
-from bench.errors import ConfigError
-from bench.listing import plugin_listing
-from bench.params import build_params
-from bench.rng import TrialRNG
-from bench.tasks.base import COVARIANCE_TOLERANCE, OutputError, check_covariance
+from radarbench.bench import registry
+from radarbench.bench.cli import main
+from radarbench.bench.core import TrackingOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.listing import plugin_listing
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.tasks.base import COVARIANCE_TOLERANCE, OutputError, check_covariance
 
 registry.discover()
 
@@ -114,7 +114,7 @@ def test_scored_traces_outside_their_range_are_refused(trace, value, says):
 
 
 def test_a_multitarget_gate_covariance_must_be_a_covariance():
-    from bench.tasks.multitarget import MultiTargetOutput
+    from radarbench.bench.tasks.multitarget import MultiTargetOutput
     batch = _batch("hfswr-targets", n=2)
     n, K = batch.n, batch.steps
     state = np.full((n, K, 1, 4), np.nan)
@@ -133,7 +133,7 @@ def test_a_multitarget_gate_covariance_must_be_a_covariance():
 
 
 def test_a_cfar_significance_below_zero_is_an_impossible_probability():
-    from bench.tasks.cells import CellDetectionOutput
+    from radarbench.bench.tasks.cells import CellDetectionOutput
     batch = _batch("rd-map", n=2)
     stat = np.zeros((2, *batch.scene.shape), np.float32)
     task = registry.get_task("cell-detection")
@@ -159,7 +159,7 @@ IMPOSSIBLE_TRACKER = '''
 import numpy as np
 from dataclasses import dataclass
 
-from bench.core import TRACKING, Method, TrackingOutput
+from radarbench.bench.core import TRACKING, Method, TrackingOutput
 
 
 class NegativeCovariance(Method):
@@ -240,7 +240,7 @@ def impossible_run(tmp_path_factory):
                          "[bench.methods]\nnegative-covariance = impossible_plugin:NegativeCovariance\n"
                          "huge-estimate = impossible_plugin:HugeEstimate\n")
     (root / "sweep.toml").write_text(IMPOSSIBLE_SWEEP)
-    proc = subprocess.run([sys.executable, "-m", "bench", "run", str(root / "sweep.toml"), "--out", str(root / "run"),
+    proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", str(root / "sweep.toml"), "--out", str(root / "run"),
                            "--quiet", "--workers", "1"], env=env, capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 6, proc.stderr                      # failed units: exit 6
@@ -274,7 +274,7 @@ def test_the_report_of_a_run_whose_plugins_are_not_installed_names_them_and_the_
     shutil.copytree(impossible_run[0], run)
     from tests.test_reliability_store import _tree
     before = _tree(run)
-    proc = subprocess.run([sys.executable, "-m", "bench", "report", str(run)], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "report", str(run)], capture_output=True, text=True,
                           timeout=300)                                # this environment lacks the plugin
     assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1, proc.stderr
     assert proc.stderr.startswith(f"error: {run / 'results.sqlite'}: the run was made with plugins not installed "
@@ -386,9 +386,9 @@ def test_pd_on_a_map_without_targets_is_said_to_be_undefined_never_ranked(tmp_pa
 
 
 def test_a_collapsed_interval_and_a_negative_zero_are_printed_as_what_they_are():
-    from bench.markdown import fmt
-    from bench.metrics import bootstrap_mean_ci, paired_difference
-    from bench.report.render import _interval
+    from radarbench.bench.markdown import fmt
+    from radarbench.bench.metrics import bootstrap_mean_ci, paired_difference
+    from radarbench.bench.report.render import _interval
     assert fmt(-0.0) == "0" and fmt(0.0) == "0" and fmt(-1e-20) == "-1.00e-20"
     equal = bootstrap_mean_ci(np.full(6, 1 / 6), np.zeros(6))
     assert _interval(*equal) == "all trials equal: 0.167"                   # was 0.167 [0.167, 0.167]
@@ -401,7 +401,7 @@ def test_a_collapsed_interval_and_a_negative_zero_are_printed_as_what_they_are()
 def test_float_noise_in_a_paired_difference_is_zero_not_a_significant_margin():
     """Means of means of 0/1 differences over three levels: 9.25e-18 where the exact value
     is 0 (the issue's [-0.1, 5.55e-18]: an end above 0 by float noise reads as a gain)."""
-    from bench.metrics import paired_difference
+    from radarbench.bench.metrics import paired_difference
     a = np.array([0, 1, 0, 1, 0, 0, 0, 0, 1, 1, 0, 1, 1, 1, 1, 1, 0, 0], float)
     b = np.array([1, 0, 1, 1, 1, 1, 0, 0, 0, 0, 1, 0, 1, 0, 0, 1, 1, 0], float)
     strata = np.repeat(np.arange(3), 6)
@@ -414,8 +414,8 @@ def test_float_noise_in_a_paired_difference_is_zero_not_a_significant_margin():
 def test_the_glance_of_configs_equal_on_every_trial_is_a_tie_said_plainly():
     """Was "ekf leads … by -0 [-0, -0]"."""
     import pandas as pd
-    from bench.report.glance import comparisons_frame, glance
-    from bench.report.render import glance_markdown
+    from radarbench.bench.report.glance import comparisons_frame, glance
+    from radarbench.bench.report.render import glance_markdown
     task = registry.get_task("tracking")
     trials = pd.DataFrame({"scenario": "glint", "config": ["ekf"] * 4 + ["viterbi"] * 4, "snr_db": 0.0,
                            "trial": list(range(4)) * 2, "rmse": [2.0, 3.0, 4.0, 5.0] * 2})
@@ -436,7 +436,7 @@ def test_a_tracker_estimate_of_1e308_is_a_failure_and_warns_nothing(impossible_r
 
 def test_a_position_a_float32_cannot_hold_is_drawn_as_a_gap_without_a_warning():
     import warnings
-    from bench.recording.draw import north_up
+    from radarbench.bench.recording.draw import north_up
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         xy = north_up(np.array([[1.0, 2.0], [1e100, -3.0], [4.0, -1e40]]))
@@ -448,7 +448,7 @@ def _every_task_sweep(folder) -> str:
     """Every scenario at its small size, with every method that serves it: all the tasks'
     summary columns at once (the frame pandas warned about), a recorded trial; recorded-tracks
     on a CSV written into ``folder`` (its small instance reads an optional extra's sample)."""
-    from bench import tomlw
+    from radarbench.bench import tomlw
     from tests.test_recorded_tracks import small_params_on_a_csv
     local = {"recorded-tracks": small_params_on_a_csv(folder)}
     scenarios = [{"name": name, "params": local.get(name, dict(cls.small_params))}
@@ -468,7 +468,7 @@ def test_no_library_warning_reaches_the_terminal_on_a_normal_run(tmp_path):
     import sys
     (tmp_path / "sweep.toml").write_text(_every_task_sweep(tmp_path))
     env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
-    proc = subprocess.run([sys.executable, "-m", "bench", "run", "sweep.toml", "--out", "run", "--workers", "1"],
+    proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", "sweep.toml", "--out", "run", "--workers", "1"],
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr                      # `bench report` builds the same way
     assert "Warning" not in proc.stderr and "warn" not in proc.stderr.lower(), proc.stderr

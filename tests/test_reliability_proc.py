@@ -84,13 +84,13 @@ def hostile(tmp_path_factory):
 
 
 def _bench(env, *args, timeout=240, **extra):
-    return subprocess.run([sys.executable, "-m", "bench", *map(str, args)], env={**env, **extra},
+    return subprocess.run([sys.executable, "-m", "radarbench.bench", *map(str, args)], env={**env, **extra},
                           capture_output=True, text=True, timeout=timeout)
 
 
 def _start(env, *args, stderr, **extra):
     """A run in a session of its own (its signals reach the driver alone), Ctrl-C as at a terminal."""
-    return subprocess.Popen([sys.executable, "-m", "bench", *map(str, args)], env={**env, **extra},
+    return subprocess.Popen([sys.executable, "-m", "radarbench.bench", *map(str, args)], env={**env, **extra},
                             stdout=subprocess.DEVNULL, stderr=stderr, start_new_session=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 

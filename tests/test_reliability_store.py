@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.cli import main
+from radarbench.bench.cli import main
 
 
 def _tree(root: Path) -> dict[str, int]:
@@ -104,7 +104,7 @@ def _limited(limit_mb: int, *args, cwd: Path, env=None) -> subprocess.CompletedP
     and fails."""
     env = {**(env or os.environ), "OPENBLAS_NUM_THREADS": "1", "PYTHONFAULTHANDLER": "1"}
     command = (f"ulimit -v {limit_mb * 1024}; "
-               f"exec timeout -s ABRT 120 {sys.executable} -m bench " + " ".join(map(str, args)))
+               f"exec timeout -s ABRT 120 {sys.executable} -m radarbench.bench " + " ".join(map(str, args)))
     proc = subprocess.run(["bash", "-c", command], cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
     if proc.returncode in (124, 134, -6) and "Fatal Python error: Aborted" in proc.stderr:
         stack = proc.stderr.split("Current thread", 1)[-1].split("\n\n", 1)[0]
@@ -118,7 +118,7 @@ def _limited(limit_mb: int, *args, cwd: Path, env=None) -> subprocess.CompletedP
 def plugins_mb() -> int:
     """The address space (MiB) this machine needs to import every plugin: the limits below
     are set from it, so the tests do not depend on the libraries' sizes."""
-    probe = ("from bench import registry; registry.discover(); import re; "
+    probe = ("from radarbench.bench import registry; registry.discover(); import re; "
              "print(re.search(r'VmPeak:\\s+(\\d+)', open('/proc/self/status').read()).group(1))")
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
                          env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
@@ -163,7 +163,7 @@ def test_a_plugin_import_that_runs_out_of_memory_is_exit_3_not_an_unknown_method
     env = install_plugin(tmp_path / "site", "greedy_plugin", "raise MemoryError('a 40 GB lookup table')\n",
                          "[bench.methods]\ngreedy = greedy_plugin\n")
     sweep = write_sweep()
-    proc = subprocess.run([sys.executable, "-m", "bench", "run", sweep, "--out", tmp_path / "out", "--quiet"],
+    proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", sweep, "--out", tmp_path / "out", "--quiet"],
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     one_line(proc, 3, "error: out of memory: out of memory while importing plugins (MemoryError: a 40 GB")
     assert not (tmp_path / "out").exists()
@@ -173,11 +173,11 @@ def test_a_plugin_import_that_runs_out_of_memory_is_exit_3_not_an_unknown_method
                          ids=["MemoryError", "ImportError"])
 def test_out_of_memory_after_the_folder_is_made_removes_it(tmp_path, write_sweep, monkeypatch, fault):
     """The run folder this command created, with nothing stored in it, goes (was left)."""
-    import bench.cli
+    from radarbench.bench import cli as bench_cli
 
     def fails(*args, **kwargs):
         raise fault
-    monkeypatch.setattr(bench.cli, "_run_locked", fails)
+    monkeypatch.setattr(bench_cli, "_run_locked", fails)
     err = io.StringIO()
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
         code = main(["run", str(write_sweep()), "--out", str(tmp_path / "out"), "--quiet", "--workers", "1"])
@@ -188,7 +188,7 @@ def test_out_of_memory_after_the_folder_is_made_removes_it(tmp_path, write_sweep
 def test_out_of_memory_is_recognised_through_its_causes():
     import errno
 
-    from bench.errors import is_out_of_memory
+    from radarbench.bench.errors import is_out_of_memory
     assert is_out_of_memory(MemoryError())
     assert is_out_of_memory(OSError(errno.ENOMEM, "Cannot allocate memory"))
     assert is_out_of_memory(ImportError("x.so: failed to map segment from shared object"))

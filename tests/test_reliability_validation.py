@@ -24,13 +24,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import registry, tomlw
-from bench.cli import main
-from bench.config import MIN_PFA, SNR_KEY_DIGITS, parse_sweep, parse_sweep_text, snr_key
-from bench.errors import ConfigError
-from bench.feasibility import default_unit_memory_gb, unit_memory_bytes
-from bench.params import build_params, field_types
-from bench.rng import TrialRNG
+from radarbench.bench import registry, tomlw
+from radarbench.bench.cli import main
+from radarbench.bench.config import MIN_PFA, SNR_KEY_DIGITS, parse_sweep, parse_sweep_text, snr_key
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.feasibility import default_unit_memory_gb, unit_memory_bytes
+from radarbench.bench.params import build_params, field_types
+from radarbench.bench.rng import TrialRNG
 
 registry.discover()
 
@@ -111,7 +111,7 @@ def test_every_number_is_bounded_on_both_sides_with_a_reason(kind, name, field):
 
 def test_bounds_are_metadata_and_never_change_the_resolved_params():
     """The random stream of a scenario config hashes its resolved params: bounds add no field."""
-    from bench.params import params_as_dict
+    from radarbench.bench.params import params_as_dict
     for cls in [*registry.methods().values(), *registry.scenarios().values()]:
         names = [f.name for f in dataclasses.fields(cls.Params)]
         assert list(params_as_dict(cls.Params())) == names
@@ -307,7 +307,7 @@ def test_the_memory_limit_is_a_sweep_key_the_user_can_raise():
 def test_the_default_limit_is_a_fraction_of_this_machine_and_every_preset_fits():
     import importlib.resources
     assert 0.1 < default_unit_memory_gb() < 1e5
-    root = importlib.resources.files("bench") / "presets"
+    root = importlib.resources.files("radarbench.bench") / "presets"
     for preset in root.iterdir():
         if preset.name.endswith(".toml") and not preset.name.endswith(".claims.toml"):   # claims: not sweeps
             try:
@@ -337,7 +337,7 @@ def test_the_memory_estimate_follows_the_array_sizes():
 def test_viterbi_refinement_ends_for_every_accepted_position_levels():
     """position_levels = 3 doubled the step each stage (4 / (Lp - 1) = 2) and 5 kept it,
     so the loop never ended, its list growing; now every odd value in [3, 1001] ends."""
-    from methods.viterbi import MAX_REFINEMENT_STAGES, refinement_steps
+    from radarbench.methods.glint.viterbi import MAX_REFINEMENT_STAGES, refinement_steps
     V = registry.get_method("viterbi")
     meta = {f.name: f.metadata for f in dataclasses.fields(V.Params)}["position_levels"]
     for Lp in range(meta["ge"], meta["le"] + 1, 2):
@@ -359,7 +359,7 @@ def test_viterbi_runs_at_every_accepted_position_levels():
 
 def test_viterbi_results_at_seven_levels_and_more_are_unchanged():
     """The halving applies to 3 and 5 levels only: the grids of 7 and more are the old ones."""
-    from methods.viterbi import refinement_steps
+    from radarbench.methods.glint.viterbi import refinement_steps
     for Lp in (7, 9, 41, 1001):
         old = [np.array([37.0, 2.0])]
         while old[-1][0] > 0.01:
@@ -396,8 +396,8 @@ def test_the_smallest_pfa_is_the_documented_bound():
 
 def test_no_upper_quantile_is_taken_as_ppf_of_one_minus_pfa():
     """chi2.ppf(1 - pfa) is infinite below pfa ~ 1e-16: thresholds use isf everywhere."""
-    import bench
-    import methods
+    from radarbench import bench
+    from radarbench import methods
     roots = [Path(bench.__file__).parent, Path(methods.__file__).parent]
     pattern = re.compile(r"\.ppf\(\s*\(?\s*1(\.0)?\s*-|\.ppf\(\s*\(1(\.0)?\s*-")
     for root in roots:
@@ -415,7 +415,7 @@ def test_snr_levels_equal_at_the_key_precision_are_refused():
 
 
 def test_accepted_snr_levels_have_distinct_unit_keys():
-    from bench.runner import plan_units
+    from radarbench.bench.runner import plan_units
     rng = np.random.default_rng(5)
     for _ in range(200):
         levels = [float(x) for x in np.round(rng.uniform(-200, 200, 5), rng.integers(0, 12))]
@@ -458,7 +458,7 @@ def test_a_scenario_grid_in_any_key_order_round_trips_through_plan_toml():
     again = parse_sweep(tomllib.loads(tomlw.dumps(plan.to_dict())))
     assert [s.label for s in again.scenarios] == labels
     assert again.fingerprint() == plan.fingerprint()
-    from bench.runner import plan_units
+    from radarbench.bench.runner import plan_units
     assert [u.key for part in plan_units(again) for u in part] == [u.key for part in plan_units(plan) for u in part]
 
 

@@ -14,11 +14,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import registry
-from bench.cli import EXIT_BAD_INPUT, EXIT_REGRESSION, main
-from bench.metrics import (bootstrap_statistic_interval, fit_crossing, mcnemar_exact, paired_difference,
+from radarbench.bench import registry
+from radarbench.bench.cli import EXIT_BAD_INPUT, EXIT_REGRESSION, main
+from radarbench.bench.metrics import (bootstrap_statistic_interval, fit_crossing, mcnemar_exact, paired_difference,
                            time_averaged_rmse)
-from bench.report import non_default
+from radarbench.bench.report import non_default
 
 MIXED = """
 name = "mixed"
@@ -215,8 +215,8 @@ def test_glance_ranks_detectors_at_equal_chance_pd_with_any_alarm_pd_beside(mixe
 def test_glance_does_not_rank_on_single_trials(per_level, words):
     """One trial per level (or identical trials) gives a zero-width interval: no winner."""
     from types import SimpleNamespace
-    from bench.report.glance import comparisons_frame, glance
-    from bench.report.render import glance_markdown
+    from radarbench.bench.report.glance import comparisons_frame, glance
+    from radarbench.bench.report.render import glance_markdown
     task = SimpleNamespace(name="t", noun="trackers", ranking_metric="err", ranking_higher_is_better=False,
                            ranking_label="error (m)", ranking_binary=False, equal_chance_metric="")
     rng = np.random.default_rng(3)
@@ -349,7 +349,7 @@ def test_paired_difference_and_mcnemar():
 
 
 def test_vectorised_bootstrap_equals_the_resample_loop():
-    from bench.metrics import BOOTSTRAP_SEED
+    from radarbench.bench.metrics import BOOTSTRAP_SEED
     sq = np.random.default_rng(3).gamma(2.0, 3.0, size=(37, 11))
     low, high = bootstrap_statistic_interval(sq, time_averaged_rmse, resamples=300)
     idx = np.random.default_rng(BOOTSTRAP_SEED).integers(0, 37, size=(300, 37))
@@ -360,8 +360,8 @@ def test_vectorised_bootstrap_equals_the_resample_loop():
 def test_single_scenario_grids_list_each_configs_own_parameters():
     """``scenario = ...`` with a grid axis in [scenario_params]: plan.toml merges the axis
     back into one list, and each scenario config must still show its own value."""
-    from bench.config import parse_sweep
-    from bench.report import _params_text, _resolved_scenario_params
+    from radarbench.bench.config import parse_sweep
+    from radarbench.bench.report import _params_text, _resolved_scenario_params
     sweep = tomllib.loads(textwrap.dedent("""
         name = "grid"
         scenario = "cv-turn-cv"
@@ -384,8 +384,8 @@ def test_single_scenario_grids_list_each_configs_own_parameters():
 
 
 def test_differences_of_crossings_keep_their_resolution():
-    from bench.markdown import crossing_difference
-    from bench.metrics import Crossing
+    from radarbench.bench.markdown import crossing_difference
+    from radarbench.bench.metrics import Crossing
     fit_a, fit_b = Crossing("fit", -6.0, -6.6, -5.5), Crossing("fit", -4.0, -5.0, -3.0)
     between = Crossing("between", np.nan, 6.0, 12.0)
     assert crossing_difference(fit_a, fit_b) == "+2.0"

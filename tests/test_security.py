@@ -26,8 +26,8 @@ from dataclasses import dataclass
 import html5lib
 import pytest
 
-from bench import listing, registry
-from bench.core import MANEUVER_DETECTION, Method
+from radarbench.bench import listing, registry
+from radarbench.bench.core import MANEUVER_DETECTION, Method
 
 ESCAPES = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
 
@@ -150,7 +150,7 @@ def test_a_linked_or_shared_cache_folder_is_not_used(cache, tmp_path):
 
 
 def test_a_forged_cache_entry_is_printed_escaped(cache, capsys):
-    from bench.cli import main
+    from radarbench.bench.cli import main
     cache.mkdir(parents=True, mode=0o700)
     forged = "tasks:\n  \x1b[2J\x1b]0;owned\x07 \x9b31m \u202etxt.exe \x00"
     (cache / f"list-{'f' * 32}.json").write_text(json.dumps({"text": forged}))

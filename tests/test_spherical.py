@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from models.spherical import MEASURED, los_basis, measure, measurement_jacobian, measurement_residual, wrap_angle
+from radarbench.models.spherical import MEASURED, los_basis, measure, measurement_jacobian, measurement_residual, wrap_angle
 
 
 def test_spherical_jacobian_matches_finite_differences():

@@ -8,13 +8,13 @@ import sys
 import numpy as np
 import pytest
 
-from bench import registry
-from bench.params import build_params
-from bench.registry import PluginError
-from bench.rng import TrialRNG
+from radarbench.bench import registry
+from radarbench.bench.params import build_params
+from radarbench.bench.registry import PluginError
+from radarbench.bench.rng import TrialRNG
 
-PEERS = {"methods.stonesoup_peer": "stonesoup-jpda", "methods.stonesoup_gmphd": "stonesoup-gmphd",
-         "methods.stonesoup_mht": "stonesoup-mfa"}
+PEERS = {"radarbench.methods.multitarget.stonesoup_peer": "stonesoup-jpda", "radarbench.methods.multitarget.stonesoup_gmphd": "stonesoup-gmphd",
+         "radarbench.methods.multitarget.stonesoup_mht": "stonesoup-mfa"}
 
 
 @pytest.mark.parametrize("module, name", PEERS.items())
@@ -36,11 +36,11 @@ def test_the_mfa_peer_without_ortools_is_unavailable_with_the_reason(monkeypatch
     unavailable, its reason Stone Soup's line naming the package."""
     pytest.importorskip("stonesoup")
     for loaded in [m for m in sys.modules if m.startswith("stonesoup.dataassociator.mfa")
-                   or m == "ortools" or m.startswith("ortools.")] + ["methods.stonesoup_mht"]:
+                   or m == "ortools" or m.startswith("ortools.")] + ["radarbench.methods.multitarget.stonesoup_mht"]:
         monkeypatch.delitem(sys.modules, loaded, raising=False)
     monkeypatch.setitem(sys.modules, "ortools", None)
     with pytest.raises(PluginError, match=r"\[peers\] extra.*'ortools'") as err:
-        importlib.import_module("methods.stonesoup_mht")
+        importlib.import_module("radarbench.methods.multitarget.stonesoup_mht")
     assert err.value.name == "stonesoup-mfa"
 
 
@@ -88,7 +88,7 @@ def test_mfa_follows_every_target_of_a_clean_scene(seed):
     assigned pairs against the plots' own RMS error): the UKF filters."""
     pytest.importorskip("stonesoup")
     pytest.importorskip("ortools", reason="the MFA peer needs OR-Tools (the [peers] extra)")
-    from models.hfswr import plot_to_cartesian
+    from radarbench.models.hfswr import plot_to_cartesian
 
     method = registry.get_method("stonesoup-mfa")
     params = method.Params()

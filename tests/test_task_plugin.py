@@ -22,11 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from bench.core import Scene, require
-from bench.metrics import binomial_interval, by_cell, mean_realised_snr
-from bench.recording.draw import log_series
-from bench.recording.record import MethodTrace
-from bench.tasks.base import OutputError, Task
+from radarbench.bench.core import Scene, require
+from radarbench.bench.metrics import binomial_interval, by_cell, mean_realised_snr
+from radarbench.bench.recording.draw import log_series
+from radarbench.bench.recording.record import MethodTrace
+from radarbench.bench.tasks.base import OutputError, Task
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -92,8 +92,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.core import Batch, Scenario
-from bench.params import param
+from radarbench.bench.core import Batch, Scenario
+from radarbench.bench.params import param
 from benchdemo.task import PeakScene
 
 
@@ -123,7 +123,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.core import Method
+from radarbench.bench.core import Method
 
 
 class ArgMax(Method):
@@ -184,7 +184,7 @@ def plugin_env(tmp_path):
 
 
 def _bench(env, *args):
-    return subprocess.run([sys.executable, "-m", "bench", *map(str, args)], env=env, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "radarbench.bench", *map(str, args)], env=env, capture_output=True,
                           text=True, timeout=300)
 
 
@@ -207,6 +207,6 @@ def test_a_task_from_an_entry_point_runs_end_to_end(plugin_env, tmp_path):
 
     from rerun.chunk import RrdReader
 
-    from bench.recording import entity_root, rerun_path
+    from radarbench.bench.recording import entity_root, rerun_path
     paths = set(RrdReader(out / "recording.rrd").store().schema().entity_paths())
     assert rerun_path(f"{entity_root('bumps', 12.0, 0)}/argmax/named") in paths

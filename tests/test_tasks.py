@@ -4,11 +4,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.config import parse_sweep
-from bench.errors import ConfigError
-from bench.metrics import per_step_rmse, time_averaged_rmse
-from bench.tasks.tbd.metrics import cell_centres_m, summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
-from bench.tasks.tracking.metrics import summarise_tracking, tracking_trial_metrics
+from radarbench.bench.config import parse_sweep
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.metrics import per_step_rmse, time_averaged_rmse
+from radarbench.bench.tasks.tbd.metrics import cell_centres_m, summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
+from radarbench.bench.tasks.tracking.metrics import summarise_tracking, tracking_trial_metrics
 
 GRID = {"rows": 10, "cols": 10, "cell_m": 100.0, "x_min_m": 1000.0, "y_min_m": 2000.0}
 
@@ -51,7 +51,7 @@ def test_tbd_summary_has_the_rmse_over_detected_trials_and_over_all_runs():
 
 
 def test_unit_innovation_snr_offset_matches_the_scenarios_innovation_scale():
-    from models.ar_noise import ar_autocovariance, ar_innovation_std
+    from radarbench.models.ar_noise import ar_autocovariance, ar_innovation_std
     a = (-2.0, 1.7, -0.64)
     gamma = ar_autocovariance(a, 7, 1.0)
     offset = unit_innovation_snr_offset_db(a, gamma)
@@ -119,14 +119,14 @@ def test_bad_scenarios_tables_name_the_field(over, field):
 # ------------------------------------------------------------------ the task registry
 
 def test_builtin_tasks_are_registered_in_order():
-    from bench import registry
+    from radarbench.bench import registry
     assert list(registry.tasks())[:3] == ["maneuver-detection", "tracking", "tbd"]
     assert all(registry.get_task(name).name == name for name in registry.tasks())
 
 
 def test_an_unknown_task_is_a_config_error_and_no_method_can_claim_it():
-    from bench import registry
-    from bench.core import Method
+    from radarbench.bench import registry
+    from radarbench.bench.core import Method
     with pytest.raises(ConfigError) as exc:
         registry.get_task("cfar", field="methods[0].task")
     assert str(exc.value).startswith("methods[0].task: unknown task 'cfar'")

@@ -5,14 +5,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bench.core import TBD, SceneError
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.registry import get_scenario
-from bench.rng import TrialRNG
-from bench.tasks.tbd import Grid, TBDScene
-from models.ar_noise import ar_autocovariance, ar_innovation_std, ar_roots, stationary_predictors
-from scenarios.tbd_grid import EDGE_MARGIN_CELLS, TbdGrid, generate_noise, scene_geometry, true_track
+from radarbench.bench.core import TBD, SceneError
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.registry import get_scenario
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.tasks.tbd import Grid, TBDScene
+from radarbench.models.ar_noise import ar_autocovariance, ar_innovation_std, ar_roots, stationary_predictors
+from radarbench.scenarios.tbd_grid import EDGE_MARGIN_CELLS, TbdGrid, generate_noise, scene_geometry, true_track
 
 DEFAULT = build_params(TbdGrid.Params, {})
 

@@ -1,6 +1,6 @@
 """The DP-TBD kernels against their frozen predecessors (tests/tbd_kernels_oracle.py): bit for bit.
 
-The kernels of :mod:`methods._tbd_kernels`, :mod:`methods._tbd_mf_kernels` and :mod:`methods._tbd_alongtrack`
+The kernels of :mod:`methods.tbd.kernels`, :mod:`methods.tbd.mf_kernels` and :mod:`methods.tbd.alongtrack`
 compute the maxima only, factorise the maximum over d' by heading classes,
 run as a row wavefront with checkpoints and recompute the backpointers on the
 track. None of that may change a result: score, track and value map must be
@@ -15,17 +15,17 @@ import zlib
 import numpy as np
 import pytest
 
-import methods._tbd_alongtrack as alongtrack
-import methods._tbd_kernels as kernels
-import methods._tbd_mf_kernels as mf_kernels
+import radarbench.methods.tbd.alongtrack as alongtrack
+import radarbench.methods.tbd.kernels as kernels
+import radarbench.methods.tbd.mf_kernels as mf_kernels
 import tbd_kernels_oracle as oracle   # beside this file: the previous kernels, frozen
-from bench.core import Batch
-from bench.params import build_params
-from bench.rng import TrialRNG
-from bench.tasks.tbd import Grid, TBDScene
-from methods import dp_tbd
-from methods.dp_tbd import LOG_UNIFORM_ANGLE, DpTbd, DpTbdMf
-from scenarios.tbd_grid import TbdGrid
+from radarbench.bench.core import Batch
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.tasks.tbd import Grid, TBDScene
+from radarbench.methods.tbd import dp_tbd
+from radarbench.methods.tbd.dp_tbd import LOG_UNIFORM_ANGLE, DpTbd, DpTbdMf
+from radarbench.scenarios.tbd_grid import TbdGrid
 
 
 def frames_batch(z, gamma=(1.0, 0.0, 0.0)):
@@ -41,9 +41,9 @@ def run_both(monkeypatch, cls, batch, params):
     """(new, oracle) outputs of one method on one batch."""
     new = cls().run(batch, params)
     with monkeypatch.context() as m:
-        m.setattr(dp_tbd, "_tbd_kernels", oracle)
-        m.setattr(dp_tbd, "_tbd_mf_kernels", oracle)
-        m.setattr(dp_tbd, "_tbd_alongtrack", oracle)
+        m.setattr(dp_tbd, "kernels", oracle)
+        m.setattr(dp_tbd, "mf_kernels", oracle)
+        m.setattr(dp_tbd, "alongtrack", oracle)
         old = cls().run(batch, params)
     return new, old
 

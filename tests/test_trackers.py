@@ -10,14 +10,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import methods.viterbi as vit
-from bench.core import TrackingOutput
-from bench.params import build_params
-from bench.registry import get_method
-from bench.rng import TrialRNG
-from methods.ekf import EKF, ekf_filter, filterpy_ekf, noise_covariance
-from methods.viterbi import Viterbi, expand, max_plus_step, trellis_step
-from scenarios.glint import Glint
+import radarbench.methods.glint.trellis as trellis
+import radarbench.methods.glint.viterbi as vit
+from radarbench.bench.core import TrackingOutput
+from radarbench.bench.params import build_params
+from radarbench.bench.registry import get_method
+from radarbench.bench.rng import TrialRNG
+from radarbench.methods.glint.ekf import EKF, ekf_filter, filterpy_ekf, noise_covariance
+from radarbench.methods.glint.trellis import expand, max_plus_step, trellis_step
+from radarbench.methods.glint.viterbi import Viterbi
+from radarbench.scenarios.glint import Glint
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=4)
 
@@ -126,7 +128,7 @@ def test_viterbi_tracks_and_resists_glint():
     assert cross["viterbi"] < cross["ekf"]
 
 
-@pytest.mark.skipif(vit.numba is None, reason="numba not installed")
+@pytest.mark.skipif(trellis.numba is None, reason="numba not installed")
 def test_compiled_trellis_step_equals_numpy():
     rng = np.random.default_rng(4)
     n, N, Lp, Lv = 3, 50, 9, 7
@@ -136,13 +138,13 @@ def test_compiled_trellis_step_equals_numpy():
     F2, g2 = np.array([[1.0, 0.1], [0.0, 0.96]]), np.array([0.005, 0.098])
     centre, step, metric = 0.1 * rng.normal(size=(n, 2)), np.array([0.3, 0.2]), rng.normal(size=(n, Lp))
     for snap in (False, True):
-        a = vit._trellis_step_numpy(ps, sc, F2, g2, 0.3, w, logpi, centre, step, Lp, Lv, metric, snap)
+        a = trellis._trellis_step_numpy(ps, sc, F2, g2, 0.3, w, logpi, centre, step, Lp, Lv, metric, snap)
         b = trellis_step(ps, sc, F2, g2, 0.3, w, logpi, centre, step, Lp, Lv, metric, snap)
         np.testing.assert_array_equal(a[1], b[1])
         np.testing.assert_allclose(a[0], b[0], rtol=1e-12)
         np.testing.assert_allclose(a[2], b[2], rtol=1e-12, atol=1e-14)
     cell, gain, _ = expand(ps, sc, F2, g2, 0.3, w, logpi, centre, step, Lp, Lv, metric, False)
-    np.testing.assert_array_equal(max_plus_step(cell, gain, Lp * Lv)[1], vit._max_plus_step_numpy(cell, gain, Lp * Lv)[1])
+    np.testing.assert_array_equal(max_plus_step(cell, gain, Lp * Lv)[1], trellis._max_plus_step_numpy(cell, gain, Lp * Lv)[1])
 
 
 def test_disturbance_levels():
@@ -155,7 +157,7 @@ def test_disturbance_levels():
 
 
 def test_viterbi_params_validation():
-    from bench.errors import ConfigError
+    from radarbench.bench.errors import ConfigError
     with pytest.raises(ConfigError) as err:
         build_params(Viterbi.Params, {"velocity_levels": 20})
     assert err.value.field == "velocity_levels"
@@ -169,6 +171,6 @@ def test_numpy_fallback_gives_the_compiled_result(monkeypatch):
     b = make(n=2, sensor="active", steps=20, epsilon=0.2)
     params = build_params(Viterbi.Params, {"position_levels": 11, "velocity_levels": 11, "survivors": 16})
     compiled = Viterbi().run(b, params).estimate
-    monkeypatch.setattr(vit, "_trellis_step_jit", None)
-    monkeypatch.setattr(vit, "_max_plus_step_jit", None)
+    monkeypatch.setattr(trellis, "_trellis_step_jit", None)
+    monkeypatch.setattr(trellis, "_max_plus_step_jit", None)
     np.testing.assert_allclose(Viterbi().run(b, params).estimate, compiled, rtol=1e-10, atol=1e-8)

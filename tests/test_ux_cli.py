@@ -15,15 +15,15 @@ from pathlib import Path
 
 import pytest
 
-from bench import __version__
-from bench.listing import preset_descriptions, presets
-from bench.progress import Progress
+from radarbench.bench import __version__
+from radarbench.bench.listing import preset_descriptions, presets
+from radarbench.bench.progress import Progress
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def _bench(*args, env=None, cwd=None, timeout=600):
-    return subprocess.run([sys.executable, "-m", "bench", *map(str, args)], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "radarbench.bench", *map(str, args)], capture_output=True, text=True,
                           timeout=timeout, cwd=cwd, env={**os.environ, "PYTHONPATH": str(ROOT), **(env or {})})
 
 
@@ -56,7 +56,7 @@ def test_list_from_the_cache_imports_no_plugin(tmp_path):
     """The second `bench list` prints the same listing without importing NumPy (the
     plugins): what makes it answer at once."""
     env = {"XDG_CACHE_HOME": str(tmp_path)}
-    probe = ("import sys, contextlib, io; from bench.cli import main; buf = io.StringIO()\n"
+    probe = ("import sys, contextlib, io; from radarbench.bench.cli import main; buf = io.StringIO()\n"
              "with contextlib.redirect_stdout(buf): main(['list'])\n"
              "print(buf.getvalue()); print('numpy imported:', 'numpy' in sys.modules)")
     run = [sys.executable, "-c", probe]
@@ -70,7 +70,7 @@ def test_list_from_the_cache_imports_no_plugin(tmp_path):
 
 
 def test_listing_fingerprint_follows_the_sources(tmp_path, monkeypatch):
-    from bench import listing
+    from radarbench.bench import listing
 
     pkg = tmp_path / "fakeplugins"
     pkg.mkdir()
@@ -187,7 +187,7 @@ def test_a_fresh_clone_stays_clean_after_a_run(tmp_path, write_sweep):
     subprocess.run([*git, "add", "-A"], check=True)
     subprocess.run([*git, "commit", "-qm", "clone"], check=True)
     sweep = write_sweep()
-    out = subprocess.run([sys.executable, "-m", "bench", "run", str(sweep), "--workers", "1", "--quiet"],
+    out = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", str(sweep), "--workers", "1", "--quiet"],
                          cwd=clone, capture_output=True, text=True, timeout=600,
                          env={**os.environ, "PYTHONPATH": str(clone)})
     assert out.returncode == 0, out.stderr

@@ -13,14 +13,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import methods._viterbi_paper1d as vit
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.rng import TrialRNG
-from methods._viterbi_paper1d import Component, paper_1d_component
-from methods.viterbi import Viterbi
-from models.spherical import measurement_jacobian, spherical
-from scenarios.glint import Glint
+import radarbench.methods.glint.viterbi_paper1d as vit
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.methods.glint.viterbi_paper1d import Component, paper_1d_component
+from radarbench.methods.glint.viterbi import Viterbi
+from radarbench.models.spherical import measurement_jacobian, spherical
+from radarbench.scenarios.glint import Glint
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=12)
 

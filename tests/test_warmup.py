@@ -11,8 +11,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from bench import warmup
-from bench.config import load_sweep
+from radarbench.bench import warmup
+from radarbench.bench.config import load_sweep
 
 
 def test_warm_up_is_one_task_per_pair_with_both_phases_and_one_trial(write_sweep):
@@ -65,12 +65,12 @@ def test_the_dispatcher_scan_passes_over_a_module_global_that_refuses_every_attr
     attribute lookup raises (``isinstance`` asks it for ``__class__``): the kernels are still found."""
     import types
 
-    from methods import _mtt_kernels
+    from radarbench.methods.multitarget import kernels as mtt_kernels
     swig_like = types.ModuleType("swig_like")
     swig_like.cvar = _SwigGlobals()
     monkeypatch.setitem(sys.modules, "swig_like", swig_like)
     found = list(warmup._cached_dispatchers())
-    assert _mtt_kernels.predict_all in found
+    assert mtt_kernels.predict_all in found
 
 @pytest.mark.slow
 def test_a_cold_cache_is_compiled_once_and_said_so_a_warm_one_silently(tmp_path):
@@ -83,7 +83,7 @@ def test_a_cold_cache_is_compiled_once_and_said_so_a_warm_one_silently(tmp_path)
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
     runs = []
     for name in ("cold", "warm"):
-        proc = subprocess.run([sys.executable, "-m", "bench", "run", sweep, "--out", tmp_path / name,
+        proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", sweep, "--out", tmp_path / name,
                                "--workers", "2", "--no-record"], capture_output=True, text=True, env=env,
                               timeout=1200)
         assert proc.returncode == 0, proc.stderr

@@ -5,15 +5,15 @@ import pytest
 import pywt
 import scipy.stats
 
-from bench import registry
-from bench.core import DetectionOutput
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.rng import TrialRNG
-from bench.windows import sliding_sum
-from methods.wavelet import (Wavelet, causal_coefficients, first_step, null_threshold, support,
+from radarbench.bench import registry
+from radarbench.bench.core import DetectionOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.bench.windows import sliding_sum
+from radarbench.methods.maneuver.wavelet import (Wavelet, causal_coefficients, first_step, null_threshold, support,
                              valid_from, wavelet_statistic)
-from models.kalman import innovations
+from radarbench.models.kalman import innovations
 
 CONFIGS = [
     {},

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.recording.layout import PALETTE
+from radarbench.bench.recording.layout import PALETTE
 
 #: The browser: Debian's ``chromium`` unless ``BENCH_TEST_CHROMIUM`` names another
 #: (Chromium's ``chromium-headless-shell`` does as well).
@@ -116,7 +116,7 @@ def served(small_run, tmp_path):
     run = tmp_path / "run"
     shutil.copytree(small_run, run, symlinks=True)
     port = _free_port_pair()
-    proc = subprocess.Popen([sys.executable, "-m", "bench", "view", str(run), "--web", "--port", str(port)],
+    proc = subprocess.Popen([sys.executable, "-m", "radarbench.bench", "view", str(run), "--web", "--port", str(port)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "PYTHONPATH": str(ROOT)})
     try:

@@ -33,4 +33,4 @@ __all__ = sorted(_EXPORTS)
 def __getattr__(name: str):
     if name not in _EXPORTS:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(f"bench.recording.{_EXPORTS[name]}"), name)
+    return getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)

@@ -18,9 +18,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from bench.recording.layout import TrialLayout
-from bench.recording.paths import rerun_path
-from bench.recording.record import TrialRecord
+from radarbench.bench.recording.layout import TrialLayout
+from radarbench.bench.recording.paths import rerun_path
+from radarbench.bench.recording.record import TrialRecord
 
 __all__ = ["MAX_TABS", "TrialTab", "Views", "blueprint", "legend_headroom", "relative", "trial_tab"]
 

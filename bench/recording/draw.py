@@ -36,9 +36,9 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from bench.recording.layout import MEASUREMENT_COLOR, NEUTRAL_COLOR, TRUTH_COLOR, TrialLayout
-from bench.recording.paths import rerun_path
-from bench.recording.record import Quantised, TrialRecord
+from radarbench.bench.recording.layout import MEASUREMENT_COLOR, NEUTRAL_COLOR, TRUTH_COLOR, TrialLayout
+from radarbench.bench.recording.paths import rerun_path
+from radarbench.bench.recording.record import Quantised, TrialRecord
 
 __all__ = ["COLOUR_SCALE", "FLUSH_EVERY", "indexes", "log_colour_scale", "log_image", "log_image_series",
            "log_points", "log_record", "log_records",

@@ -15,8 +15,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from bench.recording.paths import entity_root, method_entity_names
-from bench.recording.record import TrialRecord
+from radarbench.bench.recording.paths import entity_root, method_entity_names
+from radarbench.bench.recording.record import TrialRecord
 
 __all__ = ["MEASUREMENT_COLOR", "NEUTRAL_COLOR", "PALETTE", "TRUTH_COLOR", "MethodLayout", "TrialLayout", "method_colors", "trial_layout"]
 

@@ -27,7 +27,7 @@ import time
 import urllib.parse
 from pathlib import Path
 
-from bench.errors import ConfigError, Fault
+from radarbench.bench.errors import ConfigError, Fault
 
 __all__ = ["has_display", "listening", "rerun_executable", "view", "web_url"]
 

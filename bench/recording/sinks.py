@@ -18,13 +18,13 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Self
 
-from bench.errors import space_hint
-from bench.recording import blueprint as bp
-from bench.recording.draw import log_records
-from bench.recording.layout import trial_layout
-from bench.recording.record import TrialRecord
-from bench.recording.serve import has_display, listening, rerun_executable
-from bench.recording.summary import informative_snr, log_summary, summary_charts
+from radarbench.bench.errors import space_hint
+from radarbench.bench.recording import blueprint as bp
+from radarbench.bench.recording.draw import log_records
+from radarbench.bench.recording.layout import trial_layout
+from radarbench.bench.recording.record import TrialRecord
+from radarbench.bench.recording.serve import has_display, listening, rerun_executable
+from radarbench.bench.recording.summary import informative_snr, log_summary, summary_charts
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd
@@ -58,7 +58,7 @@ def write_recording(
     """
     import rerun as rr
 
-    from bench import runfolder
+    from radarbench.bench import runfolder
 
     path = Path(path)
     records = list(records)  # iterated twice: blueprint, then logging

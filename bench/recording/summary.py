@@ -32,9 +32,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bench.markdown import code, frame_table
-from bench.recording.layout import PALETTE, method_colors
-from bench.recording.paths import entity_name, method_entity_names, rerun_path
+from radarbench.bench.markdown import code, frame_table
+from radarbench.bench.recording.layout import PALETTE, method_colors
+from radarbench.bench.recording.paths import entity_name, method_entity_names, rerun_path
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd

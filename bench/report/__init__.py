@@ -22,22 +22,22 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench import claims, figures, registry, runfolder
-from bench.calibration import EQUAL_CHANCE_PD
-from bench.errors import ConfigError
-from bench.escapes import escape_controls
-from bench.markdown import code, fmt_db, text
-from bench.markdown import fmt as _fmt
-from bench.markdown import table as _table
-from bench.provenance import WALL_TIME_ROW, provenance
-from bench.report.glance import comparisons_frame, glance
-from bench.report.html import interactive_figures, markdown_to_html
-from bench.report.render import comparisons_markdown, glance_markdown, render, section_macro
-from bench.recording import TrialRecord, write_recording
-from bench.runner import calibrations
-from bench.store import Store
-from bench.tables import write_csv
-from bench.tasks import ReportContext, summary_columns
+from radarbench.bench import claims, figures, registry, runfolder
+from radarbench.bench.calibration import EQUAL_CHANCE_PD
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.escapes import escape_controls
+from radarbench.bench.markdown import code, fmt_db, text
+from radarbench.bench.markdown import fmt as _fmt
+from radarbench.bench.markdown import table as _table
+from radarbench.bench.provenance import WALL_TIME_ROW, provenance
+from radarbench.bench.report.glance import comparisons_frame, glance
+from radarbench.bench.report.html import interactive_figures, markdown_to_html
+from radarbench.bench.report.render import comparisons_markdown, glance_markdown, render, section_macro
+from radarbench.bench.recording import TrialRecord, write_recording
+from radarbench.bench.runner import calibrations
+from radarbench.bench.store import Store
+from radarbench.bench.tables import write_csv
+from radarbench.bench.tasks import ReportContext, summary_columns
 
 TRIAL_KEYS = ["scenario", "method", "config", "params", "snr_db", "trial", "seed", "realised_snr_db",
               "threshold"]
@@ -201,7 +201,7 @@ def _same(a, b) -> bool:
 def non_default(cls, params: dict) -> dict:
     """The entries of the resolved ``params`` that differ from the plugin's
     declared defaults (``cls.Params``); every entry when they cannot be built."""
-    from bench.params import build_params, params_as_dict
+    from radarbench.bench.params import build_params, params_as_dict
     try:
         defaults = params_as_dict(build_params(cls.Params, {}))
     except Exception:      # a Params without defaults for everything: show all
@@ -221,8 +221,8 @@ def _section(name: str, *args) -> str:
 def _resolved_scenario_params(sweep: dict) -> dict[str, dict]:
     """Scenario config label -> its resolved parameters, from the stored sweep resolved
     again (a single-scenario sweep keeps its grid axes merged in ``scenario_params``)."""
-    from bench.config import parse_sweep
-    from bench.params import params_as_dict
+    from radarbench.bench.config import parse_sweep
+    from radarbench.bench.params import params_as_dict
     plan = parse_sweep(sweep, allow_large=True)
     return {sc.label: params_as_dict(sc.params) for sc in plan.scenarios}
 
@@ -377,7 +377,7 @@ def preset_notes(source: str) -> str:
     import importlib.resources
     if not _preset_name(source):
         return ""
-    path = importlib.resources.files("bench") / "presets" / f"{_preset_name(source)}.md"
+    path = importlib.resources.files("radarbench.bench") / "presets" / f"{_preset_name(source)}.md"
     return path.read_text(encoding="utf-8").strip() if path.is_file() else ""
 
 

@@ -49,13 +49,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench import registry
-from bench.calibration import EQUAL_CHANCE_PD
-from bench.errors import EXIT_REGRESSION, ConfigError
-from bench.escapes import escape_controls
-from bench.markdown import code, fmt, fmt_db, table, text
-from bench.metrics import CONFIDENCE, mcnemar_exact, paired_difference, stratified_mean, unpaired_difference
-from bench.report.glance import metric_values
+from radarbench.bench import registry
+from radarbench.bench.calibration import EQUAL_CHANCE_PD
+from radarbench.bench.errors import EXIT_REGRESSION, ConfigError
+from radarbench.bench.escapes import escape_controls
+from radarbench.bench.markdown import code, fmt, fmt_db, table, text
+from radarbench.bench.metrics import CONFIDENCE, mcnemar_exact, paired_difference, stratified_mean, unpaired_difference
+from radarbench.bench.report.glance import metric_values
 
 COLUMNS = ["scenario", "task", "config", "metric", "snr_db", "paired", "n_a", "n_b", "mean_a", "mean_b",
            "difference", "difference_low", "difference_high", "confidence", "mcnemar_p", "significant", "change",
@@ -128,9 +128,9 @@ def read_claims(root: Path) -> pd.DataFrame:
 def load_run(path: str | Path) -> Run:
     """A run folder's trials (rebuilt from results.sqlite, opened read-only), failures and
     summary.csv; ConfigError (exit 2) unless it is a bench run folder."""
-    from bench import runfolder
-    from bench.report import trials_frame
-    from bench.store import Store, store_fault
+    from radarbench.bench import runfolder
+    from radarbench.bench.report import trials_frame
+    from radarbench.bench.store import Store, store_fault
     root = Path(path)
     if not root.is_dir():
         raise ConfigError("", f"{root} is not a folder (expected a bench run folder)")
@@ -166,7 +166,7 @@ def calibration_differences(a: Run, b: Run) -> dict[str, tuple]:
 def _scenario_params(run: Run) -> dict[str, dict]:
     """Scenario config label -> its resolved parameters (the stored ones as text when the
     scenario cannot be resolved here, e.g. a plugin that is not installed)."""
-    from bench.report import _resolved_scenario_params
+    from radarbench.bench.report import _resolved_scenario_params
     try:
         resolved = _resolved_scenario_params(run.record["sweep"])
     except Exception:  # noqa: BLE001 - a plugin missing here: compare what the plan stored
@@ -493,7 +493,7 @@ def run_compare(path_a: str, path_b: str, out: str | None, fail_on_regression: b
     shown = escape_controls(compare_text(a, b, diffs))     # a terminal obeys no escape from a store
     print(shown, end="")
     if out:
-        from bench import runfolder
+        from radarbench.bench import runfolder
         folder = Path(out)
         folder.mkdir(parents=True, exist_ok=True)
         runfolder.write_text(folder / "compare.csv", diffs.to_csv(index=False, lineterminator="\n"))

@@ -34,7 +34,7 @@ import itertools
 import numpy as np
 import pandas as pd
 
-from bench.metrics import CONFIDENCE, bootstrap_mean_ci, mcnemar_exact, paired_difference
+from radarbench.bench.metrics import CONFIDENCE, bootstrap_mean_ci, mcnemar_exact, paired_difference
 
 COMPARISON_COLUMNS = ["scenario", "task", "metric", "snr_db", "config_a", "config_b", "n_pairs", "mean_a", "mean_b",
                       "difference", "difference_low", "difference_high", "only_a", "only_b", "mcnemar_p",

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from bench.report.render import environment, sentence_case
+from radarbench.bench.report.render import environment, sentence_case
 
 PLACEHOLDER = '<div id="bench-interactive"></div>'
 _IMG = re.compile(r'(<img[^>]*?src=")(figures/[^"]+\.png)(")')

@@ -14,7 +14,7 @@ import functools
 import numpy as np
 import pandas as pd
 
-from bench.markdown import code, fmt, fmt_db, table, text
+from radarbench.bench.markdown import code, fmt, fmt_db, table, text
 
 
 @functools.lru_cache(maxsize=1)
@@ -27,7 +27,7 @@ def environment():
     import jinja2
     # HTML templates escape every value; Markdown ones take Markdown (text not ours escaped
     # by the code/text filters or before, bench.markdown)
-    env = jinja2.Environment(loader=jinja2.PackageLoader("bench", "templates"),
+    env = jinja2.Environment(loader=jinja2.PackageLoader("radarbench.bench", "templates"),
                              autoescape=jinja2.select_autoescape(enabled_extensions=("html.j2",),
                                                                  default_for_string=False),
                              keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True,

@@ -13,13 +13,13 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from bench.metrics import CELL_KEYS
-from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, Views
-from bench.tasks.cells import CellDetectionOutput, CellDetectionTask, MapScene
-from bench.tasks.detection import DetectionScene, DetectionTask
-from bench.tasks.multitarget import MultiTargetScene, MultiTargetTask
-from bench.tasks.tbd import TBDScene, TBDTask
-from bench.tasks.tracking import TrackingScene, TrackingTask
+from radarbench.bench.metrics import CELL_KEYS
+from radarbench.bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, Views
+from radarbench.bench.tasks.cells import CellDetectionOutput, CellDetectionTask, MapScene
+from radarbench.bench.tasks.detection import DetectionScene, DetectionTask
+from radarbench.bench.tasks.multitarget import MultiTargetScene, MultiTargetTask
+from radarbench.bench.tasks.tbd import TBDScene, TBDTask
+from radarbench.bench.tasks.tracking import TrackingScene, TrackingTask
 
 __all__ = ["BUILTIN_TASKS", "CellDetectionOutput", "DetectionScene", "MapScene", "MultiTargetScene", "OutputError",
            "RecordedScene", "ReportContext", "TBDScene", "Task", "TrackingScene", "Views", "summary_columns"]

@@ -42,10 +42,10 @@ from typing import Any, ClassVar
 import numpy as np
 import pandas as pd
 
-from bench.core import Batch, Scene
-from bench.recording.blueprint import Views
-from bench.recording.layout import TrialLayout
-from bench.recording.record import MethodTrace, TrialRecord
+from radarbench.bench.core import Batch, Scene
+from radarbench.bench.recording.blueprint import Views
+from radarbench.bench.recording.layout import TrialLayout
+from radarbench.bench.recording.record import MethodTrace, TrialRecord
 
 __all__ = ["COVARIANCE_TOLERANCE", "MAX_ESTIMATE", "OutputError", "RecordedScene", "ReportContext", "Task", "Views",
            "check_covariance", "check_estimate", "check_finite", "check_range", "time_series"]

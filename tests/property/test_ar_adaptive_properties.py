@@ -1,4 +1,4 @@
-"""Properties of the AR-model adaptive tracker (methods/ar_adaptive.py): exact
+"""Properties of the AR-model adaptive tracker (methods/kinematic/ar_adaptive.py): exact
 polynomial prediction, a PSD covariance-matched Q, and the chi-square switch
 rule's false-switch rate at its nominal level alpha on a quiet, matched target."""
 
@@ -10,7 +10,7 @@ from hypothesis import given, settings, seed
 from hypothesis import strategies as st
 from scipy import stats
 
-from methods.ar_adaptive import (ar_adaptive_filter, ar_coefficients, exactness_constraints, kinematic_map,
+from radarbench.methods.kinematic.ar_adaptive import (ar_adaptive_filter, ar_coefficients, exactness_constraints, kinematic_map,
                                  lag_map, matched_noise)
 
 

@@ -14,10 +14,10 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench import registry
-from bench.calibration import calibrate
-from bench.rng import CALIBRATION, EVALUATION, TrialRNG
-from bench.registry import get_task
+from radarbench.bench import registry
+from radarbench.bench.calibration import calibrate
+from radarbench.bench.rng import CALIBRATION, EVALUATION, TrialRNG
+from radarbench.bench.registry import get_task
 
 
 def _null_values(seed: int, domain: int, n: int) -> np.ndarray:

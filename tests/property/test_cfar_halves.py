@@ -1,4 +1,4 @@
-"""GO- and SO-CFAR (models/cfar_halves.py, models/cfar.py) on homogeneous
+"""GO- and SO-CFAR (models/cfar/halves.py, models/cfar/__init__.py) on homogeneous
 exponential noise: the measured Pfa at the nominal threshold factor is the
 closed form's (independent cells, the exact binomial interval of
 test_cfar_properties), the two implementations of the closed form agree
@@ -12,7 +12,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from models import cfar, cfar_halves
+from radarbench.models import cfar
+from radarbench.models.cfar import halves
 from tests.property.test_cfar_properties import CELLS, LINE, PFA, _assert_binomial, _independent_cells, _noise
 
 window = st.tuples(st.integers(1, 16), st.integers(0, 3))
@@ -29,7 +30,7 @@ def test_pfa_at_nominal_t_is_the_closed_form(w, det, seed):
     exceed = sig[:, :, cells] > -math.log10(PFA)
     _assert_binomial(exceed, PFA)
     # the same decision by U0 = T mu with T from the closed form
-    T = cfar_halves.halves_threshold_factor(PFA, L, L, det == "go")
+    T = halves.halves_threshold_factor(PFA, L, L, det == "go")
     assert np.mean(exceed != (maps[:, :, cells] > T * mu[:, :, cells])) < 1e-4
     # a cell near the map's edge: unequal halves (n_l < L), their own closed form
     i = g + max(L // 2, 1) if L > 1 else 0
@@ -47,8 +48,8 @@ def _textbook(T: float, n: int) -> tuple[float, float]:
 @given(n_l=st.integers(0, 40), n_r=st.integers(1, 40), T=st.floats(0.0, 200.0), det=detector)
 def test_the_two_closed_forms_agree_and_reduce_to_the_textbook(n_l, n_r, T, det):
     greatest = det == "go"
-    by_sum = math.exp(-cfar_halves.halves_log_survival(T, n_l, n_r, greatest))
-    by_beta = float(cfar_halves.halves_pfa(T, n_l, n_r, greatest))
+    by_sum = math.exp(-halves.halves_log_survival(T, n_l, n_r, greatest))
+    by_beta = float(halves.halves_pfa(T, n_l, n_r, greatest))
     assert math.isclose(by_sum, by_beta, rel_tol=1e-9, abs_tol=1e-300)
     if n_l == n_r and T < 50.0:                # beyond, the textbook's GO cancels (our forms do not)
         assert math.isclose(by_sum, _textbook(T, n_l)[0 if greatest else 1], rel_tol=1e-8)
@@ -59,9 +60,9 @@ def test_the_two_closed_forms_agree_and_reduce_to_the_textbook(n_l, n_r, T, det)
 def test_threshold_factors_invert_the_closed_forms_and_order_the_detectors():
     for pfa in (0.1, 1e-3, 1e-8, 1e-100):
         for n_l, n_r in ((1, 1), (8, 8), (3, 8), (64, 64), (256, 256)):
-            t_go, t_so = (cfar_halves.halves_threshold_factor(pfa, n_l, n_r, g) for g in (True, False))
+            t_go, t_so = (halves.halves_threshold_factor(pfa, n_l, n_r, g) for g in (True, False))
             for T, g in ((t_go, True), (t_so, False)):
-                assert math.isclose(float(cfar_halves.halves_pfa(T, n_l, n_r, g)), pfa, rel_tol=1e-7)
+                assert math.isclose(float(halves.halves_pfa(T, n_l, n_r, g)), pfa, rel_tol=1e-7)
             # mu_SO <= mu_CA <= mu_GO, so at equal Pfa T_GO < T_CA < T_SO
             assert t_go < cfar.ca_threshold_factor(pfa, n_l + n_r) < t_so
 

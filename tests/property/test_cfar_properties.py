@@ -1,4 +1,4 @@
-"""CFAR detectors on homogeneous exponential noise (models/cfar.py): the
+"""CFAR detectors on homogeneous exponential noise (models/cfar/__init__.py): the
 measured Pfa at the nominal threshold factor equals the closed form, the
 decisions are scale-invariant, and the kernels equal a direct loop.
 
@@ -18,7 +18,7 @@ import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from models import cfar
+from radarbench.models import cfar
 
 LEVEL = 1.0 - 1e-6
 PFA = 0.01

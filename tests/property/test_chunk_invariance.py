@@ -16,8 +16,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bench import registry, tomlw
-from bench.capabilities import fits
+from radarbench.bench import registry, tomlw
+from radarbench.bench.capabilities import fits
 from tests.conftest import run_bench
 from tests.test_recorded_tracks import small_params_on_a_csv
 

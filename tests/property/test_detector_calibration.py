@@ -15,10 +15,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench import registry
-from bench.calibration import empirical_threshold
-from bench.rng import CALIBRATION, EVALUATION, TrialRNG
-from bench.registry import get_task
+from radarbench.bench import registry
+from radarbench.bench.calibration import empirical_threshold
+from radarbench.bench.rng import CALIBRATION, EVALUATION, TrialRNG
+from radarbench.bench.registry import get_task
 
 DETECTORS = [
     ("innovation", {"window": 5}),

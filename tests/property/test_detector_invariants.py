@@ -13,13 +13,13 @@ import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.core import Batch
-from bench.params import build_params
-from bench.rng import TrialRNG
-from methods.cumulant import Cumulant, third_moment_null_variance, window_third_moment
-from methods.innovation import Innovation
-from models.kalman import LinearGaussianFilter, LinearGaussianModel, innovations
-from scenarios.cv_turn_cv import CvTurnCv
+from radarbench.bench.core import Batch
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.methods.maneuver.cumulant import Cumulant, third_moment_null_variance, window_third_moment
+from radarbench.methods.maneuver.innovation import Innovation
+from radarbench.models.kalman import LinearGaussianFilter, LinearGaussianModel, innovations
+from radarbench.scenarios.cv_turn_cv import CvTurnCv
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=4)
 

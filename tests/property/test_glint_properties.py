@@ -15,19 +15,20 @@ import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.params import build_params
-from bench.rng import TrialRNG
-from methods.ekf import EKF
-from methods.viterbi import Viterbi, expand, trellis_step, viterbi_path
-from models.glint import (
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.methods.glint.ekf import EKF
+from radarbench.methods.glint.trellis import expand, trellis_step, viterbi_path
+from radarbench.methods.glint.viterbi import Viterbi
+from radarbench.models.glint import (
     gauss_laplace_logpdf,
     gaussian_logpdf,
     glint_logpdf,
     glint_tail_probability,
     glint_variance,
 )
-from models.spherical import measure, measurement_residual
-from scenarios.glint import Glint
+from radarbench.models.spherical import measure, measurement_residual
+from radarbench.scenarios.glint import Glint
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=5)
 

@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from bench.calibration import calibrate
+from radarbench.bench.calibration import calibrate
 
 
 @settings(derandomize=True, deadline=None, max_examples=8)

@@ -34,9 +34,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bench import registry
-from bench.cli import main
-from bench.config import (
+from radarbench.bench import registry
+from radarbench.bench.cli import main
+from radarbench.bench.config import (
     LARGE_SWEEP_TRIAL_RUNS,
     MAX_CONFIGS,
     MAX_SNR_LEVELS,
@@ -241,7 +241,7 @@ def _bad_label(draw):
 
 
 def _bad_method_name(draw):
-    name = draw(st.one_of(st.sampled_from(PATH_LIKE + ["methods.innovation", "innovation.py", "Innovation", HUGE,
+    name = draw(st.one_of(st.sampled_from(PATH_LIKE + ["methods.maneuver.innovation", "innovation.py", "Innovation", HUGE,
                                                         "os.system", "__import__('os')"]),
                           st.text(max_size=30).filter(lambda t: t not in ("innovation", "cumulant", "wavelet"))))
 
@@ -507,7 +507,7 @@ def test_calibration_trials_count_towards_the_bound():
 
 def test_sweep_files_never_execute_code():
     """TOML only: no eval/exec, no pickle, no YAML anywhere in the harness; hostile strings stay data."""
-    import bench
+    from radarbench import bench
     forbidden = re.compile(r"\b(eval|exec)\s*\(|^\s*(import|from)\s+(pickle|cloudpickle|dill|marshal|shelve|yaml)\b"
                            r"|allow_pickle\s*=\s*True|pd\.read_pickle|__import__\s*\(", re.MULTILINE)
     for path in Path(bench.__file__).parent.glob("*.py"):
@@ -540,7 +540,7 @@ CONSOLE_CASES = [
 def test_the_console_script_rejects_hostile_files_the_same_way(tmp_path):
     """The installed ``bench`` script (all at once: each start costs seconds)."""
     exe = Path(sys.executable).with_name("bench")
-    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "bench"]
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "radarbench.bench"]
     procs = []
     for i, (raw, field) in enumerate(CONSOLE_CASES):
         root = tmp_path / str(i)

@@ -33,17 +33,17 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bench import registry
-from bench.config import parse_sweep
-from bench.core import MANEUVER_DETECTION, Method
-from bench.escapes import escape_controls
-from bench.markdown import code, table, text
-from bench.params import param
-from bench.report import build_outputs
-from bench.report.html import _body, safe_url
-from bench.runner import plan_record, run_sweep
-from methods.innovation import Innovation
-from scenarios.cv_turn_cv import CvTurnCv
+from radarbench.bench import registry
+from radarbench.bench.config import parse_sweep
+from radarbench.bench.core import MANEUVER_DETECTION, Method
+from radarbench.bench.escapes import escape_controls
+from radarbench.bench.markdown import code, table, text
+from radarbench.bench.params import param
+from radarbench.bench.report import build_outputs
+from radarbench.bench.report.html import _body, safe_url
+from radarbench.bench.runner import plan_record, run_sweep
+from radarbench.methods.maneuver.innovation import Innovation
+from radarbench.scenarios.cv_turn_cv import CvTurnCv
 
 FRAGMENTS = [
     "<script>alert(1)</script>", "<img src=x onerror=alert(1)>", "<svg onload=alert(1)>", "<iframe src=//e.x>",

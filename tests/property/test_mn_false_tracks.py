@@ -40,8 +40,8 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from methods import _mtt_kernels as kern
-from methods._track_management import TrackerParams, tracker_models
+from radarbench.methods.multitarget import kernels as kern
+from radarbench.methods.multitarget.track_management import TrackerParams, tracker_models
 
 REGION = np.array([[50e3, 150e3], [-math.radians(30), math.radians(30)], [-20.0, 20.0]])
 SIGMA = np.array([300.0, math.radians(1.0), 0.2])

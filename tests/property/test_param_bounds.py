@@ -17,11 +17,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bench import registry
-from bench.capabilities import fits
-from bench.config import parse_sweep
-from bench.errors import ConfigError
-from bench.params import field_types
+from radarbench.bench import registry
+from radarbench.bench.capabilities import fits
+from radarbench.bench.config import parse_sweep
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import field_types
 from tests.property.test_hostile_input import assert_rejected, run_in_process, toml_text
 
 registry.discover()
@@ -113,7 +113,7 @@ class _Hung(Exception):
 def run_to_completion(data) -> str:
     """Validate ``data``; if accepted, run it (one worker, in-process) and check no unit
     failed. Returns "refused" or "ran"."""
-    from bench.runner import plan_record, run_sweep
+    from radarbench.bench.runner import plan_record, run_sweep
     try:
         plan = parse_sweep(data, "bounds.toml")
     except ConfigError as err:

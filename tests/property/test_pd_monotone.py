@@ -11,9 +11,9 @@ import pandas as pd
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.config import parse_sweep
-from bench.report import build_outputs
-from bench.runner import plan_record, run_sweep
+from radarbench.bench.config import parse_sweep
+from radarbench.bench.report import build_outputs
+from radarbench.bench.runner import plan_record, run_sweep
 
 TRIALS = 150
 

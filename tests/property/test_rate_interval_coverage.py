@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from bench.metrics import binomial_interval, clustered_rate_interval
+from radarbench.bench.metrics import binomial_interval, clustered_rate_interval
 
 R = 400
 BAND = stats.binom.ppf([0.0005, 0.9995], R, 0.95) / R

@@ -17,15 +17,15 @@ import scipy.stats
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from bench.core import Batch
-from bench.tasks.tbd import Grid, TBDScene
-from bench.errors import ConfigError
-from bench.params import build_params
-from bench.rng import TrialRNG
-from methods._tbd_reference import reference_dp_tbd
-from methods.dp_tbd import DpTbd, DpTbdMf, turn_log_density
-from models.ar_noise import ar_autocovariance
-from scenarios.tbd_grid import TbdGrid
+from radarbench.bench.core import Batch
+from radarbench.bench.tasks.tbd import Grid, TBDScene
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import build_params
+from radarbench.bench.rng import TrialRNG
+from radarbench.methods.tbd.reference import reference_dp_tbd
+from radarbench.methods.tbd.dp_tbd import DpTbd, DpTbdMf, turn_log_density
+from radarbench.models.ar_noise import ar_autocovariance
+from radarbench.scenarios.tbd_grid import TbdGrid
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=8)
 LOG_UNIFORM = -math.log(2 * math.pi)
@@ -252,8 +252,8 @@ def test_empirical_scene_threshold_holds_its_pfa_on_fresh_null_scenes(pfa, seed,
     has variance about pfa (1 - pfa) (1/N0 + 1/N1) (the fitted quantile's own
     error plus the measurement's). 4.5 standard errors (a two-sided 7e-6 level
     per example), and the test can see a threshold whose Pfa is off by half."""
-    from bench.calibration import calibrate
-    from bench.rng import CALIBRATION, EVALUATION
+    from radarbench.bench.calibration import calibrate
+    from radarbench.bench.rng import CALIBRATION, EVALUATION
 
     params = build_params(TbdGrid.Params, {"cells": 16, "frames": 6})
     n0 = n1 = 1500

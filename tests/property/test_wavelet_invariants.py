@@ -10,7 +10,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from methods.wavelet import causal_coefficients, null_threshold, wavelet_statistic
+from radarbench.methods.maneuver.wavelet import causal_coefficients, null_threshold, wavelet_statistic
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=5)
 

@@ -41,11 +41,11 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from bench.calibration import cell_order_statistics
-from bench.core import Batch, Scene, has_shape, require
-from bench.recording.record import MethodTrace
-from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, check_range
-from bench.tasks.cells.metrics import REGION_NAMES, SUMMARY_COLUMNS, cell_trial_metrics, summarise_cells
+from radarbench.bench.calibration import cell_order_statistics
+from radarbench.bench.core import Batch, Scene, has_shape, require
+from radarbench.bench.recording.record import MethodTrace
+from radarbench.bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, check_range
+from radarbench.bench.tasks.cells.metrics import REGION_NAMES, SUMMARY_COLUMNS, cell_trial_metrics, summarise_cells
 
 __all__ = ["CELL_DETECTION", "REGION_NAMES", "CellDetectionOutput", "CellDetectionTask", "MapScene"]
 
@@ -209,11 +209,11 @@ class CellDetectionTask(Task):
                                   guard_cells=sc.guard_cells, swerling=sc.swerling)
 
     def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:
-        from bench.tasks.cells.draw import recorded_scene
+        from radarbench.bench.tasks.cells.draw import recorded_scene
         return recorded_scene(batch, i)
 
     def recorded_method(self, batch: Batch, out: CellDetectionOutput, i: int, threshold: float) -> MethodTrace:
-        from bench.tasks.cells.draw import recorded_method
+        from radarbench.bench.tasks.cells.draw import recorded_method
         return recorded_method(batch, out, i, threshold)
 
     # -------------------------------------------------------------- driver side
@@ -222,13 +222,13 @@ class CellDetectionTask(Task):
         return summarise_cells(trials, series)
 
     def log_trial(self, stream, layout, rec) -> None:
-        from bench.tasks.cells.draw import log_trial
+        from radarbench.bench.tasks.cells.draw import log_trial
         log_trial(self, stream, layout, rec)
 
     def views(self, layout, rec):
-        from bench.tasks.cells.draw import views
+        from radarbench.bench.tasks.cells.draw import views
         return views(self, layout, rec)
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks.cells import report
+        from radarbench.bench.tasks.cells import report
         return report.sections(ctx)

@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.recording.blueprint import Views, relative
-from bench.recording.layout import TRUTH_COLOR, TrialLayout
-from bench.recording.paths import rerun_path
-from bench.recording.record import MethodTrace, TrialRecord
-from bench.tasks.base import RecordedScene
-from bench.tasks.cells.metrics import declared_cells
-from bench.tasks.tbd import cell_pixels
+from radarbench.bench.recording.blueprint import Views, relative
+from radarbench.bench.recording.layout import TRUTH_COLOR, TrialLayout
+from radarbench.bench.recording.paths import rerun_path
+from radarbench.bench.recording.record import MethodTrace, TrialRecord
+from radarbench.bench.tasks.base import RecordedScene
+from radarbench.bench.tasks.cells.metrics import declared_cells
+from radarbench.bench.tasks.tbd import cell_pixels
 
 _MAP_COLORMAP = "viridis"
 _STATISTIC_COLORMAP = "inferno"
@@ -76,7 +76,7 @@ def log_trial(task, stream, layout: TrialLayout, rec: TrialRecord) -> None:
     """The map, its regions and targets; per detector its statistic, threshold map and detections."""
     import rerun as rr
 
-    from bench.recording.draw import log_image
+    from radarbench.bench.recording.draw import log_image
 
     shape = _shape(rec)
     if "rd_map_db" in rec.images:

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.figures import STYLES, _legend_outside, _save, plt
-from bench.recording.record import TrialRecord
-from bench.tasks.cells.metrics import ideal_pd
+from radarbench.bench.figures import STYLES, _legend_outside, _save, plt
+from radarbench.bench.recording.record import TrialRecord
+from radarbench.bench.tasks.cells.metrics import ideal_pd
 
 _REGION_COLORS = ["0.55", "tab:blue", "tab:orange", "tab:green", "tab:purple"]
 

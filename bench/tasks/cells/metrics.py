@@ -34,7 +34,7 @@ import numpy as np
 import pandas as pd
 from scipy import optimize, stats
 
-from bench.metrics import bootstrap_mean_interval, by_cell, clustered_rate_interval, mean_realised_snr
+from radarbench.bench.metrics import bootstrap_mean_interval, by_cell, clustered_rate_interval, mean_realised_snr
 
 #: the clutter regions the task knows, in label order of the built-in scenario; the clutter
 #: edge's band is one region, or its two sides (below the step / from it) when a scenario splits it

@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.calibration import cell_exceedances
-from bench.markdown import code, fmt, fmt_crossing, fmt_interval, table, text
-from bench.metrics import bootstrap_mean_interval, snr_at_pd
-from bench.recording.record import TrialRecord
-from bench.tasks.base import ReportContext
-from bench.tasks.cells.figures import map_detections, pd_panels, roc_panels
-from bench.tasks.cells.metrics import (PAIRED_GROUP, REGION_NAMES, ideal_pd, ideal_snr_at_pd, ratio_with_interval,
+from radarbench.bench.calibration import cell_exceedances
+from radarbench.bench.markdown import code, fmt, fmt_crossing, fmt_interval, table, text
+from radarbench.bench.metrics import bootstrap_mean_interval, snr_at_pd
+from radarbench.bench.recording.record import TrialRecord
+from radarbench.bench.tasks.base import ReportContext
+from radarbench.bench.tasks.cells.figures import map_detections, pd_panels, roc_panels
+from radarbench.bench.tasks.cells.metrics import (PAIRED_GROUP, REGION_NAMES, ideal_pd, ideal_snr_at_pd, ratio_with_interval,
                                        slug)
 
 #: the reference SNR is the lowest level at which the ideal detector reaches this Pd

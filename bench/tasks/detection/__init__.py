@@ -26,14 +26,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Scene, has_shape, require
-from bench.recording.blueprint import Views, legend_headroom, relative
-from bench.recording.draw import log_series
-from bench.recording.layout import TrialLayout
-from bench.recording.paths import rerun_path
-from bench.recording.record import MethodTrace, TrialRecord, check_shape
-from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task
-from bench.tasks.detection.metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
+from radarbench.bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Scene, has_shape, require
+from radarbench.bench.recording.blueprint import Views, legend_headroom, relative
+from radarbench.bench.recording.draw import log_series
+from radarbench.bench.recording.layout import TrialLayout
+from radarbench.bench.recording.paths import rerun_path
+from radarbench.bench.recording.record import MethodTrace, TrialRecord, check_shape
+from radarbench.bench.tasks.base import OutputError, RecordedScene, ReportContext, Task
+from radarbench.bench.tasks.detection.metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
 
 __all__ = ["DetectionScene", "DetectionTask", "method_trace"]
 
@@ -288,9 +288,9 @@ class DetectionTask(Task):
         return Views(top=[top])
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks.detection import report
+        from radarbench.bench.tasks.detection import report
         return report.sections(ctx)
 
     def trial_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks.detection import report
+        from radarbench.bench.tasks.detection import report
         return report.timeline(ctx)

@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from bench.metrics import (binomial_interval, bootstrap_mean_interval, by_cell, clustered_rate_interval,
+from radarbench.bench.metrics import (binomial_interval, bootstrap_mean_interval, by_cell, clustered_rate_interval,
                            mean_realised_snr)
 
 

@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench import figures
-from bench.markdown import code, crossing_difference, crossing_floors, crossing_text, fmt, fmt_db, snr50, table
-from bench.store import Store
-from bench.tasks.base import ReportContext
-from bench.tasks.detection.metrics import roc_curve
+from radarbench.bench import figures
+from radarbench.bench.markdown import code, crossing_difference, crossing_floors, crossing_text, fmt, fmt_db, snr50, table
+from radarbench.bench.store import Store
+from radarbench.bench.tasks.base import ReportContext
+from radarbench.bench.tasks.detection.metrics import roc_curve
 
 
 def sections(ctx: ReportContext) -> list[str]:

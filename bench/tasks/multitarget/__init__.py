@@ -30,13 +30,13 @@ import numpy as np
 
 import pandas as pd
 
-from bench.core import Batch, Scene, has_shape, require, require_arrays
-from bench.recording.blueprint import Views
-from bench.recording.layout import TrialLayout
-from bench.recording.record import MethodTrace, TrialRecord
-from bench.tasks.base import (OutputError, RecordedScene, ReportContext, Task, check_covariance, check_estimate,
+from radarbench.bench.core import Batch, Scene, has_shape, require, require_arrays
+from radarbench.bench.recording.blueprint import Views
+from radarbench.bench.recording.layout import TrialLayout
+from radarbench.bench.recording.record import MethodTrace, TrialRecord
+from radarbench.bench.tasks.base import (OutputError, RecordedScene, ReportContext, Task, check_covariance, check_estimate,
                               time_series)
-from bench.tasks.multitarget.metrics import (MEANS, SCENE_COLUMNS, multitarget_steps, multitarget_trial_metrics,
+from radarbench.bench.tasks.multitarget.metrics import (MEANS, SCENE_COLUMNS, multitarget_steps, multitarget_trial_metrics,
                                              summarise_multitarget)
 
 __all__ = ["MULTI_TARGET", "STATUS", "MultiTargetOutput", "MultiTargetScene", "MultiTargetTask"]
@@ -264,7 +264,7 @@ class MultiTargetTask(Task):
         return multitarget_steps(series).assign(n_trials=len(trials))
 
     def log_trial(self, stream, layout: TrialLayout, rec: TrialRecord) -> None:
-        from bench.tasks.multitarget import draw
+        from radarbench.bench.tasks.multitarget import draw
         draw.log_scene(stream, layout, rec)
         t = np.asarray(rec.t, dtype=np.float64)
         for m in layout.methods_of(self):
@@ -274,5 +274,5 @@ class MultiTargetTask(Task):
         return Views(has_xy="plots_xy" in rec.arrays or "truths_xy" in rec.arrays)
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks.multitarget import report
+        from radarbench.bench.tasks.multitarget import report
         return report.sections(ctx)

@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.recording.draw import indexes, log_track, north_up
-from bench.recording.layout import TRUTH_COLOR, TrialLayout
-from bench.recording.paths import rerun_path
-from bench.recording.record import MethodTrace, TrialRecord
+from radarbench.bench.recording.draw import indexes, log_track, north_up
+from radarbench.bench.recording.layout import TRUTH_COLOR, TrialLayout
+from radarbench.bench.recording.paths import rerun_path
+from radarbench.bench.recording.record import MethodTrace, TrialRecord
 
 TARGET_PLOT_COLOR = (60, 220, 90)
 CLUTTER_COLOR = (150, 150, 150)

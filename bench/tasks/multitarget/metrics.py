@@ -45,7 +45,7 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import linear_sum_assignment
 
-from bench.metrics import bootstrap_mean_interval, bootstrap_statistic_interval, by_cell, mean_realised_snr
+from radarbench.bench.metrics import bootstrap_mean_interval, bootstrap_statistic_interval, by_cell, mean_realised_snr
 
 CONFIRMED = 2
 

@@ -13,11 +13,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from bench import figures
-from bench.markdown import code, fmt, fmt_interval, table
-from bench.metrics import bootstrap_mean_interval
-from bench.recording.paths import entity_name as slug
-from bench.tasks.base import ReportContext
+from radarbench.bench import figures
+from radarbench.bench.markdown import code, fmt, fmt_interval, table
+from radarbench.bench.metrics import bootstrap_mean_interval
+from radarbench.bench.recording.paths import entity_name as slug
+from radarbench.bench.tasks.base import ReportContext
 
 #: the two axes a multi-target sweep varies, as summary columns, with their words
 AXES = {"scene_pd": ("Pd", "detection probability Pd", False),

@@ -38,16 +38,16 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from bench.calibration import cell_order_statistics
-from bench.core import TBD, Batch, Scene, TBDOutput, has_shape, require
-from bench.metrics import per_step_rmse
-from bench.recording.blueprint import Views, relative
-from bench.recording.draw import COLOUR_SCALE, log_image, log_image_series, log_series, log_track
-from bench.recording.layout import TRUTH_COLOR, MethodLayout, TrialLayout
-from bench.recording.paths import rerun_path
-from bench.recording.record import MethodTrace, TrialRecord, check_shape
-from bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, time_series
-from bench.tasks.tbd.metrics import summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
+from radarbench.bench.calibration import cell_order_statistics
+from radarbench.bench.core import TBD, Batch, Scene, TBDOutput, has_shape, require
+from radarbench.bench.metrics import per_step_rmse
+from radarbench.bench.recording.blueprint import Views, relative
+from radarbench.bench.recording.draw import COLOUR_SCALE, log_image, log_image_series, log_series, log_track
+from radarbench.bench.recording.layout import TRUTH_COLOR, MethodLayout, TrialLayout
+from radarbench.bench.recording.paths import rerun_path
+from radarbench.bench.recording.record import MethodTrace, TrialRecord, check_shape
+from radarbench.bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, time_series
+from radarbench.bench.tasks.tbd.metrics import summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
 
 __all__ = ["GRID_KEYS", "Grid", "TBDScene", "TBDTask", "method_trace", "scene"]
 
@@ -397,5 +397,5 @@ class TBDTask(Task):
         return Views(top=top, bottom=bottom, draws_scene=bool(images))
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks.tbd import report
+        from radarbench.bench.tasks.tbd import report
         return report.sections(ctx)

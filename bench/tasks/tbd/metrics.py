@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from bench.metrics import (binomial_interval, bootstrap_statistic_interval, by_cell, mean_realised_snr,
+from radarbench.bench.metrics import (binomial_interval, bootstrap_statistic_interval, by_cell, mean_realised_snr,
                            series_key, time_averaged_rmse)
 
 

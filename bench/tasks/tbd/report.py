@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench import figures
-from bench.calibration import gumbel_fit
-from bench.markdown import code, crossing_difference, crossing_text, fmt, fmt_db, fmt_interval, snr50, table
-from bench.tasks.base import ReportContext
+from radarbench.bench import figures
+from radarbench.bench.calibration import gumbel_fit
+from radarbench.bench.markdown import code, crossing_difference, crossing_text, fmt, fmt_db, fmt_interval, snr50, table
+from radarbench.bench.tasks.base import ReportContext
 
 
 def _rmse_level(summary: pd.DataFrame) -> float | None:

@@ -28,14 +28,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.core import TRACKING, Batch, Scene, TrackingOutput, has_shape, require
-from bench.recording.blueprint import Views
-from bench.recording.draw import log_static_points, log_track, north_up
-from bench.recording.layout import TrialLayout
-from bench.recording.record import MethodTrace, TrialRecord, check_shape
-from bench.tasks.base import (OutputError, RecordedScene, ReportContext, Task, check_covariance, check_estimate,
+from radarbench.bench.core import TRACKING, Batch, Scene, TrackingOutput, has_shape, require
+from radarbench.bench.recording.blueprint import Views
+from radarbench.bench.recording.draw import log_static_points, log_track, north_up
+from radarbench.bench.recording.layout import TrialLayout
+from radarbench.bench.recording.record import MethodTrace, TrialRecord, check_shape
+from radarbench.bench.tasks.base import (OutputError, RecordedScene, ReportContext, Task, check_covariance, check_estimate,
                               check_finite, check_range, time_series)
-from bench.tasks.tracking.metrics import (SWITCH_TRACES, maneuver_trial_metrics, summarise_tracking,
+from radarbench.bench.tasks.tracking.metrics import (SWITCH_TRACES, maneuver_trial_metrics, summarise_tracking,
                                           tracking_steps, tracking_trial_metrics)
 
 __all__ = ["TrackingScene", "TrackingTask", "method_trace", "scene"]
@@ -140,7 +140,7 @@ def _log_maneuver(stream, layout: TrialLayout, t: np.ndarray, rec: TrialRecord) 
     the true maneuver (``truth/maneuvering``, 1 inside it; its first step the onset)."""
     import rerun as rr
 
-    from bench.recording.draw import log_series
+    from radarbench.bench.recording.draw import log_series
 
     every = np.arange(t.shape[0])
     for name, values in rec.arrays.items():
@@ -256,6 +256,6 @@ class TrackingTask(Task):
         return Views(has_xy=any("estimate_xy" in rec.methods[m.label].arrays for m in layout.methods_of(self)))
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
-        from bench.tasks.tracking import report
+        from radarbench.bench.tasks.tracking import report
         return report.sections(ctx)
 

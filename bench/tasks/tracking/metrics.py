@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from bench.batched import inner
-from bench.metrics import (binomial_interval, bootstrap_mean_interval, bootstrap_statistic_interval, by_cell,
+from radarbench.bench.batched import inner
+from radarbench.bench.metrics import (binomial_interval, bootstrap_mean_interval, bootstrap_statistic_interval, by_cell,
                            clustered_rate_interval, mean_over_present, mean_realised_snr, per_step_rmse,
                            series_key, time_averaged_rmse)
 

@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench import figures
-from bench.markdown import code, fmt, fmt_db, fmt_interval, table, text
-from bench.metrics import bootstrap_mean_interval
-from bench.recording.paths import entity_name as slug
-from bench.tasks.base import ReportContext
-from bench.tasks.tracking.metrics import ONSET_WINDOW_STEPS
+from radarbench.bench import figures
+from radarbench.bench.markdown import code, fmt, fmt_db, fmt_interval, table, text
+from radarbench.bench.metrics import bootstrap_mean_interval
+from radarbench.bench.recording.paths import entity_name as slug
+from radarbench.bench.tasks.base import ReportContext
+from radarbench.bench.tasks.tracking.metrics import ONSET_WINDOW_STEPS
 
 
 def _reference_snr(g: pd.DataFrame) -> float:

@@ -1,0 +1,120 @@
+"""Method ``current-statistical``: Zhou's "current statistical" model with
+adaptive acceleration variance, batched over trials."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from radarbench.bench.core import Batch, TrackingOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.methods.kinematic.base import SIGMA_WHY, KinematicTracker, output
+from radarbench.models.kalman import predict_batched, update_where
+from radarbench.models.kinematics import (KinematicModel, current_statistical_input, current_statistical_variance, per_axis,
+                               singer)
+
+AMAX_WHY = "from 0.1 m/s^2 to 100 g; above the largest acceleration the target can have"
+
+
+def _axis_blocks(block: np.ndarray, dims: int) -> np.ndarray:
+    """(dims, ...) the per-axis ``block`` placed on each axis alone: for a (3, 3)
+    block, kron(E_jj, block); for a (3,) vector, its place in the stacked state."""
+    eye = np.eye(dims)
+    if block.ndim == 1:
+        return np.stack([np.kron(eye[j], block) for j in range(dims)])
+    return np.stack([np.kron(np.outer(eye[j], eye[j]), block) for j in range(dims)])
+
+
+@register_method
+class CurrentStatistical(KinematicTracker):
+    """Current statistical model (Zhou & Kumar) with adaptive acceleration variance, batched over trials.
+
+    Zhou Hongren & K. S. P. Kumar, "A 'current' statistical model and
+    adaptive algorithm for estimating maneuvering targets" (1984), as in Li
+    & Jilkov's survey part I, sec. 4.3 (the model the AR-model patent names
+    as the non-zero-mean Markov model). Per axis, state [p, v, a]: the
+    acceleration is a first-order Markov process around the "current" mean
+    a_bar, da/dt = -alpha (a - a_bar) + w; discretised,
+    x_{k+1} = F x_k + U a_bar + w_k with the Singer F(alpha), U
+    (:func:`models.kinematics.current_statistical_input`) and
+    Q = sigma_a^2 Q_1(alpha) (the Singer Q for unit sigma). The algorithm:
+    a_bar is the current acceleration estimate a_k|k, so the prediction is
+    x_k+1|k = F x_k|k + U a_k|k (= the CA prediction), P_k+1|k = F P F' + Q_k
+    with the adaptive variance
+    sigma_a^2 = (4 - pi)/pi (a_max - a_k|k)^2 if a_k|k >= 0,
+    (4 - pi)/pi (a_max_neg + a_k|k)^2 if a_k|k < 0 (per axis; a_k|k clipped
+    to [-a_max_neg, a_max] and the std held at ``accel_std_floor_m_s2``, ours,
+    where the printed formula would give 0). Started from the scene's prior.
+    Covariances depend on the data (through Q_k) and carry the trial axis.
+    Traces: ``mode`` 1, ``switch`` 0, ``accel_std`` (n, K) the adaptive
+    sigma_a of the first axis used to predict the next step.
+    """
+
+    name = "current-statistical"
+    reference_name = "per-trial filterpy KalmanFilter loop (Q and B u set per step)"
+
+    @dataclass(frozen=True)
+    class Params:
+        alpha_per_s: float = param(0.1, "maneuver rate alpha = 1 / maneuver time constant (1/s)", ge=1e-4,
+                                   le=100.0, why="time constants from 10 ms to about 3 h")
+        a_max_m_s2: float = param(50.0, "largest positive acceleration a_max (m/s^2)", ge=0.1, le=1e3,
+                                  why=AMAX_WHY)
+        a_max_neg_m_s2: float = param(50.0, "largest negative acceleration, as a magnitude a_-max (m/s^2)",
+                                      ge=0.1, le=1e3, why=AMAX_WHY)
+        accel_std_floor_m_s2: float = param(0.1, "smallest adaptive acceleration std (m/s^2), where the "
+                                            "formula gives 0", ge=1e-3, le=1e3, why=SIGMA_WHY)
+
+        def validate(self) -> None:
+            if self.accel_std_floor_m_s2 > max(self.a_max_m_s2, self.a_max_neg_m_s2):
+                raise ConfigError("accel_std_floor_m_s2", "above the largest acceleration")
+
+    def _matrices(self, model: KinematicModel, params):
+        """Stacked F (d, d), per-axis unit Q blocks (dims, d, d) and input columns (dims, d)."""
+        F_axis, Q_unit = singer(model.dt_s, params.alpha_per_s, 1.0)
+        U = current_statistical_input(model.dt_s, params.alpha_per_s)
+        return per_axis(F_axis, model.dims), _axis_blocks(Q_unit, model.dims), _axis_blocks(U, model.dims)
+
+    def _variance(self, a_bar: np.ndarray, params) -> np.ndarray:
+        return current_statistical_variance(a_bar, params.a_max_m_s2, params.a_max_neg_m_s2,
+                                            params.accel_std_floor_m_s2 ** 2)
+
+    def track(self, batch: Batch, model: KinematicModel, params) -> TrackingOutput:
+        F, Q_axes, U_axes = self._matrices(model, params)
+        n, K, _ = batch.z.shape
+        d, acc = F.shape[0], np.arange(2, F.shape[0], 3)
+        xs, Ps, std = np.empty((n, K, d)), np.empty((n, K, d, d)), np.empty((n, K))
+        x = np.broadcast_to(model.x0, (n, d)).copy()
+        P = np.broadcast_to(model.P0, (n, d, d)).copy()
+        valid = batch.scene.valid_steps
+        for k in range(K):
+            upd = update_where(x, P, batch.z[:, k], model.H, model.R, None if valid is None else valid[:, k])
+            xs[:, k], Ps[:, k] = upd.x, upd.P
+            a_bar = upd.x[:, acc]                                  # (n, dims): the current mean
+            var = self._variance(a_bar, params)
+            std[:, k] = np.sqrt(var[:, 0])
+            x, P = predict_batched(upd.x, upd.P, F, np.einsum("nj,jab->nab", var, Q_axes), a_bar @ U_axes)
+        out = output(xs, Ps, 1)
+        out.traces["accel_std"] = std
+        return out
+
+    def reference_track(self, batch: Batch, model: KinematicModel, params) -> TrackingOutput:
+        from filterpy.kalman import KalmanFilter
+
+        F, Q_axes, U_axes = self._matrices(model, params)
+        n, K, m = batch.z.shape
+        d, acc = F.shape[0], np.arange(2, F.shape[0], 3)
+        xs, Ps = np.empty((n, K, d)), np.empty((n, K, d, d))
+        for i in range(n):
+            kf = KalmanFilter(dim_x=d, dim_z=m, dim_u=m)
+            kf.F, kf.H, kf.R, kf.B = F, model.H, model.R, U_axes.T
+            kf.x, kf.P = model.x0.copy(), model.P0.copy()
+            for k in range(K):
+                kf.update(batch.z[i, k])
+                xs[i, k], Ps[i, k] = kf.x, kf.P
+                a_bar = kf.x[acc]
+                kf.Q = np.einsum("j,jab->ab", self._variance(a_bar, params), Q_axes)
+                kf.predict(u=a_bar)
+        return output(xs, Ps, 1)

@@ -1,0 +1,207 @@
+"""Method ``imm-cv-ca``: the interacting multiple model (IMM) estimator with a
+CV and a CA mode, batched over trials and modes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+
+import numba
+import numpy as np
+
+from radarbench.bench.core import Batch, TrackingOutput
+from radarbench.bench.errors import ConfigError
+from radarbench.bench.params import param
+from radarbench.bench.registry import register_method
+from radarbench.methods.kinematic.base import KinematicTracker, ca_noise_param, cv_ca_modes, cv_noise_param, output
+from radarbench.models.kalman import LinearGaussianModel, predict_batched, update_where
+from radarbench.models.kinematics import KinematicModel
+
+
+@dataclass(frozen=True)
+class IMMResult:
+    """Output of :func:`imm_filter`: the combined estimate x (n, K, d) and covariance
+    P (n, K, d, d) after each update, and the mode probabilities mu (n, K, r)."""
+
+    x: np.ndarray
+    P: np.ndarray
+    mu: np.ndarray
+
+
+@numba.njit(cache=True)
+def _moments(weights: np.ndarray, X: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and covariance of a Gaussian mixture per trial: weights (n, r) over r components
+    X (r, n, d), P (r, n, d, d): x = sum w_j x_j, P = sum w_j (P_j + (x_j - x)(x_j - x)')
+    (compiled: NumPy would make a call per small matrix)."""
+    r, n, d = X.shape
+    x, P_mix = np.zeros((n, d)), np.zeros((n, d, d))
+    for i in range(n):
+        for j in range(r):
+            for a in range(d):
+                x[i, a] += weights[i, j] * X[j, i, a]
+        for j in range(r):
+            w = weights[i, j]
+            for a in range(d):
+                da = X[j, i, a] - x[i, a]
+                for b in range(a, d):
+                    value = w * (0.5 * (P[j, i, a, b] + P[j, i, b, a]) + da * (X[j, i, b] - x[i, b]))
+                    P_mix[i, a, b] += value
+                    if b != a:
+                        P_mix[i, b, a] += value
+    return x, P_mix
+
+
+def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
+    """log sum exp(a) along ``axis`` (scipy's, without its overhead on small axes)."""
+    top = np.max(a, axis=axis, keepdims=True)
+    top = np.where(np.isfinite(top), top, 0.0)
+    with np.errstate(divide="ignore"):
+        return np.squeeze(top, axis) + np.log(np.sum(np.exp(a - top), axis=axis))
+
+
+def unreachable_mode(transition: np.ndarray, mu0: np.ndarray, names) -> str | None:
+    """Why an IMM with this Markov chain fails, or None. Every mode must be reachable at
+    the first step (c_bar = mu0 M > 0) and from every mode (the chain irreducible): once the
+    data drive a mode's probability to zero (it underflows), a mode reachable only from it
+    has c_bar_j = 0, its mixing weights omega_ij = M_ij mu_i / c_bar_j are 0/0 and the
+    estimate turns NaN at every later step (an absorbing mode, or an identity matrix)."""
+    M = np.asarray(transition, float) > 0
+    first = np.asarray(mu0, float) @ np.asarray(transition, float) > 0
+    if not first.all():
+        return f"mode {names[int(np.argmin(first))]} is never reached from the initial probabilities"
+    reach = M.copy()
+    for _ in range(len(M)):                                 # transitive closure: k steps for r modes
+        reach |= (reach.astype(int) @ M.astype(int)) > 0
+    for i, row in enumerate(reach):
+        if not row.all():
+            j = int(np.argmin(row))
+            return f"mode {names[j]} is never reached again once in mode {names[i]} (no path of non-zero " \
+                   f"transitions; the filter's mixing weights are 0/0 once a mode's probability underflows)"
+    return None
+
+
+def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: np.ndarray, z: np.ndarray,
+               x0: np.ndarray, P0: np.ndarray, valid: np.ndarray | None = None) -> IMMResult:
+    """The IMM of Blom & Bar-Shalom (1988), in FilterPy's ``IMMEstimator`` order
+    (Bar-Shalom, Li & Kirubarajan 2001, sec. 11.6.6), for all trials and modes at once.
+
+    ``models``: r linear models on one state space (same H, R); ``transition``
+    M (r, r), M_ij = P(mode j at k+1 | mode i at k); ``mu0`` (r,) the mode
+    probabilities before step 0. Each step, with c_bar = mu_{k-1} M:
+
+        mode-matched updates  x_j, P_j, Lambda_j = N(nu_j; 0, S_j)
+        mu_j = c_bar_j Lambda_j / sum_i c_bar_i Lambda_i        (in logs: no underflow)
+        combined  x = sum_j mu_j x_j,  P = sum_j mu_j (P_j + (x_j - x)(x_j - x)')
+        mixing    omega_ij = M_ij mu_i / c_bar'_j,  c_bar' = mu M
+                  x0_j = sum_i omega_ij x_i,  P0_j = sum_i omega_ij (P_i + (x_i - x0_j)(.)')
+        prediction of each mode from (x0_j, P0_j) with its F_j, Q_j.
+
+    Step 0 updates every mode from the prior (x0, P0) with c_bar = mu0 M, as
+    ``IMMEstimator`` does when its ``update`` comes first. ``valid`` (n, K) bool: the
+    steps each trial has (a ragged batch; None: all); at a missing step every mode
+    predicts only and its likelihood is 1, so mu_j = c_bar_j (:func:`models.kalman.update_where`).
+    """
+    n, K, _ = z.shape
+    r, d = len(models), models[0].dim_x
+    H, R = models[0].H, models[0].R
+    M = np.asarray(transition, float)
+    X = np.broadcast_to(np.asarray(x0, float), (r, n, d)).copy()
+    P = np.broadcast_to(np.asarray(P0, float), (r, n, d, d)).copy()
+    log_cbar = np.broadcast_to(np.log(np.asarray(mu0, float) @ M), (n, r))
+    xs, Ps, mus = np.empty((n, K, d)), np.empty((n, K, d, d)), np.empty((n, K, r))
+    with np.errstate(divide="ignore"):                          # a zero transition is log 0 = -inf
+        log_M = np.log(M)
+    for k in range(K):
+        upd = update_where(X, P, z[None, :, k], H, R, None if valid is None else valid[:, k])  # axes (r, n)
+        log_mu = log_cbar + upd.log_likelihood.T                # (n, r)
+        mu = np.exp(log_mu - _logsumexp(log_mu, axis=1)[:, None])
+        xs[:, k], Ps[:, k] = _moments(mu, upd.x, upd.P)
+        mus[:, k] = mu
+        with np.errstate(divide="ignore"):
+            log_joint = np.log(mu)[:, :, None] + log_M          # (n, i, j): log M_ij mu_i
+        log_cbar = _logsumexp(log_joint, axis=1)                # (n, j)
+        omega = np.exp(log_joint - log_cbar[:, None, :])         # (n, i, j)
+        mixed = [_moments(np.ascontiguousarray(omega[:, :, j]), upd.x, upd.P) for j in range(r)]
+        predicted = [predict_batched(x_j, P_j, mode.F, mode.Q) for (x_j, P_j), mode in zip(mixed, models)]
+        X = np.stack([x_j for x_j, _ in predicted])
+        P = np.stack([P_j for _, P_j in predicted])
+    return IMMResult(x=xs, P=Ps, mu=mus)
+
+
+def filterpy_imm(models: list[LinearGaussianModel], transition: np.ndarray, mu0: np.ndarray, z: np.ndarray,
+                 x0: np.ndarray, P0: np.ndarray) -> IMMResult:
+    """The reference: FilterPy's ``IMMEstimator`` per trial (update, then predict)."""
+    from filterpy.kalman import IMMEstimator, KalmanFilter
+
+    n, K, m = z.shape
+    d, r = models[0].dim_x, len(models)
+    xs, Ps, mus = np.empty((n, K, d)), np.empty((n, K, d, d)), np.empty((n, K, r))
+    for i in range(n):
+        filters = []
+        for model in models:
+            kf = KalmanFilter(dim_x=d, dim_z=m)
+            kf.F, kf.H, kf.Q, kf.R = model.F, model.H, model.Q, model.R
+            kf.x, kf.P = np.array(x0, float), np.array(P0, float)
+            filters.append(kf)
+        imm = IMMEstimator(filters, np.array(mu0, float), np.asarray(transition, float))
+        for k in range(K):
+            imm.update(z[i, k])
+            xs[i, k], Ps[i, k], mus[i, k] = imm.x, imm.P, imm.mu
+            imm.predict()
+    return IMMResult(x=xs, P=Ps, mu=mus)
+
+
+@register_method
+class IMMCVCA(KinematicTracker):
+    """IMM with a CV and a CA mode (transition matrix a parameter), batched over trials and modes.
+
+    Modes on the scenario's [p, v, a] state per axis: CV (DWNA, sigma_a; the
+    acceleration not modelled: its row of F and of Q zero,
+    :func:`models.kinematics.embed_cv`) and CA (DWPA, sigma_j); the
+    estimator is :func:`imm_filter` (Blom & Bar-Shalom), FilterPy's
+    ``IMMEstimator`` the reference. Both modes start from the scene's prior.
+    Returns the combined estimate and covariance. Traces: ``mode`` the
+    probability of the CA mode, ``switch`` 0 (an IMM makes no decision).
+    """
+
+    name = "imm-cv-ca"
+    reference_name = "per-trial filterpy IMMEstimator loop"
+
+    @dataclass(frozen=True)
+    class Params:
+        accel_noise_m_s2: float = cv_noise_param(1.0)
+        accel_increment_m_s2: float = ca_noise_param(3.0)
+        transition: tuple[float, ...] = param(
+            (0.95, 0.05, 0.05, 0.95), "mode transition matrix, row by row: P(CV->CV), P(CV->CA), "
+            "P(CA->CV), P(CA->CA); each row sums to 1", ge=0.0, le=1.0, min_len=4, max_len=4,
+            why="probabilities")
+        initial_probabilities: tuple[float, ...] = param(
+            (0.9, 0.1), "mode probabilities (CV, CA) before the first step; they sum to 1", ge=0.0, le=1.0,
+            min_len=2, max_len=2, why="probabilities")
+
+        def validate(self) -> None:
+            rows = np.reshape(self.transition, (2, 2)).sum(axis=1)
+            if not np.allclose(rows, 1.0, atol=1e-9):
+                raise ConfigError("transition", f"each row must sum to 1, got row sums {rows.tolist()}")
+            if not np.isclose(sum(self.initial_probabilities), 1.0, atol=1e-9):
+                raise ConfigError("initial_probabilities", "must sum to 1")
+            problem = unreachable_mode(np.reshape(self.transition, (2, 2)), np.asarray(self.initial_probabilities),
+                                       ("CV", "CA"))
+            if problem:
+                raise ConfigError("transition", problem)
+
+    @staticmethod
+    def modes(model: KinematicModel, params) -> list[LinearGaussianModel]:
+        """The CV and the CA mode on [p, v, a] per axis."""
+        return cv_ca_modes(model, params.accel_noise_m_s2, params.accel_increment_m_s2)
+
+    def _run(self, imm, batch: Batch, model: KinematicModel, params) -> TrackingOutput:
+        res = imm(self.modes(model, params), np.reshape(params.transition, (2, 2)),
+                  np.asarray(params.initial_probabilities), batch.z, model.x0, model.P0)
+        return output(res.x, res.P, res.mu[..., 1])
+
+    def track(self, batch, model, params):
+        return self._run(partial(imm_filter, valid=batch.scene.valid_steps), batch, model, params)
+
+    def reference_track(self, batch, model, params):
+        return self._run(filterpy_imm, batch, model, params)

@@ -1,0 +1,163 @@
+"""The recorded tracks of scenario ``recorded-tracks`` read and checked: a user's CSV or
+Parquet file or a sample of the ``traffic`` package, its columns, times and coordinates
+(planar metres, or latitude/longitude on a local plane) (docs/recorded-tracks.md)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from radarbench.bench.errors import ConfigError
+from radarbench.models.geodesy import geodetic_to_enu
+
+
+#: a file's columns: the track and the time, then planar metres or geodetic degrees
+TRACK, TIME = "track", "time_s"
+PLANAR = ("x_m", "y_m")
+GEODETIC = ("latitude", "longitude")
+ALTITUDE = "altitude_m"
+#: recorded measurements (``measurements = "recorded"``): the same form as the truth's columns
+PLANAR_MEAS = ("x_meas_m", "y_meas_m")
+GEODETIC_MEAS = ("latitude_meas", "longitude_meas")
+#: a ``traffic`` sample: "<category>/<name>", a file traffic/data/samples/<category>/<name>.json.gz
+SAMPLE_NAME = re.compile(r"[a-z0-9_]+/[a-z0-9_]+")
+SAMPLES_DIR = "traffic/data/samples"
+INSTALL_HINT = "pip install '.[data]' (the traffic package, whose wheel holds the samples)"
+FEET_M = 0.3048
+EPOCH = pd.Timestamp(0, tz="UTC")
+
+
+def sample_file(name: str) -> Path:
+    """The installed ``traffic`` sample ``name`` ("calibration/ajaccio"), found through the
+    package's metadata without importing it (its import is heavy); ConfigError naming
+    what to install when the package is absent."""
+    from importlib.metadata import PackageNotFoundError, distribution
+    check_sample_name(name)
+    try:
+        path = Path(distribution("traffic").locate_file(f"{SAMPLES_DIR}/{name}.json.gz"))
+    except PackageNotFoundError:
+        raise ConfigError("traffic_samples", f"the traffic samples need the optional extra: {INSTALL_HINT}") from None
+    if not path.is_file():
+        raise ConfigError("traffic_samples", f"no sample {name!r} in the installed traffic package ({path})")
+    return path
+
+
+def check_sample_name(name: str) -> None:
+    if not SAMPLE_NAME.fullmatch(name):
+        raise ConfigError("traffic_samples", f"{name!r} is not a sample name <category>/<name>, "
+                          "e.g. 'calibration/ajaccio'")
+
+
+def read_sample(name: str) -> pd.DataFrame:
+    """A ``traffic`` sample as a table of this module's columns: the aircraft (icao24) is
+    the track, altitude feet to metres; rows without a position (messages that carried
+    none) and repeated times are dropped."""
+    raw = pd.read_json(sample_file(name), compression="gzip")
+    table = pd.DataFrame({TRACK: name + ":" + raw["icao24"].astype(str),
+                          TIME: (pd.to_datetime(raw["timestamp"], utc=True) - EPOCH).dt.total_seconds(),
+                          GEODETIC[0]: raw["latitude"], GEODETIC[1]: raw["longitude"],
+                          ALTITUDE: pd.to_numeric(raw.get("altitude"), errors="coerce") * FEET_M})
+    table = table.dropna(subset=list(GEODETIC)).sort_values([TRACK, TIME], kind="stable")
+    return table.drop_duplicates([TRACK, TIME]).fillna({ALTITUDE: 0.0})
+
+
+def read_file(path: str) -> pd.DataFrame:
+    """A user's CSV, or Parquet (``.parquet``/``.pq``, with pyarrow), as read."""
+    if path.lower().endswith((".parquet", ".pq")):
+        try:
+            import pyarrow  # noqa: F401
+        except ImportError:
+            raise ConfigError("path", f"{path}: reading Parquet needs pyarrow (pip install pyarrow), "
+                              "or give a CSV") from None
+        return pd.read_parquet(path)
+    try:
+        return pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
+        raise ConfigError("path", f"{path}: not a readable CSV ({str(err).splitlines()[0]})") from None
+
+
+def checked_tracks(table: pd.DataFrame, where: str, recorded: bool = False) -> pd.DataFrame:
+    """The table's tracks as (track, time_s, east, north) in metres, and with ``recorded``
+    the recorded measurements (meas_east, meas_north) in the same frame, or a ConfigError
+    naming ``where`` (the file) and the first problem: a missing column, a non-numeric or
+    NaN value, too few points in a track, times not increasing within a track."""
+    planar = any(c in table for c in PLANAR)
+    columns = [TRACK, TIME, *(PLANAR if planar else GEODETIC)]
+    missing = [c for c in columns if c not in table]
+    if missing:
+        raise ConfigError("path", f"{where}: missing column(s) {', '.join(missing)} (needs {TRACK}, {TIME} and "
+                          f"{' and '.join(PLANAR)} in metres or {' and '.join(GEODETIC)} in degrees)")
+    measured = list(PLANAR_MEAS if planar else GEODETIC_MEAS) if recorded else []
+    missing = [c for c in measured if c not in table]
+    if missing:
+        raise ConfigError("path", f"{where}: missing column(s) {', '.join(missing)}: measurements = 'recorded' "
+                          f"replays them (with {' and '.join(columns[2:])}, the truth)")
+    if table.empty:
+        raise ConfigError("path", f"{where}: no rows")
+    values = {}
+    for c in columns[1:] + measured + ([ALTITUDE] if not planar and ALTITUDE in table else []):
+        col = _numbers(table[c])
+        bad = ~np.isfinite(col)
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise ConfigError("path", f"{where}: column {c} has {int(bad.sum())} missing or non-numeric "
+                              f"value(s), the first in track {table[TRACK].iloc[row]!r} at row {row + 1}")
+        values[c] = col
+    tracks = table[TRACK].astype(str).to_numpy()
+    _check_times(tracks, values[TIME], where)
+    out = pd.DataFrame({TRACK: tracks, TIME: values[TIME]})
+    for prefix, pair in (("", columns[2:]), ("meas_", measured)):
+        if pair:
+            out[prefix + "east"], out[prefix + "north"] = _in_metres(tracks, values, pair, planar)
+    return out
+
+
+def _in_metres(tracks, values: dict, pair, planar: bool) -> tuple[np.ndarray, np.ndarray]:
+    """East and north (m) of the columns ``pair`` (planar metres as they are; latitude and
+    longitude in each track's tangent plane at its first *truth* point, so truth and
+    recorded measurements share the frame)."""
+    if planar:
+        return values[pair[0]], values[pair[1]]
+    return _local_plane(tracks, values[pair[0]], values[pair[1]], values.get(ALTITUDE, np.zeros(len(tracks))),
+                        values[GEODETIC[0]], values[GEODETIC[1]])
+
+
+def _numbers(column: pd.Series) -> np.ndarray:
+    """A column as floats, NaN where not a number; timestamps (a Parquet file's datetime
+    column) as seconds since the Unix epoch."""
+    if pd.api.types.is_datetime64_any_dtype(column):
+        seconds = (column.dt.tz_localize("UTC") if column.dt.tz is None else column) - EPOCH
+        return seconds.dt.total_seconds().to_numpy(float)
+    return pd.to_numeric(column, errors="coerce").to_numpy(float)
+
+
+def _check_times(tracks: np.ndarray, t: np.ndarray, where: str) -> None:
+    """Each track has two points at least, at strictly increasing times (rows in order)."""
+    ids, first, counts = np.unique(tracks, return_index=True, return_counts=True)
+    short = counts < 2
+    if short.any():
+        raise ConfigError("path", f"{where}: track {ids[short][0]!r} has {counts[short][0]} point(s); a track "
+                          "needs two at least")
+    same_track = tracks[1:] == tracks[:-1]
+    back = same_track & (np.diff(t) <= 0)
+    if back.any():
+        row = int(np.argmax(back)) + 1
+        raise ConfigError("path", f"{where}: time does not increase within track {tracks[row]!r} at row "
+                          f"{row + 1} ({t[row - 1]:g} s, then {t[row]:g} s); sort each track by time")
+    if len(ids) != 1 + int(np.count_nonzero(~same_track)):
+        raise ConfigError("path", f"{where}: the rows of a track are not contiguous (track {ids[0]!r} or "
+                          "another comes back after other tracks); group the rows by track")
+
+
+def _local_plane(tracks, lat, lon, alt, lat_ref, lon_ref) -> tuple[np.ndarray, np.ndarray]:
+    """East and north (m) of each track in the tangent plane at its first point of
+    ``lat_ref``, ``lon_ref`` (:func:`models.geodesy.geodetic_to_enu`; height 0 at the reference)."""
+    east, north = np.empty(len(tracks)), np.empty(len(tracks))
+    starts = np.flatnonzero(np.r_[True, tracks[1:] != tracks[:-1]])
+    for a, b in zip(starts, np.r_[starts[1:], len(tracks)]):      # per track (a handful), not per point
+        enu = geodetic_to_enu(lat[a:b], lon[a:b], alt[a:b], lat_ref[a], lon_ref[a], 0.0)
+        east[a:b], north[a:b] = enu[:, 0], enu[:, 1]
+    return east, north
