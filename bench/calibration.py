@@ -10,6 +10,20 @@
   quantile: extreme-value theory for the maximum over many cells (Johnston &
   Krishnamurthy, IEEE TAES 38(1), 2002), which reaches Pfa = 1e-3 with a few
   thousand null scenes where the empirical quantile would need ~1e5.
+* ``pot`` (peaks over threshold): for scene scores whose tail is not Gumbel's
+  (a particle filter's existence log-odds has a heavier one), a generalized
+  Pareto law fitted by maximum likelihood to the excesses of the largest
+  :data:`POT_TAIL_FRACTION` of the null scores over the next one, u, and the
+  threshold where the fitted tail reaches the Pfa (Pickands, "Statistical
+  inference using extreme order statistics", Ann. Statist. 3(1), 1975; as a
+  detection threshold: Broadwater & Chellappa, "Adaptive threshold estimation
+  via extreme value theory", IEEE Trans. Signal Process. 58(2), 2010):
+
+      P(X > t) = q (1 + xi (t - u) / sigma)^(-1/xi),   t >= u,
+
+  with q the fraction of null scores above u. The Gumbel law is the xi = 0
+  limit of the laws this tail approximates, so ``pot`` also holds on Gumbel
+  scores, at the cost of a third parameter.
 
 Whatever the mode, the nominal threshold's *measured* Pfa on the same null
 values is reported with its binomial interval: a miscalibrated nominal
@@ -48,6 +62,11 @@ EQUAL_CHANCE_PD = 0.05
 #: geometrically by CELL_RANK_RATIO up to the number of cells
 EXACT_CELL_RANKS = 64
 CELL_RANK_RATIO = 1.25
+#: ``pot``: the fraction q of the null values whose excesses are fitted (the largest tenth:
+#: the rest of the sample says nothing about a Pfa far below q)
+POT_TAIL_FRACTION = 0.1
+#: ``pot`` fits at least this many excesses: fewer leave the shape xi to noise
+POT_MIN_TAIL = 30
 
 
 def empirical_threshold(null_values: np.ndarray, pfa: float) -> float:
@@ -72,6 +91,41 @@ def gumbel_fit(null_values: np.ndarray) -> tuple[float, float]:
     return float(loc), float(scale)
 
 
+def pot_tail_count(n: int) -> int:
+    """How many of ``n`` null values the ``pot`` tail holds: round(n q), q = :data:`POT_TAIL_FRACTION`."""
+    return int(round(n * POT_TAIL_FRACTION))
+
+
+def pot_fit(null_values: np.ndarray) -> tuple[float, float, float]:
+    """(u, sigma, xi): the tail's start u, the (k + 1)-th largest null value for the k of
+    :func:`pot_tail_count`, and the maximum-likelihood generalized Pareto scale and shape
+    of the k excesses over it (the module docstring's tail law, with q = k / n)."""
+    v = np.sort(np.asarray(null_values, float))
+    k = pot_tail_count(v.size)
+    if k < POT_MIN_TAIL or k >= v.size:
+        raise ValueError(f"'pot' needs at least {POT_MIN_TAIL} values in its tail, got {k} of {v.size}")
+    u = float(v[-k - 1])
+    xi, _, sigma = stats.genpareto.fit(v[-k:] - u, floc=0.0)
+    return u, float(sigma), float(xi)
+
+
+def pot_threshold(fit: tuple[float, float, float], pfa: float, n: int) -> float:
+    """The t where the fitted tail q (1 + xi (t - u) / sigma)^(-1/xi) equals ``pfa``, q = k / n."""
+    u, sigma, xi = fit
+    q = pot_tail_count(n) / n
+    return u + float(stats.genpareto.isf(pfa / q, xi, 0.0, sigma)) if pfa < q else u
+
+
+def fitted_survival(c: "CalibrationResult", grid: np.ndarray) -> np.ndarray:
+    """P(score >= x) at ``grid`` under the law calibration ``c`` fitted (``gumbel``: the
+    whole law; ``pot``: its tail, NaN below the tail's start)."""
+    if c.mode == "pot":
+        q = pot_tail_count(c.null_values) / c.null_values
+        sf = q * stats.genpareto.sf(grid - c.fit_loc, c.fit_shape, 0.0, c.fit_scale)
+        return np.where(grid >= c.fit_loc, sf, np.nan)
+    return stats.gumbel_r.sf(grid, c.fit_loc, c.fit_scale)
+
+
 @dataclass(frozen=True)
 class CalibrationResult:
     """The calibration of one method config on one scenario config."""
@@ -94,8 +148,9 @@ class CalibrationResult:
     used_pfa: float = float("nan")     # their fraction: the measured Pfa of the threshold used
     used_pfa_low: float = float("nan")
     used_pfa_high: float = float("nan")
-    gumbel_loc: float = float("nan")   # the fit, in gumbel mode
-    gumbel_scale: float = float("nan")
+    fit_loc: float = float("nan")      # the fit: gumbel's location, pot's tail start u
+    fit_scale: float = float("nan")    # gumbel's scale, pot's sigma
+    fit_shape: float = float("nan")    # pot's xi (gumbel: 0)
     equal_chance_threshold: float = float("nan")   # window threshold for the sweep's chance Pd
     cell_pfa: float = float("nan")          # per-cell Pfa of the threshold used (value maps)
     cell_pfa_low: float = float("nan")
@@ -206,12 +261,15 @@ def calibrate(scenario: str, method: str, null_values: np.ndarray, nominal: floa
     if per_cell and null_cells is not None and len(null_cells):
         return _calibrate_per_cell(scenario, method, null_values, nominal, pfa, mode, null_peaks, null_cells)
     values = np.asarray(null_values, dtype=float)
-    fit = (np.nan, np.nan)
+    fit = (np.nan, np.nan, np.nan)
     if mode == "empirical":
         used = empirical_threshold(values, pfa)
     elif mode == "gumbel":
-        fit = gumbel_fit(values)
-        used = float(stats.gumbel_r.isf(pfa, *fit))
+        fit = (*gumbel_fit(values), 0.0)
+        used = float(stats.gumbel_r.isf(pfa, *fit[:2]))
+    elif mode == "pot":
+        fit = pot_fit(values)
+        used = pot_threshold(fit, pfa, values.size)
     else:
         used = float(nominal)
     if np.isfinite(nominal):

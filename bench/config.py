@@ -25,6 +25,7 @@ import math
 import os
 import re
 import dataclasses
+import itertools
 import tomllib
 from pathlib import Path
 from typing import Any, Mapping
@@ -43,7 +44,7 @@ TOP_KEYS = {"name", "description", "scenario", "scenarios", "trials", "seed", "s
             "max_unit_memory_gb"}
 SCENARIO_KEYS = {"name", "params", "label", "snr_db", "trials"}
 METHOD_KEYS = {"name", "params", "label", "optional"}
-CALIBRATION_MODES = ("nominal", "empirical", "gumbel")
+CALIBRATION_MODES = ("nominal", "empirical", "gumbel", "pot")
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}\Z")     # \Z: "$" would let a final newline in
 #: config labels: readable like "cumulant-as-printed" or "glint[epsilon=0.05]", never path-like
 LABEL_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.,=+\-\[\]() ]{0,199}\Z")
@@ -306,7 +307,22 @@ def _parse_calibration(value: Any) -> CalibrationConfig:
     chance_pd = _expect_number(table.get("chance_pd", default.chance_pd), "calibration.chance_pd")
     if not 0 < chance_pd <= 0.5:
         raise ConfigError("calibration.chance_pd", f"expected a number in (0, 0.5], got {chance_pd!r}")
+    if mode == "pot":
+        _check_pot(pfa, h0)
     return CalibrationConfig(pfa, mode, h0, float(chance_pd))
+
+
+def _check_pot(pfa: float, h0_trials: int) -> None:
+    """``pot`` fits the largest POT_TAIL_FRACTION of the null scores: the Pfa must lie in
+    that tail, and the tail must hold enough scores to fit (:func:`bench.calibration.pot_fit`)."""
+    from radarbench.bench.calibration import POT_MIN_TAIL, POT_TAIL_FRACTION, pot_tail_count
+    if pfa >= POT_TAIL_FRACTION:
+        raise ConfigError("calibration.pfa", f"'pot' fits the largest {POT_TAIL_FRACTION:g} of the null scores "
+                                             f"and needs a Pfa below it, got {pfa!r}")
+    if pot_tail_count(h0_trials) < POT_MIN_TAIL:
+        least = next(n for n in itertools.count(h0_trials) if pot_tail_count(n) >= POT_MIN_TAIL)
+        raise ConfigError("calibration.h0_trials", f"'pot' fits at least {POT_MIN_TAIL} null scores in its tail: "
+                                                   f"needs h0_trials >= {least}, got {h0_trials}")
 
 
 def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large: bool = False,

@@ -388,7 +388,7 @@ class Method(Component):
 
         The contract (checked by ``tests/test_conformance.py``): optional. A method that
         has an analytic threshold overrides this and returns a finite number; one
-        calibrated empirically (on null trials: ``empirical``, ``gumbel``) does not
+        calibrated empirically (on null trials: ``empirical``, ``gumbel``, ``pot``) does not
         override it, and this default returns NaN, which means "none" everywhere (the
         report leaves the nominal columns empty). A sweep asking for ``nominal``
         calibration of a method that does not override it is refused at validation

@@ -235,22 +235,18 @@ def trial_in_plane(truth_xy: np.ndarray, measurements_xy: np.ndarray | None, est
     return _save(fig, path)
 
 
-def gumbel_fits(fits: dict[str, tuple[np.ndarray, float, float, float]], path: Path, pfa: float,
-                title: str) -> Path:
-    """Empirical survival function of the null scene scores (steps) against
-    the fitted Gumbel tail (dashed), with the threshold used (dotted)."""
-    from scipy import stats
-
+def null_score_fits(fits: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, float, str]], path: Path,
+                    pfa: float, title: str) -> Path:
+    """Empirical survival function of the null scene scores (steps) against the
+    fitted law's (dashed; ``fits``: label -> (scores, grid, survival on the grid,
+    threshold used, the law's name)), with the threshold used (dotted)."""
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
-    for i, (label, (values, loc, scale, used)) in enumerate(fits.items()):
+    for i, (label, (values, grid, fitted, used, law)) in enumerate(fits.items()):
         color = f"C{i % 10}"
         v = np.sort(values)
         survival = 1.0 - np.arange(v.size) / v.size
         ax.step(v, survival, where="post", color=color, lw=1.3, label=f"{label} (null scenes)")
-        if np.isfinite(loc):
-            grid = np.linspace(v[0], max(v[-1], used) + scale, 300)
-            ax.plot(grid, stats.gumbel_r.sf(grid, loc, scale), "--", color=color, lw=1.2,
-                    label=f"{label} Gumbel fit")
+        ax.plot(grid, fitted, "--", color=color, lw=1.2, label=f"{label} {law} fit")
         ax.axvline(used, color=color, ls=":", lw=1)
     ax.axhline(pfa, color="0.5", lw=0.8, ls=":")
     ax.set_yscale("log")

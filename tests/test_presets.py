@@ -65,7 +65,7 @@ def test_tbd_small_preset_runs_through_the_cli(bench_cli, tmp_path):
     summary = pd.read_csv(out / "summary.csv")
     assert set(summary.method) == {"dp-tbd", "dp-tbd-mf", "pf-tbd"}
     assert summary.groupby("config").pd.max().min() == 1.0          # each reaches Pd = 1 in the swept range
-    assert (summary.pfa <= 0.05).all()                              # scene Pfa of the Gumbel threshold
+    assert (summary.pfa <= 0.05).all()                              # scene Pfa of the fitted tail's threshold
     report = (out / "report.md").read_text()
     assert "## Track-before-detect: null scenes and the scene threshold" in report
     for name in ("figures/tbd_pd_vs_snr.png", "figures/tbd_null_scores.png", "steps.csv", "recording.rrd"):

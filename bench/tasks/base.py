@@ -189,7 +189,7 @@ class Task:
     #: whether a threshold is calibrated on null trials for this task
     calibrated: ClassVar[bool] = False
     #: calibration modes that apply (any mode is accepted when none applies)
-    calibration_modes: ClassVar[tuple[str, ...]] = ("nominal", "empirical", "gumbel")
+    calibration_modes: ClassVar[tuple[str, ...]] = ("nominal", "empirical", "gumbel", "pot")
     #: what the requested Pfa is counted over, e.g. "per step"
     pfa_unit: ClassVar[str] = ""
     #: whether the requested Pfa is per cell of a value map: calibration then reads the null

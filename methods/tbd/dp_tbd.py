@@ -14,7 +14,7 @@ the frame period and the noise statistics from ``batch.scene``; the compiled
 recursions are in :mod:`methods.tbd.kernels` and :mod:`methods.tbd.mf_kernels`. Scores are scene statistics:
 there is no analytic threshold for the maximum over a scene, so
 ``nominal_threshold`` is NaN and the harness calibrates on null scenes
-(``empirical`` or ``gumbel``).
+(``empirical``, ``gumbel`` or ``pot``).
 """
 
 from __future__ import annotations
@@ -193,7 +193,7 @@ class DpTbd(Method):
 
     # No nominal_threshold (bench.core.Method: NaN, none): the score is a maximum over all
     # cells and paths of a scene, whose null law has no closed form; calibrate on null
-    # scenes (``empirical``, or ``gumbel`` for small Pfa).
+    # scenes (``empirical``, or ``gumbel`` or ``pot`` for small Pfa).
 
 
 def prewhiten(z: np.ndarray, batch: Batch) -> np.ndarray:
@@ -592,4 +592,4 @@ class DpTbdMf(Method):
 
     # No nominal_threshold (bench.core.Method: NaN, none): the score is a maximum over all
     # cells and paths of a scene, whose null law has no closed form; calibrate on null
-    # scenes (``empirical``, or ``gumbel`` for small Pfa).
+    # scenes (``empirical``, or ``gumbel`` or ``pot`` for small Pfa).

@@ -234,7 +234,7 @@ class PfTbd(Method):
         return 176 * params.particles + 8 * H * W
 
     # No nominal_threshold (bench.core.Method: NaN, none): the null law of the existence
-    # log-odds has no closed form; calibrate on null scenes (``empirical`` or ``gumbel``).
+    # log-odds has no closed form; calibrate on null scenes (``empirical``, ``gumbel`` or ``pot``).
 
 
 def particle_split(params) -> tuple[int, int]:

@@ -29,7 +29,7 @@ def test_gumbel_threshold_has_the_requested_pfa_within_its_sampling_error(seed, 
     sigma = np.sqrt((1.1087 + 0.5140 * y + 0.6079 * y * y) / n)
     assert abs(np.log(true_pfa / pfa)) < 4.5 * sigma, (true_pfa, pfa, sigma)
     assert np.isnan(result.nominal_pfa)                      # no analytic threshold: no measured nominal Pfa
-    assert result.gumbel_scale > 0 and abs(result.gumbel_loc - loc) < 0.2 * scale + 1e-9
+    assert result.fit_scale > 0 and abs(result.fit_loc - loc) < 0.2 * scale + 1e-9
 
 
 def test_gumbel_threshold_beats_the_empirical_quantile_at_small_pfa():

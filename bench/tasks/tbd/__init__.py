@@ -2,8 +2,8 @@
 backtracked track scored against the true cells.
 
 A TBD method returns a :class:`~bench.core.TBDOutput`; the harness calibrates
-the scene threshold on null scenes (empirical quantile or a Gumbel fit,
-Johnston & Krishnamurthy, IEEE TAES 38(1), 2002), reads the same threshold
+the scene threshold on null scenes (empirical quantile, a Gumbel fit as in
+Johnston & Krishnamurthy, IEEE TAES 38(1), 2002, or a generalized Pareto tail), reads the same threshold
 per cell on the null value maps, and scores detection and position error
 (:mod:`bench.tasks.tbd.metrics`; docs/architecture.md, 'Tasks'), as the
 multi-frame DP-TBD paper and Tonissen & Evans (IEEE TAES 32(4), 1996) do.
@@ -251,7 +251,7 @@ class TBDTask(Task):
     name = TBD
     scene_type = TBDScene
     calibrated = True
-    calibration_modes = ("nominal", "empirical", "gumbel")
+    calibration_modes = ("nominal", "empirical", "gumbel", "pot")
     pfa_unit = "per scene"
     noun, short_noun = "track-before-detect", "TBD"
     null_sample = "one scene score per null scene"

@@ -1,8 +1,8 @@
 """Report sections of the track-before-detect task (docs/architecture.md, 'Outputs of a run').
 
 Pd against SNR at the calibrated scene Pfa, the SNR at Pd = 0.5 and each
-config's gain over the first one, the null scene scores against their Gumbel
-fit, the per-frame position RMSE over detected trials and its average, and
+config's gain over the first one, the null scene scores against the law fitted
+to them (:mod:`bench.calibration`: Gumbel, or a generalized Pareto tail), the per-frame position RMSE over detected trials and its average, and
 the papers' RMSE over all Monte Carlo runs with the percentage reduction of
 each config against the first config of its scenario config (the multi-frame
 DP-TBD paper's figure of merit). Imported only when a report is written
@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from radarbench.bench import figures
-from radarbench.bench.calibration import gumbel_fit
+from radarbench.bench.calibration import CalibrationResult, fitted_survival, gumbel_fit
 from radarbench.bench.markdown import code, crossing_difference, crossing_text, fmt, fmt_db, fmt_interval, snr50, table
 from radarbench.bench.tasks.base import ReportContext
 
@@ -78,20 +78,28 @@ def _section_null(cals, store, fig_dir: Path, title: str, pfa: float, configs: s
     several = len({c.scenario for c in mine}) > 1
     for c in mine:
         values, _peaks, _nominal = store.null_values(c.scenario, c.method)
-        loc, scale = (c.gumbel_loc, c.gumbel_scale) if np.isfinite(c.gumbel_loc) else gumbel_fit(values)
-        fits[f"{c.method} ({c.scenario})" if several else c.method] = (values, loc, scale, c.used)
-        rows.append([code(c.method), code(c.scenario), c.mode, f"{c.null_values:,}", fmt(loc, 4), fmt(scale, 4), fmt(c.used, 4),
+        if not np.isfinite(c.fit_loc):      # no law fitted (empirical, nominal): a Gumbel fit, for reference
+            c = CalibrationResult(**{**c.as_row(), "mode": "gumbel", **dict(zip(("fit_loc", "fit_scale"),
+                                                                                 gumbel_fit(values))), "fit_shape": 0.0})
+        law = "generalized Pareto tail" if c.mode == "pot" else "Gumbel"
+        grid = np.linspace(values.min(), max(values.max(), c.used) + c.fit_scale, 300)
+        fits[f"{c.method} ({c.scenario})" if several else c.method] = (values, grid, fitted_survival(c, grid),
+                                                                        c.used, law)
+        rows.append([code(c.method), code(c.scenario), c.mode, f"{c.null_values:,}", law, fmt(c.fit_loc, 4),
+                     fmt(c.fit_scale, 4), fmt(c.fit_shape, 3), fmt(c.used, 4),
                      fmt_interval(c.used_pfa, c.used_pfa_low, c.used_pfa_high),
                      fmt_interval(c.cell_pfa, c.cell_pfa_low, c.cell_pfa_high), fmt(c.cell_threshold, 4),
                      fmt(c.cell_threshold_scene_pfa)])
     if not fits:
         return ""
-    figures.gumbel_fits(fits, fig_dir / "tbd_null_scores.png", pfa, f"{title}: null scene scores")
+    figures.null_score_fits(fits, fig_dir / "tbd_null_scores.png", pfa, f"{title}: null scene scores")
     return "\n\n".join([
         "## Track-before-detect: null scenes and the scene threshold",
         "Each null scene (no target) gives one score, the largest merit at the last frame. The figure "
-        "shows their empirical survival function (steps), the maximum-likelihood Gumbel fit (dashed) "
-        "and the threshold used (dotted); the requested Pfa is the horizontal line. *Scene Pfa* is the "
+        "shows their empirical survival function (steps), the law fitted to them by maximum likelihood "
+        "(dashed: a Gumbel law, or in `pot` mode a generalized Pareto law for the excesses of the largest "
+        "tenth over the next score, the tail start u; for a mode that fits none, the Gumbel fit for "
+        "reference) and the threshold used (dotted); the requested Pfa is the horizontal line. *Scene Pfa* is the "
         "fraction of null scenes at or above the threshold used, with its 95% Wilson interval: with N "
         "null scenes it cannot resolve Pfa much below 3/N.",
         "*Per-cell Pfa* reads the same threshold per cell, as a DP-TBD detector that declares every cell "
@@ -102,7 +110,8 @@ def _section_null(cals, store, fig_dir: Path, title: str, pfa: float, configs: s
         f"threshold whose per-cell Pfa is {fmt(pfa)}, and the fraction of null scenes that reach it (their "
         "scene Pfa).",
         "![null scene scores](figures/tbd_null_scores.png)",
-        table(["config", "scenario", "mode", "null scenes", "Gumbel location", "Gumbel scale", "threshold used",
+        table(["config", "scenario", "mode", "null scenes", "law fitted", "location (Gumbel) or tail start u",
+               "scale", "shape ξ", "threshold used",
                "scene Pfa [95% CI]", "per-cell Pfa [95% CI]", f"threshold at per-cell Pfa {fmt(pfa)}",
                "its scene Pfa"], rows),
     ])
