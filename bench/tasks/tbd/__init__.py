@@ -354,7 +354,7 @@ class TBDTask(Task):
                          None if grid is None else {f"grid_{k}": v for k, v in grid.items()})
         if "truth_cells" in rec.arrays and image is not None:
             log_track(stream, layout.path("frames/truth_track"), t, cell_pixels(rec.arrays["truth_cells"], image),
-                      TRUTH_COLOR, radius=3.0, label="truth")
+                      TRUTH_COLOR, radius=3.0, label="truth", label_at=layout.label_at())
 
     @staticmethod
     def _log_method(stream, layout: TrialLayout, m: MethodLayout, tr: MethodTrace, t: np.ndarray, image) -> None:
@@ -371,7 +371,7 @@ class TBDTask(Task):
                        rr.SeriesLines(names=f"{m.label} threshold", colors=[(*m.color, 150)], widths=[1.0]))
         if drawn["track"]:
             log_track(stream, _track_path(layout, m), t, cell_pixels(tr.arrays["track_cells"], image), m.color,
-                      radius=3.0, label=m.label)
+                      radius=3.0, label=m.label, label_at=layout.label_at(m))
         if drawn["value"]:
             log_image(stream, m.path("value"), tr.quantised("value"), _VALUE_COLORMAP)
 
@@ -389,7 +389,7 @@ class TBDTask(Task):
             if drawn["value"]:
                 contents = [relative(layout, m.path("value")),
                             relative(layout, m.path(f"value/{COLOUR_SCALE}")) + "/**"] + (
-                    [relative(layout, _track_path(layout, m))] if drawn["track"] else [])
+                    [relative(layout, _track_path(layout, m)) + "/**"] if drawn["track"] else [])   # with its label
                 images.append(rrb.Spatial2DView(origin=origin, name=f"{m.label} value", contents=contents))
             scores += [relative(layout, m.path(c)) for c in ("score", "threshold") if drawn[c]]
         top = [rrb.Grid(*images) if len(images) > 3 else rrb.Horizontal(*images)] if images else []
