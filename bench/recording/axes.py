@@ -34,7 +34,10 @@ TICK_SHARE = 0.02
 MIN_SPAN_M = 1.0
 #: Room around the frame for its labels, in tick lengths (a label is about 2 high on a
 #: view a few hundred pixels tall): the view's bounds (Frame.bounds)
-LABEL_ROOM = {"left": 8.0, "right": 2.0, "top": 6.0, "bottom": 9.0}
+LABEL_ROOM = {"left": 12.0, "right": 2.0, "top": 6.0, "bottom": 9.0}
+#: How far left of the y axis its values are centred, in tick lengths: clear of the axis
+#: for a value about 8 tick lengths wide (a view some 200 pixels wide)
+Y_VALUES_LEFT = 6.0
 
 
 #: the largest coordinate drawn (Rerun draws positions in float32; bench.recording.draw.north_up)
@@ -119,7 +122,7 @@ def log_axes(stream, path: str, frame: Frame) -> None:
     # x values under their tick, y values left of theirs (raised by half a line), the x
     # title under the values, the y title above the y axis
     places = ([(x, bottom + tick, frame.text(x)) for x in xs]
-              + [(left - 4 * tick, y - tick, frame.text(-y)) for y in ys]
+              + [(left - Y_VALUES_LEFT * tick, y - tick, frame.text(-y)) for y in ys]
               + [((left + xs[-1]) / 2, bottom + 5 * tick, f"x east ({frame.unit})"),
                  (left, top - 3 * tick, f"y north ({frame.unit})")])
     stream.log(rerun_path(f"{path}/labels"),

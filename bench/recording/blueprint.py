@@ -133,19 +133,21 @@ def _trial_container(tab: TrialTab, title: str):
     layout = tab.layout
     origin = rerun_path(layout.root)
     top = [v for views in tab.views for v in views.top]
-    bottom = []
-    if tab.has_track_view:
-        bottom.append(_track_view(tab))
+    track = _track_view(tab) if tab.has_track_view else None
+    bottom = [track] if track is not None else []
     bottom += [v for views in tab.views for v in views.bottom]
     bottom += _trace_views(layout)
     if not top and bottom:
         top.append(bottom.pop(0))
+    track_below = bool(bottom) and bottom[0] is track
     if not top:
         return rrb.Spatial2DView(origin=origin, name=title)
     if not bottom:
         return rrb.Vertical(*top, name=title)
-    # More than three views side by side are too narrow: a grid instead.
-    row = bottom[0] if len(bottom) == 1 else rrb.Horizontal(*bottom) if len(bottom) <= 3 else rrb.Grid(*bottom)
+    # More than three views side by side are too narrow: a grid instead, beside the track
+    # (a third of the width: its axes and names need room).
+    row = bottom[0] if len(bottom) == 1 else rrb.Horizontal(*bottom) if len(bottom) <= 3 else (
+        rrb.Horizontal(bottom[0], rrb.Grid(*bottom[1:]), column_shares=[1, 2]) if track_below else rrb.Grid(*bottom))
     return rrb.Vertical(*top, row, name=title, row_shares=[3] * len(top) + [2])
 
 
