@@ -715,3 +715,23 @@ def test_track_view_has_axes_and_names_every_track(task_rrd, task_records):
         named[label] = tuple(static_values(task_rrd, f"{path}/label", "Points2D:positions")[0])
     assert sorted(named) == sorted(["truth", EKF, IMM])
     assert len(set(named.values())) == 3                              # each at its own place
+
+
+def test_tbd_frames_have_axes_in_metres(task_rrd):
+    """The frames view's axes are the grid's metres drawn over its pixels: a cell's corner
+    (x_min + c·cell, y_min + r·cell) lands on the pixel corner (c, rows - r)."""
+    from radarbench.bench.recording.axes import frame_of
+    from tests.rrd_blueprint import static_values
+
+    path = rerun_path(entity_root("tbd-line", 9.0, 0)) + "/frames/axes"
+    labels = static_values(task_rrd, f"{path}/labels", "Points2D:labels")
+    extent = np.array([[GRID["x_min_m"], GRID["y_min_m"]],
+                       [GRID["x_min_m"] + W * GRID["cell_m"], GRID["y_min_m"] + H * GRID["cell_m"]]])
+    frame = frame_of(extent)
+    assert labels == [frame.text(v) for v in np.r_[frame.x_ticks, frame.y_ticks]] + [
+        f"x east ({frame.unit})", f"y north ({frame.unit})"]
+    (translation,) = static_values(task_rrd, path, "Transform3D:translation")
+    (scale,) = static_values(task_rrd, path, "Transform3D:scale")
+    for c, r in ((0, 0), (W, H), (5, 11)):
+        x, y = GRID["x_min_m"] + c * GRID["cell_m"], GRID["y_min_m"] + r * GRID["cell_m"]
+        np.testing.assert_allclose(np.multiply(scale[:2], [x, -y]) + translation[:2], [c, H - r], atol=1e-3)

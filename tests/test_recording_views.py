@@ -235,7 +235,8 @@ def test_nice_ticks_one_step_for_both_axes():
     assert min(abs(mantissa - m) for m in (1, 2, 5)) < 1e-9                                 # 1, 2 or 5 x 10^k
     assert 4 <= frame.x_ticks.size <= 7                                                    # the longer side
     assert frame.x_ticks[0] <= 2030 and frame.x_ticks[-1] >= 4960 and frame.y_ticks[0] <= 1480
-    assert frame.unit == "km" and frame.text(2500.0) == "2.5"
+    assert frame.unit == "km" and frame.text(3000.0) == "3"
+    assert frame_of(np.array([[0.0, 0.0], [2200.0, 1000.0]])).text(1500.0) == "1.5"                # half km steps
     near = frame_of(xy_extent(np.array([[10.0, -40.0], [180.0, 25.0]])))
     assert near.unit == "m" and near.text(near.x_ticks[1]) == f"{near.x_ticks[1]:.0f}"
     still = frame_of(xy_extent(np.array([[7.0, 7.0], [7.0, 7.0]])))                       # nothing moves

@@ -1,7 +1,8 @@
 """A reference frame for a 2-D view in metres: Rerun 0.41's 2-D views draw no axes.
 
 The harness logs one per trial that has a track view (docs/architecture.md,
-'Recordings'), static, under ``{trial}/axes``: an L of two axis lines along the
+'Recordings'), static, under ``{trial}/axes`` (a task may draw one over an image of the
+plane, e.g. a grid of cells): an L of two axis lines along the
 bottom and the left of the drawn extent, a tick mark at every round step
 (1, 2 or 5 × 10^k m, the same on both axes: the view keeps one scale for x and
 y) and, under ``{trial}/axes/labels``, the ticks' values and the axes' titles,
@@ -23,9 +24,10 @@ from radarbench.bench.recording.paths import rerun_path
 
 __all__ = ["DRAWABLE_MAX", "Frame", "frame_of", "log_axes", "xy_extent"]
 
-#: Intervals the longer axis is cut into (matplotlib's MaxNLocator: at most this many,
-#: at least MIN_TICKS ticks), at round steps
-MAX_INTERVALS, MIN_TICKS = 5, 4
+#: Intervals the longer side is cut into at a round step (matplotlib's MaxNLocator: at
+#: most MAX_INTERVALS, with at least MIN_TICKS ticks inside the data's range; the frame
+#: adds a tick at each end where the data do not start or stop on one: mostly 4 to 6)
+MAX_INTERVALS, MIN_TICKS = 5, 2
 #: A step from which the ticks read in km (0.5 km, 1 km, ...) rather than m
 KM_FROM_STEP_M = 500.0
 #: A tick mark's length, as a share of the frame's longer side
@@ -91,9 +93,9 @@ def xy_extent(*arrays) -> np.ndarray | None:
 
 
 def frame_of(extent: np.ndarray) -> Frame:
-    """The ticks covering ``extent`` (:func:`xy_extent`): the step that cuts the longer
-    side into MIN_TICKS - 1 .. MAX_INTERVALS round intervals, then every multiple of it
-    from just below to just above each side."""
+    """The ticks covering ``extent`` (:func:`xy_extent`): the round step MaxNLocator
+    picks for the longer side, then every multiple of it from just below to just above
+    each side."""
     from matplotlib.ticker import MaxNLocator
 
     lo, hi = np.asarray(extent, np.float64)
@@ -107,11 +109,16 @@ def frame_of(extent: np.ndarray) -> Frame:
     return Frame(ticks[0], ticks[1], "km" if step >= KM_FROM_STEP_M else "m")
 
 
-def log_axes(stream, path: str, frame: Frame) -> None:
+def log_axes(stream, path: str, frame: Frame, scale: float = 1.0, offset=(0.0, 0.0)) -> None:
     """``frame`` as static entities at ``path`` (the lines) and ``path/labels`` (tick
-    values and titles; the viewer draws a label centred below its point)."""
+    values and titles; the viewer draws a label centred below its point). Over an image
+    (e.g. a grid of cells), ``scale`` and ``offset`` give its pixels: pixel = scale ·
+    (x, -y) + offset, a transform of ``path`` (which its labels inherit)."""
     import rerun as rr
 
+    if scale != 1.0 or any(offset):
+        stream.log(rerun_path(path), rr.Transform3D(translation=[*map(float, offset), 0.0], scale=float(scale)),
+                   static=True)
     xs, ys, tick = frame.x_ticks, frame.screen_y, frame.tick
     left, bottom, top = xs[0], ys[0], ys[-1]
     strips = [np.array([[left, top], [left, bottom], [xs[-1], bottom]])]
