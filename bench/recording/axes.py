@@ -1,12 +1,12 @@
 """A reference frame for a 2-D view in metres: Rerun 0.41's 2-D views draw no axes.
 
 The harness logs one per trial that has a track view (docs/architecture.md,
-'Recordings'), static, under ``{trial}/axes`` (a task may draw one over an image of the
-plane, e.g. a grid of cells): an L of two axis lines along the
-bottom and the left of the drawn extent, a tick mark at every round step
-(1, 2 or 5 × 10^k m, the same on both axes: the view keeps one scale for x and
-y) and, under ``{trial}/axes/labels``, the ticks' values and the axes' titles,
-in km or m as the step suggests. Neutral grey: no method's colour.
+'Recordings'), static, under ``{trial}/axes``; a task may draw one over an image of
+the plane (e.g. a grid of cells). It is an L of two axis lines along the bottom and
+the left of the drawn extent, a tick mark at every round step (1, 2 or 5 × 10^k m,
+the same on both axes: the view keeps one scale for x and y) and, under
+``.../axes/labels``, the ticks' values and the axes' titles, in km or m as the step
+suggests. Neutral grey: no method's colour.
 
 rerun and matplotlib are imported inside the functions: importing this module
 stays cheap.
@@ -40,8 +40,6 @@ LABEL_ROOM = {"left": 12.0, "right": 2.0, "top": 6.0, "bottom": 9.0}
 #: How far left of the y axis its values are centred, in tick lengths: clear of the axis
 #: for a value about 8 tick lengths wide (a view some 200 pixels wide)
 Y_VALUES_LEFT = 6.0
-
-
 #: the largest coordinate drawn (Rerun draws positions in float32; bench.recording.draw.north_up)
 DRAWABLE_MAX = float(np.finfo(np.float32).max)
 

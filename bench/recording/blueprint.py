@@ -69,7 +69,7 @@ def trial_tab(layout: TrialLayout, rec: TrialRecord) -> TrialTab:
     tab = TrialTab(layout, tuple(task.views(layout, rec) for task in layout.tasks))
     if not tab.has_track_view:
         return tab
-    # the views keep only the box of their positions
+    # the tab keeps the frame, not the positions (a multi-target trial's every plot)
     extent = xy_extent(rec.truth_xy, rec.measurements_xy, *(xy for v in tab.views for xy in v.xy))
     return TrialTab(layout, tuple(replace(v, xy=()) for v in tab.views), None if extent is None else frame_of(extent))
 

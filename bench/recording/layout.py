@@ -18,7 +18,8 @@ from typing import Any
 from radarbench.bench.recording.paths import entity_root, method_entity_names
 from radarbench.bench.recording.record import TrialRecord
 
-__all__ = ["AXES", "MEASUREMENT_COLOR", "NEUTRAL_COLOR", "PALETTE", "TRUTH_COLOR", "MethodLayout", "TrialLayout", "method_colors", "trial_layout"]
+__all__ = ["AXES", "MEASUREMENT_COLOR", "NEUTRAL_COLOR", "PALETTE", "TRUTH_COLOR", "MethodLayout", "TrialLayout",
+           "method_colors", "trial_layout"]
 
 # tab10 with its grey replaced by teal (grey is the truth's): distinct on the viewer's dark
 # (native) and light (web, by default) themes alike.
