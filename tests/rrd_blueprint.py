@@ -14,7 +14,7 @@ TABS, HORIZONTAL, VERTICAL, GRID = 1, 2, 3, 4
 
 @dataclass
 class View:
-    kind: str                                  # the view class: TimeSeries, Spatial2D, TextDocument...
+    kind: str                                  # the view class: TimeSeries, 2D, TextDocument...
     name: str
     origin: str
     queries: list[str] = field(default_factory=lambda: ["$origin/**"])
@@ -111,3 +111,38 @@ def entities(path: str | Path) -> list[str]:
     from rerun.chunk import RrdReader
 
     return list(RrdReader(str(path)).store().schema().entity_paths())
+
+
+def static_values(path: str | Path, entity: str, component: str) -> list:
+    """The values of a static ``component`` (e.g. ``Points2D:labels``) logged at ``entity``
+    (escaped path) in the ``.rrd`` at ``path``, every instance in order; [] when absent."""
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    chunks = RrdReader(str(path)).stream().filter(content=entity, is_static=True, components=component).to_chunks()
+    if not chunks:
+        return []
+    column = pa.Table.from_batches([c.to_record_batch() for c in chunks]).column(component)
+    return [value for row in column.to_pylist() if row is not None for value in row]
+
+
+def packed(rgb) -> int:
+    """A colour as Rerun stores it (``Color``: 0xRRGGBBAA, opaque)."""
+    r, g, b = rgb
+    return (r << 24) | (g << 16) | (b << 8) | 0xFF
+
+
+def track_views(blueprint: Blueprint) -> list[View]:
+    """The harness's 2-D track views (bench.recording.blueprint): one per trial tab with positions."""
+    return [v for v in blueprint.views.values() if v.kind == "2D" and v.name == "track (north up)"]
+
+
+def axes_of(path: str | Path, view: View, entities) -> tuple[int, list[str]]:
+    """A track view's axes as the recording at ``path`` draws them in it: the number of line
+    strips at ``{origin}/axes`` (the L, then a mark per tick) and the labels at
+    ``{origin}/axes/labels`` (tick values, then the titles); (0, []) for what the view does
+    not show (``entities``: the recording's, escaped)."""
+    shown = set(view.shows(entities))
+    lines, labels = f"{view.origin}/axes", f"{view.origin}/axes/labels"
+    return (len(static_values(path, lines, "LineStrips2D:strips")) if lines in shown else 0,
+            static_values(path, labels, "Points2D:labels") if labels in shown else [])

@@ -682,3 +682,56 @@ def test_a_method_without_a_task_is_refused_before_any_io(tmp_path, records):
     with pytest.raises(ValueError, match="no task given for method config"):
         write_recording(tmp_path / "r.rrd", records, None, tasks={CUM: DET}, recording_id="x")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_track_view_has_axes_and_names_every_track(task_rrd, task_records):
+    """The 2-D track view reads without the side panel (issue 29): a frame in km with a
+    tick at every round step covering what it draws, and the truth and each tracker named
+    once on the plot, in its colour, at its own place along its track."""
+    from radarbench.bench.recording.axes import frame_of, xy_extent
+    from radarbench.bench.recording.layout import TRUTH_COLOR, method_colors
+    from tests.rrd_blueprint import axes_of, entities, packed, read_blueprint, static_values, track_views
+
+    rec, logged = task_records[2], entities(task_rrd)
+    views = track_views(read_blueprint(task_rrd))
+    assert [v.origin for v in views] == [rerun_path(entity_root("glint-cv", 10.0, 2))]   # the TBD trials draw frames
+    lines, labels = axes_of(task_rrd, views[0], logged)
+    extent = xy_extent(rec.truth_xy, rec.measurements_xy, *(m.arrays["estimate_xy"] for m in rec.methods.values()))
+    frame = frame_of(extent)
+    assert labels[-2:] == ["x east (km)", "y north (km)"]
+    ticks = np.array([float(v) for v in labels[:-2]]) * 1000
+    np.testing.assert_allclose(ticks, np.r_[frame.x_ticks, frame.y_ticks])
+    assert lines == 1 + len(ticks)                                    # the L and a mark per tick
+    assert frame.x_ticks[0] <= extent[0, 0] and frame.x_ticks[-1] >= extent[1, 0]      # covers the data
+    assert frame.y_ticks[0] <= extent[0, 1] and frame.y_ticks[-1] >= extent[1, 1]
+    colors = method_colors(TASKS)
+    root = views[0].origin
+    named = {}
+    for path, color in ((f"{root}/truth", TRUTH_COLOR), (f"{root}/ekf/estimate", colors[EKF]),
+                        (f"{root}/imm_models-3/estimate", colors[IMM])):
+        assert f"{path}/label" in views[0].shows(logged), path
+        (label,) = static_values(task_rrd, f"{path}/label", "Points2D:labels")
+        assert static_values(task_rrd, f"{path}/label", "Points2D:colors") == [packed(color)]
+        named[label] = tuple(static_values(task_rrd, f"{path}/label", "Points2D:positions")[0])
+    assert sorted(named) == sorted(["truth", EKF, IMM])
+    assert len(set(named.values())) == 3                              # each at its own place
+
+
+def test_tbd_frames_have_axes_in_metres(task_rrd):
+    """The frames view's axes are the grid's metres drawn over its pixels: a cell's corner
+    (x_min + c·cell, y_min + r·cell) lands on the pixel corner (c, rows - r)."""
+    from radarbench.bench.recording.axes import frame_of
+    from tests.rrd_blueprint import static_values
+
+    path = rerun_path(entity_root("tbd-line", 9.0, 0)) + "/frames/axes"
+    labels = static_values(task_rrd, f"{path}/labels", "Points2D:labels")
+    extent = np.array([[GRID["x_min_m"], GRID["y_min_m"]],
+                       [GRID["x_min_m"] + W * GRID["cell_m"], GRID["y_min_m"] + H * GRID["cell_m"]]])
+    frame = frame_of(extent)
+    assert labels == [frame.text(v) for v in np.r_[frame.x_ticks, frame.y_ticks]] + [
+        f"x east ({frame.unit})", f"y north ({frame.unit})"]
+    (translation,) = static_values(task_rrd, path, "Transform3D:translation")
+    (scale,) = static_values(task_rrd, path, "Transform3D:scale")
+    for c, r in ((0, 0), (W, H), (5, 11)):
+        x, y = GRID["x_min_m"] + c * GRID["cell_m"], GRID["y_min_m"] + r * GRID["cell_m"]
+        np.testing.assert_allclose(np.multiply(scale[:2], [x, -y]) + translation[:2], [c, H - r], atol=1e-3)

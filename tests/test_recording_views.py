@@ -194,7 +194,7 @@ def test_the_first_screen_is_the_summary_with_a_named_curve_per_config(small_run
     empty."""
     import pandas as pd
 
-    from tests.rrd_blueprint import TABS, read_blueprint
+    from tests.rrd_blueprint import TABS, axes_of, read_blueprint, track_views
     from tests.rrd_blueprint import entities as entities_of
 
     rrd = small_run / "recording.rrd"
@@ -214,3 +214,33 @@ def test_the_first_screen_is_the_summary_with_a_named_curve_per_config(small_run
         assert all(_series_names(rrd, path).count(_series_names(rrd, path)[0]) == 2 for path in shown)  # line and points
     empty = [(v.kind, v.name) for v in blueprint.views.values() if not v.shows(entities)]
     assert not empty
+    # every trial's 2-D track: an L with a mark per tick, the ticks' values and the titles in
+    # one unit, and the truth named on the plot
+    assert track_views(blueprint)
+    for view in track_views(blueprint):
+        lines, labels = axes_of(rrd, view, entities)
+        unit = "km" if "x east (km)" in labels else "m"
+        assert labels[-2:] == [f"x east ({unit})", f"y north ({unit})"], (view.origin, labels)
+        assert lines == 1 + len(labels[:-2]) >= 5 and all(float(v) == float(v) for v in labels[:-2])
+        assert f"{view.origin}/truth/label" in view.shows(entities), view.origin
+
+
+def test_nice_ticks_one_step_for_both_axes():
+    from radarbench.bench.recording.axes import frame_of, xy_extent
+
+    frame = frame_of(xy_extent(np.array([[2030.0, 1480.0], [4960.0, 3020.0]])))
+    step = np.diff(frame.x_ticks)
+    assert np.allclose(step, step[0]) and np.allclose(np.diff(frame.y_ticks), step[0])     # one scale: x and y
+    mantissa = step[0] / 10 ** np.floor(np.log10(step[0]))
+    assert min(abs(mantissa - m) for m in (1, 2, 5)) < 1e-9                                 # 1, 2 or 5 x 10^k
+    assert 4 <= frame.x_ticks.size <= 7                                                    # the longer side
+    assert frame.x_ticks[0] <= 2030 and frame.x_ticks[-1] >= 4960 and frame.y_ticks[0] <= 1480
+    assert frame.unit == "km" and frame.text(3000.0) == "3"
+    assert frame_of(np.array([[0.0, 0.0], [2200.0, 1000.0]])).text(1500.0) == "1.5"                # half km steps
+    near = frame_of(xy_extent(np.array([[10.0, -40.0], [180.0, 25.0]])))
+    assert near.unit == "m" and near.text(near.x_ticks[1]) == f"{near.x_ticks[1]:.0f}"
+    still = frame_of(xy_extent(np.array([[7.0, 7.0], [7.0, 7.0]])))                       # nothing moves
+    assert still.x_ticks.size >= 2 and still.y_ticks.size >= 2 and still.x_ticks[0] <= 7 <= still.x_ticks[-1]
+    assert xy_extent(np.full((3, 2), np.nan), None) is None                                 # nothing drawn: no axes
+    left, right = frame.bounds()[0]
+    assert left < frame.x_ticks[0] and right > frame.x_ticks[-1]                           # room for the labels

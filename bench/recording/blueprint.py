@@ -16,8 +16,9 @@ rerun is imported inside the functions: importing this module stays cheap.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
+from radarbench.bench.recording.axes import Frame, frame_of, xy_extent
 from radarbench.bench.recording.layout import TrialLayout
 from radarbench.bench.recording.paths import rerun_path
 from radarbench.bench.recording.record import TrialRecord
@@ -41,6 +42,9 @@ class Views:
     draws_scene: bool = False
     #: the task logs positions in the plane (e.g. a tracker's estimate): a 2-D track view
     has_xy: bool = False
+    #: those positions, in metres (arrays (..., 2), north y not negated): the track view's
+    #: axes cover them besides the truth and the measurements
+    xy: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -50,10 +54,24 @@ class TrialTab:
 
     layout: TrialLayout
     views: tuple[Views, ...]
+    #: the track view's axes (bench.recording.axes); None: no track view, or nothing drawn in it
+    frame: Frame | None = None
+
+    @property
+    def has_track_view(self) -> bool:
+        """Whether the harness adds the 2-D track (north up): positions in the plane and no
+        task drawing the scene itself."""
+        return (not any(v.draws_scene for v in self.views)
+                and (self.layout.has_xy or any(v.has_xy for v in self.views)))
 
 
 def trial_tab(layout: TrialLayout, rec: TrialRecord) -> TrialTab:
-    return TrialTab(layout, tuple(task.views(layout, rec) for task in layout.tasks))
+    tab = TrialTab(layout, tuple(task.views(layout, rec) for task in layout.tasks))
+    if not tab.has_track_view:
+        return tab
+    # the tab keeps the frame, not the positions (a multi-target trial's every plot)
+    extent = xy_extent(rec.truth_xy, rec.measurements_xy, *(xy for v in tab.views for xy in v.xy))
+    return TrialTab(layout, tuple(replace(v, xy=()) for v in tab.views), None if extent is None else frame_of(extent))
 
 
 #: Share of a plot's data range kept free above the data for the legend (top right).
@@ -97,25 +115,39 @@ def _trace_views(layout: TrialLayout) -> list:
             for key, paths in by_key.items()]
 
 
+def _track_view(tab: TrialTab):
+    """The 2-D track (north up), framed on its axes and their labels (the viewer's own fit
+    leaves labels out)."""
+    import rerun.blueprint as rrb
+
+    bounds = None
+    if tab.frame is not None:
+        x_range, y_range = tab.frame.bounds()
+        bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
+    return rrb.Spatial2DView(origin=rerun_path(tab.layout.root), name="track (north up)", visual_bounds=bounds)
+
+
 def _trial_container(tab: TrialTab, title: str):
     import rerun.blueprint as rrb
 
     layout = tab.layout
     origin = rerun_path(layout.root)
     top = [v for views in tab.views for v in views.top]
-    bottom = []
-    if not any(v.draws_scene for v in tab.views) and (layout.has_xy or any(v.has_xy for v in tab.views)):
-        bottom.append(rrb.Spatial2DView(origin=origin, name="track (north up)"))
+    track = _track_view(tab) if tab.has_track_view else None
+    bottom = [track] if track is not None else []
     bottom += [v for views in tab.views for v in views.bottom]
     bottom += _trace_views(layout)
     if not top and bottom:
         top.append(bottom.pop(0))
+    track_below = bool(bottom) and bottom[0] is track
     if not top:
         return rrb.Spatial2DView(origin=origin, name=title)
     if not bottom:
         return rrb.Vertical(*top, name=title)
-    # More than three views side by side are too narrow: a grid instead.
-    row = bottom[0] if len(bottom) == 1 else rrb.Horizontal(*bottom) if len(bottom) <= 3 else rrb.Grid(*bottom)
+    # More than three views side by side are too narrow: a grid instead, beside the track
+    # (a third of the width: its axes and names need room).
+    row = bottom[0] if len(bottom) == 1 else rrb.Horizontal(*bottom) if len(bottom) <= 3 else (
+        rrb.Horizontal(bottom[0], rrb.Grid(*bottom[1:]), column_shares=[1, 2]) if track_below else rrb.Grid(*bottom))
     return rrb.Vertical(*top, row, name=title, row_shares=[3] * len(top) + [2])
 
 

@@ -19,7 +19,10 @@ Conventions every primitive keeps:
 
 Entity paths under a trial root ``/{scenario}/snr_{±NN}dB/trial_{NNN}``::
 
+    .../axes                    static LineStrips2D: the track view's axis lines and ticks
+    .../axes/labels             static Points2D: tick values and axis titles (bench.recording.axes)
     .../truth                   Points2D per step + static LineStrips2D (whole track)
+    .../truth/label             static Points2D naming it (log_label; every track drawn has one)
     .../measurements            Points2D per step (missing rows skipped)
     .../measurements/all        static Points2D of every measurement
     .../{method}/{trace}        Scalars (extra series: whitened innovation, error_x, ...)
@@ -36,12 +39,14 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from radarbench.bench.recording.layout import MEASUREMENT_COLOR, NEUTRAL_COLOR, TRUTH_COLOR, TrialLayout
+from radarbench.bench.recording.axes import DRAWABLE_MAX, log_axes
+from radarbench.bench.recording.blueprint import TrialTab
+from radarbench.bench.recording.layout import AXES, MEASUREMENT_COLOR, NEUTRAL_COLOR, TRUTH_COLOR, TrialLayout
 from radarbench.bench.recording.paths import rerun_path
 from radarbench.bench.recording.record import Quantised, TrialRecord
 
-__all__ = ["COLOUR_SCALE", "FLUSH_EVERY", "indexes", "log_colour_scale", "log_image", "log_image_series",
-           "log_points", "log_record", "log_records",
+__all__ = ["COLOUR_SCALE", "FLUSH_EVERY", "LABEL", "indexes", "log_colour_scale", "log_image", "log_image_series",
+           "log_label", "log_points", "log_record", "log_records",
            "log_series", "log_static_points", "log_track", "north_up", "quant_info"]
 
 #: Records logged between two flushes: the file sink queue is unbounded.
@@ -58,16 +63,12 @@ def indexes(steps: np.ndarray, t: np.ndarray) -> list:
     ]
 
 
-#: the largest magnitude a float32 position holds (Rerun draws positions in float32)
-_FLOAT32_MAX = float(np.finfo(np.float32).max)
-
-
 def north_up(xy: np.ndarray) -> np.ndarray:
     """Negate y: 2D views draw +y downwards, radar plots have north up. A coordinate a
     float32 cannot hold (a diverged estimate) is NaN, a gap in the drawing, rather than an
     overflow to inf."""
     xy = np.asarray(xy, np.float64)
-    drawable = np.where(np.abs(xy) <= _FLOAT32_MAX, xy, np.nan)
+    drawable = np.where(np.abs(xy) <= DRAWABLE_MAX, xy, np.nan)
     return np.column_stack([drawable[:, 0], -drawable[:, 1]]).astype(np.float32)
 
 
@@ -105,24 +106,42 @@ def log_points(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius:
 
 
 def log_track(stream, path: str, t: np.ndarray, pos: np.ndarray, color, radius: float = 5.0,
-              label: str | None = None) -> None:
+              label: str | None = None, label_at: float = 1.0) -> None:
     """Current position per step plus the whole track as a static line
-    (``pos`` in screen coordinates: north-up metres or image pixels), the line named
-    ``label`` on the plot (2-D views have no legend)."""
+    (``pos`` in screen coordinates: north-up metres or image pixels), named ``label`` on
+    the plot at a share ``label_at`` of its points (:func:`log_label`)."""
     import rerun as rr
 
     steps = log_points(stream, path, t, pos, color, radius=radius)
     if steps.size:
         stream.log(
             rerun_path(path),
-            rr.LineStrips2D([pos[steps]], colors=[color], radii=[rr.components.Radius.ui_points(1.0)],
-                            **_shown(label)),
+            rr.LineStrips2D([pos[steps]], colors=[color], radii=[rr.components.Radius.ui_points(1.0)]),
             static=True,
         )
+        if label is not None:
+            log_label(stream, path, pos[steps], color, label, label_at)
+
+
+#: The child of a drawn series that names it on a 2-D plot (:func:`log_label`).
+LABEL = "label"
+
+
+def log_label(stream, path: str, pos: np.ndarray, color, label: str, at: float = 1.0) -> None:
+    """The 2-D views' legend (they have none): a static point in the series' colour with
+    its ``label``, at the point a share ``at`` along the series' drawn points ``pos``
+    (N, 2) (1: the last; :meth:`TrialLayout.label_at` spreads overlapping tracks' names),
+    under ``path/label``: one name per series, where the line is, not at its centre."""
+    import rerun as rr
+
+    point = pos[round(float(np.clip(at, 0.0, 1.0)) * (len(pos) - 1))]
+    stream.log(rerun_path(f"{path}/{LABEL}"),
+               rr.Points2D([point], colors=[color], radii=[rr.components.Radius.ui_points(3.5)],
+                           **_shown(label)), static=True)
 
 
 def _shown(label: str | None) -> dict:
-    """The fields that name a 2-D entity on the plot, where one label is drawn at its centre."""
+    """The fields that name a 2-D entity on the plot (each point's label under it)."""
     return {} if label is None else {"labels": [label], "show_labels": True}
 
 
@@ -225,11 +244,15 @@ def _log_traces(stream, layout: TrialLayout, rec: TrialRecord, t: np.ndarray) ->
                        rr.SeriesLines(names=f"{m.label} {key}", colors=[m.color], widths=[1.0]))
 
 
-def log_record(rec: TrialRecord, stream, layout: TrialLayout) -> None:
-    """Log one trial: the harness's part, then each task's."""
+def log_record(rec: TrialRecord, stream, tab: TrialTab) -> None:
+    """Log one trial: the harness's part (with its track view's axes), then each task's."""
+    layout = tab.layout
     t = np.asarray(rec.t, dtype=np.float64)
+    if tab.frame is not None:
+        log_axes(stream, layout.path(AXES), tab.frame)
     if rec.truth_xy is not None:
-        log_track(stream, layout.path("truth"), t, north_up(rec.truth_xy), TRUTH_COLOR, label="truth")
+        log_track(stream, layout.path("truth"), t, north_up(rec.truth_xy), TRUTH_COLOR, label="truth",
+                  label_at=layout.label_at())
     if rec.measurements_xy is not None:
         _log_measurements(stream, layout, t, rec.measurements_xy)
     for task in layout.tasks:
@@ -237,10 +260,11 @@ def log_record(rec: TrialRecord, stream, layout: TrialLayout) -> None:
     _log_traces(stream, layout, rec, t)
 
 
-def log_records(records: Iterable[TrialRecord], stream, layouts: Iterable[TrialLayout]) -> None:
-    """Log records, flushing every FLUSH_EVERY (and after every record with
-    images: megabytes each) to keep the sink queue short."""
-    for i, (rec, layout) in enumerate(zip(records, layouts), start=1):
-        log_record(rec, stream, layout)
+def log_records(records: Iterable[TrialRecord], stream, tabs: Iterable[TrialTab]) -> None:
+    """Log records (``tabs``: theirs, :func:`bench.recording.blueprint.trial_tab`), flushing
+    every FLUSH_EVERY (and after every record with images: megabytes each) to keep the
+    sink queue short."""
+    for i, (rec, tab) in enumerate(zip(records, tabs), start=1):
+        log_record(rec, stream, tab)
         if i % FLUSH_EVERY == 0 or rec.has_images():
             stream.flush()

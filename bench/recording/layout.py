@@ -18,7 +18,8 @@ from typing import Any
 from radarbench.bench.recording.paths import entity_root, method_entity_names
 from radarbench.bench.recording.record import TrialRecord
 
-__all__ = ["MEASUREMENT_COLOR", "NEUTRAL_COLOR", "PALETTE", "TRUTH_COLOR", "MethodLayout", "TrialLayout", "method_colors", "trial_layout"]
+__all__ = ["AXES", "MEASUREMENT_COLOR", "NEUTRAL_COLOR", "PALETTE", "TRUTH_COLOR", "MethodLayout", "TrialLayout",
+           "method_colors", "trial_layout"]
 
 # tab10 with its grey replaced by teal (grey is the truth's): distinct on the viewer's dark
 # (native) and light (web, by default) themes alike.
@@ -46,8 +47,10 @@ def method_colors(tasks: Mapping[str, Any]) -> dict[str, tuple[int, int, int]]:
     return {label: PALETTE[i % len(PALETTE)] for labels in by_task.values() for i, label in enumerate(labels)}
 
 
+#: The child of a trial root that holds its track view's axes (bench.recording.axes).
+AXES = "axes"
 #: Children of a trial root the harness logs itself.
-ROOT_CHILDREN = ("truth", "measurements")
+ROOT_CHILDREN = ("truth", "measurements", AXES)
 
 
 @dataclass(frozen=True)
@@ -81,6 +84,14 @@ class TrialLayout:
 
     def methods_of(self, task) -> list[MethodLayout]:
         return [m for m in self.methods if m.task is task]
+
+    def label_at(self, m: MethodLayout | None = None) -> float:
+        """Where along its track a series is named on a 2-D plot, as a share of its drawn
+        points: the truth (``m`` None) at its first point (the viewer opens on the last
+        step, where the current measurement is named), the i-th of n methods at
+        (i + 1) / (n + 1), so that the names of tracks that overlap (an estimate on the truth)
+        do not."""
+        return 0.0 if m is None else (self.methods.index(m) + 1) / (len(self.methods) + 1)
 
 
 def trial_layout(rec: TrialRecord, tasks: Mapping[str, Any]) -> TrialLayout:

@@ -78,7 +78,7 @@ def write_recording(
         # The summary first: the viewer opens on it and a browser shows it while the
         # trials (megabytes of frames) still stream in.
         log_summary(stream, summary, tasks)
-        log_records(records, stream, layouts)
+        log_records(records, stream, tabs)
         stream.flush()
         data = memory.drain_as_bytes()  # a whole .rrd, footer included (checked below)
     finally:
@@ -168,9 +168,9 @@ class LiveViewer:
     def log_records(self, records: Iterable[TrialRecord]) -> None:
         """Log records now (the viewer shows them as they arrive)."""
         records = list(records)
-        layouts = [trial_layout(r, self._tasks) for r in records]
-        log_records(records, self._stream, layouts)
-        self._tabs += [bp.trial_tab(lay, rec) for lay, rec in zip(layouts, records)]
+        tabs = [bp.trial_tab(trial_layout(r, self._tasks), r) for r in records]
+        log_records(records, self._stream, tabs)
+        self._tabs += tabs
         self._send_blueprint()
 
     def log_summary(self, summary: pd.DataFrame | None) -> None:

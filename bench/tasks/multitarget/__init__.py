@@ -271,7 +271,8 @@ class MultiTargetTask(Task):
             draw.log_method(stream, layout, m, rec.methods[m.label], t)
 
     def views(self, layout: TrialLayout, rec: TrialRecord) -> Views:
-        return Views(has_xy="plots_xy" in rec.arrays or "truths_xy" in rec.arrays)
+        xy = tuple(rec.arrays[name] for name in ("truths_xy", "plots_xy") if name in rec.arrays)
+        return Views(has_xy=bool(xy), xy=xy)
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
         from radarbench.bench.tasks.multitarget import report

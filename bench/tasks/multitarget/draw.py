@@ -9,7 +9,8 @@ Entities under the trial root (positions in metres, north up)::
     .../{method}/tracks         the method's tracks at the scan, Points2D labelled by identity:
                                 confirmed in the method's colour, tentative faded, terminated red
     .../{method}/gates          3-sigma position ellipses of the tracks (LineStrips2D per scan)
-    .../{method}/track_lines    static LineStrips2D: each confirmed track's path
+    .../{method}/track_lines    static LineStrips2D: each confirmed track's path (the method named
+                                on its longest, ``track_lines/label``)
     .../{method}/{trace}        Scalars per scan: GOSPA (m), confirmed tracks (drawn by the harness)
 """
 
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from radarbench.bench.recording.draw import indexes, log_track, north_up
+from radarbench.bench.recording.draw import indexes, log_label, log_track, north_up
 from radarbench.bench.recording.layout import TRUTH_COLOR, TrialLayout
 from radarbench.bench.recording.paths import rerun_path
 from radarbench.bench.recording.record import MethodTrace, TrialRecord
@@ -107,3 +108,5 @@ def log_method(stream, layout: TrialLayout, m, tr: MethodTrace, t: np.ndarray) -
     if lines:
         stream.log(rerun_path(m.path("track_lines")),
                    rr.LineStrips2D(lines, colors=[m.color], radii=[rr.components.Radius.ui_points(1.0)]), static=True)
+        # the method named once, on its longest track
+        log_label(stream, m.path("track_lines"), max(lines, key=len), m.color, m.label, layout.label_at(m))

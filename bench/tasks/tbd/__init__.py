@@ -41,6 +41,7 @@ import pandas as pd
 from radarbench.bench.calibration import cell_order_statistics
 from radarbench.bench.core import TBD, Batch, Scene, TBDOutput, has_shape, require
 from radarbench.bench.metrics import per_step_rmse
+from radarbench.bench.recording.axes import frame_of, log_axes
 from radarbench.bench.recording.blueprint import Views, relative
 from radarbench.bench.recording.draw import COLOUR_SCALE, log_image, log_image_series, log_series, log_track
 from radarbench.bench.recording.layout import TRUTH_COLOR, MethodLayout, TrialLayout
@@ -235,6 +236,16 @@ def _track_path(layout: TrialLayout, m: MethodLayout) -> str:
     return layout.path(f"frames/{m.base.rsplit('/', 1)[-1]}_track")
 
 
+def _log_grid_axes(stream, path: str, grid: dict) -> None:
+    """Axes in metres over the frames: cell (row, col) spans x_min + col·cell .. + cell and
+    y_min + row·cell .. + cell, its pixel column col and row rows - 1 - row (north up)."""
+    cell, x_min, y_min, rows, cols = (float(grid[key]) for key in ("cell_m", "x_min_m", "y_min_m", "rows", "cols"))
+    if not cell > 0:
+        return
+    extent = np.array([[x_min, y_min], [x_min + cols * cell, y_min + rows * cell]])
+    log_axes(stream, path, frame_of(extent), scale=1 / cell, offset=(-x_min / cell, rows + y_min / cell))
+
+
 def cell_pixels(cells: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Pixel centres ``(col + 0.5, rows - row - 0.5)`` of (row, col) cells in
     the north-up image; NaN rows for cells outside the grid."""
@@ -352,9 +363,11 @@ class TBDTask(Task):
         grid = rec.info.get("grid")
         log_image_series(stream, layout.path("frames"), q, t, _FRAMES_COLORMAP,
                          None if grid is None else {f"grid_{k}": v for k, v in grid.items()})
+        if grid is not None and all(key in grid for key in GRID_KEYS):
+            _log_grid_axes(stream, layout.path("frames/axes"), grid)
         if "truth_cells" in rec.arrays and image is not None:
             log_track(stream, layout.path("frames/truth_track"), t, cell_pixels(rec.arrays["truth_cells"], image),
-                      TRUTH_COLOR, radius=3.0, label="truth")
+                      TRUTH_COLOR, radius=3.0, label="truth", label_at=layout.label_at())
 
     @staticmethod
     def _log_method(stream, layout: TrialLayout, m: MethodLayout, tr: MethodTrace, t: np.ndarray, image) -> None:
@@ -371,7 +384,7 @@ class TBDTask(Task):
                        rr.SeriesLines(names=f"{m.label} threshold", colors=[(*m.color, 150)], widths=[1.0]))
         if drawn["track"]:
             log_track(stream, _track_path(layout, m), t, cell_pixels(tr.arrays["track_cells"], image), m.color,
-                      radius=3.0, label=m.label)
+                      radius=3.0, label=m.label, label_at=layout.label_at(m))
         if drawn["value"]:
             log_image(stream, m.path("value"), tr.quantised("value"), _VALUE_COLORMAP)
 
@@ -389,7 +402,7 @@ class TBDTask(Task):
             if drawn["value"]:
                 contents = [relative(layout, m.path("value")),
                             relative(layout, m.path(f"value/{COLOUR_SCALE}")) + "/**"] + (
-                    [relative(layout, _track_path(layout, m))] if drawn["track"] else [])
+                    [relative(layout, _track_path(layout, m)) + "/**"] if drawn["track"] else [])   # with its label
                 images.append(rrb.Spatial2DView(origin=origin, name=f"{m.label} value", contents=contents))
             scores += [relative(layout, m.path(c)) for c in ("score", "threshold") if drawn[c]]
         top = [rrb.Grid(*images) if len(images) > 3 else rrb.Horizontal(*images)] if images else []

@@ -249,11 +249,13 @@ class TrackingTask(Task):
         for m in layout.methods_of(self):
             estimate = rec.methods[m.label].arrays.get("estimate_xy")
             if estimate is not None:
-                log_track(stream, m.path("estimate"), t, north_up(estimate), m.color, label=m.label)
+                log_track(stream, m.path("estimate"), t, north_up(estimate), m.color, label=m.label,
+                          label_at=layout.label_at(m))
         _log_maneuver(stream, layout, t, rec)
 
     def views(self, layout: TrialLayout, rec: TrialRecord) -> Views:
-        return Views(has_xy=any("estimate_xy" in rec.methods[m.label].arrays for m in layout.methods_of(self)))
+        estimates = [rec.methods[m.label].arrays.get("estimate_xy") for m in layout.methods_of(self)]
+        return Views(has_xy=any(e is not None for e in estimates), xy=tuple(e for e in estimates if e is not None))
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
         from radarbench.bench.tasks.tracking import report
