@@ -11,13 +11,14 @@ DP-TBD paper's figure of merit). Imported only when a report is written
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from radarbench.bench import figures
-from radarbench.bench.calibration import CalibrationResult, fitted_survival, gumbel_fit
+from radarbench.bench.calibration import fitted_survival, gumbel_fit
 from radarbench.bench.markdown import code, crossing_difference, crossing_text, fmt, fmt_db, fmt_interval, snr50, table
 from radarbench.bench.tasks.base import ReportContext
 
@@ -79,8 +80,8 @@ def _section_null(cals, store, fig_dir: Path, title: str, pfa: float, configs: s
     for c in mine:
         values, _peaks, _nominal = store.null_values(c.scenario, c.method)
         if not np.isfinite(c.fit_loc):      # no law fitted (empirical, nominal): a Gumbel fit, for reference
-            c = CalibrationResult(**{**c.as_row(), "mode": "gumbel", **dict(zip(("fit_loc", "fit_scale"),
-                                                                                 gumbel_fit(values))), "fit_shape": 0.0})
+            loc, scale = gumbel_fit(values)
+            c = dataclasses.replace(c, mode="gumbel", fit_loc=loc, fit_scale=scale, fit_shape=0.0)
         law = "generalized Pareto tail" if c.mode == "pot" else "Gumbel"
         grid = np.linspace(values.min(), max(values.max(), c.used) + c.fit_scale, 300)
         fits[f"{c.method} ({c.scenario})" if several else c.method] = (values, grid, fitted_survival(c, grid),
