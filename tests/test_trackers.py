@@ -128,7 +128,6 @@ def test_viterbi_tracks_and_resists_glint():
     assert cross["viterbi"] < cross["ekf"]
 
 
-@pytest.mark.skipif(trellis.numba is None, reason="numba not installed")
 def test_compiled_trellis_step_equals_numpy():
     rng = np.random.default_rng(4)
     n, N, Lp, Lv = 3, 50, 9, 7
