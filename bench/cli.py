@@ -18,10 +18,12 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import os
 import shlex
 import sqlite3
 import sys
+import threading
 import traceback
 from pathlib import Path
 
@@ -226,6 +228,9 @@ def cmd_run(args) -> int:
     _check_arguments(args)
     from radarbench.bench import runfolder
     _check_executor(args)
+    if args.executor == "local":
+        from radarbench.bench.executors import prestart_forkserver
+        prestart_forkserver()
     plan = _load_plan(args)
     if plan.skipped and not args.quiet:
         print(f"skipping {len(plan.skipped)} (scenario config, method config) pairs the method refuses:",
@@ -248,12 +253,21 @@ def cmd_run(args) -> int:
         lock.release()
 
 
+def _import_early(module: str) -> None:
+    """Import ``module`` in a background thread: the report's modules (pandas, matplotlib,
+    Jinja2: seconds) load while the workers run the units. A failure here is not lost: the
+    import after the units raises it again."""
+    with contextlib.suppress(Exception):
+        importlib.import_module(module)
+
+
 def _run_locked(args, plan, out_dir: Path, command: str) -> int:
     """The run, in the locked folder."""
     from radarbench.bench import registry
     from radarbench.bench.progress import Progress
-    from radarbench.bench.report import build_outputs
     from radarbench.bench.runner import Interrupted, plan_record, run_sweep, write_plan_toml
+    threading.Thread(target=_import_early, args=("radarbench.bench.report",), daemon=True,
+                     name="bench-import-report").start()
     viewer = None
     if args.viewer:
         from radarbench.bench.recording import LiveViewer
@@ -285,6 +299,7 @@ def _run_locked(args, plan, out_dir: Path, command: str) -> int:
     try:
         store.close()
         write_plan_toml(out_dir / "plan.toml", plan, command, store.stamps)
+        from radarbench.bench.report import build_outputs
         report = build_outputs(out_dir, recording=not args.no_record, on_phase=progress.phase)
     except KeyboardInterrupt:
         return _interrupted(out_dir, command, *_stored_units(plan, out_dir))

@@ -27,6 +27,7 @@ ones in flight end and are yielded, then the iteration ends.
 from __future__ import annotations
 
 import atexit
+import concurrent.futures
 import contextlib
 import multiprocessing
 import os
@@ -146,6 +147,8 @@ def sigterm_as_interrupt() -> Callable[[], None]:
     return lambda: restore_handler(signal.SIGTERM, previous)
 
 
+#: what the forkserver of the local workers imports once for all of them (bench._forkserver)
+LOCAL_PRELOAD = ["radarbench.bench._forkserver"]
 #: environment variable naming the driver to the forkserver it starts (bench._forkserver)
 DRIVER_ENV = "BENCH_FORKSERVER_DRIVER"
 
@@ -300,7 +303,7 @@ class LocalExecutor:
 
     def _spawn(self) -> _Worker:
         for attempt in range(5):
-            _start_forkserver(["radarbench.bench._forkserver"])        # again if someone killed it
+            _start_forkserver(LOCAL_PRELOAD)        # again if someone killed it
             parent, child = self._ctx.Pipe(duplex=True)
             proc = self._ctx.Process(target=_worker_main, args=(child,), name="bench-worker")
             try:
@@ -660,6 +663,21 @@ def worker_environment() -> dict[str, str]:
     missing = ", ".join(u.source for u in registry.unavailable()) or "-"
     return {"bench": bench.__version__, "methods": ", ".join(registry.methods()),
             "scenarios": ", ".join(registry.scenarios()), "unavailable plugins": missing}
+
+
+def prestart_forkserver() -> None:
+    """Start the local workers' forkserver now: it imports the harness and the plugins (a
+    few seconds of one CPU) while the driver reads the sweep on the other."""
+    _start_forkserver(LOCAL_PRELOAD)
+
+
+def process_pool(workers: int) -> concurrent.futures.ProcessPoolExecutor:
+    """A :mod:`concurrent.futures` pool of ``workers`` processes forked by the forkserver
+    :class:`LocalExecutor` uses (so they ignore SIGINT and end with the driver), for the
+    harness's own work between phases (the report's figures, :mod:`bench.figures`); a
+    plugin's code runs only in :class:`LocalExecutor`'s workers, which survive its crashes."""
+    _start_forkserver(LOCAL_PRELOAD)
+    return concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("forkserver"))
 
 
 def default_workers() -> int:

@@ -17,6 +17,8 @@ renamed, so no reader ever sees a half-written output.
 
 from __future__ import annotations
 
+import contextlib
+import importlib
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +28,7 @@ from radarbench.bench import claims, figures, registry, runfolder
 from radarbench.bench.calibration import EQUAL_CHANCE_PD
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.escapes import escape_controls
+from radarbench.bench.executors import default_workers, process_pool
 from radarbench.bench.markdown import code, fmt_db, text
 from radarbench.bench.markdown import fmt as _fmt
 from radarbench.bench.markdown import table as _table
@@ -441,8 +444,32 @@ def _recording_summary(summary: pd.DataFrame, tasks) -> pd.DataFrame:
     return summary[[c for c in summary.columns if c in wanted]]
 
 
+#: the most processes that render a report's figures (:func:`_figure_pool`)
+FIGURE_WORKERS = 4
+
+
+@contextlib.contextmanager
+def _figure_pool():
+    """Processes, one per CPU up to :data:`FIGURE_WORKERS`, that render the figures while
+    the report goes on (:func:`bench.figures.rendering_in`); on one CPU, none. Each
+    imports matplotlib as it starts, while the tables are built."""
+    workers = min(FIGURE_WORKERS, default_workers())
+    if workers < 2:
+        yield None
+        return
+    with process_pool(workers) as pool:
+        for _ in range(workers):
+            pool.submit(importlib.import_module, figures.__name__)
+        yield pool
+
+
 def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     runfolder.folder_for(out_dir / "figures")     # refuses a linked figures/ before anything is written
+    with _figure_pool() as pool:
+        return _build_with(store, out_dir, recording, on_phase, pool)
+
+
+def _build_with(store: Store, out_dir: Path, recording: bool, on_phase, pool) -> Path:
     record = store.plan()
     require_plugins(record, store.path)
     sweep = record["sweep"]
@@ -474,15 +501,18 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
         write_csv(evaluation.frame(), out_dir / "claims.csv")
     fig_dir = out_dir / "figures"
     title = sweep["name"]
-    contexts = _task_contexts(present, task_of, summary, trials, steps, series, cals, records, store, out_dir, sweep)
-    done, total = len(units), int(store.meta("units_total") or len(units))
-    chance = {(c.scenario, c.method): c.chance_pd for c in cals}
-    parts = [paper_vs_ours,
-             _section_plan(record, store, present), _section_calibration(cals, summary, task_of)]
-    parts += [s for task, ctx in contexts for s in task.report_sections(ctx)]
-    parts.append(comparisons_markdown(comparisons, task_of))
-    parts += [s for task, ctx in contexts for s in task.trial_sections(ctx)]
-    parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
+    with figures.rendering_in(pool):
+        contexts = _task_contexts(present, task_of, summary, trials, steps, series, cals, records, store, out_dir, sweep)
+        done, total = len(units), int(store.meta("units_total") or len(units))
+        chance = {(c.scenario, c.method): c.chance_pd for c in cals}
+        parts = [paper_vs_ours,
+                 _section_plan(record, store, present), _section_calibration(cals, summary, task_of)]
+        parts += [s for task, ctx in contexts for s in task.report_sections(ctx)]
+        parts.append(comparisons_markdown(comparisons, task_of))
+        parts += [s for task, ctx in contexts for s in task.trial_sections(ctx)]
+        parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
+        at_a_glance = glance_markdown(glance(trials, task_of, comparisons, chance))
+        interactive = escape_controls(interactive_figures(summary, task_of))
     if recording and records:
         on_phase("recording")
         write_recording(out_dir / "recording.rrd", records, _recording_summary(summary, present),
@@ -493,11 +523,9 @@ def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     page = {"title": text(title), "description": text(sweep.get("description") or "", inline=False),
             "command": code(record.get("command", "")),
             "incomplete": None if done >= total else {"done": done, "total": total},
-            "glance": glance_markdown(glance(trials, task_of, comparisons, chance)),
-            "parts": [p for p in parts if p]}
+            "glance": at_a_glance, "parts": [p for p in parts if p]}
     report = out_dir / "report.md"
     _write_text(report, escape_controls(render("report.md.j2", html=False, **page) + "\n"))
-    html = markdown_to_html(escape_controls(render("report.md.j2", html=True, **page)), title, out_dir,
-                            escape_controls(interactive_figures(summary, task_of)))
+    html = markdown_to_html(escape_controls(render("report.md.j2", html=True, **page)), title, out_dir, interactive)
     _write_text(out_dir / "report.html", html)      # escaped before the policy hashed its scripts
     return report

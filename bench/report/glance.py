@@ -48,25 +48,30 @@ def metric_values(column: pd.Series) -> pd.Series:
     return pd.to_numeric(column.map(lambda v: float(v) if isinstance(v, (bool, np.bool_)) else v), errors="coerce")
 
 
-def _pairs_frame(g: pd.DataFrame, metric: str, a: str, b: str) -> pd.DataFrame:
-    """One row per trial both configs ran, with ``a``, ``b`` and ``snr_db``."""
-    wide = g.assign(_v=metric_values(g[metric])).pivot_table(index=["snr_db", "trial"], columns="config", values="_v",
-                                                        aggfunc="first", dropna=False)
-    return wide[[a, b]].rename(columns={a: "a", b: "b"}).reset_index()
+def _wide(g: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """``metric`` with one row per (snr_db, trial) and one column per config, pivoted once
+    for every pair of configs."""
+    return g.assign(_v=metric_values(g[metric])).pivot_table(index=["snr_db", "trial"], columns="config", values="_v",
+                                                             aggfunc="first", dropna=False)
 
 
-def compare_pair(pairs: pd.DataFrame, binary: bool, higher_is_better: bool) -> dict:
-    """The paired comparison of one pair of configs on ``pairs`` (columns a, b, snr_db)."""
-    diff, low, high = paired_difference(pairs.a, pairs.b, pairs.snr_db)
-    only_a, only_b, p = mcnemar_exact(pairs.a, pairs.b) if binary else (np.nan, np.nan, np.nan)
+def compare_pair(a: np.ndarray, b: np.ndarray, snr_db: np.ndarray, binary: bool, higher_is_better: bool) -> dict:
+    """The paired comparison of two configs' per-trial values ``a`` and ``b`` (NaN where
+    a config has none), trial by trial, ``snr_db`` each trial's level."""
+    diff, low, high = paired_difference(a, b, snr_db)
+    only_a, only_b, p = mcnemar_exact(a, b) if binary else (np.nan, np.nan, np.nan)
     significant = bool(np.isfinite(low) and (low > 0 or high < 0) and (not binary or p < 1 - CONFIDENCE))
-    ok = np.isfinite(pairs.a) & np.isfinite(pairs.b)
+    ok = np.isfinite(a) & np.isfinite(b)
     better = "tie"
     if significant:
         better = "b" if (diff > 0) == higher_is_better else "a"
-    return {"n_pairs": int(ok.sum()), "mean_a": float(pairs.a[ok].mean()), "mean_b": float(pairs.b[ok].mean()),
+    return {"n_pairs": int(ok.sum()), "mean_a": _mean(a[ok]), "mean_b": _mean(b[ok]),
             "difference": diff, "difference_low": low, "difference_high": high, "only_a": only_a, "only_b": only_b,
             "mcnemar_p": p, "significant": significant, "better": better}
+
+
+def _mean(values: np.ndarray) -> float:
+    return float(values.mean()) if values.size else np.nan
 
 
 def _groups(trials: pd.DataFrame, task_of: dict):
@@ -101,11 +106,14 @@ def comparisons_frame(trials: pd.DataFrame, task_of: dict) -> pd.DataFrame:
     for scenario, task, g in _groups(trials, task_of):
         configs = list(dict.fromkeys(g.config))
         for metric, binary in _metrics(task, g):
+            wide = _wide(g, metric)
+            snr_db = wide.index.get_level_values("snr_db").to_numpy(float)
+            subsets = [(ALL_LEVELS, slice(None))] + [(level, snr_db == level) for level in np.unique(snr_db)]
             for a, b in itertools.combinations(configs, 2):
-                pairs = _pairs_frame(g, metric, a, b)
+                va, vb = wide[a].to_numpy(float), wide[b].to_numpy(float)
                 key = {"scenario": scenario, "task": task.name, "metric": metric, "config_a": a, "config_b": b}
-                for snr, at in [(ALL_LEVELS, pairs), *pairs.groupby("snr_db", sort=True)]:
-                    row = compare_pair(at, binary, task.ranking_higher_is_better)
+                for snr, at in subsets:
+                    row = compare_pair(va[at], vb[at], snr_db[at], binary, task.ranking_higher_is_better)
                     row["better"] = {"a": a, "b": b}.get(row["better"], "tie")
                     rows.append({**key, "snr_db": snr, **row})
     return pd.DataFrame(rows, columns=COMPARISON_COLUMNS)

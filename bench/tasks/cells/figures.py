@@ -43,7 +43,7 @@ def pd_panels(scene: pd.DataFrame, groups: list[str], columns: list[str], pfa: f
     _legend_outside(axes[-1])
     fig.suptitle(f"{title}: $P_D$ vs SNR per clutter region at per-cell $P_{{FA}}$ = {pfa:g} (95% bands)",
                  fontsize=10)
-    fig.tight_layout()
+    fig.set_layout_engine("tight")
     return _save(fig, path)
 
 
@@ -61,7 +61,7 @@ def roc_panels(curves: dict, pfa: float, path: Path, title: str) -> Path:
         ax.grid(alpha=0.3, which="both")
     _legend_outside(axes[-1])
     fig.suptitle(f"{title} (dotted: requested $P_{{FA}}$)", fontsize=10)
-    fig.tight_layout()
+    fig.set_layout_engine("tight")
     return _save(fig, path)
 
 
@@ -97,5 +97,5 @@ def map_detections(rec: TrialRecord, configs: list[str], path: Path, title: str)
             ax.scatter(cells[:, 1] - D // 2, cells[:, 0], s=6, color=f"C{i % 10}")
         ax.set_title(f"{config}: {len(cells)} cells", fontsize=8)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    fig.set_layout_engine("tight")
     return _save(fig, path)
