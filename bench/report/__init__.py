@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,7 @@ from radarbench.bench.markdown import fmt as _fmt
 from radarbench.bench.markdown import table as _table
 from radarbench.bench.provenance import WALL_TIME_ROW, provenance
 from radarbench.bench.report.glance import comparisons_frame, glance
-from radarbench.bench.report.html import interactive_figures, markdown_to_html
+from radarbench.bench.report.html import interactive_figures, interactive_specs, markdown_to_html
 from radarbench.bench.report.render import comparisons_markdown, glance_markdown, render, section_macro
 from radarbench.bench.recording import TrialRecord, write_recording
 from radarbench.bench.runner import calibrations
@@ -451,16 +452,21 @@ FIGURE_WORKERS = 4
 @contextlib.contextmanager
 def _figure_pool():
     """Processes, one per CPU up to :data:`FIGURE_WORKERS`, that render the figures while
-    the report goes on (:func:`bench.figures.rendering_in`); on one CPU, none. Each
-    imports matplotlib as it starts, while the tables are built."""
+    the report goes on (:func:`bench.figures.rendering_in`); on one CPU, none. They are
+    started from a thread (a forkserver that is not running yet takes seconds to load)
+    and import matplotlib as they start, while the tables are built."""
     workers = min(FIGURE_WORKERS, default_workers())
     if workers < 2:
         yield None
         return
     with process_pool(workers) as pool:
-        for _ in range(workers):
-            pool.submit(importlib.import_module, figures.__name__)
-        yield pool
+        starting = threading.Thread(target=lambda: [pool.submit(importlib.import_module, figures.__name__)
+                                                    for _ in range(workers)], name="bench-figure-pool")
+        starting.start()
+        try:
+            yield pool
+        finally:
+            starting.join()
 
 
 def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
@@ -512,7 +518,8 @@ def _build_with(store: Store, out_dir: Path, recording: bool, on_phase, pool) ->
         parts += [s for task, ctx in contexts for s in task.trial_sections(ctx)]
         parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
         at_a_glance = glance_markdown(glance(trials, task_of, comparisons, chance))
-        interactive = escape_controls(interactive_figures(summary, task_of))
+        specs = interactive_specs(summary, task_of)
+        interactive = pool.submit(interactive_figures, specs) if pool is not None else None
     if recording and records:
         on_phase("recording")
         write_recording(out_dir / "recording.rrd", records, _recording_summary(summary, present),
@@ -526,6 +533,8 @@ def _build_with(store: Store, out_dir: Path, recording: bool, on_phase, pool) ->
             "glance": at_a_glance, "parts": [p for p in parts if p]}
     report = out_dir / "report.md"
     _write_text(report, escape_controls(render("report.md.j2", html=False, **page) + "\n"))
-    html = markdown_to_html(escape_controls(render("report.md.j2", html=True, **page)), title, out_dir, interactive)
+    interactive = interactive.result() if interactive is not None else interactive_figures(specs)
+    html = markdown_to_html(escape_controls(render("report.md.j2", html=True, **page)), title, out_dir,
+                            escape_controls(interactive))
     _write_text(out_dir / "report.html", html)      # escaped before the policy hashed its scripts
     return report

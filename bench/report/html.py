@@ -63,13 +63,11 @@ def _plotly_text(label: str) -> str:
     return html.escape(str(label)).replace("%", "&#37;")
 
 
-def interactive_figures(summary: pd.DataFrame, task_of: dict) -> str:
-    """One plotly figure per (task with a ``curve_column``, scenario config
-    with two or more SNR levels): the column against SNR per method config,
-    its 95% interval as error bars, values on hover. "" when none applies."""
-    import plotly.graph_objects as go
-
-    figures = []
+def interactive_specs(summary: pd.DataFrame, task_of: dict) -> list[dict]:
+    """What :func:`interactive_figures` draws, as plain data (a pool's process can draw it):
+    one figure per (task with a ``curve_column``, scenario config with two or more SNR
+    levels): the column against SNR per method config, its 95% interval as error bars."""
+    specs = []
     for task in dict.fromkeys(task_of.values()):
         col = task.curve_column
         if not col or col not in summary:
@@ -78,23 +76,37 @@ def interactive_figures(summary: pd.DataFrame, task_of: dict) -> str:
         for scenario, g in mine.groupby("scenario", sort=False):
             if g.snr_db.nunique() < 2 or g[col].isna().all():
                 continue
-            fig = go.Figure()
+            traces = []
             for config, c in g.groupby("config", sort=False):
                 c = c.sort_values("snr_db")
                 y = c[col].to_numpy(float)
                 low, high = c.get(f"{col}_low"), c.get(f"{col}_high")
                 error = None if low is None or high is None else dict(
                     type="data", array=high.to_numpy(float) - y, arrayminus=y - low.to_numpy(float), thickness=1)
-                label = _plotly_text(config)
-                fig.add_trace(go.Scatter(
-                    x=c.snr_db, y=y, mode="lines+markers", name=label, error_y=error,
-                    hovertemplate=f"{label}<br>SNR %{{x:.1f}} dB<br>{col} %{{y:.3g}}<extra></extra>"))
-            fig.update_layout(title=f"{sentence_case(task.noun)} on {_plotly_text(scenario)}: {col} (summary.csv) "
-                                    "against SNR",
-                              xaxis_title="SNR (dB)", yaxis_title=f"{col} (95% interval)", template="plotly_white", height=420,
-                              yaxis_type="linear" if task.ranking_binary else "log",   # a probability; an error
-                              legend=dict(orientation="h", y=-0.2))
-            figures.append(fig)
+                traces.append({"label": _plotly_text(config), "x": c.snr_db, "y": y, "error": error})
+            specs.append({"title": f"{sentence_case(task.noun)} on {_plotly_text(scenario)}: {col} (summary.csv) "
+                                   "against SNR", "column": col, "traces": traces,
+                          "log": not task.ranking_binary})        # a probability; an error
+    return specs
+
+
+def interactive_figures(specs: list[dict]) -> str:
+    """The figures of :func:`interactive_specs` (plotly), hover for values; "" when none."""
+    import plotly.graph_objects as go
+
+    figures = []
+    for spec in specs:
+        fig = go.Figure()
+        col = spec["column"]
+        for trace in spec["traces"]:
+            label = trace["label"]
+            fig.add_trace(go.Scatter(
+                x=trace["x"], y=trace["y"], mode="lines+markers", name=label, error_y=trace["error"],
+                hovertemplate=f"{label}<br>SNR %{{x:.1f}} dB<br>{col} %{{y:.3g}}<extra></extra>"))
+        fig.update_layout(title=spec["title"], xaxis_title="SNR (dB)", yaxis_title=f"{col} (95% interval)",
+                          template="plotly_white", height=420, yaxis_type="log" if spec["log"] else "linear",
+                          legend=dict(orientation="h", y=-0.2))
+        figures.append(fig)
     if not figures:
         return ""
     parts = [f.to_html(full_html=False, include_plotlyjs=(i == 0), config={"displaylogo": False})
@@ -170,4 +182,4 @@ def markdown_to_html(text: str, title: str, out_dir: Path, interactive: str = ""
     return with_policy(environment().get_template("page.html.j2").render(title=title, body=Markup(body)))
 
 
-__all__ = ["PLACEHOLDER", "interactive_figures", "markdown_to_html", "safe_url", "with_policy"]
+__all__ = ["PLACEHOLDER", "interactive_figures", "interactive_specs", "markdown_to_html", "safe_url", "with_policy"]
