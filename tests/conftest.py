@@ -20,17 +20,43 @@ from hypothesis import settings
 #: (``derandomize``), no per-example deadline (a loaded CI machine is no bug), no example
 #: database in the working tree. ``max_examples`` is the default for a test that does not
 #: ask for a count; the statistical tests set theirs with ``@settings`` and keep them.
-#: ``HYPOTHESIS_PROFILE=default`` gives Hypothesis's own randomised search instead.
+#: ``dev``, the inner loop's (``-m "not slow"``, see ``hypothesis_profile``), is ``ci`` with
+#: fewer examples for those tests. ``HYPOTHESIS_PROFILE=default`` gives Hypothesis's own
+#: randomised search instead.
 settings.register_profile("ci", derandomize=True, deadline=None, database=None, max_examples=25,
                           print_blob=True)
-settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+settings.register_profile("dev", parent=settings.get_profile("ci"), max_examples=10)
+
+
+def hypothesis_profile(config) -> str:
+    """``$HYPOTHESIS_PROFILE`` if set; else ``dev`` when the ``-m`` expression leaves out a
+    test marked ``slow`` (only) and keeps an unmarked one (the inner loop); else ``ci``, the
+    profile of the README's command."""
+    from _pytest.mark.expression import Expression     # how pytest itself evaluates ``-m``
+
+    if "HYPOTHESIS_PROFILE" in os.environ:
+        return os.environ["HYPOTHESIS_PROFILE"]
+    markexpr = config.getoption("markexpr")
+    if not markexpr:
+        return "ci"
+    expression = Expression.compile(markexpr)
+
+    def keeps(*marks):                    # is a test carrying exactly these marks selected?
+        return expression.evaluate(lambda name, **_: name in marks)
+    return "dev" if keeps() and not keeps("slow") else "ci"
+
+
+def pytest_configure(config):
+    """Load the Hypothesis profile before the test modules (and their ``@settings``) are imported."""
+    settings.load_profile(hypothesis_profile(config))
 
 
 #: Test modules each run by one xdist worker as a whole: each has a module-scoped fixture
 #: that costs a bench run (or several tests that share one), made once that way. The other
 #: tests go one by one to whichever worker is free.
 ONE_WORKER_MODULES = ("tests/test_cells_task.py", "tests/test_cli.py", "tests/test_compare.py",
-                      "tests/test_recording.py", "tests/test_reliability_io.py", "tests/test_report_ux.py")
+                      "tests/test_recording.py", "tests/test_reliability_io.py", "tests/test_reliability_outputs.py",
+                      "tests/test_report_ux.py")
 
 
 @pytest.hookimpl(optionalhook=True)

@@ -110,6 +110,7 @@ def _check_recording(rrd, trials):
     assert proc.returncode == 0, proc.stderr
 
 
+@pytest.mark.slow
 def test_plan_toml_reruns_to_the_same_results(bench_cli, small_run, tmp_path):
     a, b = small_run, tmp_path / "b"
     bench_cli("run", a / "plan.toml", "--out", b, "--workers", 1, "--quiet", "--no-record", check=True)
@@ -269,6 +270,7 @@ def test_a_run_killed_at_several_points_resumes_to_the_uninterrupted_results(ben
                                   pd.read_csv(whole / "summary.csv").drop(columns="seconds_per_trial"))
 
 
+@pytest.mark.slow
 def test_a_run_folder_refuses_a_different_sweep(bench_cli, write_sweep, small_run_copy):
     out = small_run_copy                       # the small sweep's run folder
     proc = bench_cli("run", write_sweep("other.toml", trials=13), "--out", out, "--quiet")

@@ -62,6 +62,7 @@ def test_a_lost_worker_s_unit_is_run_again_and_yielded_once(tmp_path):
     assert sorted(i for i, _ in results) == list(range(12))
 
 
+@pytest.mark.slow
 def test_under_dask_only_the_unit_that_kills_its_worker_fails(tmp_path):
     """Dask fails every unit of a worker that dies (``KilledWorker``): the units beside the
     culprit are run again alone and come back; the culprit alone yields a failure."""

@@ -249,6 +249,7 @@ def test_the_method_authors_loop_reruns_exactly_what_changed(loop):
         assert con.execute("SELECT count(*) FROM units").fetchone()[0] == 4
 
 
+@pytest.mark.slow
 def test_a_config_failing_every_unit_is_loud(loop):
     env, _pkg, sweep = loop
     sweep.write_text(SWEEP.replace('name = "absmax"', 'name = "broken"'))

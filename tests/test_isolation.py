@@ -153,6 +153,7 @@ def _stored(out):
     return runs, records
 
 
+@pytest.mark.slow
 def test_retry_failed_reruns_only_the_failed_pairs(flaky, tmp_path, monkeypatch):
     sweep = tmp_path / "flaky.toml"
     sweep.write_text(FLAKY_SWEEP)

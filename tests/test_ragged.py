@@ -198,6 +198,7 @@ trials = 1
 """
 
 
+@pytest.mark.slow
 def test_an_outside_ragged_scenario_runs_end_to_end(tmp_path):
     """Installed as a plugin (entry point on a temporary path): the built-in trackers run
     on it with no edit, every trial scored over its own steps."""

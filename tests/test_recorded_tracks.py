@@ -419,6 +419,7 @@ def test_a_tracker_on_the_ragged_batch_gives_each_trial_what_it_gets_alone(tmp_p
         np.testing.assert_array_equal(out.covariance[i, :L], alone.covariance[0])
 
 
+@pytest.mark.slow
 def test_the_cli_runs_the_trackers_on_ragged_tracks_and_refuses_a_detector(tmp_path):
     ragged_csv(tmp_path)
     sweep = SWEEP.format(path="ragged.csv").replace(
@@ -531,6 +532,7 @@ def test_replay_refuses_a_file_without_or_with_nan_measurements(tmp_path, column
         assert str(bad) in err.value.problem and problem in err.value.problem and "\n" not in str(err.value)
 
 
+@pytest.mark.slow
 def test_the_cli_refuses_a_replay_with_an_snr_axis_and_runs_it_at_0_db(tmp_path):
     replay_csv(tmp_path)
     sweep = SWEEP.format(path="replay.csv").replace(

@@ -223,6 +223,7 @@ def test_a_read_only_run_folder_is_one_line(clean, run_copy, command):
     assert snapshot(run_copy) == before
 
 
+@pytest.mark.slow
 def test_a_file_size_limit_during_the_run_is_one_line_and_the_run_resumes(clean, tmp_path):
     """``ulimit -f`` (a full disk as the run sees it) while units are stored: exit 3, one line
     naming the store and the limit; the units stored are whole, and the same command without
@@ -290,6 +291,7 @@ def _lock_holder(out: Path) -> int | None:
     return int(head) if head.isdigit() else None
 
 
+@pytest.mark.slow
 def test_a_second_run_on_a_live_run_folder_says_it_is_in_use(clean, tmp_path):
     """Run A takes the folder's lock and is stopped (SIGSTOP) while it holds it: a second
     run of the same sweep, a --fresh run of another sweep and a report are each refused with

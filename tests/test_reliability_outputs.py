@@ -460,6 +460,7 @@ def _every_task_sweep(folder) -> str:
                         "calibration": {"pfa": 0.05, "mode": "empirical", "h0_trials": 10}, "record": {"trials": 1}})
 
 
+@pytest.mark.slow
 def test_no_library_warning_reaches_the_terminal_on_a_normal_run(tmp_path):
     """Five pandas PerformanceWarning blocks came on every run and report (a summary frame
     fragmented into a block per column); Python's default filters, as a user has them."""

@@ -101,6 +101,7 @@ def _failures(report) -> str:
 
 # ------------------------------------------------------------------ cause 8: bad plugins
 
+@pytest.mark.slow
 def test_bad_plugins_are_listed_as_unavailable_and_every_command_still_works(hostile, tmp_path):
     listed = _bench(hostile, "list")
     assert listed.returncode == 0 and "Traceback" not in listed.stderr, listed.stderr
@@ -298,6 +299,7 @@ def _held_run(hostile, tmp_path, *options):
     return proc, marker, release, sweep
 
 
+@pytest.mark.slow
 def test_kill_9_of_the_driver_leaves_no_process_and_an_incomplete_report(hostile, tmp_path):
     proc, marker, release, _ = _held_run(hostile, tmp_path)
     try:

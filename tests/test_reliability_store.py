@@ -59,6 +59,7 @@ def test_a_damaged_store_is_exit_2_in_report_and_compare_naming_the_file(small_r
     assert _tree(small_run_copy) == before
 
 
+@pytest.mark.slow
 def test_bench_run_on_a_damaged_store_is_exit_2_and_its_advice_works(small_run_copy, write_sweep, bench_cli):
     """The advice says --fresh discards the damaged store: it does, and the run completes."""
     _damage(small_run_copy, "UPDATE meta SET value = '{bad' WHERE key = 'plan'")
@@ -72,6 +73,7 @@ def test_bench_run_on_a_damaged_store_is_exit_2_and_its_advice_works(small_run_c
     assert (small_run_copy / "report.md").is_file()
 
 
+@pytest.mark.slow
 def test_a_results_sqlite_that_is_a_folder_gets_advice_that_works(small_run_copy, write_sweep, bench_cli):
     """The refusal advised --fresh, which removed the run's outputs and then failed with
     exit 3 (--fresh removes what bench wrote, never a folder); now: move it away, which works."""

@@ -34,6 +34,7 @@ ESCAPES = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
 
 # ------------------------------------------------------------------ file name and --out through the CLI
 
+@pytest.mark.slow
 def test_a_backtick_in_the_file_name_or_out_path_breaks_no_code_span(write_sweep, bench_cli, tmp_path):
     name = "s`<img src=x onerror=alert(1)>.toml"
     out = "o`<svg onload=alert(2)>"

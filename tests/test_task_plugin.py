@@ -188,6 +188,7 @@ def _bench(env, *args):
                           text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_a_task_from_an_entry_point_runs_end_to_end(plugin_env, tmp_path):
     listed = _bench(plugin_env, "list")
     assert listed.returncode == 0, listed.stderr

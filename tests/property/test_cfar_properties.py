@@ -14,6 +14,7 @@ narrow enough to see a 25 % error in the Pfa.
 import math
 
 import numpy as np
+import pytest
 import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -60,6 +61,7 @@ def test_ca_pfa_at_nominal_k_is_the_closed_form(w, seed):
                      > -math.log10(PFA), PFA)
 
 
+@pytest.mark.slow                     # enough null maps per example for the binomial tolerance
 @settings(derandomize=True, deadline=None, max_examples=12)
 @given(w=window, k_fraction=st.floats(0.05, 1.0), seed=st.integers(0, 2**31))
 def test_os_pfa_at_nominal_k_is_the_closed_form(w, k_fraction, seed):

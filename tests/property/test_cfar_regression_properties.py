@@ -34,6 +34,7 @@ def test_linear_order_zero_has_its_exact_pfa():
     _assert_binomial(sig[:, :, 17] > -math.log10(PFA), PFA)
 
 
+@pytest.mark.slow                     # enough null cells for the binomial tolerance
 @pytest.mark.parametrize("order", [0, 4])
 def test_log_fit_interior_cell_has_its_nominal_pfa(order):
     """The plain log-polynomial fit: an interior cell's exceedances at the

@@ -426,6 +426,7 @@ def test_the_base_sweep_is_valid():
     assert [m.label for m in plan.methods] == ["innovation[window=5]", "cumulant-16"]
 
 
+@pytest.mark.slow                     # fuzzing: 300 generated files
 @settings(max_examples=300, derandomize=True, deadline=None, database=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.large_base_example])
 @given(case=hostile_sweep(), default_out=st.booleans())

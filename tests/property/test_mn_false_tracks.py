@@ -65,6 +65,7 @@ def _free_gate_volume(zhat, S, gamma, ball, taken) -> float:
     return 4.0 / 3.0 * math.pi * gamma ** 1.5 * math.sqrt(np.linalg.det(S)) * free.mean()
 
 
+@pytest.mark.slow                     # a false-track count large enough for its binomial tolerance
 @pytest.mark.parametrize("M, N, clutter_per_scan", [(2, 3, 300.0), (3, 4, 600.0)])
 def test_false_confirmations_follow_the_mn_prediction(M, N, clutter_per_scan):
     volume = float(np.prod(np.diff(REGION, axis=1)))

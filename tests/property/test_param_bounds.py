@@ -149,11 +149,13 @@ def test_values_beyond_every_bound_are_refused_in_one_line(kind, name, field, va
     assert f"params.{field}" in err, err
 
 
+@pytest.mark.slow                     # a small sweep run per bound of every parameter
 @pytest.mark.parametrize("kind, name, params", AT_BOUNDS)
 def test_values_at_every_bound_run_to_completion(kind, name, params):
     run_to_completion(_sweep_with(kind, name, params))
 
 
+@pytest.mark.slow
 def test_the_longest_scene_runs_every_detector_at_its_largest_window():
     """Windows at their upper bounds are refused on the small scene (longer than it) and run on
     the longest accepted one (cv-turn-cv at its largest ``steps``)."""
@@ -167,6 +169,7 @@ def test_the_longest_scene_runs_every_detector_at_its_largest_window():
     assert run_to_completion(data) == "ran"
 
 
+@pytest.mark.slow
 @settings(max_examples=12, derandomize=True, deadline=None, database=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(case=st.sampled_from([c.values for c in AT_BOUNDS]), pick=st.integers(min_value=0, max_value=10 ** 6),

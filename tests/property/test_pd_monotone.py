@@ -8,6 +8,7 @@ conservative: a drop larger than that is a real non-monotonicity.
 
 import numpy as np
 import pandas as pd
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -18,6 +19,7 @@ from radarbench.bench.runner import plan_record, run_sweep
 TRIALS = 150
 
 
+@pytest.mark.slow                     # three whole sweeps of seven SNR levels, reports included
 @settings(derandomize=True, deadline=None, max_examples=3)
 @given(seed=st.integers(0, 2**31))
 def test_pd_is_non_decreasing_in_snr(seed, tmp_path_factory):
