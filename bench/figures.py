@@ -54,6 +54,7 @@ def _save(fig, path: Path) -> Path:
         if pending is None:
             runfolder.write_bytes(path, png(fig))
         else:
+            # pickled now, in this thread: the pool's feeder thread would pickle it later, after the close below
             pending.append((path, _pool.get().submit(_png_of_pickled, pickle.dumps(fig))))
     finally:
         plt.close(fig)

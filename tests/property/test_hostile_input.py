@@ -512,7 +512,14 @@ def test_sweep_files_never_execute_code():
     forbidden = re.compile(r"\b(eval|exec)\s*\(|^\s*(import|from)\s+(pickle|cloudpickle|dill|marshal|shelve|yaml)\b"
                            r"|allow_pickle\s*=\s*True|pd\.read_pickle|__import__\s*\(", re.MULTILINE)
     for path in Path(bench.__file__).parent.glob("*.py"):
-        hits = forbidden.findall(path.read_text(encoding="utf-8"))
+        source = path.read_text(encoding="utf-8")
+        hits = forbidden.findall(source)
+        if path.name == "figures.py":
+            # the report's figure pool: a Figure pickled in the driver, in its own thread (the
+            # pool's feeder thread would pickle it while the driver closes it), and unpickled
+            # by the pool's process; never a file, nothing a sweep file can reach
+            assert re.findall(r"pickle\.\w+\(\w*\)", source) == ["pickle.loads(data)", "pickle.dumps(fig)"], source
+            hits.remove(("", "import", "pickle"))
         assert not hits, (path.name, hits)
     with tempfile.TemporaryDirectory() as tmp:
         marker = Path(tmp) / "pwned"
