@@ -115,12 +115,14 @@ def fingerprint() -> str:
     return digest.hexdigest()[:32]
 
 
-def _cache_dir() -> Path:
+def cache_dir() -> Path:
+    """The user's cache folder of bench (the plugin listing here; the warm-up's memory,
+    :mod:`bench.warmup`); use it only where :func:`private_dir` holds."""
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "radar-maneuver-bench"
 
 
-def _private_dir(path: Path) -> bool:
+def private_dir(path: Path) -> bool:
     """Whether ``path`` is a folder only this user can write (made 0700 if absent): a real
     folder, not a link, owned by the user, writable by no group or other."""
     try:
@@ -135,7 +137,7 @@ def _private_dir(path: Path) -> bool:
     return stat.S_ISDIR(st.st_mode) and st.st_uid == os.getuid() and not st.st_mode & 0o022
 
 
-def _read_cached(path: Path) -> str | None:
+def read_cached(path: Path) -> str | None:
     """The cached listing at ``path``, a regular file of this user read without following a link; None if none."""
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_NONBLOCK", 0))
@@ -152,7 +154,7 @@ def _read_cached(path: Path) -> str | None:
     return text if isinstance(text, str) else None
 
 
-def _write_cached(path: Path, text: str) -> None:
+def write_cached(path: Path, text: str) -> None:
     """``text`` to ``path``: a new file of an unpredictable name, created exclusively, renamed into place."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
@@ -205,15 +207,15 @@ def plugin_listing(verbose: bool = False) -> str:
     tests do) lists its registry as it is, without the cache."""
     from radarbench.bench import registry
 
-    folder = None if registry.discovered() else _cache_dir()
+    folder = None if registry.discovered() else cache_dir()
     path = folder / f"list-{fingerprint()}{'-v' if verbose else ''}.json" \
-        if folder is not None and _private_dir(folder) else None
-    text = _read_cached(path) if path is not None else None
+        if folder is not None and private_dir(folder) else None
+    text = read_cached(path) if path is not None else None
     if text is None:
         text = _render(verbose)
         if path is not None:
             try:
-                _write_cached(path, text)
+                write_cached(path, text)
                 for old in path.parent.glob("list-*.json"):      # listings of earlier sources
                     if not old.name.startswith(path.name.split("-v")[0].removesuffix(".json")):
                         old.unlink(missing_ok=True)

@@ -304,8 +304,11 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
                 ex = SerialExecutor() if to_run == 0 else \
                     make_executor(executor, _capped_workers(workers, to_run, quiet), scheduler)
             started = time.monotonic()
-            if to_run and ex.local and warmup.cache_is_cold():        # a cluster's workers have their own caches
-                _warm_up(ex, plan, store, progress, timeout)
+            if to_run and ex.local:                                 # a cluster's workers have their own caches
+                key = warmup.plan_key(plan)
+                if warmup.cache_is_cold(key):
+                    _warm_up(ex, plan, store, progress, timeout)
+                    warmup.remember_unused(key)
             if cal_tasks:
                 stored = sum(u.key in done for u in cal_units)
                 progress.phase("calibration", stored + len(cal_tasks), stored)

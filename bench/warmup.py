@@ -15,15 +15,18 @@ unit excludes compilation (the warm-up's seconds are stored apart).
 
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 import sys
+from pathlib import Path
 
 from radarbench.bench import registry
 from radarbench.bench.plan import Plan
 from radarbench.bench.progress import say
 from radarbench.bench.units import Unit, UnitTask, calibrated_configs, execute_unit
 
-__all__ = ["cache_is_cold", "warm_up_tasks", "run_warm_up", "COMPILING"]
+__all__ = ["cache_is_cold", "plan_key", "remember_unused", "warm_up_tasks", "run_warm_up", "COMPILING"]
 
 #: the line on stderr when the warm-up compiles
 COMPILING = "compiling kernels (first run only)…"
@@ -44,21 +47,77 @@ def _cached_dispatchers():
                 yield obj
 
 
-def cache_is_cold() -> bool:
-    """Whether numba's on-disk cache misses the imported kernels: no kernel has an entry
-    yet (a fresh install), or the entry of one is stale (its source changed since).
-    A kernel with no entry at all while others have one is taken as one this
-    installation's sweeps do not call."""
-    registry.discover()
-    indexed = False
+def _stale_kernels() -> dict[str, list]:
+    """index file -> source stamp (numba's: mtime and size) of each kernel whose cache
+    entry is stale: another numba, or its source changed since it was cached."""
+    stale = {}
     for dispatcher in _cached_dispatchers():
         index = dispatcher._cache._cache_file
-        if not os.path.exists(index._index_path):
-            continue
-        if not index._load_index():          # numba's own test: another version or another source
-            return True
-        indexed = True
+        if os.path.exists(index._index_path) and not index._load_index():
+            stale[index._index_path] = list(index._source_stamp)
+    return stale
+
+
+def cache_is_cold(plan_key: str | None = None) -> bool:
+    """Whether numba's on-disk cache misses the imported kernels: no kernel has an entry
+    yet (a fresh install), or the entry of one is stale (its source changed since),
+    unless the last warm-up of the plan (``plan_key``, :func:`plan_key`) left that same
+    entry stale: the plan's units never call it (:func:`remember_unused`). A kernel with
+    no entry at all while others have one is taken as one this installation's sweeps
+    do not call."""
+    registry.discover()
+    unused = _read_unused().get(plan_key, {}) if plan_key is not None else {}
+    if any(unused.get(path) != stamp for path, stamp in _stale_kernels().items()):
+        return True
+    indexed = any(os.path.exists(d._cache._cache_file._index_path) for d in _cached_dispatchers())
     return not indexed and any(True for _ in _cached_dispatchers())
+
+
+#: the kernels each plan's last warm-up left stale (:func:`remember_unused`), in the user's cache folder
+UNUSED_FILE = "warm-up-unused.json"
+#: how many plans it remembers (the oldest forgotten first)
+UNUSED_PLANS = 32
+
+
+def _unused_path() -> Path | None:
+    from radarbench.bench.listing import cache_dir, private_dir
+    folder = cache_dir()
+    return folder / UNUSED_FILE if private_dir(folder) else None
+
+
+def plan_key(plan: Plan) -> str:
+    """A plan's code and parameters (:func:`bench.identity.plan_identities`) as one digest:
+    a changed method or scenario is a new plan to warm up."""
+    from radarbench.bench.identity import digest, plan_identities
+    return digest(json.dumps(plan_identities(plan), sort_keys=True, default=str).encode())
+
+
+def _read_unused() -> dict:
+    from radarbench.bench.listing import read_cached
+    path = _unused_path()
+    text = read_cached(path) if path is not None else None
+    try:
+        data = json.loads(text) if text is not None else {}
+    except ValueError:                   # damaged: every stale kernel counts
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def remember_unused(key: str) -> None:
+    """After a warm-up of the plan ``key``: the kernels still stale are ones its units do
+    not call (its warm-up ran every pair), so its next runs need no warm-up for them
+    (:func:`cache_is_cold`). Without this, every run after an update of a kernel module
+    would warm up again until some sweep called every kernel of it. Kept in the user's
+    cache folder (:func:`bench.listing.cache_dir`); where it cannot be written, the
+    warm-up simply runs again."""
+    from radarbench.bench.listing import write_cached
+    path = _unused_path()
+    if path is None:
+        return
+    data = {k: v for k, v in _read_unused().items() if k != key}
+    data[key] = _stale_kernels()
+    with contextlib.suppress(OSError):
+        write_cached(path, json.dumps(dict(list(data.items())[-UNUSED_PLANS:])))
 
 
 def warm_up_tasks(plan: Plan, announce: str | None = None) -> list:

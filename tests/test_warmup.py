@@ -36,9 +36,9 @@ def test_only_the_first_process_to_compile_says_so(tmp_path, monkeypatch, capsys
     assert capsys.readouterr().err == f"bench: {warmup.COMPILING}\n"
 
 
-def _dispatcher(index_exists: bool, fresh: bool):
-    index = SimpleNamespace(_index_path="/nonexistent" if not index_exists else __file__,
-                            _load_index=lambda: {"sig": 1} if fresh else {})
+def _dispatcher(index_exists: bool, fresh: bool, path: str = __file__, stamp=(1.5, 100)):
+    index = SimpleNamespace(_index_path="/nonexistent" if not index_exists else path,
+                            _load_index=lambda: {"sig": 1} if fresh else {}, _source_stamp=stamp)
     return SimpleNamespace(_cache=SimpleNamespace(_cache_file=index))
 
 
@@ -51,6 +51,30 @@ def _dispatcher(index_exists: bool, fresh: bool):
 def test_cache_is_cold(monkeypatch, kernels, cold):
     monkeypatch.setattr(warmup, "_cached_dispatchers", lambda: iter([_dispatcher(*k) for k in kernels]))
     assert warmup.cache_is_cold() is cold
+
+
+def test_a_kernel_a_plans_warm_up_left_stale_does_not_warm_it_up_again(monkeypatch, tmp_path):
+    """After a module update, the stale kernels a plan's units never call (its warm-up left
+    them stale) no longer make every run of that plan warm up; another plan, or the same
+    kernel changed again, still does."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    (tmp_path / "k.nbi").write_bytes(b"")
+    kernels = [_dispatcher(True, True), _dispatcher(True, False, path=str(tmp_path / "k.nbi"))]
+    monkeypatch.setattr(warmup, "_cached_dispatchers", lambda: iter(kernels))
+    assert warmup.cache_is_cold("plan-a") and warmup.cache_is_cold()
+    warmup.remember_unused("plan-a")
+    assert not warmup.cache_is_cold("plan-a")
+    assert warmup.cache_is_cold("plan-b") and warmup.cache_is_cold()
+    kernels[1] = _dispatcher(True, False, path=str(tmp_path / "k.nbi"), stamp=(2.5, 100))     # changed again
+    assert warmup.cache_is_cold("plan-a")
+
+
+def test_the_plan_key_follows_the_plans_configs(write_sweep):
+    from conftest import small_sweep_text
+    a = load_sweep(write_sweep())
+    assert warmup.plan_key(a) == warmup.plan_key(load_sweep(write_sweep("again.toml")))
+    other = small_sweep_text().replace("window = 16", "window = 24")
+    assert warmup.plan_key(a) != warmup.plan_key(load_sweep(write_sweep("other.toml", text=other)))
 
 
 class _SwigGlobals:
