@@ -144,6 +144,7 @@ def test_a_cfar_significance_below_zero_is_an_impossible_probability():
         task.check_output(CellDetectionOutput(stat), batch)
 
 
+@pytest.mark.slow          # a statistical test at the default scene's size (about 25 s)
 def test_the_adaptive_trackers_covariances_pass_at_the_default_scene():
     """The checks refuse nothing a built-in produces: conformance runs every method on its
     small instance through ``check_output``; here the adaptive trackers, whose covariances

@@ -469,6 +469,13 @@ def _figure_pool():
             starting.join()
 
 
+def _write_tables(out_dir: Path, **tables) -> None:
+    """``name.csv`` per table given (None, or an empty ``steps``: not written)."""
+    for name, frame in tables.items():
+        if frame is not None and not (name == "steps" and frame.empty):
+            write_csv(frame, out_dir / f"{name}.csv")
+
+
 def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
     runfolder.folder_for(out_dir / "figures")     # refuses a linked figures/ before anything is written
     with _figure_pool() as pool:
@@ -489,37 +496,31 @@ def _build_with(store: Store, out_dir: Path, recording: bool, on_phase, pool) ->
                         frozenset(label for label, task in task_of.items() if task.pfa_per_cell))
     trials = _calibrated_trials(trials, cals, task_of)
     summary = summary_frame(trials, series, runs, record, cals)
+    specs = interactive_specs(summary, task_of)      # drawn by the pool while the driver goes on
+    interactive = pool.submit(interactive_figures, specs) if pool is not None else None
     t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}
     steps = steps_frame(trials, series, record, t_of)
     records = [TrialRecord.from_bytes(b) for b in store.records()]   # every read before the first write
     calibration = pd.DataFrame([c.as_row() for c in cals])
-    comparisons = comparisons_frame(trials, task_of)
-    evaluation, paper_vs_ours = _paper_vs_ours(   # the paper-vs-ours table leads a preset's sections
-        record.get("source", ""), {"summary": summary, "comparisons": comparisons, "calibration": calibration},
-        sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD))
-    write_csv(trials, out_dir / "trials.csv")
-    write_csv(summary, out_dir / "summary.csv")
-    write_csv(calibration, out_dir / "calibration.csv")
-    if not steps.empty:
-        write_csv(steps, out_dir / "steps.csv")
-    write_csv(comparisons, out_dir / "comparisons.csv")
-    if evaluation is not None:
-        write_csv(evaluation.frame(), out_dir / "claims.csv")
     fig_dir = out_dir / "figures"
     title = sweep["name"]
     with figures.rendering_in(pool):
+        # the sections first: their figures draw in the pool while the comparisons are computed
         contexts = _task_contexts(present, task_of, summary, trials, steps, series, cals, records, store, out_dir, sweep)
         done, total = len(units), int(store.meta("units_total") or len(units))
         chance = {(c.scenario, c.method): c.chance_pd for c in cals}
-        parts = [paper_vs_ours,
-                 _section_plan(record, store, present), _section_calibration(cals, summary, task_of)]
-        parts += [s for task, ctx in contexts for s in task.report_sections(ctx)]
-        parts.append(comparisons_markdown(comparisons, task_of))
-        parts += [s for task, ctx in contexts for s in task.trial_sections(ctx)]
-        parts += [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
+        task_parts = [s for task, ctx in contexts for s in task.report_sections(ctx)]
+        trial_parts = [s for task, ctx in contexts for s in task.trial_sections(ctx)]
+        runtime_parts = [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
+        comparisons = comparisons_frame(trials, task_of)
+        evaluation, paper_vs_ours = _paper_vs_ours(   # the paper-vs-ours table leads a preset's sections
+            record.get("source", ""), {"summary": summary, "comparisons": comparisons, "calibration": calibration},
+            sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD))
+        _write_tables(out_dir, trials=trials, summary=summary, calibration=calibration, steps=steps,
+                      comparisons=comparisons, claims=evaluation.frame() if evaluation is not None else None)
+        parts = [paper_vs_ours, _section_plan(record, store, present), _section_calibration(cals, summary, task_of),
+                 *task_parts, comparisons_markdown(comparisons, task_of), *trial_parts, *runtime_parts]
         at_a_glance = glance_markdown(glance(trials, task_of, comparisons, chance))
-        specs = interactive_specs(summary, task_of)
-        interactive = pool.submit(interactive_figures, specs) if pool is not None else None
     if recording and records:
         on_phase("recording")
         write_recording(out_dir / "recording.rrd", records, _recording_summary(summary, present),
