@@ -89,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--preset", help=f"a packaged sweep: {', '.join(presets())} (bench list describes them)")
     run.add_argument("--out", help=f"run folder (default: {RUNS_DIR}/<name>/): new, empty, or a run folder; "
                                    "one run at a time")
-    run.add_argument("--workers", type=_positive_int, help="worker processes (default: CPU count)")
+    run.add_argument("--workers", type=_positive_int, help="worker processes, for the units and then the report's figures (default: CPU count)")
     run.add_argument("--executor", default="local", choices=["local", "dask"],
                      help="where units run: local processes, or a dask cluster (needs the [dask] extra)")
     run.add_argument("--scheduler", metavar="ADDRESS",
@@ -300,7 +300,8 @@ def _run_locked(args, plan, out_dir: Path, command: str) -> int:
         store.close()
         write_plan_toml(out_dir / "plan.toml", plan, command, store.stamps)
         from radarbench.bench.report import build_outputs
-        report = build_outputs(out_dir, recording=not args.no_record, on_phase=progress.phase)
+        report = build_outputs(out_dir, recording=not args.no_record, on_phase=progress.phase,
+                               workers=_workers(args))       # --workers bounds the figures' processes too
     except KeyboardInterrupt:
         return _interrupted(out_dir, command, *_stored_units(plan, out_dir))
     finally:

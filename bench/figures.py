@@ -12,6 +12,7 @@ import contextlib
 import contextvars
 import io
 import pickle
+from concurrent.futures import BrokenExecutor
 from pathlib import Path
 
 import matplotlib
@@ -55,10 +56,44 @@ def _save(fig, path: Path) -> Path:
             runfolder.write_bytes(path, png(fig))
         else:
             # pickled now, in this thread: the pool's feeder thread would pickle it later, after the close below
-            pending.append((path, _pool.get().submit(_png_of_pickled, pickle.dumps(fig))))
+            data = pickle.dumps(fig)
+            pending.append((path, data, submitted(_pool.get(), _png_of_pickled, data)))
     finally:
         plt.close(fig)
     return path
+
+
+def submitted(pool, fn, *args):
+    """``pool.submit(fn, *args)``, or None if the pool cannot take it (it broke: a process
+    died or could not start): :func:`result_of` then calls ``fn`` here."""
+    try:
+        return pool.submit(fn, *args)
+    except (BrokenExecutor, RuntimeError, OSError) as exc:
+        _say_broken(exc)
+        return None
+
+
+def result_of(job, fn, *args):
+    """The result of ``job`` (:func:`submitted`); if the pool broke, ``fn(*args)`` in this
+    process, said once on stderr: a dead pool costs speed, never an output. An error of
+    ``fn`` itself is raised as it would be here."""
+    if job is not None:
+        try:
+            return job.result()
+        except BrokenExecutor as exc:
+            _say_broken(exc)
+    return fn(*args)
+
+
+_broken_said = False
+
+
+def _say_broken(exc: BaseException) -> None:
+    global _broken_said
+    if not _broken_said:
+        _broken_said = True
+        from radarbench.bench.progress import say
+        say(f"the figure processes stopped ({exc}); drawing the rest here")
 
 
 @contextlib.contextmanager
@@ -66,7 +101,8 @@ def rendering_in(pool):
     """Within the block, :func:`_save` hands each figure to ``pool`` (a
     :class:`concurrent.futures.Executor`; None: draw in this process, as outside the
     block) and returns at once; the PNGs are written when the block ends without an
-    error (on one, none is written)."""
+    error (on one, none is written). A pool that breaks costs speed only
+    (:func:`result_of`)."""
     if pool is None:
         yield
         return
@@ -76,14 +112,15 @@ def rendering_in(pool):
     try:
         yield
     except BaseException:
-        for _, job in pending:
-            job.cancel()
+        for *_, job in pending:
+            if job is not None:
+                job.cancel()
         raise
     finally:
         _pending.reset(tokens[0])
         _pool.reset(tokens[1])
-    for path, job in pending:
-        runfolder.write_bytes(path, job.result())
+    for path, data, job in pending:
+        runfolder.write_bytes(path, result_of(job, _png_of_pickled, data))
 
 
 def _legend_outside(ax) -> None:

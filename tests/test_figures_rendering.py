@@ -51,3 +51,35 @@ def test_without_a_pool_the_figure_is_written_at_once(tmp_path):
     with figures.rendering_in(None):
         path = figures._save(_figure("c"), tmp_path / "c.png")
         assert path.exists()
+
+
+class _BrokenAfterSubmit:
+    """An executor whose every job fails as a pool does when its process dies."""
+
+    def submit(self, fn, *args):
+        from concurrent.futures import Future
+        from concurrent.futures.process import BrokenProcessPool
+        job = Future()
+        job.set_exception(BrokenProcessPool("a process of the pool died"))
+        return job
+
+
+def test_a_pool_that_breaks_costs_speed_never_a_figure(tmp_path, capsys, monkeypatch):
+    """A broken pool (a process killed, or one that could not start): the figures are
+    drawn here instead, the same bytes, said once on stderr."""
+    import os
+
+    monkeypatch.setattr(figures, "_broken_said", False)
+    figures._save(_figure("d"), tmp_path / "here.png")
+    with figures.rendering_in(_BrokenAfterSubmit()):
+        figures._save(_figure("d"), tmp_path / "after.png")
+        figures._save(_figure("d"), tmp_path / "again.png")
+    with process_pool(1) as dead:
+        with pytest.raises(Exception):
+            dead.submit(os._exit, 1).result()             # the pool is broken from here on
+        with figures.rendering_in(dead):
+            figures._save(_figure("d"), tmp_path / "refused.png")
+    expected = (tmp_path / "here.png").read_bytes()
+    assert all((tmp_path / f"{name}.png").read_bytes() == expected for name in ("after", "again", "refused"))
+    err = capsys.readouterr().err
+    assert err.count("bench: the figure processes stopped") == 1, err

@@ -399,13 +399,14 @@ def _paper_vs_ours(source: str, tables: dict[str, pd.DataFrame], equal_chance: f
     return evaluation, claims.claims_markdown(evaluation, preset_notes(source))
 
 
-def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None) -> Path:
+def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None, workers: int | None = None) -> Path:
     """(Re)build every output of a run folder from its store; returns report.md's path.
 
     Every file is written whole (a temporary file renamed into place) and listed in the
     folder's manifest (:mod:`bench.runfolder`); the caller holds the folder's lock.
     ``on_phase(name)`` is called as each phase starts: ``report`` (CSVs, figures,
-    report.md) and ``recording`` (recording.rrd), for the progress lines."""
+    report.md) and ``recording`` (recording.rrd), for the progress lines. ``workers``: the
+    most processes that draw the figures (None: one per CPU, :func:`_figure_pool`)."""
     on_phase = on_phase or (lambda name: None)
     on_phase("report")
     out_dir = Path(out_dir)
@@ -415,7 +416,7 @@ def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None) -> Pa
     store = Store(db)
     try:
         with runfolder.writing(out_dir):
-            return _build(store, out_dir, recording, on_phase)
+            return _build(store, out_dir, recording, on_phase, workers)
     finally:
         store.close()
 
@@ -450,17 +451,17 @@ FIGURE_WORKERS = 4
 
 
 @contextlib.contextmanager
-def _figure_pool():
-    """Processes, one per CPU up to :data:`FIGURE_WORKERS`, that render the figures while
+def _figure_pool(workers: int | None = None):
+    """Processes, one per CPU up to :data:`FIGURE_WORKERS` (and ``workers``), that render the figures while
     the report goes on (:func:`bench.figures.rendering_in`); on one CPU, none. They are
     started from a thread (a forkserver that is not running yet takes seconds to load)
     and import matplotlib as they start, while the tables are built."""
-    workers = min(FIGURE_WORKERS, default_workers())
+    workers = min(FIGURE_WORKERS, default_workers(), workers or FIGURE_WORKERS)
     if workers < 2:
         yield None
         return
     with process_pool(workers) as pool:
-        starting = threading.Thread(target=lambda: [pool.submit(importlib.import_module, figures.__name__)
+        starting = threading.Thread(target=lambda: [figures.submitted(pool, importlib.import_module, figures.__name__)
                                                     for _ in range(workers)], name="bench-figure-pool")
         starting.start()
         try:
@@ -476,9 +477,9 @@ def _write_tables(out_dir: Path, **tables) -> None:
             write_csv(frame, out_dir / f"{name}.csv")
 
 
-def _build(store: Store, out_dir: Path, recording: bool, on_phase) -> Path:
+def _build(store: Store, out_dir: Path, recording: bool, on_phase, workers: int | None) -> Path:
     runfolder.folder_for(out_dir / "figures")     # refuses a linked figures/ before anything is written
-    with _figure_pool() as pool:
+    with _figure_pool(workers) as pool:
         return _build_with(store, out_dir, recording, on_phase, pool)
 
 
@@ -497,7 +498,7 @@ def _build_with(store: Store, out_dir: Path, recording: bool, on_phase, pool) ->
     trials = _calibrated_trials(trials, cals, task_of)
     summary = summary_frame(trials, series, runs, record, cals)
     specs = interactive_specs(summary, task_of)      # drawn by the pool while the driver goes on
-    interactive = pool.submit(interactive_figures, specs) if pool is not None else None
+    interactive = figures.submitted(pool, interactive_figures, specs) if pool is not None else None
     t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}
     steps = steps_frame(trials, series, record, t_of)
     records = [TrialRecord.from_bytes(b) for b in store.records()]   # every read before the first write
@@ -534,7 +535,7 @@ def _build_with(store: Store, out_dir: Path, recording: bool, on_phase, pool) ->
             "glance": at_a_glance, "parts": [p for p in parts if p]}
     report = out_dir / "report.md"
     _write_text(report, escape_controls(render("report.md.j2", html=False, **page) + "\n"))
-    interactive = interactive.result() if interactive is not None else interactive_figures(specs)
+    interactive = figures.result_of(interactive, interactive_figures, specs)
     html = markdown_to_html(escape_controls(render("report.md.j2", html=True, **page)), title, out_dir,
                             escape_controls(interactive))
     _write_text(out_dir / "report.html", html)      # escaped before the policy hashed its scripts
