@@ -249,6 +249,7 @@ def _unshare_works() -> bool:
         return False
 
 
+@pytest.mark.slow          # an end-to-end CLI run (or fuzzing): CI runs it, the inner loop does not
 @pytest.mark.skipif(not _unshare_works(), reason="needs unshare (user and mount namespaces) for a read-only mount")
 def test_compare_works_on_a_read_only_file_system(runs, tmp_path):
     """The run folders on a read-only bind mount (as root, chmod would not stop a write)."""

@@ -270,6 +270,7 @@ def test_a_config_failing_every_unit_is_loud(loop):
     assert "np.linalg.inv(gram)" in printed.stdout
 
 
+@pytest.mark.slow          # an end-to-end CLI run (or fuzzing): CI runs it, the inner loop does not
 def test_a_plugin_parameter_without_bounds_is_refused_at_discovery(loop):
     env, _pkg, sweep = loop
     listed = _bench(env, sweep.parent, "list")

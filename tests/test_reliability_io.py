@@ -243,6 +243,7 @@ def test_a_file_size_limit_during_the_run_is_one_line_and_the_run_resumes(clean,
         assert (out / name).read_bytes() == (whole / name).read_bytes(), name
 
 
+@pytest.mark.slow          # an end-to-end CLI run (or fuzzing): CI runs it, the inner loop does not
 @pytest.mark.parametrize("limit, culprit", [(35_000, "figures/"), (150_000, "recording.rrd")])
 def test_a_file_size_limit_during_the_report_leaves_every_output_whole(run_copy, limit, culprit):
     """At 35 kB a figure cannot be written, at 150 kB the recording (whose writer,

@@ -266,6 +266,7 @@ def test_an_impossible_output_is_a_failure_in_the_run_never_a_published_nees(imp
     assert "negative-covariance" in failures and "covariance is not a covariance" in failures
 
 
+@pytest.mark.slow          # an end-to-end CLI run (or fuzzing): CI runs it, the inner loop does not
 def test_the_report_of_a_run_whose_plugins_are_not_installed_names_them_and_the_store(impossible_run, tmp_path):
     """Was "methods[1].name: unknown method ..." naming no file (exit 2 all the same)."""
     import shutil

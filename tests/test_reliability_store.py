@@ -43,6 +43,7 @@ def _damage(run: Path, sql: str) -> None:
         db.commit()
 
 
+@pytest.mark.slow          # an end-to-end CLI run (or fuzzing): CI runs it, the inner loop does not
 @pytest.mark.parametrize("sql, what", [
     ("UPDATE meta SET value = '{bad' WHERE key = 'plan'", "the stored plan is not valid JSON"),
     ("UPDATE meta SET value = '[1, 2]' WHERE key = 'plan'", "the stored plan is not a JSON object"),

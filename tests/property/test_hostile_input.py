@@ -545,6 +545,7 @@ CONSOLE_CASES = [
 ]
 
 
+@pytest.mark.slow          # an end-to-end CLI run (or fuzzing): CI runs it, the inner loop does not
 def test_the_console_script_rejects_hostile_files_the_same_way(tmp_path):
     """The installed ``bench`` script (all at once: each start costs seconds)."""
     exe = Path(sys.executable).with_name("bench")

@@ -200,6 +200,7 @@ def assert_report_inert(out):
     assert not CONTROLS.search((out / "report.md").read_text())
 
 
+@pytest.mark.slow          # an end-to-end CLI run (or fuzzing): CI runs it, the inner loop does not
 @settings(max_examples=3, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(s=hostile, label=LABEL_TEXT)
 def test_hostile_text_in_every_field_of_a_run_is_inert_in_report_html(plugins, tmp_path_factory, s, label):
