@@ -673,11 +673,13 @@ def prestart_forkserver() -> None:
 
 def process_pool(workers: int) -> concurrent.futures.ProcessPoolExecutor:
     """A :mod:`concurrent.futures` pool of ``workers`` processes forked by the forkserver
-    :class:`LocalExecutor` uses (so they ignore SIGINT and end with the driver), for the
-    harness's own work between phases (the report's figures, :mod:`bench.figures`); a
-    plugin's code runs only in :class:`LocalExecutor`'s workers, which survive its crashes."""
+    :class:`LocalExecutor` uses (so they ignore SIGINT), each exiting when the driver dies
+    (:func:`_exit_with_driver`: a killed driver leaves none behind), for the harness's own
+    work between phases (the report's figures, :mod:`bench.figures`); a plugin's code runs
+    only in :class:`LocalExecutor`'s workers, which survive its crashes."""
     _start_forkserver(LOCAL_PRELOAD)
-    return concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("forkserver"))
+    return concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("forkserver"),
+                                                  initializer=_exit_with_driver)
 
 
 def default_workers() -> int:

@@ -154,3 +154,38 @@ def test_an_unreachable_scheduler_is_one_line(write_sweep, tmp_path, monkeypatch
     code, err = _run_main(["run", str(write_sweep()), "--out", str(tmp_path / "out"), "--executor", "dask",
                            "--scheduler", "tcp://127.0.0.1:9", "--quiet", "--no-record"], capsys)
     assert code == 2 and err.count("\n") == 1 and "--scheduler: cannot connect to tcp://127.0.0.1:9" in err, err
+
+
+POOL_THEN_KILL = """
+import os, time
+from radarbench.bench.executors import process_pool
+if __name__ == "__main__":
+    pool = process_pool(2)
+    for job in [pool.submit(time.sleep, 0.05) for _ in range(4)]:
+        job.result()
+    with open(os.environ["PIDS_FILE"], "w") as f:
+        f.write(" ".join(map(str, pool._processes)))
+    os.kill(os.getpid(), 9)
+"""
+
+
+def test_the_report_pools_processes_end_with_a_killed_driver(tmp_path):
+    """bench.executors.process_pool (the report's figures): a driver killed with SIGKILL
+    leaves none of its processes behind (they were orphans before)."""
+    import subprocess
+    import time
+
+    script, pids_file = tmp_path / "pool_then_kill.py", tmp_path / "pids"
+    script.write_text(POOL_THEN_KILL)
+    proc = subprocess.run([sys.executable, str(script)], env={**os.environ, "PIDS_FILE": str(pids_file)},
+                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120)
+    assert proc.returncode == -9
+    pids = [int(p) for p in pids_file.read_text().split()]
+    assert len(pids) == 2
+    deadline = time.monotonic() + 30
+    while any(os.path.exists(f"/proc/{p}") for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    alive = [p for p in pids if os.path.exists(f"/proc/{p}")]
+    for p in alive:
+        os.kill(p, 9)
+    assert not alive
