@@ -6,7 +6,7 @@ Imported in the forkserver, it also makes the server exit with the driver that
 started it (named by ``BENCH_FORKSERVER_DRIVER``): on Linux the kernel kills it
 when the driver dies (``prctl(PR_SET_PDEATHSIG)``); everywhere, the server
 exits once the driver and every worker have closed its "alive" pipe, and the
-workers exit with the driver (:func:`bench.executors._exit_with_driver`).
+workers exit with the driver (:func:`bench.processes._exit_with_driver`).
 """
 
 import os

@@ -89,7 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--preset", help=f"a packaged sweep: {', '.join(presets())} (bench list describes them)")
     run.add_argument("--out", help=f"run folder (default: {RUNS_DIR}/<name>/): new, empty, or a run folder; "
                                    "one run at a time")
-    run.add_argument("--workers", type=_positive_int, help="worker processes, for the units and then the report's figures (default: CPU count)")
+    run.add_argument("--workers", type=_positive_int,
+                     help="worker processes, for the units and then the report's figures (default: CPU count)")
     run.add_argument("--executor", default="local", choices=["local", "dask"],
                      help="where units run: local processes, or a dask cluster (needs the [dask] extra)")
     run.add_argument("--scheduler", metavar="ADDRESS",
@@ -181,7 +182,7 @@ def _check_arguments(args) -> None:
 
 
 def _workers(args) -> int:
-    from radarbench.bench.executors import default_workers
+    from radarbench.bench.processes import default_workers
     return args.workers or default_workers()
 
 
@@ -229,7 +230,7 @@ def cmd_run(args) -> int:
     from radarbench.bench import runfolder
     _check_executor(args)
     if args.executor == "local":
-        from radarbench.bench.executors import prestart_forkserver
+        from radarbench.bench.processes import prestart_forkserver
         prestart_forkserver()
     plan = _load_plan(args)
     if plan.skipped and not args.quiet:
@@ -416,7 +417,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)   # before any heavy import: argument errors answer at once
         if args.command != "list":
-            from radarbench.bench.executors import sigterm_as_interrupt
+            from radarbench.bench.processes import sigterm_as_interrupt
             restore_sigterm = sigterm_as_interrupt()   # SIGTERM ends a command as Ctrl-C does (exit 130)
         return COMMANDS[args.command](args)
     except ConfigError as err:

@@ -27,25 +27,19 @@ ones in flight end and are yielded, then the iteration ends.
 from __future__ import annotations
 
 import atexit
-import concurrent.futures
 import contextlib
 import multiprocessing
 import os
 import signal
-import threading
 import time
 import traceback
 import weakref
-from multiprocessing import forkserver
 from multiprocessing.connection import wait as _wait
 from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
 from radarbench.bench.errors import ConfigError
-
-#: the signals the driver handles and the workers ignore
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
+from radarbench.bench.processes import STOP_SIGNALS, _signals_deferred, _start_forkserver, LOCAL_PRELOAD, _exit_with_driver
 
 class UnitFailure:
     """A task that produced no result, and why (one line)."""
@@ -99,99 +93,6 @@ class SerialExecutor:
 
     def kill(self) -> None:
         pass
-
-
-@contextlib.contextmanager
-def _signals_deferred():
-    """Hold SIGINT and SIGTERM until the block ends, then deliver them to the
-    handlers in force before it (an interrupt that lands while a worker is being
-    spawned would leave it half-born).
-
-    A Python-level handler (it always runs in the main thread), not a signal
-    mask: helper threads would take a masked signal instead.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    received: list[int] = []
-    previous = {}
-    for sig in STOP_SIGNALS:
-        previous[sig] = signal.signal(sig, lambda signum, frame: received.append(signum))
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            restore_handler(sig, handler)
-        for sig in dict.fromkeys(received):
-            signal.raise_signal(sig)
-
-
-def restore_handler(sig: int, handler) -> None:
-    """Put back a handler ``signal.signal`` returned (None: one set outside Python, taken as the default)."""
-    signal.signal(sig, signal.SIG_DFL if handler is None else handler)
-
-
-def _raise_interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
-def sigterm_as_interrupt() -> Callable[[], None]:
-    """From now on SIGTERM is handled as Ctrl-C (KeyboardInterrupt in the main thread):
-    a command stopped by a service manager or ``kill`` ends as cleanly as one stopped
-    at the terminal. Returns the function that restores the previous handler. A SIGTERM
-    ignored when the process started stays ignored."""
-    if threading.current_thread() is not threading.main_thread() or \
-            signal.getsignal(signal.SIGTERM) is signal.SIG_IGN:
-        return lambda: None
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
-    return lambda: restore_handler(signal.SIGTERM, previous)
-
-
-#: what the forkserver of the local workers imports once for all of them (bench._forkserver)
-LOCAL_PRELOAD = ["radarbench.bench._forkserver"]
-#: environment variable naming the driver to the forkserver it starts (bench._forkserver)
-DRIVER_ENV = "BENCH_FORKSERVER_DRIVER"
-
-
-def _start_forkserver(preload: list[str]) -> None:
-    """Start the forkserver (if not running) with SIGINT ignored, a disposition
-    that survives exec: the server ignores Ctrl-C (a terminal sends it to the
-    whole process group) and the driver alone handles it. The server is told
-    the driver's pid (:data:`DRIVER_ENV`) so that it exits when the driver dies
-    (:mod:`bench._forkserver`)."""
-    ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(preload)
-    main = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
-    os.environ[DRIVER_ENV] = str(os.getpid())
-    try:
-        forkserver.ensure_running()
-    finally:
-        os.environ.pop(DRIVER_ENV, None)
-        if main:
-            restore_handler(signal.SIGINT, previous)
-
-
-def _exit_with_driver() -> None:
-    """In a worker: exit at once when the driver (the parent process) dies, even in the
-    middle of a unit. A thread waits on the parent's sentinel (a pipe only the driver
-    holds open), so it works whatever started the worker and on every platform."""
-    parent = multiprocessing.parent_process()
-    sentinel = getattr(parent, "sentinel", None)
-    if sentinel is None:
-        return
-
-    def watch() -> None:
-        try:
-            _wait([sentinel])
-        finally:
-            os._exit(EXIT_DRIVER_GONE)
-
-    threading.Thread(target=watch, name="bench-driver-watch", daemon=True).start()
-
-
-#: exit status of a worker whose driver died
-EXIT_DRIVER_GONE = 75
 
 
 def _worker_main(conn) -> None:
@@ -663,27 +564,6 @@ def worker_environment() -> dict[str, str]:
     missing = ", ".join(u.source for u in registry.unavailable()) or "-"
     return {"bench": bench.__version__, "methods": ", ".join(registry.methods()),
             "scenarios": ", ".join(registry.scenarios()), "unavailable plugins": missing}
-
-
-def prestart_forkserver() -> None:
-    """Start the local workers' forkserver now: it imports the harness and the plugins (a
-    few seconds of one CPU) while the driver reads the sweep on the other."""
-    _start_forkserver(LOCAL_PRELOAD)
-
-
-def process_pool(workers: int) -> concurrent.futures.ProcessPoolExecutor:
-    """A :mod:`concurrent.futures` pool of ``workers`` processes forked by the forkserver
-    :class:`LocalExecutor` uses (so they ignore SIGINT), each exiting when the driver dies
-    (:func:`_exit_with_driver`: a killed driver leaves none behind), for the harness's own
-    work between phases (the report's figures, :mod:`bench.figures`); a plugin's code runs
-    only in :class:`LocalExecutor`'s workers, which survive its crashes."""
-    _start_forkserver(LOCAL_PRELOAD)
-    return concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("forkserver"),
-                                                  initializer=_exit_with_driver)
-
-
-def default_workers() -> int:
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
 
 
 EXECUTORS = ("local", "dask")

@@ -26,7 +26,7 @@ DPI = 110
 #: zlib level of the PNGs: 1 encodes several times faster than Pillow's default 6, for files a little larger
 PNG_COMPRESS_LEVEL = 1
 
-#: the figures of the :func:`rendering_in` block in progress: [(path, future of its PNG)], or None
+#: the figures of the :func:`rendering_in` block in progress: [(path, pickled figure, future of its PNG or None)]
 _pending: contextvars.ContextVar[list | None] = contextvars.ContextVar("pending_figures", default=None)
 _pool: contextvars.ContextVar = contextvars.ContextVar("figure_pool", default=None)
 

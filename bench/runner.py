@@ -33,7 +33,8 @@ import numpy as np
 from radarbench.bench import registry, tomlw, warmup
 from radarbench.bench.calibration import EQUAL_CHANCE_PD, CalibrationResult, calibrate
 from radarbench.bench.plan import Plan
-from radarbench.bench.executors import STOP_SIGNALS, SerialExecutor, UnitFailure, make_executor, restore_handler
+from radarbench.bench.executors import SerialExecutor, UnitFailure, make_executor
+from radarbench.bench.processes import STOP_SIGNALS, restore_handler
 from radarbench.bench.identity import PREVIOUS, set_aside_changed
 from radarbench.bench.progress import Progress
 from radarbench.bench.provenance import provenance

@@ -48,8 +48,8 @@ def _cached_dispatchers():
 
 
 def _stale_kernels() -> dict[str, list]:
-    """index file -> source stamp (numba's: mtime and size) of each kernel whose cache
-    entry is stale: another numba, or its source changed since it was cached."""
+    """index file -> numba's stamp of the kernel's source (as a JSON list) for each kernel
+    whose cache entry is stale: another numba, or its source changed since it was cached."""
     stale = {}
     for dispatcher in _cached_dispatchers():
         index = dispatcher._cache._cache_file

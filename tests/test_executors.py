@@ -158,7 +158,7 @@ def test_an_unreachable_scheduler_is_one_line(write_sweep, tmp_path, monkeypatch
 
 POOL_THEN_KILL = """
 import os, time
-from radarbench.bench.executors import process_pool
+from radarbench.bench.processes import process_pool
 if __name__ == "__main__":
     pool = process_pool(2)
     for job in [pool.submit(time.sleep, 0.05) for _ in range(4)]:
@@ -170,7 +170,7 @@ if __name__ == "__main__":
 
 
 def test_the_report_pools_processes_end_with_a_killed_driver(tmp_path):
-    """bench.executors.process_pool (the report's figures): a driver killed with SIGKILL
+    """bench.processes.process_pool (the report's figures): a driver killed with SIGKILL
     leaves none of its processes behind (they were orphans before)."""
     import subprocess
     import time

@@ -29,7 +29,7 @@ from radarbench.bench import claims, figures, registry, runfolder
 from radarbench.bench.calibration import EQUAL_CHANCE_PD
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.escapes import escape_controls
-from radarbench.bench.executors import default_workers, process_pool
+from radarbench.bench.processes import default_workers, process_pool
 from radarbench.bench.markdown import code, fmt_db, text
 from radarbench.bench.markdown import fmt as _fmt
 from radarbench.bench.markdown import table as _table
