@@ -226,17 +226,46 @@ def kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray,
     F, H = model.F, model.H
     P_prior, P_post, S, K = covariance_sequence(model, P0, steps)
 
-    x_prior = np.empty((n, steps, model.dim_x))
-    x_post = np.empty_like(x_prior)
-    nu = np.empty_like(z)
-    x = np.broadcast_to(np.asarray(x0, dtype=float), (n, model.dim_x)).copy()
-    for k in range(steps):
-        x_prior[:, k] = x
-        nu[:, k] = z[:, k] - matvec(H, x)
-        x_post[:, k] = x + matvec(K[k], nu[:, k])
-        x = matvec(F, x_post[:, k])
+    x0 = np.ascontiguousarray(np.broadcast_to(np.asarray(x0, dtype=float), (n, model.dim_x)))
+    x_prior, x_post, nu = _state_kernel(np.ascontiguousarray(z), x0, np.ascontiguousarray(F, dtype=float),
+                                        np.ascontiguousarray(H, dtype=float), K)
     return KalmanResult(x_prior=x_prior, x_post=x_post, nu=nu, P_prior=P_prior,
                         P_post=P_post, S=S, gain=K)
+
+
+@numba.njit(cache=True)
+def _state_kernel(z, x0, F, H, gain):
+    """The state recursion of :func:`kalman_filter`, trial by trial and step by step:
+    ``nu_k = z_k - H x_k|k-1``, ``x_k|k = x_k|k-1 + K_k nu_k``, ``x_k+1|k = F x_k|k``
+    (the module docstring). Each product is summed in index order, with no fused
+    multiply-add, as :func:`bench.batched.matvec` does: a trial's numbers are the same
+    bits whatever its batch, and the same as the NumPy loop this kernel replaced (one
+    call per step was the filter's fixed cost, issue 28). Returns x_prior, x_post
+    (n, K, d) and nu (n, K, m)."""
+    n, steps, m = z.shape
+    d = F.shape[0]
+    x_prior, x_post, nu = np.empty((n, steps, d)), np.empty((n, steps, d)), np.empty((n, steps, m))
+    x = np.empty(d)
+    for i in range(n):
+        x[:] = x0[i]
+        for k in range(steps):
+            x_prior[i, k] = x
+            for j in range(m):
+                acc = H[j, 0] * x[0]
+                for c in range(1, d):
+                    acc += H[j, c] * x[c]
+                nu[i, k, j] = z[i, k, j] - acc
+            for a in range(d):
+                acc = gain[k, a, 0] * nu[i, k, 0]
+                for j in range(1, m):
+                    acc += gain[k, a, j] * nu[i, k, j]
+                x_post[i, k, a] = x[a] + acc
+            for a in range(d):
+                acc = F[a, 0] * x_post[i, k, 0]
+                for c in range(1, d):
+                    acc += F[a, c] * x_post[i, k, c]
+                x[a] = acc
+    return x_prior, x_post, nu
 
 
 def masked_kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0: np.ndarray,

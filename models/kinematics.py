@@ -61,8 +61,12 @@ def position_index(dims: int, per_axis_states: int = 3) -> tuple[int, ...]:
 
 
 def per_axis(block: np.ndarray, dims: int) -> np.ndarray:
-    """The same per-axis block on each of ``dims`` axes: kron(I_dims, block)."""
-    return np.kron(np.eye(dims), np.asarray(block, float))
+    """The same per-axis block on each of ``dims`` axes: kron(I_dims, block), element for
+    element (the off-diagonal blocks are 0 * block, signed zeros included), as one
+    broadcast product: ``np.kron``'s general path was a fifth of a small tracker's call."""
+    block = np.asarray(block, float)
+    rows, cols = block.shape
+    return (np.eye(dims)[:, None, :, None] * block[None, :, None, :]).reshape(dims * rows, dims * cols)
 
 
 def cv(dt: float, sigma_a: float) -> tuple[np.ndarray, np.ndarray]:

@@ -115,3 +115,36 @@ def test_a_misshapen_filter_names_the_field(setup, field, change):
         LinearGaussianFilter(model=model, x0=x0, P0=P0)
     with pytest.raises(ValueError, match="LinearGaussianModel.R: expected an array of shape"):
         LinearGaussianModel(F=model.F, H=model.H, Q=model.Q, R=np.eye(3))
+
+
+def _state_recursion_in_numpy(model, z, x0, gain):
+    """The per-step NumPy loop the compiled state recursion replaced (issue 28), kept as
+    its bit-for-bit oracle: products by :func:`bench.batched.matvec`, in index order."""
+    from radarbench.bench.batched import matvec
+    n, steps, _ = z.shape
+    x_prior, x_post, nu = np.empty((n, steps, model.dim_x)), np.empty((n, steps, model.dim_x)), np.empty_like(z)
+    x = np.broadcast_to(x0, (n, model.dim_x)).copy()
+    for k in range(steps):
+        x_prior[:, k] = x
+        nu[:, k] = z[:, k] - matvec(model.H, x)
+        x_post[:, k] = x + matvec(gain[k], nu[:, k])
+        x = matvec(model.F, x_post[:, k])
+    return x_prior, x_post, nu
+
+
+@pytest.mark.parametrize("d, m, n", [(1, 1, 1), (2, 1, 7), (4, 2, 33), (6, 3, 200), (9, 3, 5)])
+def test_the_compiled_state_recursion_is_the_numpy_loop_bit_for_bit(d, m, n):
+    """Every trial's numbers, not merely close: the committed results were made by the
+    NumPy loop, and a compiled loop that fused a multiply-add or reordered a sum would
+    move their last bits (docs/architecture.md, 'Portable numbers')."""
+    rng = np.random.default_rng(100 * d + m)
+    model = random_model(rng, d, m)
+    z = rng.standard_normal((n, 40, m)) * 1e3
+    x0 = rng.standard_normal((n, d))
+    P0 = np.eye(d) * 50.0
+    res = kalman_filter(model, z, x0, P0)
+    expected = _state_recursion_in_numpy(model, z, x0, res.gain)
+    for got, want in zip((res.x_prior, res.x_post, res.nu), expected):
+        np.testing.assert_array_equal(got, want)
+    shared = kalman_filter(model, z, x0[0], P0)             # one (d,) prior for all trials
+    np.testing.assert_array_equal(shared.nu, _state_recursion_in_numpy(model, z, x0[0], res.gain)[2])
