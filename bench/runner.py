@@ -240,9 +240,10 @@ def _capped_workers(workers: int, to_run: int, quiet: bool) -> int:
     return n
 
 
-def _warm_up(executor, plan: Plan, store: Store, progress: Progress, timeout: float | None) -> None:
+def _warm_up(executor, plan: Plan, store: Store, progress: Progress, timeout: float | None) -> bool:
     """Compile the sweep's kernels in one worker before any unit is timed (:mod:`bench.warmup`);
-    its seconds are stored apart (meta ``warm_up_seconds``), never in a unit's runtime."""
+    its seconds are stored apart (meta ``warm_up_seconds``), never in a unit's runtime.
+    Returns whether every pair's warm-up ran whole (:func:`bench.warmup.run_warm_up`)."""
     import tempfile
 
     tasks = warmup.warm_up_tasks(plan)
@@ -250,11 +251,14 @@ def _warm_up(executor, plan: Plan, store: Store, progress: Progress, timeout: fl
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="bench-warm-up-") as folder:
         announce = None if progress.quiet else str(Path(folder) / "announced")
-        for _ in executor.imap_unordered(warmup.run_warm_up, [(units, announce) for units, _ in tasks],
-                                         timeout=timeout):
+        whole = True
+        for ran_whole in executor.imap_unordered(warmup.run_warm_up, [(units, announce) for units, _ in tasks],
+                                                 timeout=timeout):
+            whole &= ran_whole is True
             progress.advance()
     store.set_meta("warm_up_seconds", repr(time.monotonic() - t0))
     progress.close()
+    return whole
 
 
 def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
@@ -307,9 +311,8 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
             started = time.monotonic()
             if to_run and ex.local:                                 # a cluster's workers have their own caches
                 key = warmup.plan_key(plan)
-                if warmup.cache_is_cold(key):
-                    _warm_up(ex, plan, store, progress, timeout)
-                    warmup.remember_unused(key)
+                if warmup.cache_is_cold(key) and _warm_up(ex, plan, store, progress, timeout):
+                    warmup.remember_unused(key)       # not after a failed pair: it may not have reached a kernel
             if cal_tasks:
                 stored = sum(u.key in done for u in cal_units)
                 progress.phase("calibration", stored + len(cal_tasks), stored)

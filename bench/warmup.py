@@ -104,8 +104,8 @@ def _read_unused() -> dict:
 
 
 def remember_unused(key: str) -> None:
-    """After a warm-up of the plan ``key``: the kernels still stale are ones its units do
-    not call (its warm-up ran every pair), so its next runs need no warm-up for them
+    """After a warm-up of the plan ``key`` whose every pair ran whole (:func:`run_warm_up`):
+    the kernels still stale are ones its units do not call, so its next runs need no warm-up for them
     (:func:`cache_is_cold`). Without this, every run after an update of a kernel module
     would warm up again until some sweep called every kernel of it. Kept in the user's
     cache folder (:func:`bench.listing.cache_dir`); where it cannot be written, the
@@ -158,15 +158,20 @@ def _announce_once(marker: str) -> None:
     say(COMPILING)
 
 
-def run_warm_up(units_announce) -> None:
+def _ran_whole(results) -> bool:
+    """Whether every method config of every unit ran to its end: a pair that failed may have
+    stopped before a kernel it calls, which then stays stale without being unused."""
+    return all(run.error is None for result in results for run in result.runs)
+
+
+def run_warm_up(units_announce) -> bool:
     """In a worker: run one pair's warm-up units and drop their results (their failures are the
-    real units' to report). With ``announce`` (:func:`warm_up_tasks`), the first kernel numba
-    compiles (not one it loads from the cache: numba's ``numba:compile`` event) says so."""
+    real units' to report); returns whether they all ran whole (:func:`_ran_whole`). With
+    ``announce`` (:func:`warm_up_tasks`), the first kernel numba compiles (not one it loads
+    from the cache: numba's ``numba:compile`` event) says so."""
     units, announce = units_announce
     if announce is None or _announced:
-        for unit in units:
-            execute_unit(unit)
-        return
+        return _ran_whole([execute_unit(unit) for unit in units])
     from numba.core import event
 
     class Announce(event.Listener):
@@ -177,5 +182,4 @@ def run_warm_up(units_announce) -> None:
             pass
 
     with event.install_listener("numba:compile", Announce()):
-        for unit in units:
-            execute_unit(unit)
+        return _ran_whole([execute_unit(unit) for unit in units])

@@ -69,6 +69,32 @@ def test_a_kernel_a_plans_warm_up_left_stale_does_not_warm_it_up_again(monkeypat
     assert warmup.cache_is_cold("plan-a")
 
 
+@pytest.mark.parametrize("error, whole", [(None, True), ("the method raised ValueError", False)])
+def test_a_warm_up_says_whether_its_pair_ran_whole(monkeypatch, error, whole):
+    """A pair that failed may have stopped before a kernel it calls: that kernel stays stale
+    without being unused, so such a warm-up must not be remembered (:func:`warmup.remember_unused`)."""
+    from radarbench.bench.store import MethodRun, UnitResult
+
+    def execute(work):
+        return UnitResult(work, "evaluation", "s", 0.0, 0, 1, 0.0, runs=[MethodRun("a", 0.0), MethodRun("b", 0.0, error)])
+    monkeypatch.setattr(warmup, "execute_unit", execute)
+    monkeypatch.setattr(warmup, "_announced", True)
+    assert warmup.run_warm_up((["unit-1", "unit-2"], None)) is whole
+    assert warmup.run_warm_up((["unit-1", "unit-2"], "marker")) is whole
+
+
+@pytest.mark.parametrize("whole", [False, True])
+def test_a_run_remembers_its_stale_kernels_only_after_a_whole_warm_up(monkeypatch, tmp_path, write_sweep, whole):
+    from radarbench.bench import runner
+    monkeypatch.setattr(warmup, "cache_is_cold", lambda key=None: True)
+    monkeypatch.setattr(runner, "_warm_up", lambda *args: whole)
+    remembered = []
+    monkeypatch.setattr(warmup, "remember_unused", remembered.append)
+    plan = load_sweep(write_sweep())
+    runner.run_sweep(plan, tmp_path / "run", plan_record={}, executor="serial", quiet=True).close()
+    assert remembered == ([warmup.plan_key(plan)] if whole else [])
+
+
 def test_the_plan_key_follows_the_plans_configs(write_sweep):
     from conftest import small_sweep_text
     a = load_sweep(write_sweep())
