@@ -222,15 +222,42 @@ def snr_at_pd(snr_db, pd, pd_low, pd_high, level: float = 0.5) -> tuple[float, f
 
 # ------------------------------------------------------------------ paired and unpaired differences
 
-def _stratified_means(values: np.ndarray, strata: np.ndarray, resamples: int, rng) -> np.ndarray:
+def _stratified_means(values: np.ndarray, strata: np.ndarray, resamples: int, rng=None) -> np.ndarray:
     """(resamples,) bootstrap replicates of the mean over strata of each
-    stratum's mean, resampling within each stratum (an SNR level's trials)."""
+    stratum's mean, resampling within each stratum (an SNR level's trials).
+    ``rng`` None: a fresh generator seeded with :data:`BOOTSTRAP_SEED`, whose draws
+    depend on the strata's sizes only (:func:`_fresh_resamples`)."""
     levels = np.unique(strata)
+    by_level = [values[strata == level] for level in levels]
+    draws = _fresh_resamples(tuple(v.size for v in by_level), resamples) if rng is None else \
+        [rng.integers(0, v.size, size=(resamples, v.size)) for v in by_level]
     out = np.zeros(resamples)
-    for level in levels:
-        v = values[strata == level]
-        out += v[rng.integers(0, v.size, size=(resamples, v.size))].mean(axis=1)
+    for v, index in zip(by_level, draws):
+        out += v[index].mean(axis=1)
     return out / levels.size
+
+
+#: strata sizes whose fresh resampling indices :func:`_fresh_resamples` keeps
+RESAMPLES_MEMO_SIZE = 4
+_resamples_memo: dict = {}
+
+
+def _fresh_resamples(sizes: tuple[int, ...], resamples: int) -> list[np.ndarray]:
+    """The indices a generator seeded with :data:`BOOTSTRAP_SEED` draws for strata of
+    ``sizes``, in order: the same for every metric and config pair of a scenario, so drawn
+    once (the draws were two thirds of a report's bootstrap). Kept for the last
+    :data:`RESAMPLES_MEMO_SIZE` strata sizes, as int32, read-only."""
+    key = (sizes, resamples)
+    found = _resamples_memo.pop(key, None)
+    if found is None:
+        rng = np.random.default_rng(BOOTSTRAP_SEED)
+        found = [rng.integers(0, n, size=(resamples, n)).astype(np.int32) for n in sizes]
+        for index in found:
+            index.flags.writeable = False
+    _resamples_memo[key] = found              # the most recent last
+    while len(_resamples_memo) > RESAMPLES_MEMO_SIZE:
+        del _resamples_memo[next(iter(_resamples_memo))]
+    return found
 
 
 def stratified_mean(values, strata) -> float:
@@ -254,7 +281,7 @@ def bootstrap_mean_ci(values, strata, level: float = CONFIDENCE,
     values, strata = _finite_pairs(np.asarray(values, float), np.asarray(strata))
     if values.size == 0:
         return (np.nan, np.nan, np.nan)
-    reps = _stratified_means(values, strata, resamples, np.random.default_rng(BOOTSTRAP_SEED))
+    reps = _stratified_means(values, strata, resamples)
     alpha = (1 - level) / 2
     noise = FLOAT_NOISE * float(np.abs(values).max())
     return tuple(_snap(x, noise) for x in (stratified_mean(values, strata), np.quantile(reps, alpha),

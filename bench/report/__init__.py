@@ -69,13 +69,10 @@ def trials_frame(store: Store, record: dict) -> tuple[pd.DataFrame, dict]:
         two_d = {k: v for k, v in cols.items() if np.ndim(v) == 2}
         if two_d:
             parts.setdefault((scenario, label, snr), []).append((cols["trial"], two_d))
-        df = pd.DataFrame({k: v for k, v in cols.items() if np.ndim(v) == 1})
-        df.insert(0, "scenario", scenario)
-        df.insert(1, "method", info[label]["name"])
-        df.insert(2, "config", label)
-        df.insert(3, "params", info[label]["params"])
-        df.insert(4, "snr_db", snr)
-        frames.append(df)
+        one_d = {k: v for k, v in cols.items() if np.ndim(v) == 1}
+        frames.append(pd.DataFrame({"scenario": scenario, "method": info[label]["name"], "config": label,
+                                    "params": info[label]["params"], "snr_db": snr, **one_d},
+                                   index=pd.RangeIndex(len(cols["trial"]))))
     series = {}
     for key, chunks in parts.items():
         order = np.argsort(np.concatenate([t for t, _ in chunks]), kind="stable")
