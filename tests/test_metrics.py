@@ -91,3 +91,17 @@ def test_calibration_pfa_intervals_are_counted_over_trials():
     scenes = rng.gumbel(size=1000)
     assert exceedance_interval(scenes, 2.0, np.ones(1000, int)) == \
         binomial_interval(int((scenes >= 2.0).sum()), 1000)
+
+
+def test_the_bootstrap_draws_a_fresh_generator_would_whatever_came_before():
+    """The resampling indices are kept per strata sizes: every interval must still be the
+    one a fresh generator seeded with BOOTSTRAP_SEED gives, in any order of calls, and the
+    memo stays bounded."""
+    from radarbench.bench import metrics
+    rng = np.random.default_rng(5)
+    cases = [(rng.standard_normal(n * k), np.repeat(np.arange(k), n)) for n, k in [(7, 3), (20, 1), (7, 3), (5, 6),
+                                                                                   (3, 2), (9, 2), (4, 4), (7, 3)]]
+    for values, strata in cases:
+        fresh = metrics._stratified_means(values, strata, 300, np.random.default_rng(metrics.BOOTSTRAP_SEED))
+        np.testing.assert_array_equal(metrics._stratified_means(values, strata, 300), fresh)
+    assert len(metrics._resamples_memo) <= metrics.RESAMPLES_MEMO_SIZE
