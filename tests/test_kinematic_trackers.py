@@ -3,6 +3,7 @@ imm-cv-ca): batched == their per-trial filterpy reference; consistency (NIS, NEE
 of the Kalman baselines on matched targets within sampling error; IMM with one mode
 is that mode's Kalman filter; the kinematic models' closed forms."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -195,3 +196,42 @@ def test_current_statistical_variance():
     c = (4 - math.pi) / math.pi
     var = current_statistical_variance(np.array([0.0, 10.0, -10.0, 60.0, -80.0]), 50.0, 40.0, 0.01)
     np.testing.assert_allclose(var, [c * 2500, c * 1600, c * 900, 0.01, 0.01])
+
+
+@pytest.mark.parametrize("dims, transition, mu0, ragged", [
+    (2, (0.9, 0.1, 0.2, 0.8), (0.6, 0.4), False),
+    (1, (0.95, 0.05, 0.05, 0.95), (0.9, 0.1), True),
+    (2, (0.5, 0.5, 1.0, 0.0), (0.5, 0.5), True),          # a zero transition: log 0 = -inf, its weight 0
+])
+def test_the_compiled_imm_is_the_batched_numpy_steps_bit_for_bit(dims, transition, mu0, ragged):
+    """Every trial's numbers equal, not merely close: the committed results were made by
+    the batched NumPy steps (tests/imm_oracle.py) the compiled kernel replaced."""
+    from tests.kinematic_oracle import stepwise_imm_filter
+    batch = _scenario_batch(n=9, dims=dims, snr_db=-3.0)
+    model = batch.scene.model
+    params = IMMCVCA.Params(transition=transition, initial_probabilities=mu0)
+    valid = np.random.default_rng(dims).random(batch.z.shape[:2]) > 0.2 if ragged else None
+    args = (IMMCVCA.modes(model, params), np.reshape(transition, (2, 2)), np.asarray(mu0), batch.z, model.x0,
+            model.P0)
+    ours, oracle = imm_filter(*args, valid=valid), stepwise_imm_filter(*args, valid=valid)
+    for name in ("x", "P", "mu"):
+        np.testing.assert_array_equal(getattr(ours, name), getattr(oracle, name), err_msg=name)
+
+
+@pytest.mark.parametrize("dims, ragged, a_max", [(2, False, 50.0), (1, True, 50.0), (2, True, 0.5)])
+def test_the_compiled_current_statistical_is_the_batched_numpy_steps_bit_for_bit(dims, ragged, a_max):
+    """As the IMM's above; ``a_max`` 0.5 m/s^2 clips the acceleration and holds the floor."""
+    from tests.kinematic_oracle import stepwise_current_statistical
+    batch = _scenario_batch(n=9, dims=dims, snr_db=-3.0)
+    if ragged:
+        valid = np.random.default_rng(dims).random(batch.z.shape[:2]) > 0.2
+        batch = dataclasses.replace(batch, z=np.where(valid[..., None], batch.z, np.nan),
+                                    scene=dataclasses.replace(batch.scene, valid_steps=valid))
+    method = registry.get_method("current-statistical")()
+    params = build_params(type(method).Params, {"a_max_m_s2": a_max, "a_max_neg_m_s2": a_max,
+                                                "accel_std_floor_m_s2": 0.1})
+    ours, oracle = method.track(batch, batch.scene.model, params), stepwise_current_statistical(
+        method, batch, batch.scene.model, params)
+    np.testing.assert_array_equal(ours.estimate, oracle.estimate)
+    np.testing.assert_array_equal(ours.covariance, oracle.covariance)
+    np.testing.assert_array_equal(ours.traces["accel_std"], oracle.traces["accel_std"])

@@ -14,7 +14,7 @@ from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_method
 from radarbench.methods.kinematic.base import KinematicTracker, ca_noise_param, cv_ca_modes, cv_noise_param, output
-from radarbench.models.kalman import LinearGaussianModel, predict_batched, update_where
+from radarbench.models.kalman import LinearGaussianModel, predict_one, update_one, update_scratch
 from radarbench.models.kinematics import KinematicModel
 
 
@@ -26,37 +26,6 @@ class IMMResult:
     x: np.ndarray
     P: np.ndarray
     mu: np.ndarray
-
-
-@numba.njit(cache=True)
-def _moments(weights: np.ndarray, X: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and covariance of a Gaussian mixture per trial: weights (n, r) over r components
-    X (r, n, d), P (r, n, d, d): x = sum w_j x_j, P = sum w_j (P_j + (x_j - x)(x_j - x)')
-    (compiled: NumPy would make a call per small matrix)."""
-    r, n, d = X.shape
-    x, P_mix = np.zeros((n, d)), np.zeros((n, d, d))
-    for i in range(n):
-        for j in range(r):
-            for a in range(d):
-                x[i, a] += weights[i, j] * X[j, i, a]
-        for j in range(r):
-            w = weights[i, j]
-            for a in range(d):
-                da = X[j, i, a] - x[i, a]
-                for b in range(a, d):
-                    value = w * (0.5 * (P[j, i, a, b] + P[j, i, b, a]) + da * (X[j, i, b] - x[i, b]))
-                    P_mix[i, a, b] += value
-                    if b != a:
-                        P_mix[i, b, a] += value
-    return x, P_mix
-
-
-def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
-    """log sum exp(a) along ``axis`` (scipy's, without its overhead on small axes)."""
-    top = np.max(a, axis=axis, keepdims=True)
-    top = np.where(np.isfinite(top), top, 0.0)
-    with np.errstate(divide="ignore"):
-        return np.squeeze(top, axis) + np.log(np.sum(np.exp(a - top), axis=axis))
 
 
 def unreachable_mode(transition: np.ndarray, mu0: np.ndarray, names) -> str | None:
@@ -103,29 +72,106 @@ def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: n
     """
     n, K, _ = z.shape
     r, d = len(models), models[0].dim_x
-    H, R = models[0].H, models[0].R
     M = np.asarray(transition, float)
-    X = np.broadcast_to(np.asarray(x0, float), (r, n, d)).copy()
-    P = np.broadcast_to(np.asarray(P0, float), (r, n, d, d)).copy()
-    log_cbar = np.broadcast_to(np.log(np.asarray(mu0, float) @ M), (n, r))
-    xs, Ps, mus = np.empty((n, K, d)), np.empty((n, K, d, d)), np.empty((n, K, r))
     with np.errstate(divide="ignore"):                          # a zero transition is log 0 = -inf
         log_M = np.log(M)
-    for k in range(K):
-        upd = update_where(X, P, z[None, :, k], H, R, None if valid is None else valid[:, k])  # axes (r, n)
-        log_mu = log_cbar + upd.log_likelihood.T                # (n, r)
-        mu = np.exp(log_mu - _logsumexp(log_mu, axis=1)[:, None])
-        xs[:, k], Ps[:, k] = _moments(mu, upd.x, upd.P)
-        mus[:, k] = mu
-        with np.errstate(divide="ignore"):
-            log_joint = np.log(mu)[:, :, None] + log_M          # (n, i, j): log M_ij mu_i
-        log_cbar = _logsumexp(log_joint, axis=1)                # (n, j)
-        omega = np.exp(log_joint - log_cbar[:, None, :])         # (n, i, j)
-        mixed = [_moments(np.ascontiguousarray(omega[:, :, j]), upd.x, upd.P) for j in range(r)]
-        predicted = [predict_batched(x_j, P_j, mode.F, mode.Q) for (x_j, P_j), mode in zip(mixed, models)]
-        X = np.stack([x_j for x_j, _ in predicted])
-        P = np.stack([P_j for _, P_j in predicted])
-    return IMMResult(x=xs, P=Ps, mu=mus)
+        log_cbar0 = np.log(np.asarray(mu0, float) @ M)
+    stack = lambda name: np.ascontiguousarray([getattr(mode, name) for mode in models], dtype=float)  # noqa: E731
+    x, P, mu = _imm_kernel(np.ascontiguousarray(z, dtype=float),
+                           np.ones((n, K), bool) if valid is None else np.ascontiguousarray(valid, dtype=bool),
+                           np.ascontiguousarray(np.broadcast_to(np.asarray(x0, float), (n, d))),
+                           np.ascontiguousarray(P0, dtype=float), stack("F"), stack("Q"),
+                           np.ascontiguousarray(models[0].H, dtype=float), np.ascontiguousarray(models[0].R, dtype=float),
+                           log_cbar0, log_M)
+    return IMMResult(x=x, P=P, mu=mu)
+
+
+@numba.njit(cache=True, inline="always")
+def _logsumexp_into(a, out):
+    """log sum exp(a) of a (r,) vector, as NumPy computes it along an axis of r <= 8
+    (in index order): the maximum (NaN if any), 0 where it is not finite."""
+    top = a[0]
+    for j in range(1, a.shape[0]):
+        if not np.isnan(top) and (np.isnan(a[j]) or a[j] > top):
+            top = a[j]
+    if not np.isfinite(top):
+        top = 0.0
+    total = 0.0
+    for j in range(a.shape[0]):
+        total += np.exp(a[j] - top)
+    out[0] = top + np.log(total)
+
+
+@numba.njit(cache=True)
+def _mixture_into(weights, X, P, x, P_mix):
+    """One trial's Gaussian mixture (the sums in the order of the batched NumPy steps it replaced):
+    weights (r,), X (r, d), P (r, d, d) into x (d,), P_mix (d, d)."""
+    r, d = X.shape
+    x[:] = 0.0
+    P_mix[:, :] = 0.0
+    for j in range(r):
+        for a in range(d):
+            x[a] += weights[j] * X[j, a]
+    for j in range(r):
+        w = weights[j]
+        for a in range(d):
+            da = X[j, a] - x[a]
+            for b in range(a, d):
+                value = w * (0.5 * (P[j, a, b] + P[j, b, a]) + da * (X[j, b] - x[b]))
+                P_mix[a, b] += value
+                if b != a:
+                    P_mix[b, a] += value
+
+
+@numba.njit(cache=True)
+def _imm_kernel(z, valid, x0, P0, F, Q, H, R, log_cbar0, log_M):
+    """:func:`imm_filter` trial by trial and step by step, every mode's update and
+    prediction by :func:`models.kalman.update_one` / :func:`models.kalman.predict_one`;
+    F, Q (r, d, d) per mode. The same operations in the same order as the batched NumPy
+    steps it replaced (a per-step loop of a dozen calls was the fixed cost of a small
+    batch, issue 28), so the same bits. Returns x (n, K, d), P (n, K, d, d), mu (n, K, r)."""
+    n, K, m = z.shape
+    r, d = F.shape[0], F.shape[1]
+    xs, Ps, mus = np.empty((n, K, d)), np.empty((n, K, d, d)), np.empty((n, K, r))
+    X, P = np.empty((r, d)), np.empty((r, d, d))
+    X_upd, P_upd = np.empty((r, d)), np.empty((r, d, d))
+    nu, S, scratch = np.empty(m), np.empty((m, m)), update_scratch(d, m)
+    zero_u, FP = np.zeros(d), np.empty((d, d))
+    log_cbar, log_mu, mu, lse = np.empty(r), np.empty(r), np.empty(r), np.empty(1)
+    log_joint, omega, column = np.empty((r, r)), np.empty((r, r)), np.empty(r)
+    x_mix, P_mix = np.empty(d), np.empty((d, d))
+    for i in range(n):
+        for j in range(r):
+            X[j], P[j] = x0[i], P0
+        log_cbar[:] = log_cbar0
+        for k in range(K):
+            for j in range(r):                      # mode-matched updates; a missing step: predict only, Lambda = 1
+                if valid[i, k]:
+                    log_lik = update_one(X[j], P[j], z[i, k], H, R, X_upd[j], P_upd[j], nu, S, scratch)[1]
+                else:
+                    X_upd[j], P_upd[j], log_lik = X[j], P[j], 0.0
+                log_mu[j] = log_cbar[j] + log_lik
+            _logsumexp_into(log_mu, lse)
+            for j in range(r):
+                mu[j] = np.exp(log_mu[j] - lse[0])
+            _mixture_into(mu, X_upd, P_upd, xs[i, k], Ps[i, k])
+            mus[i, k] = mu
+            for a in range(r):                      # log M_ij mu_i
+                log_mu_a = np.log(mu[a])
+                for b in range(r):
+                    log_joint[a, b] = log_mu_a + log_M[a, b]
+            for b in range(r):
+                column[:] = log_joint[:, b]
+                _logsumexp_into(column, lse)
+                log_cbar[b] = lse[0]
+            for a in range(r):
+                for b in range(r):
+                    omega[a, b] = np.exp(log_joint[a, b] - log_cbar[b])
+            for j in range(r):                      # mixing, then each mode's prediction
+                column[:] = omega[:, j]
+                _mixture_into(column, X_upd, P_upd, x_mix, P_mix)
+                predict_one(x_mix, P_mix, F[j], Q[j], zero_u, X[j], P[j], FP)
+    return xs, Ps, mus
 
 
 def filterpy_imm(models: list[LinearGaussianModel], transition: np.ndarray, mu0: np.ndarray, z: np.ndarray,
