@@ -50,9 +50,7 @@ worker, N local workers and N Dask workers, to measure the executors' scaling.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import contextlib
-import multiprocessing
 import os
 import platform
 import resource
@@ -68,6 +66,7 @@ from radarbench.bench import capabilities, limits, registry
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.markdown import code, fmt, table
 from radarbench.bench.params import build_params
+from radarbench.bench.processes import call_in_fresh_process
 from radarbench.bench.rng import EVALUATION, TrialRNG, stable_key
 from radarbench.bench.tables import write_csv
 
@@ -231,10 +230,10 @@ def _in_fresh_process(job: Job | SceneJob) -> dict:
 
 
 def _spawned(fn, *args) -> dict:
-    """``fn(*args)`` in a fresh spawned process held to one core (:data:`ONE_CORE`)."""
-    ctx = multiprocessing.get_context("spawn")
-    with _environment(ONE_CORE), cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
-        return pool.submit(fn, *args).result()
+    """``fn(*args)`` in a fresh spawned process held to one core (:data:`ONE_CORE`;
+    :func:`bench.processes.call_in_fresh_process`)."""
+    with _environment(ONE_CORE):
+        return call_in_fresh_process(fn, *args)
 
 
 def machine_limits() -> dict:

@@ -2,7 +2,8 @@
 'Runner'): the forkserver that forks every local worker, warm (:mod:`bench._forkserver`
 preloaded), with SIGINT ignored, and that ends with the driver; the watch by which a
 worker exits when its driver dies; the pool of processes for the harness's own work
-(the report's figures); SIGINT and SIGTERM held back, restored or read as Ctrl-C.
+(the report's figures) and the fresh process of one call (``bench perf``'s measurements);
+SIGINT and SIGTERM held back, restored or read as Ctrl-C.
 :mod:`bench.executors` runs units on these processes.
 """
 
@@ -134,3 +135,46 @@ def process_pool(workers: int) -> concurrent.futures.ProcessPoolExecutor:
 
 def default_workers() -> int:
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+
+
+def call_in_fresh_process(fn: Callable, *args):
+    """``fn(*args)`` in a fresh spawned process (with this process's environment, so a
+    caller can hold it to one core), returned or raised here. The process exits when the
+    driver dies (:func:`_exit_with_driver`) and is killed when the call is interrupted
+    (Ctrl-C, SIGTERM): an interrupted ``bench perf`` ends at once and leaves no measurement
+    running (with a pool, the interrupt waited for the measurement in flight, minutes for
+    a peer tracker, and a killed driver left it running as an orphan)."""
+    ctx = multiprocessing.get_context("spawn")
+    receive, send = ctx.Pipe(duplex=False)
+    process = ctx.Process(target=_call_and_send, args=(send, fn, args), name="bench-fresh-process")
+    process.start()
+    send.close()
+    try:
+        try:
+            succeeded, value = receive.recv()
+        except EOFError:
+            process.join()
+            raise RuntimeError(f"the process running {getattr(fn, '__qualname__', fn)} died "
+                               f"(exit status {process.exitcode})") from None
+    finally:
+        if process.is_alive():
+            process.kill()
+        process.join()
+        receive.close()
+    if not succeeded:
+        raise value
+    return value
+
+
+def _call_and_send(send, fn: Callable, args: tuple) -> None:
+    _exit_with_driver()
+    try:
+        outcome = (True, fn(*args))
+    except BaseException as exc:        # noqa: BLE001 - raised again in the caller
+        outcome = (False, exc)
+    try:
+        send.send(outcome)
+    except Exception as exc:            # noqa: BLE001 - an unpicklable result or exception
+        send.send((False, RuntimeError(f"{getattr(fn, '__qualname__', fn)}: {outcome[1]!r} "
+                                       f"could not be sent back ({exc})")))
+    send.close()

@@ -189,3 +189,69 @@ def test_the_report_pools_processes_end_with_a_killed_driver(tmp_path):
     for p in alive:
         os.kill(p, 9)
     assert not alive
+
+
+FRESH_THEN_STOP = """
+import os, sys, time
+from radarbench.bench.processes import call_in_fresh_process
+
+def sleep_forever(pids_file):
+    with open(pids_file, "w") as f:
+        f.write(str(os.getpid()))
+    time.sleep(600)
+
+if __name__ == "__main__":
+    if sys.argv[1] == "kill":              # the driver killed while its call runs
+        import threading
+        def kill_when_started():
+            while not os.path.exists(os.environ["PIDS_FILE"]):
+                time.sleep(0.05)
+            os.kill(os.getpid(), 9)
+        threading.Thread(target=kill_when_started, daemon=True).start()
+    else:                                  # Ctrl-C while the call runs
+        import signal, threading
+        def interrupt_when_started():
+            while not os.path.exists(os.environ["PIDS_FILE"]):
+                time.sleep(0.05)
+            os.kill(os.getpid(), signal.SIGINT)
+        threading.Thread(target=interrupt_when_started, daemon=True).start()
+    call_in_fresh_process(sleep_forever, os.environ["PIDS_FILE"])
+"""
+
+
+@pytest.mark.parametrize("stop, returncode", [("kill", -9), ("interrupt", -2)])   # -2: an uncaught Ctrl-C
+def test_a_fresh_process_call_ends_with_its_interrupted_or_killed_driver(tmp_path, stop, returncode):
+    """bench.processes.call_in_fresh_process (bench perf's measurements): Ctrl-C ends the
+    call at once and a driver killed with SIGKILL leaves no process behind (with the pool
+    it replaced, the interrupt waited for the call to end and SIGKILL left it running)."""
+    import subprocess
+    import time
+
+    script, pids_file = tmp_path / "fresh_then_stop.py", tmp_path / "pid"
+    script.write_text(FRESH_THEN_STOP)
+    proc = subprocess.run([sys.executable, str(script), stop], env={**os.environ, "PIDS_FILE": str(pids_file)},
+                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, timeout=120)
+    assert proc.returncode == returncode
+    if stop == "interrupt":
+        assert "KeyboardInterrupt" in proc.stderr
+    pid = int(pids_file.read_text())
+    deadline = time.monotonic() + 30
+    while os.path.exists(f"/proc/{pid}") and time.monotonic() < deadline:
+        time.sleep(0.1)
+    alive = os.path.exists(f"/proc/{pid}")
+    if alive:
+        os.kill(pid, 9)
+    assert not alive
+
+
+def _exit_at_once():
+    os._exit(7)
+
+
+def test_a_fresh_process_call_returns_raises_or_says_it_died():
+    from radarbench.bench.processes import call_in_fresh_process
+    assert call_in_fresh_process(max, 3, 11) == 11
+    with pytest.raises(ValueError, match="invalid literal"):
+        call_in_fresh_process(int, "eleven")
+    with pytest.raises(RuntimeError, match=r"_exit_at_once died \(exit status 7\)"):
+        call_in_fresh_process(_exit_at_once)
