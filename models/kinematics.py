@@ -36,6 +36,7 @@ the AR-model patent cites), sec. 4 (Singer, current statistical model):
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from functools import cached_property
@@ -84,6 +85,14 @@ def ca(dt: float, sigma_j: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def singer(dt: float, alpha: float, sigma_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_singer`, computed once per (dt, alpha, sigma_m) (a tracker builds its model
+    on every call: the matrix exponential was a third of a small batch's time, issue 28);
+    the arrays are read-only."""
+    return _singer(float(dt), float(alpha), float(sigma_m))
+
+
+@functools.lru_cache(maxsize=64)
+def _singer(dt: float, alpha: float, sigma_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Per-axis (F, Q) of the Singer model with maneuver time constant 1/alpha (s)
     and acceleration std sigma_m (m/s^2). For alpha T <= 1 by Van Loan's method: with
     A = [[0, 1, 0], [0, 0, 1], [0, 0, -alpha]], L = [0, 0, 1]', q = 2 alpha sigma_m^2,
@@ -91,8 +100,13 @@ def singer(dt: float, alpha: float, sigma_m: float) -> tuple[np.ndarray, np.ndar
     Q = F M12 (exact, without the cancellations of the closed form at small alpha T);
     beyond, where the block expm(-A T) grows as e^{alpha T}, by Singer's closed form
     (:func:`_singer_closed_form`)."""
-    if alpha * dt > 1.0:
-        return _singer_closed_form(dt, alpha, sigma_m)
+    F, Q = _singer_closed_form(dt, alpha, sigma_m) if alpha * dt > 1.0 else _singer_van_loan(dt, alpha, sigma_m)
+    F.flags.writeable = Q.flags.writeable = False
+    return F, Q
+
+
+def _singer_van_loan(dt: float, alpha: float, sigma_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_singer` by Van Loan's method."""
     A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -alpha]])
     LqL = np.zeros((3, 3))
     LqL[2, 2] = 2.0 * alpha * sigma_m ** 2
