@@ -39,7 +39,8 @@ from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.processes import STOP_SIGNALS, _signals_deferred, _start_forkserver, LOCAL_PRELOAD, _exit_with_driver
+from radarbench.bench.processes import LOCAL_PRELOAD, STOP_SIGNALS, _exit_with_driver, _signals_deferred, _start_forkserver
+
 
 class UnitFailure:
     """A task that produced no result, and why (one line)."""

@@ -148,8 +148,8 @@ def call_in_fresh_process(fn: Callable, *args):
     receive, send = ctx.Pipe(duplex=False)
     process = ctx.Process(target=_call_and_send, args=(send, fn, args), name="bench-fresh-process")
     process.start()
-    send.close()
     try:
+        send.close()                    # the child's end: its death is then an EOF here
         try:
             succeeded, value = receive.recv()
         except EOFError:

@@ -46,9 +46,8 @@ def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
         return np.squeeze(top, axis) + np.log(np.sum(np.exp(a - top), axis=axis))
 
 
-
 def stepwise_imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: np.ndarray, z: np.ndarray,
-               x0: np.ndarray, P0: np.ndarray, valid: np.ndarray | None = None) -> IMMResult:
+                        x0: np.ndarray, P0: np.ndarray, valid: np.ndarray | None = None) -> IMMResult:
     """The IMM as the batched NumPy steps it was before its compiled kernel (issue 28)."""
     n, K, _ = z.shape
     r, d = len(models), models[0].dim_x

@@ -156,6 +156,19 @@ def test_an_unreachable_scheduler_is_one_line(write_sweep, tmp_path, monkeypatch
     assert code == 2 and err.count("\n") == 1 and "--scheduler: cannot connect to tcp://127.0.0.1:9" in err, err
 
 
+def _still_running_after(pids: list[int], seconds: float) -> list[int]:
+    """The processes of ``pids`` still running once they have all ended or ``seconds`` have
+    passed (a bound on a wait for an exit, not a timing); those are then killed."""
+    import time
+    deadline = time.monotonic() + seconds
+    while any(os.path.exists(f"/proc/{p}") for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    alive = [p for p in pids if os.path.exists(f"/proc/{p}")]
+    for p in alive:
+        os.kill(p, 9)
+    return alive
+
+
 POOL_THEN_KILL = """
 import os, time
 from radarbench.bench.processes import process_pool
@@ -173,7 +186,6 @@ def test_the_report_pools_processes_end_with_a_killed_driver(tmp_path):
     """bench.processes.process_pool (the report's figures): a driver killed with SIGKILL
     leaves none of its processes behind (they were orphans before)."""
     import subprocess
-    import time
 
     script, pids_file = tmp_path / "pool_then_kill.py", tmp_path / "pids"
     script.write_text(POOL_THEN_KILL)
@@ -182,13 +194,7 @@ def test_the_report_pools_processes_end_with_a_killed_driver(tmp_path):
     assert proc.returncode == -9
     pids = [int(p) for p in pids_file.read_text().split()]
     assert len(pids) == 2
-    deadline = time.monotonic() + 30
-    while any(os.path.exists(f"/proc/{p}") for p in pids) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    alive = [p for p in pids if os.path.exists(f"/proc/{p}")]
-    for p in alive:
-        os.kill(p, 9)
-    assert not alive
+    assert _still_running_after(pids, 30.0) == []
 
 
 FRESH_THEN_STOP = """
@@ -200,21 +206,15 @@ def sleep_forever(pids_file):
         f.write(str(os.getpid()))
     time.sleep(600)
 
+def stop_driver_when_started(signum):
+    while not os.path.exists(os.environ["PIDS_FILE"]):
+        time.sleep(0.05)
+    os.kill(os.getpid(), signum)
+
 if __name__ == "__main__":
-    if sys.argv[1] == "kill":              # the driver killed while its call runs
-        import threading
-        def kill_when_started():
-            while not os.path.exists(os.environ["PIDS_FILE"]):
-                time.sleep(0.05)
-            os.kill(os.getpid(), 9)
-        threading.Thread(target=kill_when_started, daemon=True).start()
-    else:                                  # Ctrl-C while the call runs
-        import signal, threading
-        def interrupt_when_started():
-            while not os.path.exists(os.environ["PIDS_FILE"]):
-                time.sleep(0.05)
-            os.kill(os.getpid(), signal.SIGINT)
-        threading.Thread(target=interrupt_when_started, daemon=True).start()
+    import signal, threading
+    signum = signal.SIGKILL if sys.argv[1] == "kill" else signal.SIGINT     # killed, or Ctrl-C
+    threading.Thread(target=stop_driver_when_started, args=(signum,), daemon=True).start()
     call_in_fresh_process(sleep_forever, os.environ["PIDS_FILE"])
 """
 
@@ -225,7 +225,6 @@ def test_a_fresh_process_call_ends_with_its_interrupted_or_killed_driver(tmp_pat
     call at once and a driver killed with SIGKILL leaves no process behind (with the pool
     it replaced, the interrupt waited for the call to end and SIGKILL left it running)."""
     import subprocess
-    import time
 
     script, pids_file = tmp_path / "fresh_then_stop.py", tmp_path / "pid"
     script.write_text(FRESH_THEN_STOP)
@@ -234,14 +233,7 @@ def test_a_fresh_process_call_ends_with_its_interrupted_or_killed_driver(tmp_pat
     assert proc.returncode == returncode
     if stop == "interrupt":
         assert "KeyboardInterrupt" in proc.stderr
-    pid = int(pids_file.read_text())
-    deadline = time.monotonic() + 30
-    while os.path.exists(f"/proc/{pid}") and time.monotonic() < deadline:
-        time.sleep(0.1)
-    alive = os.path.exists(f"/proc/{pid}")
-    if alive:
-        os.kill(pid, 9)
-    assert not alive
+    assert _still_running_after([int(pids_file.read_text())], 30.0) == []
 
 
 def _exit_at_once():
