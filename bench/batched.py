@@ -15,6 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 __all__ = ["inner", "matmul", "matvec"]
 
 

@@ -55,6 +55,10 @@ from scipy import stats
 
 from radarbench.bench.metrics import binomial_interval, clustered_rate_interval
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 #: the default chance Pd (fraction of null trials with an alarm in the detection
 #: window) that every detector is calibrated to for ``pd_equal_chance``
 EQUAL_CHANCE_PD = 0.05

@@ -280,6 +280,11 @@ class Scenario(Component):
 
     #: tasks whose methods can run on this scenario
     tasks: ClassVar[tuple[str, ...]] = ()
+    #: the parameters that key the random streams whatever their value; any other keys them
+    #: only when set away from its default, so a parameter added at its default changes no
+    #: number. A scenario lists here the parameters its streams were first keyed by; None:
+    #: every parameter only when set (docs/architecture.md, 'Random streams')
+    stream_params: ClassVar[tuple[str, ...] | None] = None
     #: parameters of a small instance (conformance tests, quick looks); empty: the defaults
     small_params: ClassVar[dict[str, Any]] = {}
     #: ``bench perf`` sizes: size name -> (scenario params, trials)

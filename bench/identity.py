@@ -1,32 +1,46 @@
-"""What produced a stored result: each config's code, data files and numeric libraries
+"""What produced a stored result: each config's code, data files and libraries
 (docs/architecture.md, 'Identities').
 
 A config's **identity** is a short hash of
 
-* its plugin's **code**: the source of the plugin's module and of every module it
-  imports, transitively, from its own code — for a plugin beside the harness (the
-  built-ins: ``methods/tbd/dp_tbd.py`` with the ``models/`` and ``methods/tbd/`` modules it
-  imports) the modules under the same folder of ``sys.path``, installed packages left out;
-  for a plugin installed from a distribution, the modules of that distribution's packages,
-  and its name and version; the harness itself (``bench/``) left out of both;
+* its **code**: the content of every module that computes its numbers — the plugin's
+  module and, transitively, every module it loads (``import`` and ``from`` statements
+  anywhere in a module, and ``importlib.import_module``/``__import__`` of a literal name),
+  plus, for a method config, its task's module and the calibration; for a scenario
+  config, its tasks' modules and the random streams (:mod:`bench.rng`). A plugin outside
+  this package brings its whole top-level package (a registry that loads modules by a
+  computed name is covered too). A module's content is its code with comments,
+  docstrings, formatting and the module paths of its imports left out (an
+  :func:`ast.dump`), or the file's bytes for a module without source (``.pyc``, an
+  extension), so a comment, a docstring, a move or a rename changes no identity. Names
+  are left out of the hash altogether: the code identity is the set of those contents,
+  closed over the import graph (any edit of executed code reaches it; a move cannot).
+* the harness's own modules only where they compute stored numbers: a harness module
+  declares it with ``COMPUTES_RESULTS = True`` (the batched arithmetic, the tasks and
+  their per-trial metrics, the calibration, the streams); the rest of ``bench/``
+  (orchestration, report, command line) is in no identity and is never followed;
+* the **libraries** it loads (any installed distribution other than its own, the
+  Python standard library left out), by name and version, and always :data:`LIBRARIES`;
 * the content of the **data files** it reads (:meth:`bench.core.Component.data_files`:
-  by default the values of its ``kind="path"`` parameters);
-* the versions of the numeric libraries (:data:`LIBRARIES`).
+  by default the values of its ``kind="path"`` parameters), by content only.
 
-The driver computes the identities once per run (sources are scanned for their
-imports, never imported again); the store stamps each unit with its scenario config's
-identity and each (unit, method config) run with its method config's
-(:mod:`bench.store`), and a run re-computes exactly the results whose identity changed.
+The driver computes the identities once per run from the modules' files (parsed, never
+executed again; each file parsed once per process while unchanged); the store stamps
+each unit with its scenario config's identity and each (unit, method config) run with its
+method config's (:mod:`bench.store`), and a run re-computes exactly the results whose
+identity changed.
 """
 
 from __future__ import annotations
 
+import ast
 import functools
 import hashlib
+import importlib.machinery
 import importlib.metadata
 import importlib.util
 import json
-import re
+import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,8 +49,16 @@ from pathlib import Path
 LIBRARIES = ("numpy", "scipy", "numba")
 #: hex digits of a shown identity
 SHORT = 12
+#: how identities are computed; a store stamped by an earlier scheme is re-run once
+SCHEME = 2
+#: a harness module that computes stored numbers says so with this name bound to True
+MARKER = "COMPUTES_RESULTS"
+
+_PACKAGE = __name__.split(".")[0]
+_PACKAGE_DIR = Path(sys.modules[_PACKAGE].__file__).resolve().parent
 _HARNESS = Path(__file__).resolve().parent
 _INSTALLED = {"site-packages", "dist-packages"}
+_MODULE_SUFFIXES = (".py", ".pyc", *importlib.machinery.EXTENSION_SUFFIXES)
 
 
 def digest(data: bytes) -> str:
@@ -63,64 +85,192 @@ def library_versions() -> dict[str, str]:
     return out
 
 
+# --- one module: its content and what it loads -------------------------------------------
+
+class _Content(ast.NodeTransformer):
+    """What of a module's syntax tree is executed code: docstrings dropped, and the module
+    paths of imports (``from radarbench.models.kalman import KalmanFilter``, ``import a.b
+    as c``) blanked, so a module moved or renamed leaves its importers' content as it was."""
+
+    def _body(self, node):
+        self.generic_visit(node)
+        body = node.body
+        if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
+                and isinstance(body[0].value.value, str):
+            node.body = body[1:]         # a dump, never compiled: an empty body is fine
+        return node
+
+    visit_Module = visit_ClassDef = visit_FunctionDef = visit_AsyncFunctionDef = _body
+
+    def visit_ImportFrom(self, node):
+        node.module, node.level = None, 0
+        return node
+
+    def visit_Import(self, node):
+        for alias in node.names:
+            if alias.asname:
+                alias.name = ""
+        return node
+
+
+_IMPORTERS = {"import_module", "__import__"}
+
+
+def _loaded_names(tree: ast.Module, module: str, is_package: bool) -> set[str]:
+    """Absolute dotted names a module's code may load, wherever the statement stands
+    (``from a.b import c``: ``a.b`` and ``a.b.c``, since ``c`` may be a module; relative
+    imports resolved; ``importlib.import_module("x")`` and ``__import__("x")``)."""
+    package = module if is_package else module.rpartition(".")[0]
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                parent = ".".join(parts[:len(parts) - node.level + 1])
+                base = f"{parent}.{base}" if base else parent
+            names.add(base)
+            names.update(f"{base}.{alias.name}" for alias in node.names if alias.name != "*")
+        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant) \
+                and isinstance(node.args[0].value, str) \
+                and getattr(node.func, "attr", getattr(node.func, "id", None)) in _IMPORTERS:
+            names.add(node.args[0].value.lstrip("."))
+    names.discard("")
+    return names
+
+
+def _with_parents(names) -> set[str]:
+    """``a.b.c`` -> ``a``, ``a.b``, ``a.b.c``: importing a module runs its packages' ``__init__.py``."""
+    return {".".join(n.split(".")[:i]) for n in names for i in range(1, n.count(".") + 2)}
+
+
+def imported_names(source: str | bytes, module: str, is_package: bool = False) -> set[str]:
+    """Absolute dotted names the source of ``module`` imports (see :func:`_loaded_names`)."""
+    return _loaded_names(ast.parse(source), module, is_package)
+
+
+def _marked(tree: ast.Module) -> bool:
+    """Whether the module binds :data:`MARKER` to True at its top level."""
+    return any(isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant) and node.value.value is True
+               and any(isinstance(t, ast.Name) and t.id == MARKER for t in node.targets) for node in tree.body)
+
+
+@dataclass(frozen=True)
+class Module:
+    """One module file as the identity sees it."""
+
+    content: str                # hash of its executed code (or of its bytes, without source)
+    loads: frozenset[str]       # absolute dotted names it may load
+    marked: bool                # binds COMPUTES_RESULTS = True
+
+
+def read_module(name: str, file: Path) -> Module:
+    """The module ``name`` in ``file``; parsed again only when the file changed (an edit
+    between two runs of one process is seen)."""
+    st = file.stat()
+    return _parse_module(name, file, st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=4096)
+def _parse_module(name: str, file: Path, _mtime_ns: int, _size: int) -> Module:
+    data = file.read_bytes()
+    key = hashlib.sha256(b"%s\0%s\0" % (name.encode(), file.name.encode()) + data).hexdigest()
+    known = _parsed().get(key)
+    if known is None:
+        known = _parsed()[key] = _content_of(name, file, data)
+        _parsed.new = True
+    content, loads, marked = known
+    return Module(content, frozenset(loads), marked)
+
+
+def _content_of(name: str, file: Path, data: bytes) -> tuple[str, list[str], bool]:
+    """(content hash, names it loads, marked) of a module file's bytes (see :class:`Module`)."""
+    if file.suffix != ".py":                                   # no source: its bytes
+        payload = data[16:] if file.suffix == ".pyc" else data  # a .pyc's header holds a timestamp
+        return digest(payload), [], False
+    try:
+        tree = ast.parse(data, filename=str(file))
+    except (SyntaxError, ValueError):                          # not ours to judge: its bytes
+        return digest(data), [], False
+    names = _loaded_names(tree, name, file.name == "__init__.py")
+    loads = sorted(_with_parents(names))
+    marked = _marked(tree)
+    content = ast.dump(_Content().visit(tree), annotate_fields=False, include_attributes=False)
+    return digest(content.encode()), loads, marked
+
+
+#: how many parsed modules the user's cache keeps (a module's entry is about 1 kB)
+CACHED_MODULES = 4096
+
+
+def _cache_file() -> Path | None:
+    """Where parsed modules are kept between runs (parsing is most of an identity's cost):
+    the user's cache folder of bench, when it is private (:func:`bench.listing.private_dir`)."""
+    from radarbench.bench import listing
+    folder = listing.cache_dir()
+    return folder / f"identity-modules-{SCHEME}.json" if listing.private_dir(folder) else None
+
+
+@functools.lru_cache(maxsize=1)
+def _parsed() -> dict[str, tuple[str, list[str], bool]]:
+    """Parsed modules by the hash of their name and bytes: the user's cache, read once."""
+    from radarbench.bench import listing
+    path = _cache_file()
+    text = listing.read_cached(path) if path is not None else None
+    try:
+        entries = json.loads(text) if text else {}
+    except ValueError:
+        entries = {}
+    return entries if isinstance(entries, dict) else {}
+
+
+_parsed.new = False
+
+
+def save_parsed() -> None:
+    """Keep this process's parsed modules in the user's cache (the newest
+    :data:`CACHED_MODULES`); a cache that cannot be written costs only speed."""
+    from radarbench.bench import listing
+    path = _cache_file()
+    if not _parsed.new or path is None:
+        return
+    entries = dict(list(_parsed().items())[-CACHED_MODULES:])
+    try:
+        listing.write_cached(path, json.dumps(entries))
+    except OSError:
+        return
+    _parsed.new = False
+
+
+# --- where a module lives: ours, the harness, a library, the standard library -------------
+
 @functools.lru_cache(maxsize=None)
-def _module_file(name: str) -> Path | None:
-    """The source file of module ``name`` (imported or not), None if it has none."""
+def module_file(name: str) -> Path | None:
+    """The file of module ``name`` (imported or not): its source, or its ``.pyc`` or
+    extension when it has none; None for a name that is no module with a file (a
+    built-in, a namespace package, an attribute such as ``a.b.Name``)."""
     module = sys.modules.get(name)
     origin = getattr(module, "__file__", None) if module is not None else None
-    if origin is None:
+    if origin is None and module is None:
         try:
             spec = importlib.util.find_spec(name)
         except Exception:       # noqa: BLE001 - finding "a.b.c" imports a.b, which may fail (a plugin's
             return None         # missing extra raises PluginError): c is then a name in it, not a module
-        origin = spec.origin if spec is not None else None
-    return Path(origin).resolve() if origin and origin.endswith(".py") else None
+        origin = spec.origin if spec is not None and spec.has_location else None
+    if not origin or not origin.endswith(_MODULE_SUFFIXES):
+        return None
+    return Path(origin).resolve()
 
 
-_IMPORT = re.compile(r"^[ \t]*import[ \t]+([\w. \t,]+)", re.M)
-_FROM = re.compile(r"^[ \t]*from[ \t]+(\.*)([\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n#;]*)", re.M)
+def _installed(path: Path) -> bool:
+    return bool(_INSTALLED & set(path.parts))
 
 
-def _names(clause: str) -> list[str]:
-    """``a as b, c`` (parenthesised, commented, over several lines) -> ["a", "c"]."""
-    clause = re.sub(r"#[^\n]*", "", clause).strip("() \t\n")
-    return [part.split()[0] for part in clause.split(",") if part.split() and part.split()[0] != "*"]
-
-
-def imported_names(source: str | bytes, module: str, is_package: bool = False) -> set[str]:
-    """Absolute dotted names the source of ``module`` imports, at any indentation
-    (``from a.b import c``: ``a.b`` and ``a.b.c``, since ``c`` may be a module; relative
-    imports resolved). Statements are found line by line, not parsed: ten times faster
-    than :mod:`ast` (a run computes every plugin's identity), and a docstring line that
-    reads like an import at worst widens an identity."""
-    text = source.decode("utf-8", "replace") if isinstance(source, bytes) else source
-    text = text.replace("\\\n", " ")
-    package = module if is_package else module.rpartition(".")[0]
-    names = {name for match in _IMPORT.finditer(text) for name in _names(match.group(1))}
-    for dots, base, clause in _FROM.findall(text):
-        if dots:
-            parts = package.split(".")
-            parent = ".".join(parts[:len(parts) - len(dots) + 1])
-            base = f"{parent}.{base}" if base else parent
-        names.add(base)
-        names.update(f"{base}.{name}" for name in _names(clause))
-    return names
-
-
-@dataclass(frozen=True)
-class Scope:
-    """Which modules are a plugin's own code: under ``root`` (not the harness, not an
-    installed package), or the packages of its distribution."""
-
-    root: Path | None
-    packages: frozenset[str] = frozenset()
-
-    def owns(self, name: str, path: Path) -> bool:
-        if path.is_relative_to(_HARNESS):
-            return False
-        if self.packages:
-            return name.split(".")[0] in self.packages
-        return self.root is not None and path.is_relative_to(self.root) and not _INSTALLED & set(path.parts)
+def _is_harness(path: Path) -> bool:
+    """The harness's own files: ``bench/`` and the package's top files (``radarbench/__init__.py``)."""
+    return path.is_relative_to(_HARNESS) or path.parent == _PACKAGE_DIR
 
 
 @functools.lru_cache(maxsize=1)
@@ -129,104 +279,159 @@ def _package_owners() -> dict[str, list[str]]:
     return importlib.metadata.packages_distributions()
 
 
-def _distribution(top: str, path: Path) -> tuple[str, frozenset[str]]:
-    """("name version", its top-level packages) of the installed distribution holding
-    package ``top`` at ``path``; ("", {}) for code that is not installed (a checkout)."""
-    if not _INSTALLED & set(path.parts):
-        return "", frozenset()
-    owners = _package_owners()
-    for name in owners.get(top) or []:
+@functools.lru_cache(maxsize=None)
+def distribution_of(top: str) -> str:
+    """"name version" of the installed distribution of top-level package ``top``, "" for none."""
+    for name in _package_owners().get(top) or []:
         try:
             dist = importlib.metadata.distribution(name)
         except importlib.metadata.PackageNotFoundError:
             continue
-        tops = frozenset(t for t, ds in owners.items() if name in ds)
-        return f"{dist.metadata['Name']} {dist.version}", tops or frozenset({top})
-    return "", frozenset({top})
-
-
-def _read_module(name: str, file: Path) -> tuple[str, frozenset[str]]:
-    """(source hash, the modules it may import) of module ``name``; scanned again only
-    when the file changed (an edit between two runs of one process is seen)."""
-    st = file.stat()
-    return _scan_module(name, file, st.st_mtime_ns, st.st_size)
+        return f"{dist.metadata['Name']} {dist.version}"
+    return ""
 
 
 @functools.lru_cache(maxsize=None)
-def _scan_module(name: str, file: Path, _mtime_ns: int, _size: int) -> tuple[str, frozenset[str]]:
-    data = file.read_bytes()
-    imported = imported_names(data, name, file.name == "__init__.py")
-    # importing a.b.c runs a/__init__.py and a/b/__init__.py too
-    return digest(data), frozenset(".".join(n.split(".")[:i]) for n in imported if n for i in range(1, n.count(".") + 2))
+def _own_tops(top: str, path: Path) -> frozenset[str]:
+    """The top-level packages that are one plugin's own code: its distribution's, when it
+    is installed, else its own."""
+    if top == _PACKAGE or not _installed(path):
+        return frozenset({top})
+    names = set(_package_owners().get(top) or [])
+    return frozenset({t for t, ds in _package_owners().items() if names & set(ds)} | {top})
 
 
-def _search_folder(module: str, path: Path) -> Path:
-    """The folder of sys.path the plugin's top-level package (or module) lives in, found from
-    the top-level package's own file: a package may hold folders that are not in it (in a
-    checkout, radarbench's subpackages are the folders beside it; radarbench/__init__.py)."""
-    top = module.split(".")[0]
-    top_file = path if top == module else _module_file(top)
-    if top_file is None:                      # a namespace package: no file of its own
-        return path.parents[module.count(".") + (path.name == "__init__.py")]
-    return top_file.parents[1] if top_file.name == "__init__.py" else top_file.parent
+def _package_files(top: str) -> list[tuple[str, Path]]:
+    """(name, file) of every module file under the folder(s) of top-level package ``top``."""
+    package = sys.modules.get(top)
+    folders = list(getattr(package, "__path__", []) or [])
+    out = []
+    for folder in map(Path, folders):
+        for path in sorted(folder.rglob("*")):
+            if "__pycache__" in path.parts or not path.name.endswith(_MODULE_SUFFIXES) or not path.is_file():
+                continue
+            parts = path.relative_to(folder).with_suffix("").parts
+            stem = parts[-1].split(".")[0]                     # an extension's name.cpython-311-x86_64...
+            parts = parts[:-1] if stem == "__init__" else (*parts[:-1], stem)
+            out.append((".".join((top, *parts)), path.resolve()))
+    return out
 
+
+# --- a config's code: the closure over what it loads --------------------------------------
 
 @dataclass(frozen=True)
 class CodeIdentity:
     hash: str
     distribution: str                        # "name version" of an installed plugin, else ""
-    modules: tuple[tuple[str, str], ...]     # (module, its source hash), sorted
+    modules: tuple[tuple[str, str], ...]     # (module, its content hash), sorted: a description
+    libraries: tuple[tuple[str, str], ...] = ()   # (distribution, version) it loads, sorted
 
 
-def code_identity(module: str) -> CodeIdentity:
-    """The code identity of a plugin whose class lives in ``module`` (see the module doc)."""
-    path = _module_file(module)
-    if path is None:
-        return CodeIdentity("unknown", "", ())
-    top = module.split(".")[0]
-    dist, packages = _distribution(top, path)
-    scope = Scope(_search_folder(module, path), packages)
-    sources: dict[str, str] = {}
-    todo = [(module, path)]
+def code_identity(*roots: str) -> CodeIdentity:
+    """The code identity of the modules ``roots`` (the first: the plugin's) and all they
+    load (see the module doc)."""
+    first = module_file(roots[0])
+    if first is None:
+        raise LookupError(f"module {roots[0]!r} has no file: its code cannot be identified")
+    top = roots[0].split(".")[0]
+    own = _own_tops(top, first)
+    libraries = dict(library_versions())
+    modules = _closure([(name, None) for name in _with_parents(roots)], own, libraries)
+    if top != _PACKAGE:
+        modules.update(_closure(_unreached(own), own, libraries))
+    contents = sorted(set(modules.values()))
+    hashed = digest(json.dumps([contents, sorted(libraries.items())]).encode())
+    return CodeIdentity(hashed, distribution_of(top) if top != _PACKAGE else "", tuple(sorted(modules.items())),
+                        tuple(sorted(libraries.items())))
+
+
+def _closure(todo: list[tuple[str, Path | None]], own: frozenset[str], libraries: dict[str, str]) -> dict[str, str]:
+    """Module -> content of the modules ``todo`` ((name, file or None to find it)) and all
+    they load, within a plugin's code (``own`` top-level packages, this package, code that
+    is not installed); the libraries met are added to ``libraries`` (name -> version)."""
+    modules: dict[str, str] = {}
+    seen: set[str] = set()
     while todo:
-        name, file = todo.pop()
-        if name in sources:
+        name, path = todo.pop()
+        if name in seen:
             continue
-        sources[name], imported = _read_module(name, file)
-        for other in imported - set(sources):
-            top_file = _module_file(other.split(".")[0])       # never resolve inside a library
-            if top_file is None or not scope.owns(other.split(".")[0], top_file):
-                continue
-            other_file = _module_file(other)
-            if other_file is not None and scope.owns(other, other_file):
-                todo.append((other, other_file))
-    modules = tuple(sorted(sources.items()))
-    return CodeIdentity(digest(json.dumps([dist, modules]).encode()), dist, modules)
+        seen.add(name)
+        t = name.split(".")[0]
+        if t in sys.stdlib_module_names:
+            continue
+        top_file = module_file(t)
+        if top_file is not None and _installed(top_file) and t not in own and t != _PACKAGE:
+            version = distribution_of(t)               # a library: its version, never its files
+            if version:
+                dist, _, number = version.rpartition(" ")
+                libraries[dist] = number
+            continue
+        path = path or module_file(name)
+        if path is None:
+            continue
+        module = read_module(name, path)
+        if _is_harness(path) and not module.marked:
+            continue
+        modules[name] = module.content
+        todo += [(other, None) for other in sorted(module.loads - seen)]
+    return modules
+
+
+def _unreached(own: frozenset[str]) -> list[tuple[str, Path]]:
+    """The modules of a plugin's packages that none of its registered classes reaches by
+    its imports: what may be loaded by a computed name (a registry of its own, a
+    ``importlib.import_module(f"...")``), hence part of every identity of that plugin."""
+    from radarbench.bench import registry
+    classes = [*registry.methods().values(), *registry.scenarios().values(),
+               *(type(task) for task in registry.tasks().values())]
+    reached: set[str] = set()
+    for cls in classes:
+        if cls.__module__.split(".")[0] in own:
+            reached |= set(_closure([(name, None) for name in _with_parents([cls.__module__])], own, {}))
+    return [(name, path) for t in sorted(own) for name, path in _package_files(t) if name not in reached]
 
 
 def config_identity(cls: type, params, code: CodeIdentity | None = None) -> dict:
     """The identity of one config of plugin ``cls`` with ``params``: ``identity`` (the
-    short hash), ``code``, ``distribution``, ``modules`` and ``data`` (file -> hash)."""
-    code = code or code_identity(cls.__module__)
+    short hash), ``code``, ``distribution``, ``modules``, ``data`` (file -> hash) and
+    ``versions`` (library -> version)."""
+    code = code or code_identity(*identity_roots(cls))
     data = {str(p): file_digest(p) for p in cls().data_files(params)}
-    versions = dict(library_versions())
-    whole = json.dumps([code.hash, data, versions], sort_keys=True).encode()
+    versions = dict(code.libraries)
+    whole = json.dumps([code.hash, sorted(data.values())]).encode()
     return {"identity": digest(whole), "code": code.hash, "distribution": code.distribution,
             "modules": dict(code.modules), "data": data, "versions": versions}
+
+
+def identity_roots(cls: type) -> tuple[str, ...]:
+    """The modules whose code computes a config of ``cls``'s stored numbers: its own, and
+    for a method its task's and the calibration's; for a scenario its tasks' and the
+    random streams'."""
+    from radarbench.bench import calibration, registry, rng
+    from radarbench.bench.core import Method
+
+    if isinstance(cls, type) and issubclass(cls, Method):
+        tasks, harness = (cls.task,), calibration
+    else:
+        tasks, harness = tuple(getattr(cls, "tasks", ())), rng
+    return (cls.__module__, *(type(registry.get_task(t)).__module__ for t in tasks), harness.__name__)
 
 
 def plan_identities(plan) -> dict[str, dict[str, dict]]:
     """``{"scenarios": {label: identity}, "methods": {label: identity}}`` of a plan's configs."""
     from radarbench.bench import registry
-    codes: dict[str, CodeIdentity] = {}
+    codes: dict[tuple[str, ...], CodeIdentity] = {}
 
     def of(cls: type, params) -> dict:
-        if cls.__module__ not in codes:
-            codes[cls.__module__] = code_identity(cls.__module__)
-        return config_identity(cls, params, codes[cls.__module__])
+        roots = identity_roots(cls)
+        if roots not in codes:
+            codes[roots] = code_identity(*roots)
+        return config_identity(cls, params, codes[roots])
 
-    return {"scenarios": {sc.label: of(registry.get_scenario(sc.name), sc.params) for sc in plan.scenarios},
-            "methods": {m.label: of(registry.get_method(m.name), m.params) for m in plan.methods}}
+    identities = {"scenarios": {sc.label: of(registry.get_scenario(sc.name), sc.params) for sc in plan.scenarios},
+                  "methods": {m.label: of(registry.get_method(m.name), m.params) for m in plan.methods}}
+    save_parsed()
+    return identities
 
 
 #: where a run folder keeps the results its last run replaced (a store of its own)
@@ -256,7 +461,9 @@ def set_aside_changed(store, plan, out_dir: Path, quiet: bool = False) -> dict[s
     from radarbench.bench import runfolder
     from radarbench.bench.store import Store
 
+    earlier_scheme = store.meta("identity_scheme") != str(SCHEME)
     store.use_identities(plan_identities(plan))
+    store.set_meta("identity_scheme", str(SCHEME))
     units, runs = store.stale()
     if not units and not runs:
         return {}
@@ -271,18 +478,23 @@ def set_aside_changed(store, plan, out_dir: Path, quiet: bool = False) -> dict[s
         previous.close()
     store.set_meta("replaced", json.dumps(old))
     if not quiet:
-        print(_changed_line(old, store.stamps, len(units), sum(map(len, runs.values())), Path(out_dir)),
-              file=sys.stderr)
+        print(_changed_line(old, store.stamps, len(units), sum(map(len, runs.values())), Path(out_dir),
+                            earlier_scheme), file=sys.stderr)
     return runs
 
 
-def _changed_line(old: dict, new: dict, units: int, runs: int, out_dir: Path) -> str:
+def _changed_line(old: dict, new: dict, units: int, runs: int, out_dir: Path, earlier_scheme: bool) -> str:
     """One line: which configs re-run, from which identity to which, and where the old results are."""
     changes = [f"{label} {'/'.join(ids)} -> {new[kind].get(label, '?')}"
                for kind in ("scenarios", "methods") for label, ids in old[kind].items()]
     shown = "; ".join(changes[:4]) + (f"; and {len(changes) - 4} more" if len(changes) > 4 else "")
-    why = "stored without a recorded identity (by an earlier bench)" if all(
-        ids == ["unrecorded"] for table in old.values() for ids in table.values()) else "code or data changed"
+    if all(ids == ["unrecorded"] for table in old.values() for ids in table.values()):
+        why = "stored without a recorded identity (by an earlier bench)"
+    elif earlier_scheme:
+        why = ("stamped by an earlier bench, whose identities hashed module sources by name "
+               "(now by content: a one-time re-run)")
+    else:
+        why = "code or data changed"
     what = " and ".join(part for part in (f"{units} units" if units else "",
                                           f"{runs} (unit, method config) runs" if runs else "") if part)
     return (f"{why}: re-running {what} ({shown}); the results they replace are in {out_dir / PREVIOUS} "

@@ -28,6 +28,10 @@ import numpy as np
 import pandas as pd
 from scipy import optimize, special, stats
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 CONFIDENCE = 0.95
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 20040101

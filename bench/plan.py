@@ -46,10 +46,16 @@ class ComponentConfig:
 
     @property
     def key(self) -> int:
-        """Stable integer identity, from the name and *all* resolved params (a data file
-        by its name: the random streams do not depend on the folder the data lives in)."""
+        """The stable integer that keys a scenario config's random streams: from its name and
+        the params set away from their defaults, and those its class keys whatever their
+        value (:attr:`bench.core.Scenario.stream_params`); a data file by its name, so the
+        streams do not depend on the folder the data lives in (docs/architecture.md,
+        'Random streams')."""
+        cls = registry.scenarios().get(self.name)
+        always = set(getattr(cls, "stream_params", None) or ())
+        defaults = params_as_dict(type(self.params)())
         values = {k: os.path.basename(v) if _is_path(self.params, k) else v
-                  for k, v in params_as_dict(self.params).items()}
+                  for k, v in params_as_dict(self.params).items() if k in always or v != defaults[k]}
         return stable_key([self.name, values])
 
 

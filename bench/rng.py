@@ -19,6 +19,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 EVALUATION = 0
 CALIBRATION = 1
 

@@ -161,6 +161,9 @@ class CvTurnCv(Scenario):
 
     name = "cv-turn-cv"
     tasks = (MANEUVER_DETECTION,)
+    #: the parameters its random streams were first keyed by (Scenario.stream_params)
+    stream_params = ("steps", "dt_s", "onset_step", "turn_steps", "speed_m_s", "turn_rate_deg_s", "tracking_index",
+                     "process_noise", "detect_window_steps", "warmup_steps", "onset_jitter_steps")
     provides = frozenset({"reference-filter"})
     #: ``bench perf`` sizes: name -> (scenario params, trials)
     perf_sizes = {"paper": ({}, 1000)}

@@ -180,6 +180,14 @@ class Glint(Scenario):
 
     name = "glint"
     tasks = (TRACKING,)
+    #: the parameters its random streams were first keyed by (Scenario.stream_params)
+    stream_params = ("steps", "dt_s", "damping_per_s", "control_m_s2", "process_noise_m_s2",
+                     "process_noise_los_m_s2", "sensor", "epsilon", "glint_model", "sigma_range_m",
+                     "sigma_bearing_rad", "sigma_elevation_rad", "eta_range_m", "eta_bearing_rad",
+                     "eta_elevation_rad", "initial_range_m", "initial_bearing_deg", "initial_elevation_deg",
+                     "initial_velocity_m_s", "initial_angle_rate_rad_s", "initial_angle_std_rad",
+                     "initial_range_std_m", "initial_cross_range_std_m", "initial_velocity_std_m_s",
+                     "divergence_bound_m")
     provides = frozenset({"glint-model"})
     #: a small instance for quick conformance tests
     small_params: ClassVar[dict] = {"steps": 60}

@@ -102,6 +102,12 @@ class HFSWRTargets(Scenario):
 
     name = "hfswr-targets"
     tasks = (MULTI_TARGET,)
+    #: the parameters its random streams were first keyed by (Scenario.stream_params)
+    stream_params = ("targets", "scans", "scan_period_s", "detection", "pd", "pfa_cell", "clutter_per_scan",
+                     "range_bounds_m", "azimuth_bounds_deg", "radial_velocity_bounds_m_s", "sigma_range_m",
+                     "sigma_azimuth_deg", "sigma_radial_velocity_m_s", "noise_scales_with_snr", "reference_snr_db",
+                     "speed_bounds_m_s", "accel_std_m_s2", "crossing", "crossing_targets", "crossing_angle_deg",
+                     "gospa_cutoff_m", "gospa_order")
     small_params: ClassVar[dict] = {"targets": 3, "scans": 20, "clutter_per_scan": 5.0}
     perf_sizes: ClassVar[dict] = {"default": ({}, 20)}
     perf_snr_db: ClassVar[float] = 15.0

@@ -105,6 +105,11 @@ class Maneuvering(Scenario):
 
     name = "maneuvering-1d"
     tasks = (TRACKING,)
+    #: the parameters its random streams were first keyed by (Scenario.stream_params)
+    stream_params = ("steps", "dt_s", "dims", "profile", "maneuver_start_s", "maneuver_duration_s",
+                     "maneuver_accel_m_s2", "singer_alpha_per_s", "singer_sigma_m_s2", "process_noise_m_s2",
+                     "noise_std_m", "initial_position_m", "initial_velocity_m_s", "initial_position_std_m",
+                     "initial_velocity_std_m_s", "initial_accel_std_m_s2", "divergence_bound_m")
     provides = frozenset({"kinematic-model"})
     small_params: ClassVar[dict] = {"steps": 40, "maneuver_start_s": 15.0, "maneuver_duration_s": 10.0}
     perf_sizes: ClassVar[dict] = {"default": ({}, 1000)}

@@ -99,6 +99,13 @@ class RdMap(Scenario):
 
     name = "rd-map"
     tasks = (CELL_DETECTION,)
+    #: the parameters its random streams were first keyed by (Scenario.stream_params)
+    stream_params = ("range_cells", "doppler_cells", "bragg", "bragg_offset_bins", "bragg_spread_bins",
+                     "bragg_cnr_db", "bragg_cnr_far_db", "bragg_asymmetry_db", "bragg_scale_db", "interference",
+                     "interference_inr_db", "interference_range_start", "interference_range_cells",
+                     "interference_doppler_bins", "clutter_edge", "edge_step_db", "edge_range_cell",
+                     "edge_band_cells", "edge_sides", "targets_per_region", "pairs", "pair_offset_cells",
+                     "target_spacing_cells", "margin_cells", "swerling", "fa_guard_cells", "layout_seed")
     small_params = {"range_cells": 48, "doppler_cells": 96, "bragg_offset_bins": 14, "interference_range_start": 16,
                     "interference_range_cells": 8, "interference_doppler_bins": 20.0, "edge_range_cell": 34,
                     "edge_band_cells": 4, "target_spacing_cells": 10, "margin_cells": 6, "targets_per_region": 1,

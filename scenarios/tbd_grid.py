@@ -301,6 +301,9 @@ class TbdGrid(Scenario):
 
     name = "tbd-grid"
     tasks = (TBD,)
+    #: the parameters its random streams were first keyed by (Scenario.stream_params)
+    stream_params = ("cells", "frames", "noise", "ar_coefficients", "amplitude", "hit_tolerance_cells",
+                     "frame_period_s", "cell_m", "turn_rate_rad_s")
     #: a small instance, for tests and quick looks
     small_params = {"cells": 32, "frames": 8}
     #: ``bench perf`` sizes: name -> (scenario params, trials)

@@ -383,10 +383,11 @@ def test_a_store_without_identities_is_rerun_and_its_results_kept_aside(tmp_path
 
 
 def test_identities_follow_the_plugins_own_modules_only():
-    from radarbench.bench.identity import code_identity
-    cumulant = dict(code_identity("radarbench.methods.maneuver.cumulant").modules)
+    from radarbench.bench.identity import code_identity, identity_roots
+    cumulant = dict(code_identity(*identity_roots(registry.get_method("cumulant"))).modules)
     assert {"radarbench.methods.maneuver.cumulant", "radarbench.methods.maneuver.base", "radarbench.models.kalman"} <= set(cumulant)
-    assert not any(m.split(".")[0] in ("bench", "numpy", "scipy") for m in cumulant)
+    assert not any(m.split(".")[0] in ("numpy", "scipy") for m in cumulant)
+    assert "radarbench.methods.maneuver.innovation" not in cumulant
     assert code_identity("radarbench.methods.maneuver.cumulant").hash != code_identity("radarbench.methods.maneuver.innovation").hash
 
 
@@ -404,7 +405,8 @@ def test_plan_toml_lists_the_identities(tmp_path):
 
 def test_a_code_identity_follows_edits_of_the_plugin_and_of_what_it_imports_only(tmp_path, monkeypatch):
     """In one process too: an edit of the module or of a module it imports changes the
-    identity; an edit of a module it does not import does not."""
+    identity; an edit of a module that another registered class of its package imports
+    does not (a module no class imports may be loaded by a computed name: it counts)."""
     import importlib
 
     from radarbench.bench.identity import code_identity
@@ -417,6 +419,10 @@ def test_a_code_identity_follows_edits_of_the_plugin_and_of_what_it_imports_only
                                  "    return np.ones(2) * SCALE\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     importlib.import_module("idpkg.mine")
+
+    class Other:                              # a registered class of the package that imports other.py
+        __module__ = "idpkg.other"
+    monkeypatch.setattr(registry, "_METHODS", {**registry._METHODS, "other": Other})
     first = code_identity("idpkg.mine")
     assert [m for m, _ in first.modules] == ["idpkg", "idpkg._helpers", "idpkg.mine"] and not first.distribution
     (pkg / "other.py").write_text("X = 22\n")
@@ -433,5 +439,5 @@ def test_a_name_in_a_module_that_fails_to_import_is_not_a_module(tmp_path, monke
     (tmp_path / "brokenpkg" / "__init__.py").write_text("")
     (tmp_path / "brokenpkg" / "peer.py").write_text("raise RuntimeError('needs an extra')\n")
     monkeypatch.syspath_prepend(str(tmp_path))
-    assert identity._module_file("brokenpkg.peer.Name") is None
-    assert identity._module_file("brokenpkg.peer") == (tmp_path / "brokenpkg" / "peer.py").resolve()
+    assert identity.module_file("brokenpkg.peer.Name") is None
+    assert identity.module_file("brokenpkg.peer") == (tmp_path / "brokenpkg" / "peer.py").resolve()

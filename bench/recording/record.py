@@ -42,6 +42,10 @@ from typing import Any
 
 import numpy as np
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 __all__ = ["MethodTrace", "Quantised", "TrialRecord", "check_shape"]
 
 #: Bumped when the byte layout of :meth:`TrialRecord.to_bytes` changes.

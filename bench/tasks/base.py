@@ -47,6 +47,10 @@ from radarbench.bench.recording.blueprint import Views
 from radarbench.bench.recording.layout import TrialLayout
 from radarbench.bench.recording.record import MethodTrace, TrialRecord
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 __all__ = ["COVARIANCE_TOLERANCE", "MAX_ESTIMATE", "OutputError", "RecordedScene", "ReportContext", "Task", "Views",
            "check_covariance", "check_estimate", "check_finite", "check_range", "time_series"]
 

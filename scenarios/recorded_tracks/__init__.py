@@ -164,6 +164,12 @@ class RecordedTracks(Scenario):
 
     name = "recorded-tracks"
     tasks = (TRACKING, MANEUVER_DETECTION)
+    #: the parameters its random streams were first keyed by (Scenario.stream_params)
+    stream_params = ("path", "traffic_samples", "max_file_mb", "dt_s", "max_gap_s", "masked_gap_s", "min_steps",
+                     "smoothing_s", "steps", "onset_step", "maneuver_threshold_m_s2", "maneuver_measure",
+                     "turn_rate_threshold_deg_s", "min_maneuver_steps", "detect_window_steps", "warmup_steps",
+                     "tracking_index", "noise_std_m", "measurements", "initial_position_std_m",
+                     "initial_velocity_std_m_s", "initial_accel_std_m_s2", "divergence_bound_m")
     provides = frozenset({"kinematic-model", "reference-filter"})
     small_params: ClassVar[dict] = {"traffic_samples": ["calibration/ajaccio"], "steps": 30, "onset_step": 10,
                                     "detect_window_steps": 10}

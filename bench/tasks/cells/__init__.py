@@ -47,6 +47,10 @@ from radarbench.bench.recording.record import MethodTrace
 from radarbench.bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, check_range
 from radarbench.bench.tasks.cells.metrics import REGION_NAMES, SUMMARY_COLUMNS, cell_trial_metrics, summarise_cells
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 __all__ = ["CELL_DETECTION", "REGION_NAMES", "CellDetectionOutput", "CellDetectionTask", "MapScene"]
 
 CELL_DETECTION = "cell-detection"

@@ -36,6 +36,10 @@ from scipy import optimize, stats
 
 from radarbench.bench.metrics import bootstrap_mean_interval, by_cell, clustered_rate_interval, mean_realised_snr
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 #: the clutter regions the task knows, in label order of the built-in scenario; the clutter
 #: edge's band is one region, or its two sides (below the step / from it) when a scenario splits it
 REGION_NAMES = ("homogeneous", "bragg", "interference", "clutter-edge", "clutter-edge-quiet", "clutter-edge-raised")

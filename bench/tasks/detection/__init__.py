@@ -35,6 +35,10 @@ from radarbench.bench.recording.record import MethodTrace, TrialRecord, check_sh
 from radarbench.bench.tasks.base import OutputError, RecordedScene, ReportContext, Task
 from radarbench.bench.tasks.detection.metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 __all__ = ["DetectionScene", "DetectionTask", "method_trace"]
 
 

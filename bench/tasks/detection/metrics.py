@@ -34,6 +34,10 @@ import pandas as pd
 from radarbench.bench.metrics import (binomial_interval, bootstrap_mean_interval, by_cell, clustered_rate_interval,
                            mean_realised_snr)
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 
 def detection_trial_metrics(statistic: np.ndarray, threshold: float, *, onset,
                             detect_window: int, null_start: int) -> dict[str, np.ndarray]:

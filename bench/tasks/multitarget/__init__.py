@@ -39,6 +39,10 @@ from radarbench.bench.tasks.base import (OutputError, RecordedScene, ReportConte
 from radarbench.bench.tasks.multitarget.metrics import (MEANS, SCENE_COLUMNS, multitarget_steps, multitarget_trial_metrics,
                                              summarise_multitarget)
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 __all__ = ["MULTI_TARGET", "STATUS", "MultiTargetOutput", "MultiTargetScene", "MultiTargetTask"]
 
 MULTI_TARGET = "multi-target"

@@ -47,6 +47,10 @@ from scipy.optimize import linear_sum_assignment
 
 from radarbench.bench.metrics import bootstrap_mean_interval, bootstrap_statistic_interval, by_cell, mean_realised_snr
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 CONFIRMED = 2
 
 #: per-cell columns of summary.csv: (column, per-trial column it averages)

@@ -50,6 +50,10 @@ from radarbench.bench.recording.record import MethodTrace, TrialRecord, check_sh
 from radarbench.bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_finite, time_series
 from radarbench.bench.tasks.tbd.metrics import summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 __all__ = ["GRID_KEYS", "Grid", "TBDScene", "TBDTask", "method_trace", "scene"]
 
 #: Keys of a grid: cell ``(row, col)`` has its centre at

@@ -17,6 +17,10 @@ import pandas as pd
 from radarbench.bench.metrics import (binomial_interval, bootstrap_statistic_interval, by_cell, mean_realised_snr,
                            series_key, time_averaged_rmse)
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 
 def cell_centres_m(cells: np.ndarray, grid: dict) -> np.ndarray:
     """(x, y) in metres of the centres of ``(row, col)`` cells (…, 2)."""

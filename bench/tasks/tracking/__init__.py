@@ -38,6 +38,10 @@ from radarbench.bench.tasks.base import (OutputError, RecordedScene, ReportConte
 from radarbench.bench.tasks.tracking.metrics import (SWITCH_TRACES, maneuver_trial_metrics, summarise_tracking,
                                           tracking_steps, tracking_trial_metrics)
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 __all__ = ["TrackingScene", "TrackingTask", "method_trace", "scene"]
 
 _GLINT_COLOR = (255, 40, 90)

@@ -18,6 +18,10 @@ from radarbench.bench.metrics import (binomial_interval, bootstrap_mean_interval
                            clustered_rate_interval, mean_over_present, mean_realised_snr, per_step_rmse,
                            series_key, time_averaged_rmse)
 
+#: this module computes stored numbers: its code belongs to the identity of every config
+#: that loads it (docs/architecture.md, 'Identities')
+COMPUTES_RESULTS = True
+
 
 def tracking_trial_metrics(estimate: np.ndarray, truth: np.ndarray, *, position_index, labels,
                            covariance: np.ndarray | None, divergence_bound_m: float,
