@@ -106,6 +106,18 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-record", action="store_true", help="do not write recording.rrd")
     run.add_argument("--viewer", action="store_true", help="stream trials live to a spawned Rerun viewer")
     run.add_argument("--yes", action="store_true", help="run a very large sweep without asking")
+    over = run.add_argument_group("changes to the sweep (checked like the sweep file; plan.toml keeps the result)")
+    over.add_argument("--methods", nargs="+", metavar="NAME",
+                      help="only these methods: names or config labels of the sweep's [[methods]] (all their "
+                           "configs), or any registered method at its defaults")
+    over.add_argument("--scenarios", nargs="+", metavar="NAME",
+                      help="only these scenarios: names or labels of the sweep's, or any registered one at its defaults")
+    over.add_argument("--snr", nargs="+", type=float, metavar="DB", help="these SNR levels (dB), for every scenario")
+    over.add_argument("--trials", type=int, metavar="N", help="trials per SNR level, for every scenario")
+    over.add_argument("--seed", type=int, metavar="N", help="the sweep's seed")
+    over.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="sets",
+                      help="any key of the sweep, dotted (calibration.h0_trials=500, scenario_params.steps=200, "
+                           "methods.0.params.window=8); VALUE is a TOML value; repeatable")
     rep = sub.add_parser("report", help="rebuild CSV, figures, report.md and recording from results.sqlite")
     rep.add_argument("dir")
     rep.add_argument("--no-record", action="store_true", help="do not rewrite recording.rrd")
@@ -149,23 +161,65 @@ def cmd_list(args) -> int:
     return 0
 
 
-def _load_plan(args):
-    from radarbench.bench.config import load_sweep, parse_sweep_text
+def _overrides(args):
+    from radarbench.bench.config import Overrides
+    return Overrides(tuple(args.methods or ()), tuple(args.scenarios or ()), tuple(args.snr or ()), args.trials,
+                     args.seed, tuple(args.sets))
+
+
+def _sweep_data(args) -> tuple[dict, str, Path]:
+    """(the sweep as data with the command line's changes, where it came from, its folder),
+    its own fields checked (:func:`bench.config.check_sweep_fields`): no plugin, no NumPy yet."""
+    from radarbench.bench.config import apply_overrides, check_sweep_fields, read_sweep_file, sweep_data
     if args.preset:
-        source = f"preset {args.preset}"
-        try:
-            preset = presets()[args.preset]
-            return parse_sweep_text(preset.read_bytes(), source, allow_large=args.yes, base=Path(str(preset)).parent)
-        except ConfigError as err:
-            raise ConfigError(f"{source}: {err.field}" if err.field else source, err.problem) from None
+        source, preset = f"preset {args.preset}", presets()[args.preset]
+        folder = Path(str(preset)).parent
+        with _named(source, None):
+            data = sweep_data(preset.read_bytes())
+    else:
+        source, folder = args.sweep, Path(args.sweep).parent
+        with _named(source, None):
+            data = sweep_data(read_sweep_file(args.sweep))
+    overrides = _overrides(args)
+    with _named(source, overrides):
+        data = apply_overrides(data, overrides)
+        check_sweep_fields(data)
+    return data, source, folder
+
+
+@contextlib.contextmanager
+def _named(source: str, overrides):
+    """A ConfigError raised inside, prefixed with where its field came from: the option of
+    the command line that wrote it, or the sweep's source."""
     try:
-        return load_sweep(args.sweep, allow_large=args.yes)
+        yield
     except ConfigError as err:
-        raise ConfigError(f"{args.sweep}: {err.field}" if err.field else args.sweep, err.problem) from None
+        field = err.field
+        origin = overrides.origin(field) if overrides is not None and field else None
+        if field.startswith("--"):                        # the command line's own words
+            where = field
+        else:
+            where = origin or (f"{source}: {field}" if field else source)
+        raise ConfigError(where, err.problem) from None
+
+
+def _load_plan(args, data: dict, source: str, folder: Path):
+    from radarbench.bench.config import parse_sweep
+    overrides = _overrides(args)
+    with _named(source, overrides):
+        return parse_sweep(data, source, allow_large=args.yes, base=folder,
+                           drop_idle_scenarios=bool(overrides.methods) and not overrides.scenarios)
 
 
 def _command_line(args) -> str:
     words = ["bench", "run"] + (["--preset", args.preset] if args.preset else [args.sweep])
+    for option, values in (("--methods", args.methods), ("--scenarios", args.scenarios),
+                           ("--snr", [f"{v:g}" for v in args.snr or ()]), ("--trials", args.trials),
+                           ("--seed", args.seed)):
+        if values not in (None, []):
+            words += [option, *map(str, values if isinstance(values, list) else [values])]
+    for assignment in args.sets:
+        words += ["--set", assignment]
     if args.out:
         words += ["--out", args.out]
     return shlex.join(words)
@@ -173,8 +227,13 @@ def _command_line(args) -> str:
 
 def _check_arguments(args) -> None:
     """What the command line alone decides, before the sweep (and NumPy) is loaded."""
-    if bool(args.sweep) == bool(args.preset):
-        raise ConfigError("", "give a sweep file or --preset NAME (one of them)")
+    if args.sweep and args.preset:
+        raise ConfigError("", f"{args.sweep!r} and --preset {args.preset}: give a sweep file or --preset NAME, "
+                              "not both (methods are chosen with --methods, scenarios with --scenarios)")
+    if not args.sweep and not args.preset:
+        eaten = [v for v in (args.methods or []) + (args.scenarios or []) if v.endswith(".toml") or os.path.isfile(v)]
+        hint = f" ({eaten[0]!r} was read as a name of --methods/--scenarios: put the sweep file first)" if eaten else ""
+        raise ConfigError("", f"give a sweep file or --preset NAME (one of them){hint}")
     if args.preset and args.preset not in presets():
         raise ConfigError("--preset", unknown_name("preset", args.preset, presets()))
     if args.scheduler is not None and args.executor != "dask":
@@ -227,12 +286,13 @@ def _store_errors(out_dir: Path):
 
 def cmd_run(args) -> int:
     _check_arguments(args)
+    data, source, folder = _sweep_data(args)
     from radarbench.bench import runfolder
     _check_executor(args)
     if args.executor == "local":
         from radarbench.bench.processes import prestart_forkserver
         prestart_forkserver()
-    plan = _load_plan(args)
+    plan = _load_plan(args, data, source, folder)
     if plan.skipped and not args.quiet:
         print(f"skipping {len(plan.skipped)} (scenario config, method config) pairs the method refuses:",
               file=sys.stderr)

@@ -21,12 +21,14 @@ track-before-detect.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+import itertools
 import math
 import os
 import re
-import dataclasses
-import itertools
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -326,30 +328,19 @@ def _check_pot(pfa: float, h0_trials: int) -> None:
 
 
 def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large: bool = False,
-                base: str | os.PathLike | None = None) -> Plan:
+                base: str | os.PathLike | None = None, drop_idle_scenarios: bool = False) -> Plan:
     """Validate a parsed sweep mapping and resolve it into a :class:`Plan`. ``base``: the
     folder of the sweep file, from which its data paths (``kind="path"`` parameters) are
-    read and made absolute; None: they are kept as written (a resolved plan)."""
-    _reject_unknown(data, TOP_KEYS, "")
-    for key in ("name", "methods"):
-        if key not in data:
-            raise ConfigError(key, "missing")
-    name = data["name"]
-    if not isinstance(name, str) or not NAME_PATTERN.match(name):
-        raise ConfigError("name", "expected letters, digits, '_', '-' or '.' (at most 64, no path "
-                                  f"separators), got {name!r}"[:200])
-    description = data.get("description", "")
-    if not isinstance(description, str):
-        raise ConfigError("description", f"expected a string, got {description!r}"[:200])
-    trials = _expect_int(data.get("trials", 100), "trials", 1, 10_000_000)
+    read and made absolute; None: they are kept as written (a resolved plan).
+    ``drop_idle_scenarios``: a scenario config no method config runs on is left out
+    (``bench run --methods``) rather than refused."""
+    fields = check_sweep_fields(data)
+    name, trials, calibration = fields["name"], fields["trials"], fields["calibration"]
     base = None if base is None else os.path.abspath(base)
     scenario, scenarios, scenario_fields = _parse_scenarios(data, trials, base)
-    seed = _expect_int(data.get("seed", 0), "seed", 0, 2**63 - 1)
-    chunk = _expect_int(data.get("chunk", DEFAULT_CHUNK), "chunk", 1, 1_000_000)
-    snr_db = _parse_snr(data["snr_db"]) if "snr_db" in data else scenarios[0].snr_db
+    snr_db = fields["snr_db"] if fields["snr_db"] is not None else scenarios[0].snr_db
     methods, method_fields, skipped = _parse_methods(data["methods"], scenarios, base)
     method_tasks = tuple(registry.get_method(m.name).task for m in methods)
-    calibration = _parse_calibration(data.get("calibration", {}))
     for i, (m, task) in enumerate(zip(methods, method_tasks)):
         modes = registry.get_task(task).calibration_modes
         if calibration.mode not in modes:
@@ -360,25 +351,17 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
             others = ", ".join(repr(x) for x in modes if x != "nominal")
             raise ConfigError("calibration.mode", f"'nominal' needs an analytic threshold and {m.label!r} has none "
                                                   f"(it is calibrated on null trials): use {others}")
-    record = _expect_table(data.get("record", {}), "record")
-    _reject_unknown(record, {"trials", "timeline_snr_db"}, "record")
-    record_trials = _expect_int(record.get("trials", 1), "record.trials", 0, 1000)
-    timeline_snr_db = None if "timeline_snr_db" not in record else \
-        _check_snr_bound(_expect_number(record["timeline_snr_db"], "record.timeline_snr_db"), "record.timeline_snr_db")
-    unit_timeout_s = _parse_unit_timeout(data["unit_timeout_s"]) if "unit_timeout_s" in data else None
-    memory_gb = None
-    if "max_unit_memory_gb" in data:
-        memory_gb = _expect_number(data["max_unit_memory_gb"], "max_unit_memory_gb")
-        if not MIN_UNIT_MEMORY_GB <= memory_gb <= MAX_UNIT_MEMORY_GB:
-            raise ConfigError("max_unit_memory_gb", f"expected a number in [{MIN_UNIT_MEMORY_GB:g}, "
-                                                    f"{MAX_UNIT_MEMORY_GB:g}] (GB), got {memory_gb:g}")
     axes = tuple(k for k in data.get("scenario_params", {}) if isinstance(k, str)) if scenario else ()
-    plan = Plan(name, description, scenario, scenarios, trials, seed, snr_db, chunk,
-                methods, calibration, record_trials, source, method_tasks, timeline_snr_db, unit_timeout_s, axes, memory_gb,
-                skipped)
+    plan = Plan(name, fields["description"], scenario, scenarios, trials, fields["seed"], snr_db, fields["chunk"],
+                methods, calibration, fields["record_trials"], source, method_tasks, fields["timeline_snr_db"],
+                fields["unit_timeout_s"], axes, fields["max_unit_memory_gb"], skipped)
     feasibility.check_snr_levels(plan, scenario_fields)
     plan = dataclasses.replace(plan, skipped=feasibility.check_pairs(plan, method_fields))
     idle = [s for s in scenarios if not plan.pairs(s)]
+    if idle and drop_idle_scenarios and len(idle) < len(scenarios):
+        kept = [i for i, s in enumerate(scenarios) if s not in idle]
+        scenarios, scenario_fields = tuple(scenarios[i] for i in kept), tuple(scenario_fields[i] for i in kept)
+        plan, idle = dataclasses.replace(plan, scenarios=scenarios), []
     if idle:
         raise ConfigError("methods", f"no method of the sweep runs on scenario config {idle[0].label!r}"
                                      f"{_why_idle(plan, idle[0])}"[:400])
@@ -393,6 +376,147 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
                                                    f"trial-runs (h0_trials x calibrated configs) besides "
                                                    f"{plan.trial_runs:,} others; pass --yes to run it anyway")
     return plan
+
+
+def check_sweep_fields(data: Mapping[str, Any]) -> dict[str, Any]:
+    """The sweep's own fields, those no plugin is needed to check (name, trials, seed,
+    chunk, snr_db, calibration, record, limits), checked and resolved: ``bench run`` calls
+    it before the plugins are imported, so a mistake there is answered at once."""
+    _reject_unknown(data, TOP_KEYS, "")
+    for key in ("name", "methods"):
+        if key not in data:
+            raise ConfigError(key, "missing")
+    name = data["name"]
+    if not isinstance(name, str) or not NAME_PATTERN.match(name):
+        raise ConfigError("name", "expected letters, digits, '_', '-' or '.' (at most 64, no path "
+                                  f"separators), got {name!r}"[:200])
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise ConfigError("description", f"expected a string, got {description!r}"[:200])
+    record = _expect_table(data.get("record", {}), "record")
+    _reject_unknown(record, {"trials", "timeline_snr_db"}, "record")
+    memory_gb = None
+    if "max_unit_memory_gb" in data:
+        memory_gb = _expect_number(data["max_unit_memory_gb"], "max_unit_memory_gb")
+        if not MIN_UNIT_MEMORY_GB <= memory_gb <= MAX_UNIT_MEMORY_GB:
+            raise ConfigError("max_unit_memory_gb", f"expected a number in [{MIN_UNIT_MEMORY_GB:g}, "
+                                                    f"{MAX_UNIT_MEMORY_GB:g}] (GB), got {memory_gb:g}")
+    return {
+        "name": name, "description": description,
+        "trials": _expect_int(data.get("trials", 100), "trials", 1, 10_000_000),
+        "seed": _expect_int(data.get("seed", 0), "seed", 0, 2**63 - 1),
+        "chunk": _expect_int(data.get("chunk", DEFAULT_CHUNK), "chunk", 1, 1_000_000),
+        "snr_db": _parse_snr(data["snr_db"]) if "snr_db" in data else None,
+        "calibration": _parse_calibration(data.get("calibration", {})),
+        "record_trials": _expect_int(record.get("trials", 1), "record.trials", 0, 1000),
+        "timeline_snr_db": None if "timeline_snr_db" not in record else _check_snr_bound(
+            _expect_number(record["timeline_snr_db"], "record.timeline_snr_db"), "record.timeline_snr_db"),
+        "unit_timeout_s": _parse_unit_timeout(data["unit_timeout_s"]) if "unit_timeout_s" in data else None,
+        "max_unit_memory_gb": memory_gb,
+    }
+
+
+@dataclass(frozen=True)
+class Overrides:
+    """Changes the command line makes to a sweep before it is checked
+    (``bench run --methods ... --snr ... --set KEY=VALUE``; docs/running.md)."""
+
+    methods: tuple[str, ...] = ()        # method names or config labels: the sweep's matching entries, or new ones
+    scenarios: tuple[str, ...] = ()      # scenario names or labels, likewise
+    snr_db: tuple[float, ...] = ()
+    trials: int | None = None
+    seed: int | None = None
+    sets: tuple[str, ...] = ()           # "KEY=VALUE": a dotted key of the sweep, a TOML value
+
+    def __bool__(self) -> bool:
+        return self != Overrides()
+
+    def origin(self, field: str) -> str | None:
+        """Where sweep field ``field`` came from when the command line wrote it, for an
+        error's first words (``--snr: snr_db[0]``, ``--trials``, ``--set calibration.pfa``);
+        None when the sweep did."""
+        written = [(key.partition("=")[0].strip(), "--set " + key.partition("=")[0].strip()) for key in self.sets]
+        written += [(k, o) for k, o, v in (("methods", "--methods", self.methods), ("scenario", "--scenarios",
+                    self.scenarios), ("scenarios", "--scenarios", self.scenarios), ("snr_db", "--snr", self.snr_db),
+                    ("trials", "--trials", self.trials), ("seed", "--seed", self.seed)) if v not in ((), None)]
+        for key, option in written:
+            if field == key:
+                return option
+            if field.startswith((f"{key}.", f"{key}[")):
+                return f"{option}: {field}"
+        return None
+
+
+def apply_overrides(data: Mapping[str, Any], overrides: Overrides) -> dict[str, Any]:
+    """A copy of sweep ``data`` with ``overrides`` applied; the result is checked like any
+    sweep (:func:`parse_sweep`), so the command line gets the TOML's messages."""
+    out = copy.deepcopy(dict(data))
+    if overrides.methods:
+        out["methods"] = _chosen(out.get("methods"), overrides.methods, "--methods")
+    if overrides.scenarios:
+        if "scenarios" in out or "scenario" not in out:
+            out["scenarios"] = _chosen(out.get("scenarios"), overrides.scenarios, "--scenarios")
+        else:
+            single = {"name": out.pop("scenario"), "params": out.pop("scenario_params", {})}
+            out["scenarios"] = _chosen([single], overrides.scenarios, "--scenarios")
+    for key, value in (("snr_db", list(overrides.snr_db)), ("trials", overrides.trials)):
+        if value not in ([], None):
+            out[key] = value
+            for entry in out.get("scenarios", []) if isinstance(out.get("scenarios"), list) else []:
+                if isinstance(entry, dict):
+                    entry.pop(key, None)          # the command line's value for every scenario config
+    if overrides.seed is not None:
+        out["seed"] = overrides.seed
+    for assignment in overrides.sets:
+        _set(out, assignment)
+    return out
+
+
+def _chosen(entries: Any, names: tuple[str, ...], option: str) -> list:
+    """The ``[[methods]]`` (or ``[[scenarios]]``) entries named (by name or label) in
+    ``names``, in that order; a name no entry has becomes a new entry of its defaults."""
+    entries = entries if isinstance(entries, list) else []
+    chosen = []
+    for name in names:
+        matching = [e for e in entries if isinstance(e, dict) and name in (e.get("name"), e.get("label"))]
+        chosen += copy.deepcopy(matching) or [{"name": name}]
+    return chosen
+
+
+def _set(data: dict, assignment: str) -> None:
+    """``--set KEY=VALUE``: KEY a dotted path into the sweep (``calibration.h0_trials``,
+    ``methods.0.params.window``), VALUE a TOML value (a bare word is a string)."""
+    key, sep, text = assignment.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise ConfigError("--set", f"expected KEY=VALUE (e.g. calibration.h0_trials=500), got {assignment!r}"[:200])
+    try:
+        value = tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = text.strip()
+    *path, last = key.split(".")
+    node: Any = data
+    for i, part in enumerate(path):
+        node = _step(node, part, ".".join(path[:i + 1]), key, create=True)
+    if isinstance(node, list):
+        _step(node, last, key, key, create=False)
+        node[int(last)] = value
+    elif isinstance(node, dict):
+        node[last] = value
+    else:
+        raise ConfigError(f"--set {key}", f"{'.'.join(path)} is not a table")
+
+
+def _step(node: Any, part: str, where: str, key: str, *, create: bool) -> Any:
+    if isinstance(node, list):
+        if not part.isdigit() or int(part) >= len(node):
+            raise ConfigError(f"--set {key}", f"{where}: expected an index below {len(node)}, got {part!r}"[:200])
+        return node[int(part)]
+    if not isinstance(node, dict):
+        raise ConfigError(f"--set {key}", f"{where.rpartition('.')[0] or where} is not a table")
+    if part not in node and create:
+        node[part] = {}
+    return node[part]
 
 
 def _parse_unit_timeout(value: Any) -> float:
@@ -413,17 +537,21 @@ def _calibration_trial_runs(plan: Plan) -> int:
 
 def load_sweep(path: str | Path, *, allow_large: bool = False) -> Plan:
     """Read and validate a sweep file. Raises ConfigError (field '' for file-level problems)."""
-    path = Path(path)
+    return parse_sweep_text(read_sweep_file(path), str(path), allow_large=allow_large, base=Path(path).parent)
+
+
+def read_sweep_file(path: str | Path) -> bytes:
+    """A sweep file's bytes, at most :data:`MAX_SWEEP_BYTES` + 1 (never a huge file, or a
+    pipe, in memory)."""
     try:
-        with path.open("rb") as f:
-            raw = f.read(MAX_SWEEP_BYTES + 1)      # bounded: never a huge file (or a pipe) in memory
+        with Path(path).open("rb") as f:
+            return f.read(MAX_SWEEP_BYTES + 1)
     except OSError as exc:
         raise ConfigError("", f"cannot read the file ({exc.strerror or exc})") from None
-    return parse_sweep_text(raw, str(path), allow_large=allow_large, base=path.parent)
 
 
-def parse_sweep_text(raw: bytes, source: str, *, allow_large: bool = False,
-                     base: str | os.PathLike | None = None) -> Plan:
+def sweep_data(raw: bytes) -> dict[str, Any]:
+    """A sweep file's bytes as TOML data (ConfigError, field '', when they are not)."""
     if len(raw) > MAX_SWEEP_BYTES:
         raise ConfigError("", f"more than {MAX_SWEEP_BYTES:,} bytes; a sweep file is at most that "
                               "(a grid axis that long would not run anyway)")
@@ -432,11 +560,15 @@ def parse_sweep_text(raw: bytes, source: str, *, allow_large: bool = False,
     except UnicodeDecodeError as exc:
         raise ConfigError("", f"not UTF-8 text (byte {exc.start})") from None
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError("", f"invalid TOML: {exc}") from None
     except ValueError as exc:                 # an integer of more than 4300 digits
         raise ConfigError("", f"invalid TOML: {str(exc).split(';')[0]}") from None
     except RecursionError:
         raise ConfigError("", "invalid TOML: nested too deeply") from None
-    return parse_sweep(data, source, allow_large=allow_large, base=base)
+
+
+def parse_sweep_text(raw: bytes, source: str, *, allow_large: bool = False,
+                     base: str | os.PathLike | None = None) -> Plan:
+    return parse_sweep(sweep_data(raw), source, allow_large=allow_large, base=base)

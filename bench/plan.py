@@ -20,7 +20,6 @@ from typing import Any
 
 from radarbench.bench import capabilities, registry
 from radarbench.bench.params import PATH, params_as_dict
-from radarbench.bench.rng import stable_key
 
 #: significant digits of an SNR level in a unit's key (:func:`snr_key`): levels that
 #: agree to this many digits are one level, and a sweep listing two of them is refused
@@ -51,6 +50,7 @@ class ComponentConfig:
         value (:attr:`bench.core.Scenario.stream_params`); a data file by its name, so the
         streams do not depend on the folder the data lives in (docs/architecture.md,
         'Random streams')."""
+        from radarbench.bench.rng import stable_key   # NumPy: not before a sweep's own fields are checked
         cls = registry.scenarios().get(self.name)
         always = set(getattr(cls, "stream_params", None) or ())
         defaults = params_as_dict(type(self.params)())
@@ -168,6 +168,7 @@ class Plan:
         d.pop("description")
         d.pop("unit_timeout_s", None)     # a time limit changes no result: a run may resume under another
         d.pop("max_unit_memory_gb", None)
+        from radarbench.bench.rng import stable_key
         return f"{stable_key(d):016x}"
 
 
