@@ -375,7 +375,7 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     axes = tuple(k for k in data.get("scenario_params", {}) if isinstance(k, str)) if scenario else ()
     plan = Plan(name, description, scenario, scenarios, trials, seed, snr_db, chunk,
                 methods, calibration, record_trials, source, method_tasks, timeline_snr_db, unit_timeout_s, axes, memory_gb,
-                skipped)
+                skipped, sweep_folder=base)
     feasibility.check_snr_levels(plan, scenario_fields)
     plan = dataclasses.replace(plan, skipped=feasibility.check_pairs(plan, method_fields))
     idle = [s for s in scenarios if not plan.pairs(s)]
