@@ -373,8 +373,9 @@ def write_plan_toml(path: Path, plan: Plan, command: str, identities: dict | Non
     """The resolved sweep, re-runnable as a sweep file (its data files named relative to
     its folder, from which a sweep's relative paths are read), with provenance: the
     identities (config label -> short hash, ``Store.stamps``) the results were computed with."""
-    body = {**plan.to_dict(paths_from=path.parent), "provenance": {"command": command, "fingerprint": plan.fingerprint(),
-                                             **provenance(), "identities": identities}}
+    body = {**plan.to_dict(paths_from=path.parent),
+            "provenance": {"command": command, "fingerprint": plan.fingerprint(), **provenance(),
+                           "identities": identities}}
     text = "# Resolved plan written by bench; `bench run plan.toml` reproduces the results.\n" + tomlw.dumps(body)
     from radarbench.bench.runfolder import write_text      # whole, a unique temporary name, listed in the manifest
     write_text(path, text)
