@@ -354,7 +354,8 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     axes = tuple(k for k in data.get("scenario_params", {}) if isinstance(k, str)) if scenario else ()
     plan = Plan(name, fields["description"], scenario, scenarios, trials, fields["seed"], snr_db, fields["chunk"],
                 methods, calibration, fields["record_trials"], source, method_tasks, fields["timeline_snr_db"],
-                fields["unit_timeout_s"], axes, fields["max_unit_memory_gb"], skipped)
+                fields["unit_timeout_s"], axes, fields["max_unit_memory_gb"], skipped,
+                sweep_folder=base)
     feasibility.check_snr_levels(plan, scenario_fields)
     plan = dataclasses.replace(plan, skipped=feasibility.check_pairs(plan, method_fields))
     idle = [s for s in scenarios if not plan.pairs(s)]

@@ -30,6 +30,7 @@ import dataclasses
 import math
 import operator
 import os
+import stat
 import typing
 from typing import Any, Mapping
 
@@ -179,14 +180,47 @@ def is_tuple_field(cls: type, name: str) -> bool:
 
 def resolve_path(value: str, base: str | os.PathLike) -> str:
     """A ``kind="path"`` value of a sweep read from folder ``base``: absolute (a relative
-    path is taken from ``base``, never from the working directory), and an existing file."""
+    path is taken from ``base``, never from the working directory), and an existing
+    regular file (a folder, a FIFO or a device is not data: reading a FIFO would block
+    and ``/dev/zero`` never ends)."""
     if not value:
         return value
     path = os.path.normpath(os.path.join(base, os.path.expanduser(value)))
-    if not os.path.isfile(path):
-        where = "" if os.path.isabs(os.path.expanduser(value)) else f" (relative to the sweep file's folder {base})"
-        raise ConfigError("", f"no such file: {path}{where}")
+    where = "" if os.path.isabs(os.path.expanduser(value)) else f" (relative to the sweep file's folder {base})"
+    try:
+        mode = os.stat(path).st_mode         # follows a symlink: what would be read
+    except (FileNotFoundError, NotADirectoryError):
+        raise ConfigError("", f"no such file: {path}{where}") from None
+    except OSError as exc:
+        raise ConfigError("", f"cannot read {path}{where} ({exc.strerror or exc})") from None
+    if not stat.S_ISREG(mode):
+        raise ConfigError("", f"not a regular file: {path}{where} is {_file_kind(mode)}")
     return path
+
+
+def _file_kind(mode: int) -> str:
+    kinds = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+             (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+    return next((name for is_kind, name in kinds if is_kind(mode)), "a special file")
+
+
+def path_fields(cls: type) -> frozenset[str]:
+    """The names of the ``kind="path"`` fields of the params dataclass ``cls``."""
+    return frozenset(f.name for f in dataclasses.fields(cls) if f.metadata.get("kind") == PATH)
+
+
+def shown_path(path: str, folder: str | os.PathLike | None) -> str:
+    """How a report or a written sweep names the data file ``path``: relative to
+    ``folder`` (the folder of the sweep that names it), never absolute, so that a shared
+    report does not disclose its author's folders; its name alone without a folder."""
+    if not path or not os.path.isabs(path):
+        return path
+    if folder is None:
+        return os.path.basename(path)
+    try:
+        return os.path.relpath(path, folder)
+    except ValueError:                        # another drive (Windows): no relative path
+        return os.path.basename(path)
 
 
 def build_params(cls: type, values: Mapping[str, Any] | None, base: str | os.PathLike | None = None):
@@ -251,13 +285,21 @@ def declaration_problem(cls: type) -> str | None:
     return None
 
 
-def params_as_dict(params: Any) -> dict[str, Any]:
-    """Plain mapping of a params instance (tuples as lists), for TOML/JSON."""
+def params_as_dict(params: Any, paths_from: str | os.PathLike | None = None) -> dict[str, Any]:
+    """Plain mapping of a params instance (tuples as lists), for TOML/JSON; with
+    ``paths_from``, its data files named relative to that folder (:func:`shown_path`)."""
     out = {}
     for f in dataclasses.fields(params):
         v = getattr(params, f.name)
         out[f.name] = list(v) if isinstance(v, tuple) else v
-    return out
+    return out if paths_from is None else shown_paths(type(params), out, paths_from)
+
+
+def shown_paths(cls: type, values: Mapping[str, Any], folder: str | os.PathLike | None) -> dict[str, Any]:
+    """``values`` (parameters of the params dataclass ``cls``) with its data files named
+    relative to ``folder`` (:func:`shown_path`)."""
+    paths = path_fields(cls)
+    return {k: shown_path(v, folder) if k in paths and isinstance(v, str) else v for k, v in values.items()}
 
 
 def bounds_of(cls: type, name: str) -> dict[str, Any]:

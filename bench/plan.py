@@ -12,14 +12,13 @@ TOML), its grids expand in :mod:`bench.grid`.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
 from radarbench.bench import capabilities, registry
-from radarbench.bench.params import PATH, params_as_dict
+from radarbench.bench.params import params_as_dict, path_fields
 
 #: significant digits of an SNR level in a unit's key (:func:`snr_key`): levels that
 #: agree to this many digits are one level, and a sweep listing two of them is refused
@@ -54,7 +53,8 @@ class ComponentConfig:
         cls = registry.scenarios().get(self.name)
         always = set(getattr(cls, "stream_params", None) or ())
         defaults = params_as_dict(type(self.params)())
-        values = {k: os.path.basename(v) if _is_path(self.params, k) else v
+        paths = path_fields(type(self.params))
+        values = {k: os.path.basename(v) if k in paths else v
                   for k, v in params_as_dict(self.params).items() if k in always or v != defaults[k]}
         return stable_key([self.name, values])
 
@@ -109,6 +109,9 @@ class Plan:
     #: ``check_scenario`` refuses while the method config runs on another scenario config
     #: of the sweep: skipped, no units, no rows (:func:`bench.feasibility.check_pairs`)
     skipped: tuple[tuple[str, str, str], ...] = ()
+    #: the absolute folder of the sweep file its data files (``kind="path"`` parameters) were
+    #: read from, which a report names them relative to; None: a plan parsed without one
+    sweep_folder: str | None = None
 
     def pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
         """The method configs that run on ``scenario``: those whose task it serves and whose
@@ -135,22 +138,25 @@ class Plan:
     def trial_runs(self) -> int:
         return sum(s.trials * len(s.snr_db) * len(self.pairs(s)) for s in self.scenarios)
 
-    def to_dict(self) -> dict[str, Any]:
-        """The plan as a sweep file that reproduces it (written as plan.toml)."""
+    def to_dict(self, paths_from: str | os.PathLike | None = None) -> dict[str, Any]:
+        """The plan as a sweep file that reproduces it: with ``paths_from``, as a sweep file in
+        that folder (plan.toml in the run folder), its data files named relative to it (never
+        absolute: a shared plan.toml does not disclose its author's folders); without it, the
+        data files as held (absolute: the fingerprint and the store)."""
         head = {"name": self.name, "description": self.description}
         if self.scenario:
             head |= {"scenario": self.scenario, "trials": self.trials, "seed": self.seed,
                      "snr_db": list(self.snr_db), "chunk": self.chunk,
-                     "scenario_params": _merge_scenario_grid(self.scenarios, self.scenario_axes)}
+                     "scenario_params": _merge_scenario_grid(self.scenarios, self.scenario_axes, paths_from)}
         else:
             head |= {"trials": self.trials, "seed": self.seed, "snr_db": list(self.snr_db),
                      "chunk": self.chunk,
-                     "scenarios": [{"name": s.name, "label": s.label, "params": params_as_dict(s.params),
+                     "scenarios": [{"name": s.name, "label": s.label, "params": params_as_dict(s.params, paths_from),
                                     "snr_db": list(s.snr_db), "trials": s.trials} for s in self.scenarios]}
         # written only when set, so plans without it keep their plan.toml
         head |= {} if self.unit_timeout_s is None else {"unit_timeout_s": self.unit_timeout_s}
         return head | {
-            "methods": [{"name": m.name, "label": m.label, "params": params_as_dict(m.params)}
+            "methods": [{"name": m.name, "label": m.label, "params": params_as_dict(m.params, paths_from)}
                         for m in self.methods] + [entry | {"optional": True} for entry, _ in self.skipped_methods],
             "calibration": {"pfa": self.calibration.pfa, "mode": self.calibration.mode,
                             "h0_trials": self.calibration.h0_trials}
@@ -186,21 +192,18 @@ def label_value(params: Any, key: str) -> str:
     """How a label writes parameter ``key``: a data file by its name alone (its folder
     depends on where the sweep lives; the label must not)."""
     value = getattr(params, key)
-    return os.path.basename(value) if _is_path(params, key) else _format_value(value)
+    return os.path.basename(value) if key in path_fields(type(params)) else _format_value(value)
 
 
-def _is_path(params: Any, key: str) -> bool:
-    return next(f for f in dataclasses.fields(params) if f.name == key).metadata.get("kind") == PATH
-
-
-def _merge_scenario_grid(configs: tuple[ComponentConfig, ...], axes: tuple[str, ...] = ()) -> dict[str, Any]:
+def _merge_scenario_grid(configs: tuple[ComponentConfig, ...], axes: tuple[str, ...] = (),
+                         paths_from: str | os.PathLike | None = None) -> dict[str, Any]:
     """Scenario params of the plan: resolved values, lists where a grid varies.
 
     Keys in declaration order, except that the grid axes (the keys that vary)
     keep the order ``axes`` gives them (the sweep's): the order of the axes is
     the order of the configs and of the names in their labels, so
     ``bench run plan.toml`` gives the same labels and resumes the same units."""
-    dicts = [params_as_dict(c.params) for c in configs]
+    dicts = [params_as_dict(c.params, paths_from) for c in configs]
     merged = {}
     for key in dicts[0]:
         values = [d[key] for d in dicts]

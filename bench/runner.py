@@ -357,6 +357,7 @@ def plan_record(plan: Plan, command: str) -> dict:
     return {
         "sweep": plan.to_dict(),
         "source": plan.source,
+        "sweep_folder": plan.sweep_folder,
         "command": command,
         "methods": [{"label": m.label, "name": m.name, "params": m.params_text,
                      "task": registry.get_method(m.name).task} for m in plan.methods],
@@ -369,10 +370,12 @@ def plan_record(plan: Plan, command: str) -> dict:
 
 
 def write_plan_toml(path: Path, plan: Plan, command: str, identities: dict | None = None) -> None:
-    """The resolved sweep, re-runnable as a sweep file, with provenance: the identities
-    (config label -> short hash, ``Store.stamps``) the results were computed with."""
-    body = {**plan.to_dict(), "provenance": {"command": command, "fingerprint": plan.fingerprint(),
-                                             **provenance(), "identities": identities}}
+    """The resolved sweep, re-runnable as a sweep file (its data files named relative to
+    its folder, from which a sweep's relative paths are read), with provenance: the
+    identities (config label -> short hash, ``Store.stamps``) the results were computed with."""
+    body = {**plan.to_dict(paths_from=path.parent),
+            "provenance": {"command": command, "fingerprint": plan.fingerprint(), **provenance(),
+                           "identities": identities}}
     text = "# Resolved plan written by bench; `bench run plan.toml` reproduces the results.\n" + tomlw.dumps(body)
     from radarbench.bench.runfolder import write_text      # whole, a unique temporary name, listed in the manifest
     write_text(path, text)

@@ -375,7 +375,7 @@ def test_single_scenario_grids_list_each_configs_own_parameters():
         name = "innovation"
     """))
     plan = parse_sweep(sweep)
-    resolved = _resolved_scenario_params(plan.to_dict())
+    resolved = _resolved_scenario_params({"sweep": plan.to_dict()})
     texts = {label: _params_text(non_default(registry.get_scenario("cv-turn-cv"), p)) for label, p in resolved.items()}
     assert len(texts) == 2
     assert {("turn_rate_deg_s=2.0" in t, "turn_rate_deg_s=4.5" in t) for t in texts.values()} == {(True, False),

@@ -219,13 +219,27 @@ def _section(name: str, *args) -> str:
     return section_macro(name)(*args).strip("\n")
 
 
-def _resolved_scenario_params(sweep: dict) -> dict[str, dict]:
+def _resolved_scenario_params(record: dict) -> dict[str, dict]:
     """Scenario config label -> its resolved parameters, from the stored sweep resolved
-    again (a single-scenario sweep keeps its grid axes merged in ``scenario_params``)."""
+    again (a single-scenario sweep keeps its grid axes merged in ``scenario_params``), its
+    data files named as a report shows them (:func:`_shown_params`)."""
     from radarbench.bench.config import parse_sweep
     from radarbench.bench.params import params_as_dict
-    plan = parse_sweep(sweep, allow_large=True)
-    return {sc.label: params_as_dict(sc.params) for sc in plan.scenarios}
+    plan = parse_sweep(record["sweep"], allow_large=True)
+    return {sc.label: _shown_params(type(sc.params), params_as_dict(sc.params), record) for sc in plan.scenarios}
+
+
+def _shown_params(cls: type, params: dict, record: dict) -> dict:
+    """``params`` (of the params dataclass ``cls``) with its data files named relative to the
+    sweep's folder, never absolute (a shared report must not disclose its author's folders):
+    by their name alone for a store that did not record the folder."""
+    from radarbench.bench.params import shown_paths
+    return shown_paths(cls, params, record.get("sweep_folder"))
+
+
+def _method_params_text(cls, params: dict, record: dict) -> str:
+    """A method config's parameters that differ from its defaults, as the plan section shows them."""
+    return _params_text(non_default(cls, _shown_params(cls.Params, params, record)))
 
 
 def _section_plan(record: dict, store: Store, tasks: list) -> str:
@@ -239,13 +253,13 @@ def _section_plan(record: dict, store: Store, tasks: list) -> str:
         rows.append(["calibration", f"{cal['mode']}, requested Pfa {cal['pfa']:g}{f' ({units})' if units else ''}, "
                                     f"{cal['h0_trials']} null trials per scenario config of a calibrated task "
                                     f"({', '.join(null_for)})"])
-    resolved = _resolved_scenario_params(sweep)
+    resolved = _resolved_scenario_params(record)
     scenarios = [[code(sc["label"]), text(sc["name"]), text(", ".join(sc.get("tasks", []))),
                   _params_text(non_default(registry.get_scenario(sc["name"]), resolved.get(sc["label"], {}))),
                   _snr_text(sc.get("snr_db", sweep.get("snr_db", []))), sc.get("trials", sweep.get("trials"))]
                  for sc in record["scenarios"]]
     methods = [[code(m["label"]), text(m["name"]), text(m["task"]),
-                _params_text(non_default(registry.get_method(m["name"]), sweep["methods"][i]["params"]))]
+                _method_params_text(registry.get_method(m["name"]), sweep["methods"][i]["params"], record)]
                for i, m in enumerate(record["methods"])]
     return _section(
         "plan",

@@ -168,7 +168,7 @@ def _scenario_params(run: Run) -> dict[str, dict]:
     scenario cannot be resolved here, e.g. a plugin that is not installed)."""
     from radarbench.bench.report import _resolved_scenario_params
     try:
-        resolved = _resolved_scenario_params(run.record["sweep"])
+        resolved = _resolved_scenario_params(run.record)
     except Exception:  # noqa: BLE001 - a plugin missing here: compare what the plan stored
         resolved = {}
     return {sc["label"]: {"scenario": sc["name"], **resolved.get(sc["label"], {"parameters": sc.get("params", "")})}

@@ -8,6 +8,7 @@ draws segments from in :mod:`.bank`."""
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
@@ -66,7 +67,9 @@ class RecordedTracks(Scenario):
     """Segments of recorded tracks (a CSV/Parquet file, or the traffic package's real aircraft) as truth; position measurements in Gaussian noise.
 
     **Source**: ``path``, a CSV (or Parquet, with pyarrow) of one row per recorded
-    point: ``track`` (an id), ``time_s`` (s, increasing within a track, rows grouped
+    point: ``track`` (an id, read as text: ``1`` and ``01`` are two tracks; a Parquet
+    column of another type is converted to text, with a note on stderr), ``time_s``
+    (s, increasing within a track, rows grouped
     by track; in Parquet also a timestamp column), and either ``x_m``, ``y_m`` (planar metres) or ``latitude``,
     ``longitude`` (degrees, WGS-84) with an optional ``altitude_m`` (m above the
     ellipsoid, 0 if absent), converted to east/north metres in the tangent plane
@@ -79,9 +82,12 @@ class RecordedTracks(Scenario):
     ``featured/zero_gravity``), read from the installed package with pandas
     (``pip install '.[data]'``); the aircraft (icao24) is the track, altitude
     feet to metres, rows without a position dropped. A bad file (a missing
-    column, a NaN or non-numeric value, a track with fewer than two points,
-    time not increasing within a track, more than ``max_file_mb``) is refused
-    in one line naming the file, before anything runs.
+    column, a column name twice, an empty id, a NaN or non-numeric value, a
+    coordinate outside its physical range: latitude within +-90 degrees,
+    longitude within +-180 degrees, metres within +-1e8 m, a track with fewer
+    than two points, time not increasing within a track, more than
+    ``max_file_mb``, a file that cannot be parsed) is refused in one line
+    naming the file, its row and value, before anything runs.
 
     **Truth**: each track is cut into gap-free spans (a gap over ``max_gap_s``
     ends a span) and each span resampled on the grid of ``dt_s``: the recorded
@@ -280,8 +286,11 @@ class RecordedTracks(Scenario):
 
     def check_config(self, params) -> None:
         """Reads and checks the tracks (ConfigError naming the file) and that they hold a
-        segment with an onset and a quiet one."""
+        segment with an onset and a quiet one; says on stderr what reading converted (a
+        Parquet file's ids of another type than text)."""
         bank = bank_of(params)
+        for note in bank.notes:
+            print(f"note: {note}", file=sys.stderr)
         for what, starts in (("with a maneuver onset at step onset_step after quiet steps", bank.onsets),
                              ("quiet throughout (for the detectors' null trials)", bank.quiet)):
             if len(starts) == 0:

@@ -35,6 +35,8 @@ class Bank:
     valid: np.ndarray
     #: (M, 2) replaying: the recorded measurement of each step (NaN where none); else None
     z: np.ndarray | None = None
+    #: what reading the file converted, for the user (:func:`files.read_file`)
+    notes: tuple[str, ...] = ()
 
 
 def _span_states(t: np.ndarray, xy: np.ndarray, dt: float, window: int) -> np.ndarray:
@@ -98,7 +100,7 @@ def _runs_at_least(flags: np.ndarray, boundary: np.ndarray, length: int) -> np.n
 def build_bank(p) -> Bank:
     """The resampled tracks of config ``p`` and the segments a trial can draw
     (docstring of :class:`RecordedTracks`)."""
-    table = load_tracks(p)
+    table, notes = load_tracks(p)
     window = smoothing_steps(p)
     parts, boundary, recorded, measured = [], [], [], []
     for _, track in table.groupby(TRACK, sort=False):
@@ -126,7 +128,7 @@ def build_bank(p) -> Bank:
         valid = valid & ~np.isnan(z[:, 0])
     onsets, quiet = _segment_starts(maneuvering, first, valid, p.steps, p.onset_step)
     return Bank(pos=states[:, 0], vel=states[:, 1], acc=states[:, 2], maneuvering=maneuvering,
-                onsets=onsets, quiet=quiet, spans=len(parts), valid=valid, z=z)
+                onsets=onsets, quiet=quiet, spans=len(parts), valid=valid, z=z, notes=notes)
 
 
 def _segment_starts(maneuvering: np.ndarray, first: np.ndarray, valid: np.ndarray, K: int, onset: int):
@@ -164,12 +166,14 @@ def source_text(p) -> str:
     return p.path or "traffic samples " + ", ".join(p.traffic_samples)
 
 
-def load_tracks(p) -> pd.DataFrame:
-    """The config's tracks (track, time_s, east, north), checked (:func:`checked_tracks`)."""
+def load_tracks(p) -> tuple[pd.DataFrame, tuple[str, ...]]:
+    """The config's tracks (track, time_s, east, north), checked (:func:`checked_tracks`),
+    and what reading them converted (:func:`read_file`'s note)."""
     if p.path:
-        return checked_tracks(read_file(p.path), p.path, replays(p))
+        table, note = read_file(p.path)
+        return checked_tracks(table, p.path, replays(p)), (note,) if note else ()
     return pd.concat([checked_tracks(read_sample(name), f"traffic sample {name}", replays(p))
-                      for name in p.traffic_samples], ignore_index=True)
+                      for name in p.traffic_samples], ignore_index=True), ()
 
 
 @functools.lru_cache(maxsize=8)

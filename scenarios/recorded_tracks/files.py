@@ -4,7 +4,9 @@ Parquet file or a sample of the ``traffic`` package, its columns, times and coor
 
 from __future__ import annotations
 
+import collections
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +29,14 @@ SAMPLE_NAME = re.compile(r"[a-z0-9_]+/[a-z0-9_]+")
 SAMPLES_DIR = "traffic/data/samples"
 INSTALL_HINT = "pip install '.[data]' (the traffic package, whose wheel holds the samples)"
 FEET_M = 0.3048
+#: the bound on a coordinate in metres (m): 100,000 km, beyond any radar's coverage (a
+#: geostationary orbit is 42,164 km from the Earth's centre) and far inside float64's range,
+#: so no smoothing or plane conversion overflows (1e300 m is a corrupt file, not a track)
+MAX_METRES = 1e8
+#: the physical range of each coordinate column: (low, high, unit)
+RANGES = {**dict.fromkeys((GEODETIC[0], GEODETIC_MEAS[0]), (-90.0, 90.0, "degrees")),
+          **dict.fromkeys((GEODETIC[1], GEODETIC_MEAS[1]), (-180.0, 180.0, "degrees")),
+          **dict.fromkeys((*PLANAR, *PLANAR_MEAS, ALTITUDE), (-MAX_METRES, MAX_METRES, "m"))}
 EPOCH = pd.Timestamp(0, tz="UTC")
 
 
@@ -64,26 +74,88 @@ def read_sample(name: str) -> pd.DataFrame:
     return table.drop_duplicates([TRACK, TIME]).fillna({ALTITUDE: 0.0})
 
 
-def read_file(path: str) -> pd.DataFrame:
-    """A user's CSV, or Parquet (``.parquet``/``.pq``, with pyarrow), as read."""
+def read_file(path: str) -> tuple[pd.DataFrame, str | None]:
+    """A user's CSV, or Parquet (``.parquet``/``.pq``, with pyarrow), as written: the
+    column names as they are (a name twice is refused, never renamed), the track ids as
+    text; and a note when the ids had to be converted to text (Parquet), else None. A file
+    that cannot be parsed is a ConfigError naming it, in one line."""
     if path.lower().endswith((".parquet", ".pq")):
-        try:
-            import pyarrow  # noqa: F401
-        except ImportError:
-            raise ConfigError("path", f"{path}: reading Parquet needs pyarrow (pip install pyarrow), "
-                              "or give a CSV") from None
-        return pd.read_parquet(path)
+        return _read_parquet(path)
+    return _read_csv(path), None
+
+
+def _read_csv(path: str) -> pd.DataFrame:
+    """The CSV with its ids as text (``"01"`` is not ``"1"``); only an empty field is a
+    missing value (``NA`` may be an aircraft's id; a NaN in a number column is refused
+    later as non-numeric); a row with more fields than the header is refused (pandas
+    would make the extra leading fields an index, or drop the last ones)."""
     try:
-        return pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
-        raise ConfigError("path", f"{path}: not a readable CSV ({str(err).splitlines()[0]})") from None
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            header = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False).iloc[0].tolist()
+            _check_unique(header, path)
+            return pd.read_csv(path, dtype={TRACK: str}, keep_default_na=False, na_values={TRACK: [""]},
+                               index_col=False)
+    except (pd.errors.ParserError, pd.errors.ParserWarning, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
+        raise ConfigError("path", f"{path}: not a readable CSV ({_first_line(err)})") from None
+
+
+def _read_parquet(path: str) -> tuple[pd.DataFrame, str | None]:
+    """The Parquet file, its track ids converted to text when of another type (integers
+    to their decimal digits, floats to their shortest text: pyarrow's cast), and the note
+    that says so."""
+    try:
+        import pyarrow as pa
+        import pyarrow.compute as pc
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise ConfigError("path", f"{path}: reading Parquet needs pyarrow (pip install pyarrow), "
+                          "or give a CSV") from None
+    try:
+        file = pq.ParquetFile(path)
+        _check_unique(file.schema_arrow.names, path)
+        table = file.read()
+        note = None
+        if TRACK in table.column_names and not _is_text(pa, table.schema.field(TRACK).type):
+            kind = table.schema.field(TRACK).type
+            ids = pc.cast(table.column(TRACK), pa.string())
+            table = table.set_column(table.column_names.index(TRACK), TRACK, ids)
+            example = next((i for i in ids.to_pylist() if i is not None), "")
+            note = f"{path}: column {TRACK} holds {kind}, not text: its ids are read as their text (e.g. {example!r})"
+        # the columns as stored, not as pandas' metadata (JSON in the file, maybe corrupt) would rebuild them
+        return table.replace_schema_metadata(None).to_pandas(), note
+    except (pa.ArrowException, OSError, UnicodeDecodeError) as err:     # names not UTF-8 too
+        raise ConfigError("path", f"{path}: not a readable Parquet file ({_first_line(err)})") from None
+
+
+def _is_text(pa, kind) -> bool:
+    """Whether the Arrow type ``kind`` holds text (a dictionary of text too: a categorical)."""
+    if pa.types.is_dictionary(kind):
+        kind = kind.value_type
+    is_view = getattr(pa.types, "is_string_view", lambda _: False)     # pyarrow >= 16
+    return pa.types.is_string(kind) or pa.types.is_large_string(kind) or is_view(kind)
+
+
+def _first_line(err: BaseException) -> str:
+    return (str(err).strip().splitlines() or [type(err).__name__])[0][:200]
+
+
+def _check_unique(names: list, where: str) -> None:
+    """Every non-empty column name once: pandas would rename a second ``x_m`` to ``x_m.1``
+    and read the first alone."""
+    counts = collections.Counter(str(name) for name in names if str(name))
+    twice = [name for name, count in counts.items() if count > 1]
+    if twice:
+        raise ConfigError("path", f"{where}: column name(s) {', '.join(map(repr, twice))} appear more than once; "
+                          "give each column its own name")
 
 
 def checked_tracks(table: pd.DataFrame, where: str, recorded: bool = False) -> pd.DataFrame:
     """The table's tracks as (track, time_s, east, north) in metres, and with ``recorded``
     the recorded measurements (meas_east, meas_north) in the same frame, or a ConfigError
-    naming ``where`` (the file) and the first problem: a missing column, a non-numeric or
-    NaN value, too few points in a track, times not increasing within a track."""
+    naming ``where`` (the file) and the first problem: a missing column, an empty track id,
+    a non-numeric or NaN value, a coordinate outside its physical range (:data:`RANGES`),
+    too few points in a track, times not increasing within a track."""
     planar = any(c in table for c in PLANAR)
     columns = [TRACK, TIME, *(PLANAR if planar else GEODETIC)]
     missing = [c for c in columns if c not in table]
@@ -97,22 +169,33 @@ def checked_tracks(table: pd.DataFrame, where: str, recorded: bool = False) -> p
                           f"replays them (with {' and '.join(columns[2:])}, the truth)")
     if table.empty:
         raise ConfigError("path", f"{where}: no rows")
+    empty = table[TRACK].isna().to_numpy()
+    if empty.any():
+        raise ConfigError("path", f"{where}: column {TRACK} has {int(empty.sum())} empty id(s), the first at row "
+                          f"{int(np.argmax(empty)) + 1}")
+    tracks = table[TRACK].astype(str).to_numpy()
     values = {}
     for c in columns[1:] + measured + ([ALTITUDE] if not planar and ALTITUDE in table else []):
-        col = _numbers(table[c])
-        bad = ~np.isfinite(col)
-        if bad.any():
-            row = int(np.argmax(bad))
-            raise ConfigError("path", f"{where}: column {c} has {int(bad.sum())} missing or non-numeric "
-                              f"value(s), the first in track {table[TRACK].iloc[row]!r} at row {row + 1}")
-        values[c] = col
-    tracks = table[TRACK].astype(str).to_numpy()
+        values[c] = _numbers(table[c])
+        _check_values(c, values[c], tracks, where)
     _check_times(tracks, values[TIME], where)
     out = pd.DataFrame({TRACK: tracks, TIME: values[TIME]})
     for prefix, pair in (("", columns[2:]), ("meas_", measured)):
         if pair:
             out[prefix + "east"], out[prefix + "north"] = _in_metres(tracks, values, pair, planar)
     return out
+
+
+def _check_values(column: str, values: np.ndarray, tracks: np.ndarray, where: str) -> None:
+    """Every value of ``column`` a finite number within the column's range (:data:`RANGES`),
+    or a ConfigError naming the first other one: its row, track and value."""
+    low, high, unit = RANGES.get(column, (-np.inf, np.inf, ""))
+    for bad, what in ((~np.isfinite(values), "missing or non-numeric value(s)"),
+                      ((values < low) | (values > high), f"value(s) outside [{low:g}, {high:g}] {unit}")):
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise ConfigError("path", f"{where}: column {column} has {int(bad.sum())} {what}, the first "
+                              f"({values[row]:g}) in track {tracks[row]!r} at row {row + 1}")
 
 
 def _in_metres(tracks, values: dict, pair, planar: bool) -> tuple[np.ndarray, np.ndarray]:
