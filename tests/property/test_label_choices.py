@@ -133,3 +133,13 @@ def test_a_markup_choice_is_refused_when_its_plugin_registers():
     with pytest.raises(registry.PluginError, match=r"choice '<svg onload=alert\(1\)>' is not letters"), \
             registered(chooser(("plain", "<svg onload=alert(1)>"))):
         pass
+
+
+def test_bench_run_refuses_a_value_its_label_cannot_hold_in_one_line_writing_nothing():
+    """Was: the run computed every unit, then exited 2 on its own plan.toml's label, and
+    ``bench report`` failed the same way forever."""
+    from tests.test_reliability_validation import refused, toml
+    with registered(free_text()):
+        line = refused(toml(sweep({"note": "<svg onload=alert(1)>"})))
+    assert "methods[0].params.note: its label 'chooser[note=<svg onload=alert(1)>]' is not letters" in line
+    assert line.endswith("name this config with a 'label' (one config per entry)")
