@@ -34,7 +34,7 @@ from typing import Any, Mapping
 
 from radarbench.bench import capabilities, feasibility, registry
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.grid import MAX_CONFIGS, expand, label_problem, params_text_of_label
+from radarbench.bench.grid import MAX_CONFIGS, expand, named
 from radarbench.bench.params import as_float, show
 from radarbench.bench.plan import (SNR_KEY_DIGITS, CalibrationConfig, ComponentConfig, Plan,  # noqa: F401 - importable from here
                         ScenarioConfig, snr_key)
@@ -48,8 +48,6 @@ SCENARIO_KEYS = {"name", "params", "label", "snr_db", "trials"}
 METHOD_KEYS = {"name", "params", "label", "optional"}
 CALIBRATION_MODES = ("nominal", "empirical", "gumbel", "pot")
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}\Z")     # \Z: "$" would let a final newline in
-#: config labels: readable like "cumulant-as-printed" or "glint[epsilon=0.05]", never path-like
-LABEL_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.,=+\-\[\]() ]{0,199}\Z")
 MAX_SNR_LEVELS = 1000
 #: |SNR| bound (dB): beyond it powers overflow and nothing physical is left to measure
 MAX_ABS_SNR_DB = 200.0
@@ -169,18 +167,9 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...], base: str 
         _check_runs_somewhere(cls, scenarios, f"{field}.name")
         params = _expect_table(entry.get("params", {}), f"{field}.params")
         expanded = expand(cls.name, cls.Params, params, f"{field}.params", base=base)
-        if "label" in entry:
-            label = entry["label"]
-            if not isinstance(label, str) or not LABEL_PATTERN.match(label):
-                raise ConfigError(f"{field}.label", "expected letters, digits, spaces or '_.,=+-[]()' "
-                                                    f"(at most 200, no path separators), got {label!r}"[:200])
-            if len(expanded) != 1:
-                raise ConfigError(f"{field}.label", "a label names one config; remove the grid (list) values")
-            c = expanded[0]
-            problem = label_problem(c.name, label, c.params, bare_means_defaults=True)
-            if problem:
-                raise ConfigError(f"{field}.label", problem)
-            expanded = [ComponentConfig(c.name, c.params, label, params_text_of_label(c.name, label))]
+        if "label" in entry and len(expanded) != 1:
+            raise ConfigError(f"{field}.label", "a label names one config; remove the grid (list) values")
+        expanded = [named(c, entry.get("label"), f"{field}.params", bare_means_defaults=True) for c in expanded]
         for c in expanded:
             if c.label in seen:
                 raise ConfigError(field, f"config {c.label!r} repeats {seen[c.label]}")
@@ -227,16 +216,11 @@ def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, .
     cls = registry.get_scenario(name, f"{field}.name" if field != "scenario_params" else "scenario")
     table = _expect_table(params, field)
     expanded = expand(cls.name, cls.Params, table, field, identity=identity, base=base)
-    if label is not None:
-        if not isinstance(label, str) or not LABEL_PATTERN.match(label):
-            raise ConfigError(field.replace(".params", ".label"), "expected letters, digits, spaces or "
-                                                                  f"'_.,=+-[]()' (at most 200), got {label!r}"[:200])
-        if len(expanded) != 1:
-            raise ConfigError(field.replace(".params", ".label"), "a label names one config; remove the grid")
-        problem = label_problem(cls.name, label, expanded[0].params, bare_means_defaults=False)
-        if problem:
-            raise ConfigError(field.replace(".params", ".label"), problem)
-        expanded = [ComponentConfig(cls.name, expanded[0].params, label, expanded[0].params_text)]
+    if label is not None and len(expanded) != 1:
+        raise ConfigError(field.replace(".params", ".label"), "a label names one config; remove the grid")
+    # a scenario config's params column stays what its parameters say, whatever its label
+    expanded = [dataclasses.replace(named(c, label, field, bare_means_defaults=False), params_text=c.params_text)
+                for c in expanded]
     labels = [c.label for c in expanded]
     for i, label in enumerate(labels):
         if label in labels[:i]:                  # e.g. a float axis [1, 1.0]

@@ -189,6 +189,21 @@ class Batch:
         return int(self.t.shape[0])
 
 
+@dataclass(frozen=True)
+class Timeline:
+    """The steps of a scenario config's scenes, from its params (:meth:`Scenario.timeline`).
+
+    steps : int — K, the steps of a scene.
+    onset_step : int or None — the earliest step a maneuver starts in any trial
+        (None: the scenes have none).
+    warmup_steps : int — steps before it that are never counted as false alarms.
+    """
+
+    steps: int
+    onset_step: int | None
+    warmup_steps: int = 0
+
+
 @dataclass
 class DetectionOutput:
     """Output of a maneuver detector.
@@ -196,8 +211,9 @@ class DetectionOutput:
     statistic : (n, K) float — the test statistic per trial and step; an
         alarm is ``statistic >= threshold``.
     valid_from : int — first step at which the statistic is fully formed
-        (e.g. a sliding window is full). Steps before it are never counted as
-        false alarms nor used for calibration.
+        (e.g. a sliding window is full; :meth:`Method.valid_from` declares it).
+        Steps before it are never counted as false alarms or detections, nor used
+        for calibration.
     traces : dict of (n, K) arrays — extra per-step series worth seeing in a
         recording (e.g. the whitened innovation).
     """
@@ -333,6 +349,14 @@ class Scenario(Component):
         ``max_unit_memory_gb``. None (the default): not estimated."""
         return None
 
+    def timeline(self, params) -> Timeline | None:
+        """The steps of the scenes a config with ``params`` generates, known from the
+        params alone (:class:`Timeline`: their number, the earliest maneuver onset, the
+        warm-up), read at plan time by its tasks (the detection task refuses a detector
+        whose statistic is formed only at or after the onset). None (the default): not
+        declared, nothing is checked against it."""
+        return None
+
     def check_config(self, params) -> None:
         """The checks of a config that cost work in proportion to its size (e.g. whether
         its targets fit on its map): raise ``ConfigError`` naming the field. Run once
@@ -438,6 +462,14 @@ class Method(Component):
         up front. Read the scenario's parameters by name (``getattr`` with a
         default): a method does not import scenarios."""
         return None
+
+    def valid_from(self, params, steps: int) -> int:
+        """The first step at which this config's per-step statistic is formed in a scene
+        of ``steps`` steps (a sliding window full): the ``valid_from`` of the
+        :class:`DetectionOutput` it returns, declared here so the harness reads it at plan
+        time against a scenario's :meth:`Scenario.timeline`. The default: 0, from the
+        first step."""
+        return 0
 
     def unit_memory_bytes(self, params, scenario_params, n: int) -> int | None:
         """Working memory (bytes) of :meth:`run` on ``n`` trials of a scenario

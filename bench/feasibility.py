@@ -3,9 +3,10 @@
 After a sweep is parsed and its grids expanded (:mod:`bench.config`), every
 scenario config's SNR levels are checked by the scenario
 (:meth:`~bench.core.Scenario.check_snr`), every (method config, scenario
-config) pair by the method (:meth:`~bench.core.Method.check_scenario`: a
-pair it refuses is skipped, a method config it refuses everywhere is an
-error), every unit's memory is estimated from the plugins' declared array sizes
+config) pair by the method (:meth:`~bench.core.Method.check_scenario`) and by
+its task (:meth:`~bench.tasks.base.Task.check_pair`: whether the config can be
+scored there; a pair either refuses is skipped, a method config refused
+everywhere is an error), every unit's memory is estimated from the plugins' declared array sizes
 (``unit_memory_bytes``) against ``max_unit_memory_gb``, and only then are the
 checks that cost work in proportion to a config's size run (the scenario's
 ``check_config``) — so a sweep that would fail, hang or swap on every unit is
@@ -67,9 +68,10 @@ def check_snr_levels(plan: Plan, scenario_fields: tuple[str, ...]) -> None:
 
 def check_pairs(plan: Plan, method_fields: tuple[str, ...]) -> tuple[tuple[str, str, str], ...]:
     """Every (method config, scenario config) pair the sweep names, checked by the
-    method's :meth:`~bench.core.Method.check_scenario` after grid expansion. A pair
-    it refuses (a window longer than the scene, a tracker of another kind of
-    scene) is skipped when the method config runs on some other scenario config
+    method's :meth:`~bench.core.Method.check_scenario` and its task's
+    :meth:`~bench.tasks.base.Task.check_pair` after grid expansion (:func:`pair_problem`).
+    A pair refused (a window longer than the scene, a tracker of another kind of
+    scene, a statistic formed only after the onset) is skipped when the method config runs on some other scenario config
     of the sweep; returns the skipped pairs as (scenario label, method label,
     reason). A method config that runs on none is refused, in one line naming it
     and its first refused scenario config, rather than failing on every unit."""
@@ -77,13 +79,22 @@ def check_pairs(plan: Plan, method_fields: tuple[str, ...]) -> tuple[tuple[str, 
     for m, field in zip(plan.methods, method_fields):
         method = registry.get_method(m.name)()
         candidates = [s for s in plan.scenarios if any(p is m for p in plan.candidate_pairs(s))]
-        refused = [(s, problem) for s in candidates if (problem := method.check_scenario(m.params, s.params))]
+        refused = [(s, problem) for s in candidates if (problem := pair_problem(method, m.params, s))]
         if refused and len(refused) == len(candidates):
             s, problem = refused[0]
             raise ConfigError(f"{field}.params", f"{m.label!r} cannot run on scenario config "
                                                  f"{s.label!r}: {problem}"[:400])
         skipped += [(s.label, m.label, problem) for s, problem in refused]
     return tuple(skipped)
+
+
+def pair_problem(method, method_params, scenario: ScenarioConfig) -> str | None:
+    """Why a method config cannot run on ``scenario`` (the method's own
+    :meth:`~bench.core.Method.check_scenario`), or cannot be scored there (its task's
+    :meth:`~bench.tasks.base.Task.check_pair`, from what the method and the scenario
+    declare); None: it can."""
+    return method.check_scenario(method_params, scenario.params) or registry.get_task(method.task).check_pair(
+        method, method_params, registry.get_scenario(scenario.name)(), scenario.params)
 
 
 def unit_memory_bytes(plan: Plan, scenario: ScenarioConfig, n: int, calibration: bool) -> tuple[int, str]:

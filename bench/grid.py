@@ -8,7 +8,11 @@ parameter whose type is itself a list (e.g. AR coefficients), a list of lists is
 A config's identity is a readable label in the style of benchopt: ``cumulant[window=32]``,
 the registry name plus the parameters the sweep set (for scenarios, only the grid axes).
 A label the user gives is refused where it would misstate the config
-(:func:`label_problem`).
+(:func:`label_problem`). Every label of a plan, given or generated, is in
+:data:`LABEL_PATTERN`'s alphabet and reads back as its config's (:func:`named`): plan.toml
+writes the method labels out and ``bench run plan.toml`` and ``bench report`` read them
+back, so a parameter value a label cannot hold (markup, a path separator, a comma) is
+refused when the sweep is read, naming it, never once the run has computed.
 """
 
 from __future__ import annotations
@@ -25,6 +29,10 @@ from radarbench.bench.plan import ComponentConfig, label_value
 
 #: the most configs one grid (or one sweep's list of methods or scenarios) may expand to
 MAX_CONFIGS = 1000
+#: config labels: readable like "cumulant-as-printed" or "glint[epsilon=0.05]", never path-like
+#: nor markup
+LABEL_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.,=+\-\[\]() ]{0,199}\Z")
+LABEL_ALPHABET = "letters, digits, spaces or '_.,=+-[]()' (at most 200, no path separators)"
 
 
 def _grid_axes(params_cls: type, values: Mapping[str, Any], field: str) -> list[list[tuple[str, Any]]]:
@@ -109,6 +117,40 @@ def label_problem(name: str, label: str, params: Any, *, bare_means_defaults: bo
             if text != actual:
                 return f"{label!r} says {key}={text}, but this config has {key}={actual}"[:300]
     return None
+
+
+def named(c: ComponentConfig, label: Any, field: str, *, bare_means_defaults: bool) -> ComponentConfig:
+    """``c`` named by the user's ``label`` (None: its generated one), once the label is
+    checked as plan.toml's reader will check it (:data:`LABEL_PATTERN`,
+    :func:`label_problem`): a user's label in ``field.label``; a generated one in the
+    parameter whose value it cannot hold, whose config then needs a label of its own."""
+    if label is None:
+        problem = _label_check(c.name, c.label, c.params, bare_means_defaults)
+        if problem:
+            culprit = next((k for k in _keys_in(c) if _label_check(
+                c.name, f"{c.name}[{k}={label_value(c.params, k)}]", c.params, False)), "")
+            raise ConfigError(f"{field}.{culprit}" if culprit else field,
+                              f"{problem}: name this config with a 'label' (one config per entry)"[:400])
+        return c
+    label_field = f"{field.removesuffix('.params')}.label"
+    if not isinstance(label, str) or not LABEL_PATTERN.match(label):
+        raise ConfigError(label_field, f"expected {LABEL_ALPHABET}, got {label!r}"[:200])
+    problem = label_problem(c.name, label, c.params, bare_means_defaults=bare_means_defaults)
+    if problem:
+        raise ConfigError(label_field, problem)
+    return ComponentConfig(c.name, c.params, label, params_text_of_label(c.name, label))
+
+
+def _keys_in(c: ComponentConfig) -> list[str]:
+    """The parameters a generated label writes (``k=`` at the start or after a comma)."""
+    return [k for k in field_types(type(c.params)) if re.search(rf"(^|,){re.escape(k)}=", c.params_text)]
+
+
+def _label_check(name: str, label: str, params: Any, bare_means_defaults: bool) -> str | None:
+    """Why ``label`` cannot name the config (its alphabet, or :func:`label_problem`); None: it can."""
+    if not LABEL_PATTERN.match(label):
+        return f"its label {label!r} is not {LABEL_ALPHABET}"[:300]
+    return label_problem(name, label, params, bare_means_defaults=bare_means_defaults)
 
 
 def params_text_of_label(name: str, label: str) -> str:

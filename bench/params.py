@@ -30,6 +30,7 @@ import dataclasses
 import math
 import operator
 import os
+import re
 import stat
 import typing
 from typing import Any, Mapping
@@ -38,6 +39,10 @@ from radarbench.bench.errors import ConfigError
 
 #: the ``kind`` of a parameter that names a data file
 PATH = "path"
+#: a declared choice: a word of a config label's alphabet (:data:`bench.grid.LABEL_PATTERN`)
+#: without the label's own punctuation (``,=[]()``) or blanks at its ends, so a config that
+#: sets it has a label that reads back as its own (``name[key=choice]``)
+CHOICE_PATTERN = re.compile(r"[A-Za-z0-9_.+\-]([A-Za-z0-9_.+\- ]{0,62}[A-Za-z0-9_.+\-])?\Z")
 
 
 def param(default: Any, doc: str, *, ge=None, gt=None, le=None, lt=None,
@@ -258,9 +263,10 @@ _SCALARS = (bool, int, float, str)
 def declaration_problem(cls: type) -> str | None:
     """Why the params dataclass ``cls`` breaks the project's convention, naming the
     parameter (None if it keeps it): every field a supported type with a default its own
-    checks accept, every number bounded on both sides with a reason (``why``). Checked
+    checks accept, every number bounded on both sides with a reason (``why``), every
+    string choice a word of the label alphabet (:data:`CHOICE_PATTERN`). Checked
     when a plugin registers (:mod:`bench.registry`), so a sweep can never run a value
-    the plugin did not bound."""
+    the plugin did not bound, nor a declared choice its config's label cannot hold."""
     types = field_types(cls)
     for f in dataclasses.fields(cls):
         tp, meta = types[f.name], f.metadata
@@ -278,6 +284,10 @@ def declaration_problem(cls: type) -> str | None:
             return f"parameter {f.name!r}: a path is a str, not a {_type_name(tp)}"
         if f.default is dataclasses.MISSING:
             return f"parameter {f.name!r} has no default"
+        odd = [c for c in meta.get("choices") or () if isinstance(c, str) and not CHOICE_PATTERN.match(c)]
+        if odd:
+            return f"parameter {f.name!r}: choice {show(odd[0])} is not letters, digits, inner spaces or " \
+                   "'_.+-' (at most 64): a config label could not name it"
         try:
             check_value(tp, f.default, meta)
         except ConfigError as err:

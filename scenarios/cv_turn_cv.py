@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from radarbench.bench.batched import matvec
-from radarbench.bench.core import MANEUVER_DETECTION, Batch, Scenario
+from radarbench.bench.core import MANEUVER_DETECTION, Batch, Scenario, Timeline
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_scenario
@@ -167,6 +167,10 @@ class CvTurnCv(Scenario):
     provides = frozenset({"reference-filter"})
     #: ``bench perf`` sizes: name -> (scenario params, trials)
     perf_sizes = {"paper": ({}, 1000)}
+
+    def timeline(self, params) -> Timeline:
+        """``steps`` steps; the earliest onset is ``onset_step`` (a jitter only delays it)."""
+        return Timeline(steps=params.steps, onset_step=params.onset_step, warmup_steps=params.warmup_steps)
 
     def unit_memory_bytes(self, params, n: int) -> int:
         """About 32 float64 values per trial and step: the truth (4), its process

@@ -9,7 +9,7 @@ import pytest
 
 from radarbench.bench import registry
 from radarbench.bench.capabilities import CAPABILITIES, fits, missing
-from radarbench.bench.core import Scene
+from radarbench.bench.core import DetectionOutput, Scene
 from radarbench.bench.params import build_params
 from radarbench.bench.rng import TrialRNG
 from radarbench.bench.registry import get_task
@@ -78,6 +78,8 @@ def test_method_conforms(scenario, method):
         assert first and first.keys() == second.keys()
         for name in first:                                                  # pure and deterministic
             np.testing.assert_array_equal(first[name], second[name], err_msg=name)
+        if isinstance(out, DetectionOutput):      # what the plan-time check reads is what it returns
+            assert out.valid_from == cls().valid_from(cls.Params(), batch.steps)
         if snr is not None:
             metrics = task.trial_metrics(batch, out, 1.0)
             assert all(len(v) == batch.n for v in metrics.values())
@@ -125,6 +127,20 @@ def test_scenario_batches_carry_the_scene_of_each_task(scenario):
         with pytest.raises(dataclasses.FrozenInstanceError):
             batch.scene.snr_definition = "changed"
         assert not hasattr(batch, "meta")
+
+
+@pytest.mark.parametrize("scenario", list(registry.scenarios()))
+def test_a_declared_timeline_is_the_generated_scenes(scenario):
+    """``Scenario.timeline`` (what the plan-time checks read) states the steps, the
+    earliest onset and the warm-up of the scenes ``generate`` makes."""
+    cls = registry.get_scenario(scenario)
+    timeline = cls().timeline(_params(cls))
+    if timeline is None:
+        return
+    batch = _batch(scenario, 10.0)
+    assert timeline.steps == batch.steps
+    assert timeline.onset_step == int(np.min(batch.scene.onset_step))
+    assert timeline.warmup_steps == batch.scene.warmup_steps
 
 
 @pytest.mark.parametrize("scenario, method", PAIRS)

@@ -198,29 +198,30 @@ def test_a_method_that_cannot_run_on_a_scenario_config_is_refused_naming_both(me
 
 
 def test_the_pair_check_runs_after_the_scenario_grid_expands():
-    """window = 64 fits the 160-step config of the grid but not the 50-step one: that pair
-    is skipped, with the method's reason; a window of exactly the scene's length runs."""
-    grid = {"steps": [160, 50], "onset_step": 20, "turn_steps": 10, "detect_window_steps": 20}
+    """window = 64 is formed (step 63) before the onset of the grid's onset-80 config but
+    not of its onset-20 one: that pair is skipped, with the reason; a window formed on the
+    step before the onset runs."""
+    grid = {"steps": 160, "onset_step": [80, 20], "turn_steps": 10, "detect_window_steps": 20}
     data = sweep(scenario_params=grid, methods=[{"name": "cumulant", "params": {"window": 64}},
                                                 {"name": "innovation", "params": {"window": 5}}])
     plan = parse_sweep(data)
-    long, short = plan.scenarios
-    assert [(s, m) for s, m, _ in plan.skipped] == [(short.label, "cumulant[window=64]")]
-    assert "window of 64 steps" in plan.skipped[0][2]
-    assert [m.label for m in plan.pairs(long)] == ["cumulant[window=64]", "innovation[window=5]"]
-    assert [m.label for m in plan.pairs(short)] == ["innovation[window=5]"]
+    late, early = plan.scenarios
+    assert [(s, m) for s, m, _ in plan.skipped] == [(early.label, "cumulant[window=64]")]
+    assert "formed from step 63 (valid_from), not before the maneuver onset at step 20" in plan.skipped[0][2]
+    assert [m.label for m in plan.pairs(late)] == ["cumulant[window=64]", "innovation[window=5]"]
+    assert [m.label for m in plan.pairs(early)] == ["innovation[window=5]"]
     assert plan.trial_runs == 2 * 2 * (2 + 1)
-    data["scenario_params"]["steps"] = [160, 64]
+    data["scenario_params"]["onset_step"] = [80, 64]
     assert parse_sweep(data).skipped == ()
-    data["scenario_params"]["steps"] = [64, 50]
+    data["scenario_params"]["onset_step"] = [64, 20]
     data["methods"] = [{"name": "cumulant", "params": {"window": 64}}]
-    refused(toml(data), "no method of the sweep runs on scenario config 'cv-turn-cv[steps=50]'")
+    refused(toml(data), "no method of the sweep runs on scenario config 'cv-turn-cv[onset_step=20]'")
 
 
 def test_a_skipped_pair_has_no_units_or_rows_and_is_listed():
     """A run with a skipped pair: one stderr line per pair (unless --quiet), no trials.csv
     rows for it, and the report's 'What was run' section names it with the reason."""
-    grid = {"steps": [80, 30], "onset_step": 15, "turn_steps": 5, "detect_window_steps": 10}
+    grid = {"steps": 80, "onset_step": [45, 15], "turn_steps": 5, "detect_window_steps": 10}
     data = sweep(scenario_params=grid, methods=[{"name": "cumulant", "params": {"window": 40}},
                                                 {"name": "innovation", "params": {"window": 5}}])
     with tempfile.TemporaryDirectory() as tmp:
@@ -230,14 +231,16 @@ def test_a_skipped_pair_has_no_units_or_rows_and_is_listed():
         with contextlib.chdir(root), contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
             code = main(["run", "sweep.toml", "--out", "out", "--workers", "1", "--no-record"])
         assert code == 0, err.getvalue()
-        assert "cumulant[window=40] on cv-turn-cv[steps=30]: the window of 40 steps" in err.getvalue()
+        assert "cumulant[window=40] on cv-turn-cv[onset_step=15]: its statistic is formed from step 39" \
+            in err.getvalue()
         trials = pd.read_csv(root / "out" / "trials.csv")
         pairs = set(zip(trials.scenario, trials.config))
-        assert ("cv-turn-cv[steps=30]", "cumulant[window=40]") not in pairs
-        assert {("cv-turn-cv[steps=80]", "cumulant[window=40]"),
-                ("cv-turn-cv[steps=30]", "innovation[window=5]")} <= pairs
+        assert ("cv-turn-cv[onset_step=15]", "cumulant[window=40]") not in pairs
+        assert {("cv-turn-cv[onset_step=45]", "cumulant[window=40]"),
+                ("cv-turn-cv[onset_step=15]", "innovation[window=5]")} <= pairs
         report = (root / "out" / "report.md").read_text(encoding="utf-8")
-        assert "| `cv-turn-cv[steps=30]` | `cumulant[window=40]` | the window of 40 steps" in report
+        assert "| `cv-turn-cv[onset_step=15]` | `cumulant[window=40]` | its statistic is formed from step 39" \
+            in report
         assert "None: every method config ran on every unit." in report
 
 

@@ -218,7 +218,8 @@ def test_glance_does_not_rank_on_single_trials(per_level, words):
     from radarbench.bench.report.glance import comparisons_frame, glance
     from radarbench.bench.report.render import glance_markdown
     task = SimpleNamespace(name="t", noun="trackers", ranking_metric="err", ranking_higher_is_better=False,
-                           ranking_label="error (m)", ranking_binary=False, equal_chance_metric="")
+                           ranking_label="error (m)", ranking_binary=False, equal_chance_metric="",
+                           ranking_undefined="no trial has a value", unranked_reason=lambda trials: "")
     rng = np.random.default_rng(3)
     trials = pd.DataFrame([{"scenario": "s", "config": c, "snr_db": snr, "trial": i,
                             "err": base + (rng.normal() if per_level > 1 else 0.0)}

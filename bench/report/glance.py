@@ -17,8 +17,10 @@ discordant pairs; the exact test is not).
 
 *At a glance*: per (task, scenario config) the configs ranked by the ranking
 metric averaged over the SNR levels (each level weighing the same), with
-bootstrap intervals; the winner's margin over the runner-up is their paired
-comparison over all levels, "tie" when it is not significant, "not enough
+bootstrap intervals; a config whose metric is undefined (no value, or what its task
+finds undefined, :meth:`~bench.tasks.base.Task.unranked_reason`) is listed unranked with
+the reason; the winner's margin over the runner-up is their paired comparison over all
+levels, "tie" when it is not significant, "not enough
 trials to rank" when the comparison has a single pair or a zero-width interval
 away from 0. A task whose detectors differ in chance Pd (a single-step test
 alarms by chance far more often than a window statistic) declares
@@ -133,6 +135,23 @@ def enough_trials(row) -> bool:
     return bool(row.n_pairs >= 2 and not degenerate)
 
 
+def unranked_reasons(task, g: pd.DataFrame, means: dict) -> dict[str, str]:
+    """config -> why it is never ranked: no value of the ranking metric (the task's
+    ``ranking_undefined``), or what the task finds undefined in its trials
+    (:meth:`~bench.tasks.base.Task.unranked_reason`, e.g. a Pfa with no false-alarm step)."""
+    reasons, no_value = {}, task.ranking_undefined or "no value"
+    for config, c in g.groupby("config", sort=False):
+        reason = no_value if not np.isfinite(means[config][0]) else task.unranked_reason(c)
+        if reason:
+            reasons[config] = reason
+    return reasons
+
+
+def _common_reason(reasons) -> str:
+    """The reasons no config is ranked, each once, in order."""
+    return "; ".join(dict.fromkeys(reasons))
+
+
 def glance(trials: pd.DataFrame, task_of: dict, comparisons: pd.DataFrame, chance: dict) -> list[dict]:
     """Per (scenario config, task): the configs ranked (mean of the ranking
     metric over the levels with its interval, the chance Pd where calibrated),
@@ -145,15 +164,16 @@ def glance(trials: pd.DataFrame, task_of: dict, comparisons: pd.DataFrame, chanc
         metric = fair or task.ranking_metric
         means = _mean_by_config(g, metric)
         secondary = _mean_by_config(g, task.ranking_metric) if fair else {}
-        ranking = [{"config": config, "mean": mean, "low": low, "high": high,
+        unranked = unranked_reasons(task, g, means)
+        ranking = [{"config": config, "mean": mean, "low": low, "high": high, "unranked": unranked.get(config, ""),
                     "chance": chance.get((scenario, config), np.nan), "secondary": secondary.get(config)}
                    for config, (mean, low, high) in means.items()]
         sign = -1.0 if task.ranking_higher_is_better else 1.0
-        ranking.sort(key=lambda r: sign * r["mean"] if np.isfinite(r["mean"]) else np.inf)
-        ranked = sum(np.isfinite(r["mean"]) for r in ranking)     # a config without a value is never ranked
+        ranking.sort(key=lambda r: np.inf if r["unranked"] else sign * r["mean"])
+        ranked = sum(not r["unranked"] for r in ranking)
         entry = {"scenario": scenario, "task": task, "ranking": ranking, "levels": int(g.snr_db.nunique()),
                  "winner": ranking[0]["config"], "runner_up": None, "margin": None, "equal_chance": bool(fair),
-                 "undefined": "" if ranked else task.ranking_undefined}
+                 "undefined": "" if ranked else _common_reason(unranked.values())}
         if ranked > 1:
             a, b = ranking[0]["config"], ranking[1]["config"]
             pick = comparisons[(comparisons.scenario == scenario) & (comparisons.task == task.name)

@@ -83,7 +83,7 @@ def glance_markdown(entries: list[dict]) -> str:
         header = ["rank", "config", f"{label} [95% CI]"] + \
             ([f"{task.ranking_label} (any alarm) [95% CI]"] if g["equal_chance"] else []) + \
             ([f"chance Pd{' (any alarm)' if g['equal_chance'] else ''}"] if show_chance else [])
-        rows = [[str(i) if np.isfinite(r["mean"]) else "–", code(r["config"]), _interval(r["mean"], r["low"], r["high"])] +
+        rows = [["–" if r["unranked"] else str(i), code(r["config"]), _interval(r["mean"], r["low"], r["high"])] +
                 ([_interval(*r["secondary"])] if g["equal_chance"] else []) +
                 ([fmt(r["chance"])] if show_chance else []) for i, r in enumerate(g["ranking"], start=1)]
         margin = g["margin"]
@@ -91,7 +91,8 @@ def glance_markdown(entries: list[dict]) -> str:
             margin = {"text": _interval(margin["difference"], margin["low"], margin["high"], signed=True),
                       "tie": margin["tie"], "p": _p(margin["mcnemar_p"]), "enough": margin["enough"],
                       "same": margin["low"] == margin["high"] == 0}
-        view.append({**g, "margin": margin, "label": label, "table": table(header, rows)})
+        not_ranked = "; ".join(f"{code(r['config'])} ({text(r['unranked'])})" for r in g["ranking"] if r["unranked"])
+        view.append({**g, "margin": margin, "label": label, "table": table(header, rows), "not_ranked": not_ranked})
     return render("glance.md.j2", entries=view, any_binary=any(g["task"].ranking_binary for g in entries),
                   any_equal_chance=any(g["equal_chance"] for g in entries))
 

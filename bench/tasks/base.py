@@ -258,6 +258,16 @@ class Task:
         doc = (cls.__doc__ or "").strip()
         return doc.splitlines()[0] if doc else ""
 
+    # -------------------------------------------------------------- plan time
+
+    def check_pair(self, method, method_params, scenario, scenario_params) -> str | None:
+        """Why a config of ``method`` (a Method instance) cannot be scored on a scenario
+        config (``scenario`` a Scenario instance), in one phrase, from what both declare
+        (e.g. a statistic formed only after the scenario's onset leaves no false-alarm
+        step); None (the default): it can. Checked with ``Method.check_scenario`` for every
+        pair of a sweep before anything runs (:func:`bench.feasibility.check_pairs`)."""
+        return None
+
     # -------------------------------------------------------------- worker side
 
     def check_scene(self, batch: Batch) -> None:
@@ -309,6 +319,13 @@ class Task:
         """Per-trial columns of trials.csv that need ``cal`` (e.g. :attr:`equal_chance_metric`),
         for the trials of its scenario config and method config (indexed like ``trials``)."""
         return {}
+
+    def unranked_reason(self, trials: pd.DataFrame) -> str:
+        """Why one method config, whose trials on one scenario config are ``trials``
+        (trials.csv rows), must not be ranked although it has ``ranking_metric`` values
+        (e.g. its Pfa is undefined, so its Pd means nothing): a phrase *Results at a
+        glance* prints beside it. "" (the default): it may be ranked."""
+        return ""
 
     def steps(self, trials: pd.DataFrame, series: dict[str, np.ndarray]) -> pd.DataFrame | None:
         """Per-step table of one (scenario, config, SNR) cell from its trials and

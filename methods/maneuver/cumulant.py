@@ -211,7 +211,7 @@ class Cumulant(InnovationDetector):
                              where=V[None, :, None] > 0)
         statistic = per_axis.sum(axis=-1) if params.combine == "sum" else per_axis.max(axis=-1)
         traces = {f"innovation_{i}": x[..., i] for i in range(x.shape[-1])}
-        return DetectionOutput(statistic=statistic, valid_from=params.window - 1,
+        return DetectionOutput(statistic=statistic, valid_from=self.valid_from(params, x.shape[1]),
                                traces=traces)
 
     def _run_sample_variance(self, x: np.ndarray, params) -> DetectionOutput:
@@ -221,7 +221,11 @@ class Cumulant(InnovationDetector):
                              for i in range(x.shape[-1])], axis=-1)
         statistic = per_axis.sum(axis=-1) if params.combine == "sum" else per_axis.max(axis=-1)
         traces = {f"innovation_{i}": x[..., i] for i in range(x.shape[-1])}
-        return DetectionOutput(statistic=statistic, valid_from=min(M - 1, x.shape[1] - 1), traces=traces)
+        return DetectionOutput(statistic=statistic, valid_from=self.valid_from(params, x.shape[1]), traces=traces)
+
+    def valid_from(self, params, steps: int) -> int:
+        """Once the window of M steps is full (the last step if the scene is shorter)."""
+        return min(params.window, steps) - 1
 
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
         """The chi2 quantile of eq. (8): chi2(n_z) for the sum, chi2(1) per

@@ -110,5 +110,9 @@ class Cusum(InnovationDetector):
             score, valid_from = glr.statistic, glr.valid_from
         return DetectionOutput(statistic=reference_cusum(score, params.drift), valid_from=valid_from)
 
+    def valid_from(self, params, steps: int) -> int:
+        """The score's: 0 for the NIS, the GLR's once its window is whole."""
+        return Glr().valid_from(params, steps) if params.score == "glr" else 0
+
     def check_scenario(self, params, scenario_params) -> str | None:
         return Glr().check_scenario(params, scenario_params) if params.score == "glr" else None

@@ -225,8 +225,12 @@ class Glr(InnovationDetector):
 
     def detect(self, batch: Batch, inn: InnovationSequence, params) -> DetectionOutput:
         statistic, lag = glr_statistic(inn.nu, inn.S, self.signatures(batch, inn, params))
-        return DetectionOutput(statistic=statistic, valid_from=glr_valid_from(params.window, batch.steps),
+        return DetectionOutput(statistic=statistic, valid_from=self.valid_from(params, batch.steps),
                                traces={"onset_lag": lag, "nis": inn.nis})
+
+    def valid_from(self, params, steps: int) -> int:
+        """Once the window of M onsets is whole (:func:`glr_valid_from`)."""
+        return glr_valid_from(params.window, steps)
 
     @staticmethod
     def signatures(batch: Batch, inn: InnovationSequence, params) -> Iterator[Signature]:
@@ -240,7 +244,7 @@ class Glr(InnovationDetector):
         """:func:`reference_glr`: the per-trial, per-step filterpy loop."""
         filt = reference_filter(batch)
         statistic = reference_glr(filt.model, batch.z, filt.x0, filt.P0, params.window, params.jump)
-        return DetectionOutput(statistic=statistic, valid_from=glr_valid_from(params.window, batch.steps))
+        return DetectionOutput(statistic=statistic, valid_from=self.valid_from(params, batch.steps))
 
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
         """chi2(n_z) upper quantile at pfa / M (Bonferroni over the M onsets), by the

@@ -82,14 +82,13 @@ class Innovation(InnovationDetector):
 
     def detect(self, batch: Batch, inn: InnovationSequence, params) -> DetectionOutput:
         nis = inn.nis
-        if params.delta > 0.0:
-            statistic = fading_sum(nis, params.delta)
-            valid_from = fading_valid_from(params.delta)
-        else:
-            statistic = sliding_sum(nis, params.window)
-            valid_from = params.window - 1
-        return DetectionOutput(statistic=statistic, valid_from=valid_from,
+        statistic = fading_sum(nis, params.delta) if params.delta > 0.0 else sliding_sum(nis, params.window)
+        return DetectionOutput(statistic=statistic, valid_from=self.valid_from(params, batch.steps),
                                traces={"nis": nis})
+
+    def valid_from(self, params, steps: int) -> int:
+        """Once the fading sum's start-up deficit is below 1%, or the sliding window is full."""
+        return fading_valid_from(params.delta) if params.delta > 0.0 else params.window - 1
 
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
         """chi2 upper quantiles by the survival-function inverse, ``isf(pfa)``

@@ -351,7 +351,7 @@ class Wavelet(InnovationDetector):
                                   f"{self.levels}, got {self.coarsest}")
 
     def detect(self, batch: Batch, inn: InnovationSequence, params) -> DetectionOutput:
-        start = valid_from(params.wavelet, params.levels, params.coarsest, params.mode)
+        start = self.valid_from(params, batch.steps)
         if start >= batch.steps:
             raise ConfigError("levels", f"level {params.levels} of {params.wavelet!r} "
                               f"({params.mode}) first forms at step {start}, but the scenario "
@@ -369,7 +369,11 @@ class Wavelet(InnovationDetector):
         df = n_z * (2 if params.coefficients == "both" else 1)
         return null_threshold(pfa, df, params.coarsest)
 
+    def valid_from(self, params, steps: int) -> int:
+        """Once every tested level has a complete coefficient (:func:`valid_from`)."""
+        return valid_from(params.wavelet, params.levels, params.coarsest, params.mode)
+
     def check_scenario(self, params, scenario_params) -> str | None:
-        start = valid_from(params.wavelet, params.levels, params.coarsest, params.mode)
+        start = self.valid_from(params, getattr(scenario_params, "steps", 0))
         return steps_problem(start, f"level {params.levels} of {params.wavelet!r} ({params.mode})",
                              scenario_params)

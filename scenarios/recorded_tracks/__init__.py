@@ -18,7 +18,7 @@ import pandas as pd
 
 from radarbench.bench.batched import matvec
 from radarbench.bench.capabilities import VALID_STEP_MASKS
-from radarbench.bench.core import MANEUVER_DETECTION, TRACKING, Batch, Scenario
+from radarbench.bench.core import MANEUVER_DETECTION, TRACKING, Batch, Scenario, Timeline
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_scenario
@@ -298,6 +298,10 @@ class RecordedTracks(Scenario):
                     "turn_rate_threshold_deg_s"
                 raise ConfigError(field, f"{source_text(params)}: no segment of {params.steps} steps {what} at "
                                   f"{field} = {maneuver_threshold(params):g}")
+
+    def timeline(self, params) -> Timeline:
+        """A segment of ``steps`` steps whose onset is at ``onset_step`` in every trial."""
+        return Timeline(steps=params.steps, onset_step=params.onset_step, warmup_steps=params.warmup_steps)
 
     def requires(self, params) -> frozenset[str]:
         """``valid-step-masks`` when the trials may miss steps (masked gaps, or ``min_steps``)."""

@@ -156,6 +156,7 @@ class DetectionTask(Task):
                        "pd_equal_chance", "pd_equal_chance_low", "pd_equal_chance_high")
     headline_columns = ("pd", "pd_low", "pd_high", "pfa", "pfa_low", "pfa_high", "delay_mean")
     ranking_metric = "detected"
+    ranking_undefined = "Pd undefined: no trial has a value"
     ranking_higher_is_better = True
     ranking_label = "Pd"
     ranking_binary = True
@@ -166,6 +167,25 @@ class DetectionTask(Task):
     recording_charts = (("pd", "Pd"), ("delay_mean", "mean delay (steps)"))
     informative_column = "pd"
     method_entities = ("statistic", "threshold", "alarms", "onset")
+
+    # -------------------------------------------------------------- plan time
+
+    def check_pair(self, method, method_params, scenario, scenario_params) -> str | None:
+        """A detector is scored on the steps its statistic is formed (from its declared
+        ``valid_from``): false alarms from there to the onset, detections from the onset.
+        Refused where that leaves no step before the scenario's earliest onset (its
+        declared ``timeline``): no false-alarm step, so its Pfa is undefined, and the
+        statistic is not formed at the onset."""
+        timeline = scenario.timeline(scenario_params)
+        if timeline is None or timeline.onset_step is None:
+            return None
+        valid_from = int(method.valid_from(method_params, timeline.steps))
+        if max(valid_from, timeline.warmup_steps) < timeline.onset_step:
+            return None
+        after = f"after the warm-up of {timeline.warmup_steps} steps" if timeline.warmup_steps > valid_from else \
+            f"from step {valid_from} (valid_from)"
+        return (f"its statistic is formed {after}, not before the maneuver onset at step "
+                f"{timeline.onset_step}: no false-alarm step before the onset, so it cannot be scored")
 
     # -------------------------------------------------------------- worker side
 
@@ -197,12 +217,13 @@ class DetectionTask(Task):
             return None
         steps = np.asarray(onset)[..., None] + np.arange(int(batch.scene.detect_window_steps))
         steps = np.broadcast_to(steps, (batch.n, steps.shape[-1]))   # per-trial onsets (jitter)
-        return np.take_along_axis(out.statistic, np.minimum(steps, batch.steps - 1), axis=1).max(axis=1)
+        window = np.take_along_axis(out.statistic, np.minimum(steps, batch.steps - 1), axis=1)
+        return np.where(steps >= int(out.valid_from), window, -np.inf).max(axis=1)   # a formed statistic only
 
     def trial_metrics(self, batch: Batch, out: DetectionOutput, threshold: float) -> dict[str, np.ndarray]:
         return detection_trial_metrics(out.statistic, threshold, onset=np.asarray(batch.scene.onset_step),
                                        detect_window=int(batch.scene.detect_window_steps),
-                                       null_start=self.null_start(batch, out))
+                                       null_start=self.null_start(batch, out), valid_from=int(out.valid_from))
 
     def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:
         """The trial's maneuver onset step (none under the null), marked in its plots."""
@@ -213,7 +234,8 @@ class DetectionTask(Task):
 
     def recorded_method(self, batch: Batch, out: DetectionOutput, i: int, threshold: float) -> MethodTrace:
         stat = out.statistic[i]
-        return method_trace(stat, threshold, stat >= threshold, {k: v[i] for k, v in out.traces.items()})
+        alarms = (stat >= threshold) & (np.arange(stat.shape[0]) >= int(out.valid_from))
+        return method_trace(stat, threshold, alarms, {k: v[i] for k, v in out.traces.items()})
 
     # -------------------------------------------------------------- driver side
 
@@ -228,6 +250,13 @@ class DetectionTask(Task):
             rows = (summary.scenario == cal.scenario) & (summary.config == cal.method) & (summary.snr_db == snr)
             for col, value in equal_chance_pd(g["peak_statistic"], cal.equal_chance_threshold).items():
                 summary.loc[rows, col] = value
+
+    def unranked_reason(self, trials: pd.DataFrame) -> str:
+        """A config with no false-alarm step before the onset in any trial has no Pfa, so
+        its Pd is at no known false-alarm rate: never ranked."""
+        if "null_steps" in trials and not trials["null_steps"].sum() > 0:
+            return "Pfa undefined: no false-alarm step before the onset"
+        return ""
 
     def calibrated_trial_columns(self, trials: pd.DataFrame, cal) -> dict[str, pd.Series]:
         """``detected_equal_chance``: 1 where the trial's peak statistic in the detection

@@ -1,13 +1,14 @@
 """Maneuver-detection metrics, per trial and per cell (docs/architecture.md, 'Metrics').
 
-Per trial, with alarm = statistic >= threshold:
+Per trial, with alarm = statistic >= threshold at a step where the statistic is
+formed (from ``valid_from`` on: an alarm of a partial window is no alarm):
 
 * ``detected``: the first alarm at or after the onset falls within
   ``detect_window_steps`` steps of it;
 * ``delay``: that alarm's step minus the onset (NaN when not detected);
 * ``false_alarms``: alarms in the null region, the steps
   ``[max(warmup, valid_from), onset)``; ``null_steps`` is its length;
-* ``peak_statistic``: the largest statistic in the detection window, so that a
+* ``peak_statistic``: the largest formed statistic in the detection window, so that a
   ROC curve (Pd at any threshold) can be computed later without re-running;
 * ``window_alarm_fraction``: the fraction of the detection window's steps that
   alarm (the per-step detection probability of the trial).
@@ -40,16 +41,17 @@ COMPUTES_RESULTS = True
 
 
 def detection_trial_metrics(statistic: np.ndarray, threshold: float, *, onset,
-                            detect_window: int, null_start: int) -> dict[str, np.ndarray]:
+                            detect_window: int, null_start: int, valid_from: int = 0) -> dict[str, np.ndarray]:
     """Per-trial detection metrics for ``statistic`` (n, K) at ``threshold``.
 
-    ``onset``: the onset step, one for all trials or one per trial (n,).
+    ``onset``: the onset step, one for all trials or one per trial (n,);
+    ``valid_from``: the first step the statistic is formed, before which nothing alarms.
     """
     n, K = statistic.shape
-    alarms = statistic >= threshold
+    steps = np.arange(K)[None, :]
+    alarms = (statistic >= threshold) & (steps >= valid_from)
     onset = np.broadcast_to(np.asarray(onset, dtype=np.int64), (n,))
     null_start = np.minimum(null_start, onset)
-    steps = np.arange(K)[None, :]
     window_steps = onset[:, None] + np.arange(detect_window)[None, :]      # (n, W)
     inside = window_steps < K
     idx = np.minimum(window_steps, K - 1)
@@ -57,7 +59,7 @@ def detection_trial_metrics(statistic: np.ndarray, threshold: float, *, onset,
     detected = window.any(axis=1)
     first = np.argmax(window, axis=1)
     delay = np.where(detected, first, np.nan).astype(float)
-    in_window = np.where(inside, np.take_along_axis(statistic, idx, axis=1), -np.inf)
+    in_window = np.where(inside & (window_steps >= valid_from), np.take_along_axis(statistic, idx, axis=1), -np.inf)
     peak = in_window.max(axis=1) if detect_window else np.full(n, -np.inf)
     null_region = (steps >= null_start[:, None]) & (steps < onset[:, None])
     return {
