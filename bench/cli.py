@@ -37,7 +37,7 @@ EXIT_CODES = f"""exit codes:
   {EXIT_BUG}    a bug in bench or a plugin (one line; BENCH_TRACEBACK=1 shows the traceback)
   {EXIT_BAD_INPUT}    bad input: the command line, the sweep file, or the folder named (a file, a name
        too long, a non-empty folder that holds no bench run, a results.sqlite that is not
-       a bench store, a run of another sweep, a symbolic link inside the run folder);
+       a bench store, a symbolic link inside the run folder);
        nothing is written
   {EXIT_ENVIRONMENT}    the machine refused: permission denied, read-only file system, disk full,
        file-size limit, I/O error, out of memory; nothing is half-written, and the same command

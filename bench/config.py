@@ -424,10 +424,11 @@ class Overrides:
         written += [(k, o) for k, o, v in (("methods", "--methods", self.methods), ("scenario", "--scenarios",
                     self.scenarios), ("scenarios", "--scenarios", self.scenarios), ("snr_db", "--snr", self.snr_db),
                     ("trials", "--trials", self.trials), ("seed", "--seed", self.seed)) if v not in ((), None)]
+        dotted = re.sub(r"\[(\d+)\]", r".\1", field)         # methods[0].params -> methods.0.params
         for key, option in written:
-            if field == key:
+            if key in (field, dotted):
                 return option
-            if field.startswith((f"{key}.", f"{key}[")):
+            if field.startswith((f"{key}.", f"{key}[")) or dotted.startswith(f"{key}."):
                 return f"{option}: {field}"
         return None
 

@@ -453,34 +453,124 @@ def _old_identities(store, units: list[str], runs: dict[str, set[str]]) -> dict[
     return {kind: {label: sorted(ids) for label, ids in table.items()} for kind, table in out.items()}
 
 
+def content_keys(plan) -> dict:
+    """What each config of ``plan`` computes, whatever its label: a key of its name and every
+    parameter (a scenario's with the sweep's seed, which picks its streams), of the
+    calibration, and the recorded trials (kept in the store's plan record, so an edited
+    sweep can be matched against the results a folder holds: :func:`sweep_changes`)."""
+    from radarbench.bench.params import params_as_dict
+    from radarbench.bench.rng import stable_key
+
+    def key(*parts) -> str:
+        return f"{stable_key(list(parts)):016x}"
+    calibration = plan.calibration
+    return {"scenarios": {s.label: key(s.name, params_as_dict(s.params), plan.seed) for s in plan.scenarios},
+            "methods": {m.label: key(m.name, params_as_dict(m.params)) for m in plan.methods},
+            "calibration": key(calibration.pfa, calibration.mode, calibration.h0_trials, calibration.chance_pd),
+            "record_trials": plan.record_trials}
+
+
+@dataclass
+class SweepChange:
+    """How an edited sweep meets the results a run folder holds (:func:`sweep_changes`)."""
+
+    units: list[str]                  # stored units the sweep no longer asks for, as they are
+    runs: dict[str, set[str]]         # unit -> stored method configs it no longer asks for on it
+    added: dict[str, set[str]]        # unit kept -> method configs it asks for that are not stored
+    kept_units: int = 0
+    edited: bool = False              # the sweep is not the one the store was written by
+
+    def __bool__(self) -> bool:
+        return self.edited
+
+
+def sweep_changes(store, plan) -> SweepChange:
+    """The results of ``store`` that ``plan`` (the sweep as edited since the store was
+    written) still asks for, by what computed them rather than by the sweep: a unit is kept
+    when the plan has it (same scenario config label, SNR level and trials) and its scenario
+    config is the same (every parameter, the seed; its recorded trials unchanged), a run
+    on it when its method config is the same and still pairs with the scenario config (for
+    a run of a calibrated task, the calibration unchanged too). Nothing when the sweep did
+    not change."""
+    from radarbench.bench import registry
+    from radarbench.bench.units import calibrated_configs, plan_units
+
+    old = json.loads(store.meta("plan") or "null")
+    if old is None or store.meta("fingerprint") == plan.fingerprint():
+        return SweepChange([], {}, {})
+    before, now = old.get("contents"), content_keys(plan)
+    cal_units, eval_units = plan_units(plan)
+    wanted = {u.key: u for u in cal_units + eval_units}
+    recorded = max(now["record_trials"], (before or {}).get("record_trials", 0))
+    change = SweepChange([], {}, {}, edited=True)
+    for key, scenario, phase, trial_start in store.db.execute("SELECT key, scenario, phase, trial_start FROM units"):
+        unit = wanted.get(key)
+        if before is None or unit is None or before["scenarios"].get(scenario) != now["scenarios"][scenario] or \
+                (phase == "evaluation" and before["record_trials"] != now["record_trials"] and trial_start < recorded):
+            change.units.append(key)
+            continue
+        change.kept_units += 1
+        sc = plan.scenarios[unit.scenario_index]
+        expected = {m.label: m for m in (calibrated_configs(plan, sc) if phase == "calibration" else plan.pairs(sc))}
+        stored = {m for (m,) in store.db.execute("SELECT method FROM runs WHERE unit=?", (key,))}
+        recalibrated = before["calibration"] != now["calibration"]       # thresholds, and the nominal one stored
+        gone = {m for m in stored if m not in expected or before["methods"].get(m) != now["methods"][m] or
+                (recalibrated and registry.get_task(registry.get_method(expected[m].name).task).calibrated)}
+        if gone:
+            change.runs[key] = gone
+        if set(expected) - (stored - gone):
+            change.added[key] = set(expected) - (stored - gone)
+    return change
+
+
 def set_aside_changed(store, plan, out_dir: Path, quiet: bool = False) -> dict[str, set[str]]:
-    """Bind ``store`` to the identities of ``plan``'s configs now; move the stored results
-    they no longer match into ``out_dir/previous/`` (:meth:`bench.store.Store.set_aside`),
-    saying so in one line; returns the (unit -> method configs) runs to compute again (the
-    units set aside whole are simply no longer stored)."""
+    """Match ``store`` with ``plan``: bind it to the identities of ``plan``'s configs now,
+    and move the stored results that no longer match them, or that the sweep (if it was
+    edited since) no longer asks for (:func:`sweep_changes`), into ``out_dir/previous/``
+    (:meth:`bench.store.Store.set_aside`), saying so in one line each; returns the (unit ->
+    method configs) runs to compute on the units kept (the units set aside whole are
+    simply no longer stored)."""
     from radarbench.bench import runfolder
     from radarbench.bench.store import Store
 
+    change = sweep_changes(store, plan)
     earlier_scheme = store.meta("identity_scheme") != str(SCHEME)
     store.use_identities(plan_identities(plan))
     store.set_meta("identity_scheme", str(SCHEME))
     units, runs = store.stale()
-    if not units and not runs:
+    units = sorted(set(units) - set(change.units))
+    runs = {u: ms - change.runs.get(u, set()) for u, ms in runs.items() if u not in change.units}
+    runs = {u: ms for u, ms in runs.items() if ms}
+    if not (units or runs or change):
         return {}
     old = _old_identities(store, units, runs)
     folder = runfolder.folder_for(Path(out_dir) / PREVIOUS)
     if runfolder.read_manifest(Path(out_dir)) is not None:
         runfolder.claim(Path(out_dir), [f"{PREVIOUS}/{name}" for name in runfolder.STORE_FILES])
     previous = Store(folder / runfolder.STORE)
+    aside = {u: runs.get(u, set()) | change.runs.get(u, set()) for u in {*runs, *change.runs}}
     try:
-        store.set_aside(units, runs, previous)
+        store.set_aside(units + change.units, aside, previous)
     finally:
         previous.close()
     store.set_meta("replaced", json.dumps(old))
-    if not quiet:
+    if not quiet and (units or runs):
         print(_changed_line(old, store.stamps, len(units), sum(map(len, runs.values())), Path(out_dir),
                             earlier_scheme), file=sys.stderr)
-    return runs
+    if not quiet and change:
+        print(_sweep_line(change, Path(out_dir)), file=sys.stderr)
+    return {u: runs.get(u, set()) | change.added.get(u, set()) for u in {*runs, *change.added}}
+
+
+def _sweep_line(change: SweepChange, out_dir: Path) -> str:
+    """One line: what of the folder's results an edited sweep reuses, computes and sets aside."""
+    added = sum(map(len, change.added.values()))
+    aside = [f"{n} {what}" for n, what in ((len(change.units), "units"),
+                                           (sum(map(len, change.runs.values())), "(unit, method config) runs")) if n]
+    return (f"the sweep changed: reusing {change.kept_units} stored units"
+            + (f", computing {added} (unit, method config) runs on them" if added else "")
+            + " and the units it adds"
+            + (f"; {' and '.join(aside)} it no longer asks for are in {out_dir / PREVIOUS}" if aside else ""))
 
 
 def _changed_line(old: dict, new: dict, units: int, runs: int, out_dir: Path, earlier_scheme: bool) -> str:

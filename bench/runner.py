@@ -35,7 +35,7 @@ from radarbench.bench.calibration import EQUAL_CHANCE_PD, CalibrationResult, cal
 from radarbench.bench.plan import Plan
 from radarbench.bench.executors import SerialExecutor, UnitFailure, make_executor
 from radarbench.bench.processes import STOP_SIGNALS, restore_handler
-from radarbench.bench.identity import PREVIOUS, set_aside_changed
+from radarbench.bench.identity import PREVIOUS, content_keys, set_aside_changed
 from radarbench.bench.progress import Progress
 from radarbench.bench.provenance import provenance
 from radarbench.bench.recording.record import TrialRecord
@@ -292,10 +292,11 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
                 clear_run_folder(out_dir)
             out_dir.mkdir(parents=True, exist_ok=True)
             store = Store(out_dir / "results.sqlite")
+            # code, data or the sweep changed: set aside what no longer matches, re-run it
+            changed = set_aside_changed(store, plan, out_dir, quiet)
             store.bind_plan(plan.fingerprint(), plan_record)
             # before the first unit: a report of a run stopped short says it is incomplete
             store.set_meta("units_total", str(total))
-            changed = set_aside_changed(store, plan, out_dir, quiet)     # code or data changed: re-run those
             done = store.done_units()
             failed = store.failed_runs() if retry_failed else {}
             failed = {u: failed.get(u, set()) | changed.get(u, set()) for u in {*failed, *changed}}
@@ -358,6 +359,7 @@ def plan_record(plan: Plan, command: str) -> dict:
         "sweep": plan.to_dict(),
         "source": plan.source,
         "sweep_folder": plan.sweep_folder,
+        "contents": content_keys(plan),
         "command": command,
         "methods": [{"label": m.label, "name": m.name, "params": m.params_text,
                      "task": registry.get_method(m.name).task} for m in plan.methods],

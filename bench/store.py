@@ -207,12 +207,9 @@ class Store:
 
     # ---------------------------------------------------------------- plan
     def bind_plan(self, fingerprint: str, plan: dict) -> None:
-        """Tie the store to a plan; refuse results of a different sweep."""
+        """Tie the store to a plan (the sweep as run now: the results it no longer asks for
+        were set aside first, :func:`bench.identity.set_aside_changed`)."""
         with self._write():
-            row = self.db.execute("SELECT value FROM meta WHERE key='fingerprint'").fetchone()
-            if row is not None and row[0] != fingerprint:
-                raise ConfigError("--out", f"{self.path.parent} holds results of a different sweep; "
-                                           "use --fresh to start over or choose another --out")
             self.db.execute("INSERT OR REPLACE INTO meta VALUES ('fingerprint', ?)", (fingerprint,))
             self.db.execute("INSERT OR REPLACE INTO meta VALUES ('plan', ?)", (json.dumps(plan),))
             self.db.execute("INSERT OR IGNORE INTO meta VALUES ('created', ?)", (repr(time.time()),))
