@@ -31,6 +31,7 @@ from radarbench.bench import __version__
 from radarbench.bench.errors import (EXIT_BAD_INPUT, EXIT_BUG, EXIT_ENVIRONMENT, EXIT_FAILED_UNITS, EXIT_IN_USE, EXIT_INTERRUPTED,
                           EXIT_REGRESSION, ConfigError, Fault, is_out_of_memory, os_fault, unknown_name)
 from radarbench.bench.listing import plugin_listing, preset_descriptions, presets
+from radarbench.bench.progress import notices_of_one_command
 
 EXIT_CODES = f"""exit codes:
   0    done
@@ -479,7 +480,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.command != "list":
             from radarbench.bench.processes import sigterm_as_interrupt
             restore_sigterm = sigterm_as_interrupt()   # SIGTERM ends a command as Ctrl-C does (exit 130)
-        return COMMANDS[args.command](args)
+        with notices_of_one_command():          # a notice any of its processes meets, said once
+            return COMMANDS[args.command](args)
     except ConfigError as err:
         _error(str(err))
         return EXIT_BAD_INPUT

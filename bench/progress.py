@@ -10,15 +10,23 @@ thread, so a phase whose units take minutes is never silent) and one when it end
 
 ``quiet`` prints nothing. tqdm draws the bar; the plain lines are ours because tqdm
 has no line mode for files (it rewrites one line with ``\\r`` whatever the stream).
+
+A notice that any process of a command may come across (a worker, the forkserver, the
+driver) is said once per command by :func:`say_once`, inside :func:`notices_of_one_command`.
 """
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import os
+import shutil
 import sys
+import tempfile
 import threading
 import time
 
-__all__ = ["PERIOD_S", "Progress", "say"]
+__all__ = ["PERIOD_S", "Progress", "say", "say_once", "notices_of_one_command"]
 
 #: Seconds between two plain progress lines when stderr is not a terminal.
 PERIOD_S = 10.0
@@ -37,6 +45,47 @@ def say(text: str, stream=None) -> None:
         stream.flush()
     except (OSError, ValueError):   # a closed or full stderr never stops a run
         pass
+
+
+#: the folder where the processes of one command mark the notices said (:func:`say_once`)
+NOTICES_ENV = "BENCH_NOTICES"
+_said: set[str] = set()
+
+
+@contextlib.contextmanager
+def notices_of_one_command():
+    """A folder for :func:`say_once`'s marks, named to the processes this command starts
+    (by the environment they inherit), removed at its end."""
+    folder = tempfile.mkdtemp(prefix="bench-notices-")
+    previous = os.environ.get(NOTICES_ENV)
+    os.environ[NOTICES_ENV] = folder
+    try:
+        yield
+    finally:
+        if previous is None:
+            os.environ.pop(NOTICES_ENV, None)
+        else:
+            os.environ[NOTICES_ENV] = previous
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def say_once(key: str, text: str) -> None:
+    """:func:`say` ``text`` unless this process or another process of the command said
+    ``key`` (the first to create the key's mark in :data:`NOTICES_ENV`'s folder speaks).
+    Outside a command, or in a process that outlived its command's folder: once per process."""
+    if key in _said:
+        return
+    _said.add(key)
+    folder = os.environ.get(NOTICES_ENV)
+    if folder:
+        mark = os.path.join(folder, hashlib.sha256(key.encode()).hexdigest()[:32])
+        try:
+            os.close(os.open(mark, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        except FileExistsError:
+            return
+        except OSError:           # the folder is gone: this process speaks for itself
+            pass
+    say(text)
 
 
 class Progress:

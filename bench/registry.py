@@ -231,11 +231,14 @@ def discovered() -> bool:
 
 
 def discover() -> None:
-    """Import all plugins once per process: the built-ins, then the entry points."""
+    """Import all plugins once per process: the built-ins, then the entry points; their
+    numba kernels keep a cache whose failures never fail them (:mod:`bench.numba_cache`)."""
     global _DISCOVERED
     if _DISCOVERED:
         return
     _DISCOVERED = True
+    from radarbench.bench import numba_cache
+    numba_cache.install()           # before any plugin's kernel is decorated (bench/numba_cache.py)
     _builtin_tasks()
     _import_package_modules("radarbench.scenarios")
     _import_package_modules("radarbench.methods")

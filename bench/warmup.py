@@ -34,17 +34,10 @@ COMPILING = "compiling kernels (first run only)…"
 
 def _cached_dispatchers():
     """Every numba dispatcher with ``cache=True`` among the imported modules (none without numba)."""
-    numba = sys.modules.get("numba")
-    if numba is None:
-        return
-    from numba.core.caching import FunctionCache
-    from numba.core.registry import CPUDispatcher
-
-    for module in list(sys.modules.values()):
-        for obj in list(getattr(module, "__dict__", {}).values()):
-            # type(obj), not isinstance: a SWIG module's ``cvar`` (OR-Tools') raises on any attribute, __class__ too
-            if issubclass(type(obj), CPUDispatcher) and isinstance(getattr(obj, "_cache", None), FunctionCache):
-                yield obj
+    if "numba" not in sys.modules:
+        return iter(())
+    from radarbench.bench.numba_cache import kernels
+    return kernels()
 
 
 def _stale_kernels() -> dict[str, list]:
@@ -53,9 +46,18 @@ def _stale_kernels() -> dict[str, list]:
     stale = {}
     for dispatcher in _cached_dispatchers():
         index = dispatcher._cache._cache_file
-        if os.path.exists(index._index_path) and not index._load_index():
+        if os.path.exists(index._index_path) and not _entries(index):
             stale[index._index_path] = list(index._source_stamp)
     return stale
+
+
+def _entries(index) -> dict:
+    """The entries of a kernel's cache index; none when it is damaged (its kernel compiles,
+    :mod:`bench.numba_cache`)."""
+    try:
+        return index._load_index()
+    except Exception:  # noqa: BLE001 - any damage: the entry is stale
+        return {}
 
 
 def cache_is_cold(plan_key: str | None = None) -> bool:
