@@ -21,3 +21,14 @@ def csv_text(df) -> str:
 def write_csv(df, path: Path) -> None:
     """Write ``df`` to ``path`` inside a run folder (:func:`bench.runfolder.write_text`)."""
     runfolder.write_text(path, csv_text(df))
+
+
+def read_csv(text_or_path):
+    """A CSV as written by :func:`write_csv` (an empty file: an empty frame); pandas >= 3
+    parses floats round-trip (what ``float_precision="round_trip"`` asked of earlier
+    versions), so values are bit-exact."""
+    import pandas as pd
+    try:
+        return pd.read_csv(text_or_path)
+    except pd.errors.EmptyDataError:
+        return pd.DataFrame()
