@@ -1,5 +1,5 @@
-"""How a run's tables are written: every CSV of a run folder, its report's and its claims'
-(docs/architecture.md, 'Outputs of a run'), so that they read back bit-exact.
+"""How a run's tables are written, and read back: every CSV of a run folder, its report's
+and its claims' (docs/architecture.md, 'Outputs of a run'), so that they read back bit-exact.
 
 Apart from :mod:`bench.report` so that :mod:`bench.claims`, which the report imports,
 writes its claims.csv the same way without importing the report.
