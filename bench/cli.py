@@ -1,4 +1,4 @@
-"""The ``bench`` command: ``list``, ``run``, ``report``, ``view``, ``perf``.
+"""The ``bench`` command: ``list``, ``run``, ``report``, ``view``, ``compare``, ``export``, ``perf``.
 
 Arguments are checked before anything heavy is imported: the parser, ``--version``,
 the preset names and ``bench list``'s presets need no plugin, NumPy or pandas, and
@@ -59,6 +59,8 @@ class _Parser(argparse.ArgumentParser):
 
 #: Where ``bench run`` writes unless ``--out`` is given (git-ignored).
 RUNS_DIR = Path("runs")
+#: Where ``bench export RUN`` writes unless ``--out`` is given: a folder of the run folder.
+EXPORT_DIR = "tidy"
 
 
 def _int_in(lo: int, hi: int, what: str = "", note: str = ""):
@@ -132,6 +134,12 @@ def build_parser() -> argparse.ArgumentParser:
     cmp.add_argument("--fail-on-regression", action="store_true",
                      help=f"exit {EXIT_REGRESSION} when a method config got significantly worse, ran in A and "
                           "failed in B, or is not comparable (for CI)")
+    exp = sub.add_parser("export", help="a run's summary (one row per metric), trials and calibration as tidy "
+                                        "tables with a typed column per parameter")
+    exp.add_argument("run", metavar="RUN", help="a run folder or a committed reports/NAME folder")
+    exp.add_argument("--format", required=True, choices=["parquet", "csv"], help="the files' format")
+    exp.add_argument("--out", help=f"folder to write summary, trials and calibration into "
+                                   f"(default: RUN/{EXPORT_DIR}/)")
     view = sub.add_parser("view", help="open a run's recording in the Rerun viewer (--web: in a browser)")
     view.add_argument("dir")
     view.add_argument("--web", action="store_true",
@@ -438,6 +446,22 @@ def cmd_compare(args) -> int:
     return run_compare(args.run_a, args.run_b, args.out, args.fail_on_regression)
 
 
+def cmd_export(args) -> int:
+    from radarbench.bench import runfolder
+    from radarbench.bench.tidy import check_format, export, load_run
+    check_format(args.format)
+    run = load_run(args.run)                 # read whole before anything is written
+    out = Path(args.out) if args.out else run.path / EXPORT_DIR
+    inside = out.absolute().is_relative_to(run.path.absolute())
+    # inside the run folder: under its lock (no run rewrites the CSVs meanwhile) and in its
+    # manifest (what `bench run --fresh` removes)
+    with runfolder.RunLock(run.path, "bench export") if inside else contextlib.nullcontext(), \
+            runfolder.writing(run.path) if inside else contextlib.nullcontext():
+        written = export(run, out, args.format)
+    print(f"wrote {', '.join(p.name for p in written)} in {out}")
+    return 0
+
+
 def cmd_perf(args) -> int:
     from radarbench.bench import registry
     from radarbench.bench.perf import check_sizes, prepare_out, run_perf
@@ -461,7 +485,7 @@ def one_line(text: str, limit: int = 400) -> str:
 
 
 COMMANDS = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "view": cmd_view, "perf": cmd_perf,
-            "compare": cmd_compare}
+            "compare": cmd_compare, "export": cmd_export}
 
 
 def _error(text: str) -> None:

@@ -76,7 +76,7 @@ def expand(name: str, params_cls: type, values: Mapping[str, Any], field: str, *
     return configs
 
 
-def _split_top_level(text: str) -> list[str]:
+def split_top_level(text: str) -> list[str]:
     """``text`` split at the commas outside parentheses (tuple values are "(a,b)")."""
     parts, depth, start = [], 0, 0
     for i, c in enumerate(text):
@@ -110,7 +110,7 @@ def label_problem(name: str, label: str, params: Any, *, bare_means_defaults: bo
         return f"{label!r} looks like the label of a {owner} config; this is a {name} config" \
             if owner in others else None
     fields = field_types(type(params))
-    for part in _split_top_level(inner):        # free text ("dp-tbd[prewhiten]") says nothing checkable
+    for part in split_top_level(inner):         # free text ("dp-tbd[prewhiten]") says nothing checkable
         key, eq, text = (x.strip() for x in part.partition("="))
         if eq and key in fields:
             actual = label_value(params, key)

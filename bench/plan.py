@@ -178,13 +178,14 @@ class Plan:
         return f"{stable_key(d):016x}"
 
 
-def _format_value(v: Any) -> str:
+def format_value(v: Any) -> str:
+    """How a label writes a parameter's value: ``true``, ``32`` for 32.0, ``(1,2)`` for a list."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, float):
         return repr(int(v)) if v.is_integer() and abs(v) < 1e15 else repr(v)
     if isinstance(v, (list, tuple)):
-        return "(" + ",".join(_format_value(x) for x in v) + ")"
+        return "(" + ",".join(format_value(x) for x in v) + ")"
     return str(v)
 
 
@@ -192,7 +193,7 @@ def label_value(params: Any, key: str) -> str:
     """How a label writes parameter ``key``: a data file by its name alone (its folder
     depends on where the sweep lives; the label must not)."""
     value = getattr(params, key)
-    return os.path.basename(value) if key in path_fields(type(params)) else _format_value(value)
+    return os.path.basename(value) if key in path_fields(type(params)) else format_value(value)
 
 
 def _merge_scenario_grid(configs: tuple[ComponentConfig, ...], axes: tuple[str, ...] = (),

@@ -23,7 +23,7 @@ import pandas as pd
 
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.markdown import crossing_floors, fmt_db, snr50
-from radarbench.bench.tables import csv_text
+from radarbench.bench.tables import csv_text, read_csv
 
 #: ``snr_db`` of a paired quantity over every level (comparisons.csv's blank ``snr_db``)
 ALL_LEVELS = "all"
@@ -45,19 +45,10 @@ class Tables:
     equal_chance: float
 
 
-def _read_csv(text_or_path) -> pd.DataFrame:
-    """A CSV as written by the report; pandas >= 3 parses floats round-trip (what
-    ``float_precision="round_trip"`` asked of earlier versions), so values are bit-exact."""
-    try:
-        return pd.read_csv(text_or_path)
-    except pd.errors.EmptyDataError:
-        return pd.DataFrame()
-
-
 def csv_frame(df: pd.DataFrame) -> pd.DataFrame:
     """``df`` exactly as its CSV reads back, so claims evaluated at report time and
     from the committed CSVs are the same numbers."""
-    return _read_csv(io.StringIO(csv_text(df)))
+    return read_csv(io.StringIO(csv_text(df)))
 
 
 def read_tables(folder: str | Path) -> Tables:
@@ -65,7 +56,7 @@ def read_tables(folder: str | Path) -> Tables:
     calibration.csv and plan.toml's ``[calibration] chance_pd``."""
     from radarbench.bench.calibration import EQUAL_CHANCE_PD
     folder = Path(folder)
-    frames = [_read_csv(folder / f"{name}.csv") if (folder / f"{name}.csv").exists() else pd.DataFrame()
+    frames = [read_csv(folder / f"{name}.csv") if (folder / f"{name}.csv").exists() else pd.DataFrame()
               for name in ("summary", "comparisons", "calibration")]
     plan = tomllib.loads((folder / "plan.toml").read_text(encoding="utf-8")) if (folder / "plan.toml").exists() else {}
     return Tables(*frames, float(plan.get("calibration", {}).get("chance_pd", EQUAL_CHANCE_PD)))

@@ -1,5 +1,5 @@
-"""How a run's tables are written: every CSV of a run folder, its report's and its claims'
-(docs/architecture.md, 'Outputs of a run'), so that they read back bit-exact.
+"""How a run's tables are written, and read back: every CSV of a run folder, its report's
+and its claims' (docs/architecture.md, 'Outputs of a run'), so that they read back bit-exact.
 
 Apart from :mod:`bench.report` so that :mod:`bench.claims`, which the report imports,
 writes its claims.csv the same way without importing the report.
@@ -21,3 +21,14 @@ def csv_text(df) -> str:
 def write_csv(df, path: Path) -> None:
     """Write ``df`` to ``path`` inside a run folder (:func:`bench.runfolder.write_text`)."""
     runfolder.write_text(path, csv_text(df))
+
+
+def read_csv(text_or_path):
+    """A CSV as written by :func:`write_csv` (an empty file: an empty frame); pandas >= 3
+    parses floats round-trip (what ``float_precision="round_trip"`` asked of earlier
+    versions), so values are bit-exact."""
+    import pandas as pd
+    try:
+        return pd.read_csv(text_or_path)
+    except pd.errors.EmptyDataError:
+        return pd.DataFrame()

@@ -10,6 +10,10 @@ subpackages through ``__path__`` (this folder's parent holds them).
 Importing this package installs the compatibility path of the old names
 (:mod:`radarbench._compat`): ``import bench.core`` or ``from models.kalman import ...``
 in an outside plugin still works, with a deprecation warning naming the new import.
+
+:func:`load_run` (a run's results as tidy pandas frames, :class:`Run`) comes from
+:mod:`radarbench.bench.tidy`, imported on first use: every plugin imports this package,
+and pandas is not imported for it.
 """
 
 from pathlib import Path
@@ -24,3 +28,15 @@ if not (_HERE / "bench").is_dir():      # a checkout (or an editable install): t
     __path__.append(str(_HERE.parent))  # noqa: F821 - a package's __path__
 
 _compat.install()
+
+
+#: the names this package lends from its subpackages, imported when first used
+_LAZY = {"load_run": "radarbench.bench.tidy", "Run": "radarbench.bench.tidy"}
+
+
+def __getattr__(name: str):
+    """``radarbench.load_run`` / ``radarbench.Run``: imported on first use (PEP 562)."""
+    if name in _LAZY:
+        import importlib
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
