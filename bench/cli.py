@@ -30,6 +30,7 @@ from pathlib import Path
 from radarbench.bench import __version__
 from radarbench.bench.errors import (EXIT_BAD_INPUT, EXIT_BUG, EXIT_ENVIRONMENT, EXIT_FAILED_UNITS, EXIT_IN_USE, EXIT_INTERRUPTED,
                           EXIT_REGRESSION, ConfigError, Fault, is_out_of_memory, os_fault, unknown_name)
+from radarbench.bench import runfolder
 from radarbench.bench.listing import plugin_listing, preset_descriptions, presets
 from radarbench.bench.progress import notices_of_one_command
 
@@ -367,17 +368,32 @@ def _run_locked(args, plan, out_dir: Path, command: str) -> int:
         if viewer is not None:
             viewer.close()
     try:
+        digest = runfolder.outputs_digest(store, not args.no_record, _report_code(plan))
+        current = runfolder.outputs_current(out_dir, digest, store.meta(runfolder.OUTPUTS_DIGEST))
         store.close()
+        if current:
+            progress.close()
+            print(f"the report is up to date: {out_dir / 'report.md'}")
+            return _failures_exit(out_dir, command)
         write_plan_toml(out_dir / "plan.toml", plan, command, store.stamps)
         from radarbench.bench.report import build_outputs
         report = build_outputs(out_dir, recording=not args.no_record, on_phase=progress.phase,
-                               workers=_workers(args))       # --workers bounds the figures' processes too
+                               workers=_workers(args), digest=digest)   # --workers bounds the figures' processes too
     except KeyboardInterrupt:
         return _interrupted(out_dir, command, *_stored_units(plan, out_dir))
     finally:
         progress.close()
     print(f"wrote {report}")
     return _failures_exit(out_dir, command)
+
+
+def _report_code(plan) -> list[Path]:
+    """The files a run folder's outputs are built with: the harness's, and the modules of
+    the plan's plugins (their documentation is shown)."""
+    from radarbench.bench import registry
+    classes = [registry.get_scenario(s.name) for s in plan.scenarios] + [registry.get_method(m.name) for m in plan.methods]
+    modules = [sys.modules.get(cls.__module__) for cls in classes]
+    return runfolder.harness_files() + [Path(m.__file__) for m in modules if getattr(m, "__file__", None)]
 
 
 def _failures_exit(out_dir: Path, command: str) -> int:

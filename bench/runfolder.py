@@ -26,6 +26,8 @@ import contextlib
 import contextvars
 import errno
 import fcntl
+import hashlib
+import importlib.metadata
 import json
 import os
 import re
@@ -572,3 +574,49 @@ def open_for_report(root: Path) -> RunLock:
         lock.release()
         raise
     return lock
+
+
+#: the folder of a run folder that holds the results its last run replaced (bench.identity.PREVIOUS)
+PREVIOUS_FOLDER = "previous"
+#: the libraries whose versions shape a report's pages, tables and figures
+REPORT_LIBRARIES = ("numpy", "scipy", "pandas", "matplotlib", "plotly", "jinja2", "markdown", "tabulate",
+                    "rerun-sdk")
+#: the store's record of what the folder's outputs were last built from (:func:`outputs_digest`)
+OUTPUTS_DIGEST = "outputs_digest"
+
+
+def outputs_digest(store, recording: bool, code_files: list[Path]) -> str:
+    """What a run folder's outputs are built from: the stored results (every unit and run
+    with its identity), the stored plan and identities, the files ``code_files`` (the
+    harness's code, templates and presets' notes and claims, the plan's plugins), the
+    versions of :data:`REPORT_LIBRARIES` and whether a recording is written. The outputs
+    are rebuilt only when it changed (docs/architecture.md, 'Run folders and faults')."""
+    h = hashlib.sha256()
+    for query in ("SELECT key, identity, finished FROM units ORDER BY key",
+                  "SELECT unit, method, identity, error, seconds FROM runs ORDER BY unit, method"):
+        for row in store.db.execute(query):
+            h.update(repr(row).encode())
+    for key in ("fingerprint", "plan", "identities", "replaced", "units_total", "last_wall_seconds"):
+        h.update(repr(store.meta(key)).encode())
+    for path in sorted(set(code_files)):
+        with contextlib.suppress(OSError):
+            h.update(str(path).encode() + b"\0" + path.read_bytes())
+    for name in REPORT_LIBRARIES:
+        with contextlib.suppress(importlib.metadata.PackageNotFoundError):
+            h.update(f"{name} {importlib.metadata.version(name)}".encode())
+    h.update(repr(recording).encode())
+    return h.hexdigest()
+
+
+def outputs_current(out_dir: Path, digest: str, stored: str | None) -> bool:
+    """Whether the folder's outputs were built from ``digest`` and are all still there."""
+    listed = read_manifest(out_dir) or []
+    return stored == digest and "report.md" in listed and all(
+        (out_dir / name).exists() for name in listed
+        if name not in STORE_FILES and not name.endswith("/") and not name.startswith(f"{PREVIOUS_FOLDER}/"))
+
+
+def harness_files() -> list[Path]:
+    """The harness's own files: its code, the report's templates, the presets' notes and claims."""
+    return [p for p in Path(__file__).resolve().parent.rglob("*")
+            if p.suffix in (".py", ".j2", ".toml", ".md") and "__pycache__" not in p.parts]

@@ -349,7 +349,8 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
         progress.close()
     if stop():
         raise Interrupted(len(store.done_units()), total)
-    store.set_meta("last_wall_seconds", repr(time.monotonic() - started))
+    if to_run:                             # the units' wall time of the last run that computed any
+        store.set_meta("last_wall_seconds", repr(time.monotonic() - started))
     return store
 
 

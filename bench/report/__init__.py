@@ -410,14 +410,17 @@ def _paper_vs_ours(source: str, tables: dict[str, pd.DataFrame], equal_chance: f
     return evaluation, claims.claims_markdown(evaluation, preset_notes(source))
 
 
-def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None, workers: int | None = None) -> Path:
+def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None, workers: int | None = None,
+                  digest: str | None = None) -> Path:
     """(Re)build every output of a run folder from its store; returns report.md's path.
 
     Every file is written whole (a temporary file renamed into place) and listed in the
     folder's manifest (:mod:`bench.runfolder`); the caller holds the folder's lock.
     ``on_phase(name)`` is called as each phase starts: ``report`` (CSVs, figures,
     report.md) and ``recording`` (recording.rrd), for the progress lines. ``workers``: the
-    most processes that draw the figures (None: one per CPU, :func:`_figure_pool`)."""
+    most processes that draw the figures (None: one per CPU, :func:`_figure_pool`).
+    ``digest``: what the outputs are built from (:func:`bench.runfolder.outputs_digest`),
+    recorded once they are all written, so an unchanged folder is not rebuilt."""
     on_phase = on_phase or (lambda name: None)
     on_phase("report")
     out_dir = Path(out_dir)
@@ -426,8 +429,12 @@ def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None, worke
         raise ConfigError("", f"{out_dir} has no results.sqlite (not a bench run folder)")
     store = Store(db)
     try:
+        store.set_meta(runfolder.OUTPUTS_DIGEST, "")          # outputs being rewritten: current no more
         with runfolder.writing(out_dir):
-            return _build(store, out_dir, recording, on_phase, workers)
+            report = _build(store, out_dir, recording, on_phase, workers)
+        if digest:
+            store.set_meta(runfolder.OUTPUTS_DIGEST, digest)
+        return report
     finally:
         store.close()
 
