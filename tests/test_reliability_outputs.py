@@ -427,6 +427,32 @@ def test_the_glance_of_configs_equal_on_every_trial_is_a_tie_said_plainly():
     assert "-0" not in text
 
 
+def _glance_of(rmse_a: np.ndarray, rmse_b: np.ndarray) -> tuple[str, "pd.DataFrame"]:
+    import pandas as pd
+    from radarbench.bench.report.glance import comparisons_frame, glance
+    from radarbench.bench.report.render import glance_markdown
+    task = registry.get_task("tracking")
+    n = len(rmse_a)
+    trials = pd.DataFrame({"scenario": "maneuvering-1d", "config": ["imm"] * n + ["filterpy-imm"] * n,
+                           "snr_db": np.repeat([0.0, 10.0], n // 2).tolist() * 2, "trial": list(range(n)) * 2,
+                           "rmse": np.concatenate([rmse_a, rmse_b])})
+    task_of = {"imm": task, "filterpy-imm": task}
+    comparisons = comparisons_frame(trials, task_of)
+    return glance_markdown(glance(trials, task_of, comparisons, {})), comparisons
+
+
+def test_two_implementations_equal_but_for_rounding_are_a_tie():
+    """Was "winner `filterpy-imm`, by -6.06e-13 m": the same IMM twice, differing by rounding."""
+    rmse = np.linspace(8.0, 14.0, 20)
+    text, comparisons = _glance_of(rmse, rmse - 6.06e-13)
+    assert "**tie**: `filterpy-imm` and `imm` are equal on every trial." in text and "winner **" not in text
+    assert (comparisons.better == "tie").all() and (comparisons.difference == 0).all()
+    assert "within a relative 1e-9 of each other count as equal" in text
+    # a difference above the resolution, on every trial, still ranks
+    text, comparisons = _glance_of(rmse, rmse * (1 - 1e-6))
+    assert "winner **`filterpy-imm`**" in text and (comparisons.better == "filterpy-imm").all()
+
+
 def test_a_tracker_estimate_of_1e308_is_a_failure_and_warns_nothing(impossible_run):
     """Was a NumPy overflow warning from the recording (and the metrics) on the terminal."""
     run, _ = impossible_run
