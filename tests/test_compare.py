@@ -22,7 +22,7 @@ import pandas as pd
 import pytest
 
 from radarbench.bench.cli import EXIT_REGRESSION, main
-from conftest import small_sweep_text
+from conftest import scaled, small_sweep_text
 
 OTHER_METHODS = """
 [[methods]]
@@ -257,7 +257,7 @@ def test_compare_writes_nothing_in_the_run_folders(runs, tmp_path):
 
 def _unshare_works() -> bool:
     try:
-        return subprocess.run(["unshare", "-rm", "true"], capture_output=True, timeout=10).returncode == 0
+        return subprocess.run(["unshare", "-rm", "true"], capture_output=True, timeout=scaled(60)).returncode == 0
     except (OSError, subprocess.TimeoutExpired):
         return False
 
@@ -274,6 +274,6 @@ def test_compare_works_on_a_read_only_file_system(runs, tmp_path):
     script = (f"mount --bind {media} {media} && mount -o remount,bind,ro {media} && "
               f"! touch {media}/probe 2>/dev/null && exec {sys.executable} -m radarbench.bench compare {media}/a {media}/b")
     proc = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True, env=env,
-                          timeout=120)
+                          timeout=scaled())
     assert proc.returncode == 0, proc.stderr
     assert "In one run only" in proc.stdout and not proc.stderr

@@ -11,6 +11,7 @@ import pytest
 
 import radarbench
 from radarbench._compat import OldImportName, new_name
+from conftest import scaled
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -46,7 +47,7 @@ def test_a_fresh_process_importing_an_old_name_first_gets_one_registry():
             "print(caught[0].category.__name__, caught[0].message)\n"
             "import sys, bench.registry as r, radarbench.bench.registry as n\n"
             "print(r is n, sys.modules['bench'] is sys.modules['radarbench.bench'])")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120,
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=scaled(),
                          env={"PYTHONPATH": str(ROOT), "PATH": ""})
     assert out.returncode == 0, out.stderr
     lines = out.stdout.splitlines()

@@ -26,6 +26,7 @@ from radarbench.bench.listing import plugin_listing
 from radarbench.bench.params import build_params
 from radarbench.bench.rng import TrialRNG
 from radarbench.bench.tasks.base import COVARIANCE_TOLERANCE, OutputError, check_covariance
+from conftest import scaled
 
 registry.discover()
 
@@ -243,7 +244,7 @@ def impossible_run(tmp_path_factory):
     (root / "sweep.toml").write_text(IMPOSSIBLE_SWEEP)
     proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", str(root / "sweep.toml"), "--out", str(root / "run"),
                            "--quiet", "--workers", "1"], env=env, capture_output=True, text=True,
-                          timeout=300)
+                          timeout=scaled())
     assert proc.returncode == 6, proc.stderr                      # failed units: exit 6
     (root / "stderr.txt").write_text(proc.stderr)
     return root / "run", env
@@ -277,7 +278,7 @@ def test_the_report_of_a_run_whose_plugins_are_not_installed_names_them_and_the_
     from tests.test_reliability_store import _tree
     before = _tree(run)
     proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "report", str(run)], capture_output=True, text=True,
-                          timeout=300)                                # this environment lacks the plugin
+                          timeout=scaled())                           # this environment lacks the plugin
     assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1, proc.stderr
     assert proc.stderr.startswith(f"error: {run / 'results.sqlite'}: the run was made with plugins not installed "
                                   "here: method 'negative-covariance', method 'huge-estimate'; install them")
@@ -498,6 +499,6 @@ def test_no_library_warning_reaches_the_terminal_on_a_normal_run(tmp_path):
     (tmp_path / "sweep.toml").write_text(_every_task_sweep(tmp_path))
     env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
     proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", "sweep.toml", "--out", "run", "--workers", "1"],
-                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=scaled())
     assert proc.returncode == 0, proc.stderr                      # `bench report` builds the same way
     assert "Warning" not in proc.stderr and "warn" not in proc.stderr.lower(), proc.stderr

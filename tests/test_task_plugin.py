@@ -190,7 +190,7 @@ def plugin_env(tmp_path):
 
 def _bench(env, *args):
     return subprocess.run([sys.executable, "-m", "radarbench.bench", *map(str, args)], env=env, capture_output=True,
-                          text=True, timeout=300)
+                          text=True, timeout=scaled())
 
 
 @pytest.mark.slow
