@@ -125,6 +125,11 @@ def scaled(seconds: float = PROCESS_BOUND_S) -> float:
     return seconds * timeout_scale()
 
 
+#: id of a TimeoutExpired already reported -> (the exception, kept alive so its id stays
+#: unique; the test it was reported at)
+_REPORTED_TIMEOUTS: dict[int, tuple] = {}
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item, call):
     """A bound that ran out (``subprocess.TimeoutExpired``) says which knob raises it; in a
@@ -145,11 +150,6 @@ def pytest_runtest_makereport(item, call):
     report.sections.append(("wall-clock bound", f"{expired} — a bound of the suite (tests/conftest.py, scaled()); "
                                                 f"on a loaded or slow machine raise {TIMEOUT_SCALE_VARIABLE} "
                                                 f"(now {timeout_scale():g})"))
-
-
-#: id of a TimeoutExpired already reported -> (the exception, kept alive so its id stays
-#: unique; the test it was reported at)
-_REPORTED_TIMEOUTS: dict[int, tuple] = {}
 
 
 def run_bench(*args, cwd=None, timeout=None, check=False):

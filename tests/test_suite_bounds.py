@@ -9,14 +9,14 @@ from pathlib import Path
 
 import pytest
 
-from conftest import TIMEOUT_SCALE_VARIABLE, scaled
+from conftest import PROCESS_BOUND_S, TIMEOUT_SCALE_VARIABLE, scaled
 
 
 def test_scaled_multiplies_by_the_knob(monkeypatch):
     monkeypatch.delenv(TIMEOUT_SCALE_VARIABLE, raising=False)
     assert scaled(30) == 30
     monkeypatch.setenv(TIMEOUT_SCALE_VARIABLE, "2.5")
-    assert scaled(30) == 75 and scaled() == 2.5 * scaled.__defaults__[0]
+    assert scaled(30) == 75 and scaled() == 2.5 * PROCESS_BOUND_S
 
 
 @pytest.mark.parametrize("value", ["fast", "0", "-1", "inf", "nan"])
