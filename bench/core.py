@@ -231,7 +231,9 @@ class TrackingOutput:
         state space of ``batch.truth`` (same components, same order).
     covariance : (n, K, d, d) float or None — the tracker's own error
         covariance, when it has one (used for NEES).
-    traces : dict of (n, K) arrays — extra per-step series worth recording.
+    traces : dict of (n, K) arrays — extra per-step series, every one kept in a
+        recorded trial (named neither ``error_*`` nor ``estimate_*``: the task's own);
+        ``mode``, ``switch`` and ``q_k`` are also scored (docs/architecture.md, 'Metrics').
     """
 
     estimate: np.ndarray

@@ -302,14 +302,29 @@ def _snap(x, noise: float) -> float:
     return 0.0 if abs(float(x)) <= noise else float(x)
 
 
+#: The numerical resolution of a per-trial metric, relative to its values: two values of one
+#: trial within RELATIVE_RESOLUTION · max(|a|, |b|) of each other are one value computed along
+#: two routes (two implementations of one filter differ by rounding, ~1e-13 of an RMSE in
+#: metres), so :func:`paired_difference` counts them as equal: rounding is a tie, never a
+#: winner nor a change (docs/architecture.md, 'Report').
+RELATIVE_RESOLUTION = 1e-9
+
+
+def resolved_differences(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``b - a`` per pair, 0 where the two are equal to :data:`RELATIVE_RESOLUTION`."""
+    d = b - a
+    return np.where(np.abs(d) <= RELATIVE_RESOLUTION * np.maximum(np.abs(a), np.abs(b)), 0.0, d)
+
+
 def paired_difference(a, b, strata, level: float = CONFIDENCE,
                       resamples: int = BOOTSTRAP_RESAMPLES) -> tuple[float, float, float]:
     """(mean, low, high) of ``b - a`` over pairs (the same trial seen by two
     method configs, or by two runs that share their trials): the paired
     bootstrap resamples the pairs, within each stratum (SNR level), so the noise
-    common to both cancels. Pairs with a NaN are dropped."""
+    common to both cancels. Pairs with a NaN are dropped; pairs equal to the metric's
+    resolution differ by 0 (:func:`resolved_differences`)."""
     a, b, strata = _finite_pairs(np.asarray(a, float), np.asarray(b, float), np.asarray(strata))
-    return bootstrap_mean_ci(b - a, strata, level, resamples)
+    return bootstrap_mean_ci(resolved_differences(a, b), strata, level, resamples)
 
 
 def unpaired_difference(a, a_strata, b, b_strata, level: float = CONFIDENCE,

@@ -49,8 +49,10 @@ def hypothesis_profile(config) -> str:
 
 
 def pytest_configure(config):
-    """Load the Hypothesis profile before the test modules (and their ``@settings``) are imported."""
+    """Load the Hypothesis profile before the test modules (and their ``@settings``) are
+    imported; check the timeout scale once, before any test waits on it."""
     settings.load_profile(hypothesis_profile(config))
+    timeout_scale()
 
 
 #: Test modules each run by one xdist worker as a whole: each has a module-scoped fixture
@@ -96,10 +98,65 @@ def parse_sweep_or_skip(sweep: dict, source: str):
         raise
 
 
-def run_bench(*args, cwd=None, timeout=300, check=False):
-    """Drive the CLI as a user would: a subprocess, text output."""
+#: The suite's one knob for its wall-clock bounds: every wait on a process, a lock or a
+#: socket is ``scaled(seconds)``, the bound times this variable (default 1). The bounds
+#: detect hangs, never slowness: each is several times what the wait takes on a loaded
+#: machine; raise the scale on a slower one (CONTRIBUTING.md, 'Tests').
+TIMEOUT_SCALE_VARIABLE = "BENCH_TEST_TIMEOUT_SCALE"
+#: the bound of a wait for a ``bench`` command or another fresh Python process (s)
+PROCESS_BOUND_S = 900
+
+
+def timeout_scale() -> float:
+    """``$BENCH_TEST_TIMEOUT_SCALE`` as a number > 0 (1 when unset); a UsageError naming the
+    variable otherwise, so a typo stops the session instead of disabling every bound."""
+    raw = os.environ.get(TIMEOUT_SCALE_VARIABLE, "").strip() or "1"
+    try:
+        scale = float(raw)
+    except ValueError:
+        scale = float("nan")
+    if not (scale > 0 and scale != float("inf")):
+        raise pytest.UsageError(f"{TIMEOUT_SCALE_VARIABLE}: expected a number > 0, got {raw!r}")
+    return scale
+
+
+def scaled(seconds: float = PROCESS_BOUND_S) -> float:
+    """A wall-clock bound of ``seconds`` times ``$BENCH_TEST_TIMEOUT_SCALE``."""
+    return seconds * timeout_scale()
+
+
+#: id of a TimeoutExpired already reported -> (the exception, kept alive so its id stays
+#: unique; the test it was reported at)
+_REPORTED_TIMEOUTS: dict[int, tuple] = {}
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """A bound that ran out (``subprocess.TimeoutExpired``) says which knob raises it; in a
+    fixture shared by several tests (module or session scope, whose error pytest re-raises
+    for each), it is reported once, as the error of the first test, and the others are
+    skipped naming it, instead of one error per test."""
+    outcome = yield
+    report = outcome.get_result()
+    if call.excinfo is None or not isinstance(call.excinfo.value, subprocess.TimeoutExpired):
+        return
+    expired = call.excinfo.value
+    first = _REPORTED_TIMEOUTS.setdefault(id(expired), (expired, item.nodeid))[1]
+    if report.when == "setup" and first != item.nodeid:
+        report.outcome = "skipped"
+        report.longrepr = (str(item.path), item.location[1] or 0,
+                           f"Skipped: a shared fixture's wait timed out ({expired.timeout:.3g} s); reported at {first}")
+        return
+    report.sections.append(("wall-clock bound", f"{expired} — a bound of the suite (tests/conftest.py, scaled()); "
+                                                f"on a loaded or slow machine raise {TIMEOUT_SCALE_VARIABLE} "
+                                                f"(now {timeout_scale():g})"))
+
+
+def run_bench(*args, cwd=None, timeout=None, check=False):
+    """Drive the CLI as a user would: a subprocess, text output, waited on for at most
+    ``timeout`` seconds (``scaled()`` by default)."""
     proc = subprocess.run([sys.executable, "-m", "radarbench.bench", *map(str, args)], cwd=cwd, capture_output=True,
-                          text=True, timeout=timeout)
+                          text=True, timeout=scaled() if timeout is None else timeout)
     if check and proc.returncode != 0:
         raise AssertionError(f"bench {' '.join(map(str, args))} failed ({proc.returncode}):\n{proc.stderr}")
     return proc

@@ -62,7 +62,7 @@ class Crash(Method):
             if params.how == "wait-file":
                 release = os.environ["HOSTILE_RELEASE"]
                 open(f"{release}.started.{int(batch.trials[0])}", "w").close()
-                deadline = time.monotonic() + 120
+                deadline = time.monotonic() + float(os.environ.get("HOSTILE_WAIT_S", "900"))
                 while not os.path.exists(os.environ["HOSTILE_RELEASE"]) and time.monotonic() < deadline:
                     time.sleep(0.02)
         return Innovation().run(batch, Innovation.Params(window=1))

@@ -19,6 +19,7 @@ from radarbench.bench.tasks.base import OutputError
 from radarbench.bench.tasks.cells import CellDetectionOutput, CellDetectionTask, MapScene
 from radarbench.bench.tasks.cells.metrics import (PAIRED_GROUP, REGION_NAMES, cell_trial_metrics, guard_mask, ideal_pd, ideal_snr_at_pd,
                                        summarise_cells)
+from conftest import scaled
 
 HERE = Path(__file__).resolve().parent
 
@@ -180,7 +181,7 @@ def oracle_run(tmp_path_factory):
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(site), *filter(None, [env.get("PYTHONPATH")])])
     run = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", str(tmp / "sweep.toml"), "--out", str(tmp / "run"),
-                          "--workers", "1", "--quiet"], env=env, capture_output=True, text=True, timeout=600)
+                          "--workers", "1", "--quiet"], env=env, capture_output=True, text=True, timeout=scaled())
     assert run.returncode == 0, run.stderr
     return tmp / "run"
 

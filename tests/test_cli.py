@@ -12,6 +12,7 @@ import pytest
 
 from radarbench.bench import registry
 from radarbench.bench.tasks import summary_columns
+from conftest import scaled
 
 #: summary.csv's columns with the built-in tasks, in the order readers have always found them.
 SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials", "pd", "pd_low", "pd_high",
@@ -158,7 +159,7 @@ def _as_from_a_terminal() -> None:
 
 def _stored_units(db) -> int:
     try:
-        with sqlite3.connect(db, timeout=5) as con:
+        with sqlite3.connect(db, timeout=scaled(60)) as con:
             return con.execute("SELECT count(*) FROM units").fetchone()[0]
     except sqlite3.Error:
         return 0
@@ -184,12 +185,12 @@ def test_interrupted_run_resumes_to_the_uninterrupted_results(bench_cli, uninter
     proc = subprocess.Popen([sys.executable, "-m", "radarbench.bench", "run", str(sweep), "--out", str(part), "--workers",
                              str(workers), "--quiet", "--no-record"], stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=_as_from_a_terminal)
-    deadline = time.monotonic() + 120
+    deadline = time.monotonic() + scaled(600)
     while _stored_units(part / "results.sqlite") < 60 and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.02)
     assert proc.poll() is None, "the run finished before it could be interrupted; make the sweep larger"
     os.killpg(proc.pid, sig)
-    err = proc.communicate(timeout=60)[1]
+    err = proc.communicate(timeout=scaled())[1]
     stored = _stored_units(part / "results.sqlite")
     assert 60 <= stored < 100, stored       # 50 calibration + 50 evaluation units in all
     assert not (part / "summary.csv").exists()
@@ -243,14 +244,14 @@ def test_a_run_killed_at_several_points_resumes_to_the_uninterrupted_results(ben
     for sig, workers, when, ready in stops:
         started = time.time() - 1
         proc = _start(sweep, part, workers)
-        deadline = time.monotonic() + 180
+        deadline = time.monotonic() + scaled(600)
         while not ready(_stored_units(part / "results.sqlite")) and time.monotonic() < deadline \
                 and proc.poll() is None:
             time.sleep(0.005)
         assert proc.poll() is None, f"{when}: the run ended before it could be stopped"
         at_signal = _stored_units(part / "results.sqlite")
         os.killpg(proc.pid, sig)
-        err = proc.communicate(timeout=120)[1]
+        err = proc.communicate(timeout=scaled())[1]
         after = _stored_units(part / "results.sqlite")
         assert stored <= at_signal <= after, (when, stored, at_signal, after)   # nothing stored is lost
         if at_signal < UNITS:

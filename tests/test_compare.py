@@ -22,7 +22,7 @@ import pandas as pd
 import pytest
 
 from radarbench.bench.cli import EXIT_REGRESSION, main
-from conftest import small_sweep_text
+from conftest import scaled, small_sweep_text
 
 OTHER_METHODS = """
 [[methods]]
@@ -141,6 +141,19 @@ def test_an_incomplete_run_is_compared_on_the_trials_both_hold(runs, tmp_path):
     assert "**Trials per level of `cv-turn-cv` differ**: A 10, B 5; compared on the trials both runs hold" in top
 
 
+def test_a_store_alone_compares_both_ways_with_its_summary(runs, tmp_path):
+    """A folder holding only results.sqlite, as ``previous/`` and an interrupted run are (no
+    report built): its summary is rebuilt from the store, so compare_summary.csv has both sides."""
+    bare = tmp_path / "previous"
+    bare.mkdir()
+    shutil.copy(runs["base"] / "results.sqlite", bare / "results.sqlite")
+    for a, b, name in ((bare, runs["base"], "ab"), (runs["base"], bare, "ba")):
+        code, _, err = _compare(a, b, tmp_path / name)
+        assert code == 0, err
+        side = pd.read_csv(tmp_path / name / "compare_summary.csv")
+        assert len(side) and side.a.notna().all() and side.b.notna().all() and (side.difference == 0).all()
+
+
 # ------------------------------------------------------------------ one run only
 
 def test_disjoint_methods_and_snr_levels_are_listed_on_both_sides(runs, tmp_path):
@@ -244,7 +257,7 @@ def test_compare_writes_nothing_in_the_run_folders(runs, tmp_path):
 
 def _unshare_works() -> bool:
     try:
-        return subprocess.run(["unshare", "-rm", "true"], capture_output=True, timeout=10).returncode == 0
+        return subprocess.run(["unshare", "-rm", "true"], capture_output=True, timeout=scaled(60)).returncode == 0
     except (OSError, subprocess.TimeoutExpired):
         return False
 
@@ -261,6 +274,6 @@ def test_compare_works_on_a_read_only_file_system(runs, tmp_path):
     script = (f"mount --bind {media} {media} && mount -o remount,bind,ro {media} && "
               f"! touch {media}/probe 2>/dev/null && exec {sys.executable} -m radarbench.bench compare {media}/a {media}/b")
     proc = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True, env=env,
-                          timeout=120)
+                          timeout=scaled())
     assert proc.returncode == 0, proc.stderr
     assert "In one run only" in proc.stdout and not proc.stderr

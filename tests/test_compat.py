@@ -16,13 +16,14 @@ import radarbench
 import radarbench.methods.cfar.detectors  # noqa: F401 - compared with what an old name lends
 from radarbench import _compat
 from radarbench._compat import OldImportName, new_name
+from conftest import scaled
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _python(*args, cwd: Path) -> list[str]:
     """The lines a fresh interpreter prints, with only this checkout on its path (exit 0)."""
-    out = subprocess.run([sys.executable, *args], capture_output=True, text=True, cwd=cwd,
+    out = subprocess.run([sys.executable, *args], capture_output=True, text=True, cwd=cwd, timeout=scaled(),
                          env={"PYTHONPATH": str(ROOT), "PATH": ""})
     assert out.returncode == 0, out.stderr
     return out.stdout.splitlines()
@@ -107,7 +108,7 @@ def _history() -> tuple[dict[str, str], set[str], set[str]]:
     if not (ROOT / ".git").exists():
         pytest.skip("not a git checkout: the history of the moves is not here")
     log = subprocess.run(["git", "log", "--reverse", "-M", "--name-status", "--format="], cwd=ROOT,
-                         capture_output=True, text=True, timeout=120, check=True).stdout
+                         capture_output=True, text=True, timeout=scaled(), check=True).stdout
     home, deleted, since_package, package_exists = {}, set(), set(), False
     for fields in (line.split("\t") for line in log.splitlines() if line):
         if fields[0] == "A" and fields[1] == "radarbench/__init__.py":

@@ -20,6 +20,7 @@ from radarbench.bench.cli import build_parser
 from radarbench.bench.docs import base_docstrings, main, pages, published, presets, subcommands
 from radarbench.bench.markdown import code, text
 from radarbench.bench.provenance import WALL_TIME_ROW
+from conftest import scaled
 
 REPO = Path(__file__).resolve().parents[1]
 #: a relative link target of a Markdown page (external URLs and bare anchors left out)
@@ -180,7 +181,7 @@ def test_the_site_builds_strictly(tmp_path):
     of the navigation fails it."""
     env = dict(os.environ, PYTHONPATH=str(REPO), NO_MKDOCS_2_WARNING="1")
     done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
-                          cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+                          cwd=REPO, env=env, capture_output=True, text=True, timeout=scaled())
     assert done.returncode == 0, done.stderr[-3000:]
     for kind in ("methods", "scenarios"):
         assert all((tmp_path / "site" / kind / name / "index.html").is_file() for name in getattr(registry, kind)())

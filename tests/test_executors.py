@@ -7,6 +7,7 @@ import pytest
 
 from radarbench.bench.cli import main
 from radarbench.bench.store import MethodRun, Store, UnitResult
+from conftest import scaled
 
 # (run name, bench run options, chunk): every one must give the trials.csv of the first
 RUNS = [
@@ -190,11 +191,11 @@ def test_the_report_pools_processes_end_with_a_killed_driver(tmp_path):
     script, pids_file = tmp_path / "pool_then_kill.py", tmp_path / "pids"
     script.write_text(POOL_THEN_KILL)
     proc = subprocess.run([sys.executable, str(script)], env={**os.environ, "PIDS_FILE": str(pids_file)},
-                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120)
+                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=scaled())
     assert proc.returncode == -9
     pids = [int(p) for p in pids_file.read_text().split()]
     assert len(pids) == 2
-    assert _still_running_after(pids, 30.0) == []
+    assert _still_running_after(pids, scaled(300)) == []
 
 
 FRESH_THEN_STOP = """
@@ -229,11 +230,11 @@ def test_a_fresh_process_call_ends_with_its_interrupted_or_killed_driver(tmp_pat
     script, pids_file = tmp_path / "fresh_then_stop.py", tmp_path / "pid"
     script.write_text(FRESH_THEN_STOP)
     proc = subprocess.run([sys.executable, str(script), stop], env={**os.environ, "PIDS_FILE": str(pids_file)},
-                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, timeout=120)
+                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, timeout=scaled())
     assert proc.returncode == returncode
     if stop == "interrupt":
         assert "KeyboardInterrupt" in proc.stderr
-    assert _still_running_after([int(pids_file.read_text())], 30.0) == []
+    assert _still_running_after([int(pids_file.read_text())], scaled(300)) == []
 
 
 def _exit_at_once():

@@ -31,6 +31,7 @@ from radarbench.bench.params import build_params, declaration_problem, param
 from tests.test_task_plugin import METHOD as TASK_PLUGIN_METHOD
 from tests.test_task_plugin import SCENARIO as TASK_PLUGIN_SCENARIO
 from tests.test_task_plugin import TASK
+from conftest import scaled
 
 def _edited(text: str, *changes: tuple[str, str]) -> str:
     for old, new in changes:
@@ -186,7 +187,7 @@ def loop(tmp_path):
 
 def _bench(env, cwd, *args):
     return subprocess.run([sys.executable, "-m", "radarbench.bench", *map(str, args)], env=env, cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=scaled())
 
 
 def _runs(db: Path) -> dict[tuple[str, str], tuple]:

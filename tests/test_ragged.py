@@ -29,6 +29,7 @@ from radarbench.methods.kinematic.kinematic_kf import ConstantVelocityKF
 from radarbench.models.kalman import LinearGaussianModel, kalman_filter
 from radarbench.models.kinematics import KinematicModel, position_index, state_labels
 from tests.kinematic_plugin import install, load
+from conftest import scaled
 
 FIXED = settings(derandomize=True, deadline=None, max_examples=6, database=None)
 
@@ -206,7 +207,7 @@ def test_an_outside_ragged_scenario_runs_end_to_end(tmp_path):
     (tmp_path / "run.toml").write_text(RUN)
     run = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", str(tmp_path / "run.toml"), "--out",
                           str(tmp_path / "out"), "--workers", "1", "--quiet"], env=env, capture_output=True,
-                         text=True, timeout=600)
+                         text=True, timeout=scaled())
     assert run.returncode == 0, run.stderr
     summary = pd.read_csv(tmp_path / "out" / "summary.csv")
     assert len(summary) == 4 and np.isfinite(summary["rmse_mean"]).all()

@@ -39,6 +39,7 @@ from tests.recording_records import (  # noqa: F401 - records: a fixture
     _tracking_record,
     _tracking_summary,
 )
+from conftest import scaled
 
 # -- the .rrd file -----------------------------------------------------------
 
@@ -154,7 +155,7 @@ def _rerun_cli() -> list[str]:
 
 def test_rrd_verify(rrd):
     proc = subprocess.run([*_rerun_cli(), "rrd", "verify", str(rrd)],
-                          capture_output=True, text=True, timeout=60, check=False)
+                          capture_output=True, text=True, timeout=scaled(), check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
 
 
@@ -324,7 +325,7 @@ def test_task_rrd_verify_and_blueprint(task_rrd):
 
     assert len(RrdReader(task_rrd).blueprints()) == 1
     proc = subprocess.run([*_rerun_cli(), "rrd", "verify", str(task_rrd)],
-                          capture_output=True, text=True, timeout=60, check=False)
+                          capture_output=True, text=True, timeout=scaled(), check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
 
 
@@ -369,7 +370,7 @@ def test_workers_import_neither_rerun_nor_matplotlib():
     """What a worker imports (the runner, every task, the record) stays light."""
     code = ("import sys, radarbench.bench.runner, radarbench.bench.tasks, radarbench.bench.recording; from radarbench.bench import registry; "
             "registry.discover(); print(sorted(m for m in ('rerun', 'matplotlib') if m in sys.modules))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=scaled())
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
 
 

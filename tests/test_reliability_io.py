@@ -27,6 +27,7 @@ import pytest
 from radarbench.bench import runfolder, tomlw
 from radarbench.bench.cli import main
 from radarbench.bench.store import MethodRun, Store, UnitResult
+from conftest import scaled
 
 TINY = """
 name = "tiny"
@@ -56,7 +57,7 @@ def tiny(path: Path, trials: int = 4, description: str = "tiny") -> Path:
     return path
 
 
-def bench(*args, timeout=120, limit: int | None = None, wrap: list[str] | None = None, **kw):
+def bench(*args, limit: int | None = None, wrap: list[str] | None = None, **kw):
     """``bench`` in a subprocess (the code under test: this interpreter's PYTHONPATH);
     ``limit``: a file-size limit (``ulimit -f``) with SIGXFSZ ignored, so writes fail
     with EFBIG as on a full disk; ``wrap``: a command put in front (unshare)."""
@@ -65,7 +66,7 @@ def bench(*args, timeout=120, limit: int | None = None, wrap: list[str] | None =
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
             resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
     cmd = [*(wrap or []), sys.executable, "-m", "radarbench.bench", *map(str, args)]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, preexec_fn=pre, **kw)
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=scaled(), preexec_fn=pre, **kw)
 
 
 def in_process(*args) -> tuple[int, str, str]:
@@ -303,7 +304,7 @@ def test_a_second_run_on_a_live_run_folder_says_it_is_in_use(clean, tmp_path):
     a = subprocess.Popen([sys.executable, "-m", "radarbench.bench", "run", str(sweep), "--out", str(out), "--workers", "1",
                           "--quiet", "--no-record"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + scaled(600)
         while _lock_holder(out) != a.pid and a.poll() is None and time.monotonic() < deadline:
             time.sleep(0.005)
         assert _lock_holder(out) == a.pid, "run A never took the lock"
@@ -318,7 +319,7 @@ def test_a_second_run_on_a_live_run_folder_says_it_is_in_use(clean, tmp_path):
         assert snapshot(out) == before
     finally:
         a.send_signal(signal.SIGCONT)
-    _, err = a.communicate(timeout=120)
+    _, err = a.communicate(timeout=scaled())
     assert a.returncode == 0, err
     assert (out / "trials.csv").read_bytes() == (whole / "trials.csv").read_bytes()
     code, _, err = in_process("run", sweep, "--out", out, "--quiet", "--workers", 1, "--no-record")  # free again
@@ -346,24 +347,24 @@ def test_the_unit_check_and_its_insert_are_one_transaction(tmp_path):
         b.db.set_trace_callback(lambda sql: started.set()
                                 if sql.lstrip().upper().startswith(("BEGIN", "INSERT")) else None)
         opened.set()
-        go.wait(10)
+        go.wait(scaled(120))
         result.append(_try(b.save_unit, _unit()))
         result.append(len(b.runs()))
         b.close()
 
     thread = threading.Thread(target=writer_b)
     thread.start()
-    assert opened.wait(10)
+    assert opened.wait(scaled(120))
     a.db.execute("BEGIN IMMEDIATE")          # A is inside its transaction: the unit is not there yet
     go.set()
-    assert started.wait(10)
+    assert started.wait(scaled(120))
     time.sleep(0.2)                          # B now waits for A's lock (before the fix: had already checked)
     a.db.execute("INSERT INTO units (key, phase, scenario, snr_db, trial_start, n, generate_seconds, finished) "
                  "VALUES (?,?,?,?,?,?,?,?)", ("evaluation/s/+0/000000000+2", "evaluation", "s", 0.0, 0, 2, 0.1, 0.0))
     a.db.execute("INSERT INTO runs (unit, method, seconds, error) VALUES (?,?,?,?)",
                  ("evaluation/s/+0/000000000+2", "m", 0.1, None))
     a.db.commit()
-    thread.join(30)
+    thread.join(scaled(300))
     assert result == [False, 1], result      # B saw A's unit and stored nothing twice
     a.close()
 

@@ -26,6 +26,7 @@ from radarbench.bench.listing import plugin_listing
 from radarbench.bench.params import build_params
 from radarbench.bench.rng import TrialRNG
 from radarbench.bench.tasks.base import COVARIANCE_TOLERANCE, OutputError, check_covariance
+from conftest import scaled
 
 registry.discover()
 
@@ -243,7 +244,7 @@ def impossible_run(tmp_path_factory):
     (root / "sweep.toml").write_text(IMPOSSIBLE_SWEEP)
     proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", str(root / "sweep.toml"), "--out", str(root / "run"),
                            "--quiet", "--workers", "1"], env=env, capture_output=True, text=True,
-                          timeout=300)
+                          timeout=scaled())
     assert proc.returncode == 6, proc.stderr                      # failed units: exit 6
     (root / "stderr.txt").write_text(proc.stderr)
     return root / "run", env
@@ -277,7 +278,7 @@ def test_the_report_of_a_run_whose_plugins_are_not_installed_names_them_and_the_
     from tests.test_reliability_store import _tree
     before = _tree(run)
     proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "report", str(run)], capture_output=True, text=True,
-                          timeout=300)                                # this environment lacks the plugin
+                          timeout=scaled())                           # this environment lacks the plugin
     assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1, proc.stderr
     assert proc.stderr.startswith(f"error: {run / 'results.sqlite'}: the run was made with plugins not installed "
                                   "here: method 'negative-covariance', method 'huge-estimate'; install them")
@@ -427,6 +428,32 @@ def test_the_glance_of_configs_equal_on_every_trial_is_a_tie_said_plainly():
     assert "-0" not in text
 
 
+def _glance_of(rmse_a: np.ndarray, rmse_b: np.ndarray) -> tuple[str, "pd.DataFrame"]:
+    import pandas as pd
+    from radarbench.bench.report.glance import comparisons_frame, glance
+    from radarbench.bench.report.render import glance_markdown
+    task = registry.get_task("tracking")
+    n = len(rmse_a)
+    trials = pd.DataFrame({"scenario": "maneuvering-1d", "config": ["imm"] * n + ["filterpy-imm"] * n,
+                           "snr_db": np.repeat([0.0, 10.0], n // 2).tolist() * 2, "trial": list(range(n)) * 2,
+                           "rmse": np.concatenate([rmse_a, rmse_b])})
+    task_of = {"imm": task, "filterpy-imm": task}
+    comparisons = comparisons_frame(trials, task_of)
+    return glance_markdown(glance(trials, task_of, comparisons, {})), comparisons
+
+
+def test_two_implementations_equal_but_for_rounding_are_a_tie():
+    """Was "winner `filterpy-imm`, by -6.06e-13 m": the same IMM twice, differing by rounding."""
+    rmse = np.linspace(8.0, 14.0, 20)
+    text, comparisons = _glance_of(rmse, rmse - 6.06e-13)
+    assert "**tie**: `filterpy-imm` and `imm` are equal on every trial." in text and "winner **" not in text
+    assert (comparisons.better == "tie").all() and (comparisons.difference == 0).all()
+    assert "within a relative 1e-9 of each other count as equal" in text
+    # a difference above the resolution, on every trial, still ranks
+    text, comparisons = _glance_of(rmse, rmse * (1 - 1e-6))
+    assert "winner **`filterpy-imm`**" in text and (comparisons.better == "filterpy-imm").all()
+
+
 def test_a_tracker_estimate_of_1e308_is_a_failure_and_warns_nothing(impossible_run):
     """Was a NumPy overflow warning from the recording (and the metrics) on the terminal."""
     run, _ = impossible_run
@@ -472,6 +499,6 @@ def test_no_library_warning_reaches_the_terminal_on_a_normal_run(tmp_path):
     (tmp_path / "sweep.toml").write_text(_every_task_sweep(tmp_path))
     env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
     proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", "sweep.toml", "--out", "run", "--workers", "1"],
-                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=scaled())
     assert proc.returncode == 0, proc.stderr                      # `bench report` builds the same way
     assert "Warning" not in proc.stderr and "warn" not in proc.stderr.lower(), proc.stderr

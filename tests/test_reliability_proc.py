@@ -22,6 +22,7 @@ import pandas as pd
 import pytest
 
 from hostile_plugin import UNAVAILABLE, install
+from conftest import scaled
 
 pytestmark = pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="finds processes through /proc")
 
@@ -54,12 +55,12 @@ def _wait_for(condition, seconds: float, what: str, proc=None) -> None:
         if proc is not None and proc.poll() is not None:
             raise AssertionError(f"the run ended (exit {proc.returncode}) before {what}")
         if time.monotonic() > deadline:
-            raise AssertionError(f"not within {seconds} s: {what}")
+            raise AssertionError(f"not within {seconds:g} s (a bound of tests/conftest.py scaled()): {what}")
         time.sleep(0.02)
 
 
-def _no_process_left(marker: str, seconds: float = 20) -> None:
-    deadline = time.monotonic() + seconds
+def _no_process_left(marker: str) -> None:
+    deadline = time.monotonic() + scaled(300)
     while (left := _processes(marker)) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not left, f"processes of the run left behind: {left}"
@@ -67,7 +68,7 @@ def _no_process_left(marker: str, seconds: float = 20) -> None:
 
 def _stored(db) -> list[str]:
     try:
-        with sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=5) as con:
+        with sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=scaled(60)) as con:
             return sorted(r[0] for r in con.execute("SELECT key FROM units"))
     except sqlite3.Error:
         return []
@@ -80,12 +81,13 @@ def hostile(tmp_path_factory):
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(site), *filter(None, [env.get("PYTHONPATH")])])
     env.pop("HOSTILE_OFF", None)
+    env["HOSTILE_WAIT_S"] = str(scaled(900))        # how long a held unit waits for its release
     return env
 
 
-def _bench(env, *args, timeout=240, **extra):
+def _bench(env, *args, **extra):
     return subprocess.run([sys.executable, "-m", "radarbench.bench", *map(str, args)], env={**env, **extra},
-                          capture_output=True, text=True, timeout=timeout)
+                          capture_output=True, text=True, timeout=scaled())
 
 
 def _start(env, *args, stderr, **extra):
@@ -225,7 +227,7 @@ trials = 5
 seed = 5
 snr_db = [0, 10]
 chunk = 5
-unit_timeout_s = 5
+unit_timeout_s = LIMIT
 
 [[methods]]
 name = "crash"
@@ -242,7 +244,8 @@ h0_trials = 10
 @pytest.mark.slow
 def test_a_unit_past_its_time_limit_fails_and_its_worker_is_replaced(hostile, tmp_path):
     sweep = tmp_path / "slow.toml"
-    sweep.write_text(SLOW_SWEEP)
+    limit = round(scaled(15))        # the sleeping unit's time limit; the others end long before it
+    sweep.write_text(SLOW_SWEEP.replace("LIMIT", str(limit)))
     marker = uuid.uuid4().hex
     run = _bench(hostile, "run", sweep, "--out", tmp_path / "run", "--workers", 8, "--no-record",
                  **{MARKER: marker})
@@ -252,10 +255,10 @@ def test_a_unit_past_its_time_limit_fails_and_its_worker_is_replaced(hostile, tm
     with sqlite3.connect(tmp_path / "run" / "results.sqlite") as con:
         failed = con.execute("SELECT unit, method, error FROM runs WHERE error IS NOT NULL").fetchall()
     assert [(u, m) for u, m, _ in failed] == [("evaluation/cv-turn-cv/+10/000000000+5", "crash[how=sleep]")]
-    assert failed[0][2].startswith("timeout: the unit ran longer than unit_timeout_s = 5 s")
+    assert failed[0][2].startswith(f"timeout: the unit ran longer than unit_timeout_s = {limit} s")
     assert "timeout" in _failures(tmp_path / "run" / "report.md")
-    _no_process_left(marker, 10)                                      # the stopped worker too
-    assert "unit_timeout_s = 5" in (tmp_path / "run" / "plan.toml").read_text()
+    _no_process_left(marker)                                          # the stopped worker too
+    assert f"unit_timeout_s = {limit}" in (tmp_path / "run" / "plan.toml").read_text()
 
 
 # ------------------------------------------------------------------ causes 3, 7, 9: signals and kill -9
@@ -292,7 +295,7 @@ def _held_run(hostile, tmp_path, *options):
                   *options, stderr=err, HOSTILE_RELEASE=str(release), **{MARKER: marker})
     err.close()
     started = [tmp_path / f"release.started.{t}" for t in (0, 4)]
-    _wait_for(lambda: all(p.exists() for p in started), 120, "two units held in flight", proc)
+    _wait_for(lambda: all(p.exists() for p in started), scaled(600), "two units held in flight", proc)
     assert _stored(tmp_path / "run" / "results.sqlite") == sorted(
         [f"calibration/cv-turn-cv/null/{s:09d}+4" for s in (0, 4, 8, 12)]
         + [f"evaluation/cv-turn-cv/+0/{s:09d}+4" for s in (0, 4, 8, 12)])
@@ -307,7 +310,7 @@ def test_kill_9_of_the_driver_leaves_no_process_and_an_incomplete_report(hostile
         # driver, forkserver, two workers, resource tracker: the scan sees them
         assert len(alive) >= 5 and any(p == proc.pid for p, _ in alive), alive
         os.kill(proc.pid, signal.SIGKILL)                # the driver alone
-        proc.wait(timeout=30)
+        proc.wait(timeout=scaled(300))
         _no_process_left(marker)
     finally:
         release.touch()
@@ -323,11 +326,11 @@ def test_a_stopped_run_stores_its_units_in_flight_and_leaves_no_process(hostile,
     proc, marker, release, sweep = _held_run(hostile, tmp_path)
     try:
         os.kill(proc.pid, sig)                           # the driver alone
-        _wait_for(lambda: "stopping" in (tmp_path / "stderr.txt").read_text(), 30, "the driver took the signal",
+        _wait_for(lambda: "stopping" in (tmp_path / "stderr.txt").read_text(), scaled(300), "the driver took the signal",
                   proc)
     finally:
         release.touch()                                  # the units in flight may now end
-    assert proc.wait(timeout=60) == 130
+    assert proc.wait(timeout=scaled()) == 130
     err = (tmp_path / "stderr.txt").read_text()
     assert "Traceback" not in err, err
     last = err.strip().splitlines()[-1]
@@ -357,15 +360,22 @@ def _free_port() -> int:
     ("foo://x", "is not a scheduler address"),
     ("tcp://127.0.0.1:{port}", "cannot connect to tcp://127.0.0.1:{port}"),
 ], ids=["bad-scheme", "nobody-listens"])
-def test_a_bad_or_unreachable_scheduler_is_one_line_at_once_and_writes_nothing(bench_cli, write_sweep, tmp_path,
-                                                                              address, problem):
+def test_a_bad_or_unreachable_scheduler_is_one_line_at_once_and_writes_nothing(write_sweep, tmp_path, capsys,
+                                                                              monkeypatch, address, problem):
+    """At once: refused before dask's client is made (its 15 s of retries and 30 s of clean-up
+    never start), checked by making the client a failure rather than by timing the run."""
     pytest.importorskip("distributed")
+    from radarbench.bench import executors
+    from radarbench.bench.cli import main
+
+    def no_client(*_):
+        raise AssertionError("dask's client was made for an address that check_scheduler should refuse")
+    monkeypatch.setattr(executors, "_client", no_client)
     port = _free_port()
     address, problem = address.format(port=port), problem.format(port=port)
-    started = time.monotonic()
-    proc = bench_cli("run", write_sweep(), "--out", tmp_path / "out", "--executor", "dask", "--scheduler", address,
-                     "--quiet", timeout=60)
-    assert time.monotonic() - started < 20                          # no 15 s of retries, no 30 s clean-up
-    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
-    assert proc.stderr.startswith("error: --scheduler: ") and problem in proc.stderr, proc.stderr
+    code = main(["run", str(write_sweep()), "--out", str(tmp_path / "out"), "--executor", "dask", "--scheduler",
+                 address, "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert err.startswith("error: --scheduler: ") and problem in err, err
     assert not (tmp_path / "out").exists()

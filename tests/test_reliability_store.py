@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from radarbench.bench.cli import main
+from conftest import scaled
 
 
 def _tree(root: Path) -> dict[str, int]:
@@ -101,14 +102,14 @@ def _limited(limit_mb: int, *args, cwd: Path, env=None) -> subprocess.CompletedP
     thread: below ~400 MiB its thread start-up spins instead of failing (its own behaviour,
     not bench's).
 
-    A process still alive after 120 s gets SIGABRT, on which Python's faulthandler prints
+    A process still alive after ``scaled(300)`` s gets SIGABRT, on which Python's faulthandler prints
     every thread's stack: a hang inside an import (a library spinning on a failed mapping,
     seen once on CI at 422 MiB) skips, naming the frame; a hang anywhere else is bench's
     and fails."""
     env = {**(env or os.environ), "OPENBLAS_NUM_THREADS": "1", "PYTHONFAULTHANDLER": "1"}
     command = (f"ulimit -v {limit_mb * 1024}; "
-               f"exec timeout -s ABRT 120 {sys.executable} -m radarbench.bench " + " ".join(map(str, args)))
-    proc = subprocess.run(["bash", "-c", command], cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
+               f"exec timeout -s ABRT {scaled(300):.0f} {sys.executable} -m radarbench.bench " + " ".join(map(str, args)))
+    proc = subprocess.run(["bash", "-c", command], cwd=cwd, env=env, capture_output=True, text=True, timeout=scaled(600))
     if proc.returncode in (124, 134, -6) and "Fatal Python error: Aborted" in proc.stderr:
         stack = proc.stderr.split("Current thread", 1)[-1].split("\n\n", 1)[0]
         assert "importlib._bootstrap" in stack, f"bench hung outside an import:\n{proc.stderr}"
@@ -167,7 +168,7 @@ def test_a_plugin_import_that_runs_out_of_memory_is_exit_3_not_an_unknown_method
                          "[bench.methods]\ngreedy = greedy_plugin\n")
     sweep = write_sweep()
     proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", sweep, "--out", tmp_path / "out", "--quiet"],
-                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=scaled())
     one_line(proc, 3, "error: out of memory: out of memory while importing plugins (MemoryError: a 40 GB")
     assert not (tmp_path / "out").exists()
 

@@ -11,9 +11,14 @@ import os
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pandas as pd
 import pytest
+
+from conftest import scaled
+
+ROOT = Path(__file__).resolve().parents[1]
 
 TASK = '''
 """Peak finding: a method names the step of a single bump; scored as right or wrong."""
@@ -185,7 +190,7 @@ def plugin_env(tmp_path):
 
 def _bench(env, *args):
     return subprocess.run([sys.executable, "-m", "radarbench.bench", *map(str, args)], env=env, capture_output=True,
-                          text=True, timeout=300)
+                          text=True, timeout=scaled())
 
 
 @pytest.mark.slow
@@ -211,3 +216,15 @@ def test_a_task_from_an_entry_point_runs_end_to_end(plugin_env, tmp_path):
     from radarbench.bench.recording import entity_root, rerun_path
     paths = set(RrdReader(out / "recording.rrd").store().schema().entity_paths())
     assert rerun_path(f"{entity_root('bumps', 12.0, 0)}/argmax/named") in paths
+
+
+@pytest.mark.slow          # a pytest session of its own (the conformance module's imports)
+def test_the_conformance_tests_pass_on_the_task_plugin(plugin_env):
+    """tests/test_conformance.py, as a plugin author runs it with the plugin installed: its
+    method returns a bare array, which its task takes (docs/extending.md, 'Writing a task')."""
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-v", "-n", "0", "-p", "no:cacheprovider",
+                           "tests/test_conformance.py", "-k", "argmax"], cwd=ROOT, env=plugin_env,
+                          capture_output=True, text=True, timeout=scaled())
+    assert proc.returncode == 0, proc.stdout[-3000:]
+    ran = [line for line in proc.stdout.splitlines() if "[bumps-argmax] PASSED" in line]
+    assert len(ran) == 2, proc.stdout[-3000:]           # test_method_conforms, test_a_trials_numbers_...

@@ -165,3 +165,37 @@ def test_the_harness_never_names_a_task():
     forbidden = {"MANEUVER_DETECTION", "TRACKING", "TBD", "maneuver-detection", "tracking", "tbd"}
     named = {f.name: sorted(_code_names_and_strings(f) & forbidden) for f in files}
     assert not any(named.values()), named
+
+
+def _tracking_batch(scenario: str):
+    from radarbench.bench import registry
+    from radarbench.bench.params import build_params
+    from radarbench.bench.rng import TrialRNG
+    cls = registry.get_scenario(scenario)
+    return cls().generate(build_params(cls.Params, cls.small_params), 10.0, 3, TrialRNG(1, 0, 1, range(3)))
+
+
+@pytest.mark.parametrize("scenario", ["glint", "maneuvering-1d"])       # without and with a maneuver mask
+def test_every_trace_a_tracker_returns_is_recorded(scenario):
+    from radarbench.bench.core import TrackingOutput
+    from radarbench.bench.registry import get_task
+    task, batch = get_task("tracking"), _tracking_batch(scenario)
+    gain = np.linspace(0, 1, batch.n * batch.steps).reshape(batch.n, batch.steps)
+    out = task.check_output(TrackingOutput(estimate=batch.truth.copy(), traces={"gain": gain, "mode": gain}), batch)
+    traces = task.recorded_method(batch, out, 1, np.nan).traces
+    np.testing.assert_array_equal(traces["gain"], gain[1])
+    np.testing.assert_array_equal(traces["mode"], gain[1])
+
+
+@pytest.mark.parametrize("traces, words", [
+    ({"gain": np.zeros(3)}, "traces['gain'] must be a real array of shape"),
+    ({"gain": "high"}, "traces['gain'] must be a real array of shape"),
+    ({"error_x": None}, "traces['error_x']: names starting with 'error_' or 'estimate_'"),
+])
+def test_a_trace_that_could_not_be_recorded_is_the_methods_failure(traces, words):
+    from radarbench.bench.core import TrackingOutput
+    from radarbench.bench.registry import get_task
+    from radarbench.bench.tasks.base import OutputError
+    task, batch = get_task("tracking"), _tracking_batch("glint")
+    with pytest.raises(OutputError, match=words.replace("[", r"\[").replace("(", r"\(")):
+        task.check_output(TrackingOutput(estimate=batch.truth.copy(), traces=traces), batch)

@@ -13,6 +13,7 @@ import pytest
 
 from radarbench.bench import warmup
 from radarbench.bench.config import load_sweep
+from conftest import scaled
 
 
 def test_warm_up_is_one_task_per_pair_with_both_phases_and_one_trial(write_sweep):
@@ -135,7 +136,7 @@ def test_a_cold_cache_is_compiled_once_and_said_so_a_warm_one_silently(tmp_path)
     for name in ("cold", "warm"):
         proc = subprocess.run([sys.executable, "-m", "radarbench.bench", "run", sweep, "--out", tmp_path / name,
                                "--workers", "2", "--no-record"], capture_output=True, text=True, env=env,
-                              timeout=1200)
+                              timeout=scaled(1800))
         assert proc.returncode == 0, proc.stderr
         meta = dict(sqlite3.connect(tmp_path / name / "results.sqlite").execute("SELECT key, value FROM meta"))
         runs.append((proc.stderr.splitlines(), meta))

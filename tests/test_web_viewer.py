@@ -27,15 +27,16 @@ import numpy as np
 import pytest
 
 from radarbench.bench.recording.layout import PALETTE
+from conftest import scaled
 
 #: The browser: Debian's ``chromium`` unless ``BENCH_TEST_CHROMIUM`` names another
 #: (Chromium's ``chromium-headless-shell`` does as well).
 CHROMIUM = os.environ.get("BENCH_TEST_CHROMIUM", "/usr/bin/chromium")
 ROOT = Path(__file__).resolve().parent.parent
 #: Seconds the viewer gets to show the summary (its Wasm compiles and the recording streams
-#: with a software rasterizer on a busy machine); screenshots are taken every POLL_S and
+#: with a software rasterizer on a busy machine; tests/conftest.py's scaled()); screenshots are taken every POLL_S and
 #: the test goes on at the first that shows it.
-VIEWER_TIMEOUT_S = 240
+VIEWER_TIMEOUT_S = scaled(600)
 POLL_S = 1.0
 #: Pixels of each method config's colour in each plot panel of the summary: a legend entry's
 #: dot is about 50 (measured), a line 2 px wide across a panel a few thousand at most.
@@ -120,7 +121,7 @@ def served(small_run, tmp_path):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "PYTHONPATH": str(ROOT)})
     try:
-        url, deadline = None, time.monotonic() + 90
+        url, deadline = None, time.monotonic() + scaled(300)
         while url is None and time.monotonic() < deadline:
             line = proc.stdout.readline()
             if not line:
@@ -131,7 +132,7 @@ def served(small_run, tmp_path):
         yield url, port
     finally:
         proc.terminate()                 # SIGTERM: bench stops the server as on Ctrl-C
-        assert proc.wait(timeout=30) == 0
+        assert proc.wait(timeout=scaled(300)) == 0
     assert not _listen_addresses(port) and not _listen_addresses(port + 1)   # nothing left listening
 
 
@@ -171,7 +172,7 @@ class DevTools:
             os.close(fd)
         self._received, self._last_id = b"", 0
 
-    def call(self, method: str, session: str | None = None, timeout: float = 60, **params) -> dict:
+    def call(self, method: str, session: str | None = None, timeout: float | None = None, **params) -> dict:
         """Send one command (to the page of ``session``, or to the browser) and return its
         result; the events that arrive meanwhile are dropped."""
         self._last_id += 1
@@ -179,7 +180,7 @@ class DevTools:
         if session is not None:
             message["sessionId"] = session
         os.write(self._to_browser, json.dumps(message).encode() + b"\0")
-        deadline = time.monotonic() + timeout
+        deadline = time.monotonic() + (scaled(300) if timeout is None else timeout)
         while True:
             while b"\0" in self._received:
                 raw, self._received = self._received.split(b"\0", 1)
@@ -195,11 +196,11 @@ class DevTools:
 
     def close(self) -> None:
         try:
-            self.call("Browser.close", timeout=10)
+            self.call("Browser.close", timeout=scaled(60))
         except (AssertionError, OSError):
             pass                                  # already gone: the wait below reaps it
         try:
-            self.proc.wait(timeout=30)
+            self.proc.wait(timeout=scaled(300))
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.proc.wait()

@@ -145,6 +145,20 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
     return summary[columns].reset_index(drop=True)
 
 
+def store_tables(store: Store, record: dict, runs: pd.DataFrame) -> tuple[pd.DataFrame, dict, list, pd.DataFrame]:
+    """(trials with their calibrated columns, series, calibrations, summary) of a store:
+    what summary.csv and trials.csv hold, rebuilt from the store alone, so that a reader
+    (the report, ``bench compare``) never depends on a CSV written earlier, or not at all."""
+    sweep, task_of = record["sweep"], _task_of(record)
+    trials, series = trials_frame(store, record)
+    cals = calibrations(store, [s["label"] for s in record["scenarios"]], [m["label"] for m in record["methods"]],
+                        sweep["calibration"]["pfa"], sweep["calibration"]["mode"],
+                        sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD),
+                        frozenset(label for label, task in task_of.items() if task.pfa_per_cell))
+    trials = _calibrated_trials(trials, cals, task_of)
+    return trials, series, cals, summary_frame(trials, series, runs, record, cals)
+
+
 def _calibrated_trials(trials: pd.DataFrame, cals, task_of: dict) -> pd.DataFrame:
     """``trials`` with the per-trial columns the calibrations give (:meth:`Task.calibrated_trial_columns`:
     e.g. detection at the threshold of equal chance Pd), NaN for the other rows."""
@@ -508,13 +522,7 @@ def _build_with(store: Store, out_dir: Path, recording: bool, on_phase, pool) ->
     runs, units = store.runs(), store.units()
     task_of = _task_of(record)
     present = _tasks_present(task_of)
-    trials, series = trials_frame(store, record)
-    cals = calibrations(store, [s["label"] for s in record["scenarios"]], [m["label"] for m in record["methods"]],
-                        sweep["calibration"]["pfa"], sweep["calibration"]["mode"],
-                        sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD),
-                        frozenset(label for label, task in task_of.items() if task.pfa_per_cell))
-    trials = _calibrated_trials(trials, cals, task_of)
-    summary = summary_frame(trials, series, runs, record, cals)
+    trials, series, cals, summary = store_tables(store, record, runs)
     specs = interactive_specs(summary, task_of)      # drawn by the pool while the driver goes on
     interactive = figures.submitted(pool, interactive_figures, specs) if pool is not None else None
     t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}

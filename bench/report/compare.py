@@ -126,10 +126,12 @@ def read_claims(root: Path) -> pd.DataFrame:
 
 
 def load_run(path: str | Path) -> Run:
-    """A run folder's trials (rebuilt from results.sqlite, opened read-only), failures and
-    summary.csv; ConfigError (exit 2) unless it is a bench run folder."""
+    """A run folder's trials, summary and failures, all rebuilt from results.sqlite (opened
+    read-only): any run folder the harness wrote compares, whether or not its report was
+    built (``previous/``, an interrupted run); ConfigError (exit 2) unless it is a bench
+    run folder."""
     from radarbench.bench import runfolder
-    from radarbench.bench.report import trials_frame
+    from radarbench.bench.report import store_tables
     from radarbench.bench.store import Store, store_fault
     root = Path(path)
     if not root.is_dir():
@@ -141,15 +143,13 @@ def load_run(path: str | Path) -> Run:
     store = Store(db, read_only=True)
     try:
         record = store.plan()
-        trials, _series = trials_frame(store, record)
         runs, done = store.runs(), len(store.units())
+        trials, _series, _cals, summary = store_tables(store, record, runs)
         total = int(store.meta("units_total") or done)
     except sqlite3.Error as exc:
         raise store_fault(db, exc) from None
     finally:
         store.close()
-    summary_csv = root / "summary.csv"
-    summary = pd.read_csv(summary_csv) if summary_csv.is_file() else pd.DataFrame()
     task_of = {m["label"]: registry.get_task(m["task"]) for m in record["methods"]}
     return Run(root, record["sweep"]["name"], record, trials, summary, runs, done, total, task_of,
                read_claims(root))

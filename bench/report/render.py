@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from radarbench.bench.markdown import code, fmt, fmt_db, table, text
+from radarbench.bench.metrics import RELATIVE_RESOLUTION
 
 
 @functools.lru_cache(maxsize=1)
@@ -33,6 +34,8 @@ def environment():
                              keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True,
                              undefined=jinja2.StrictUndefined)
     env.filters.update(fmt=fmt, db=fmt_db, pct=percent, code=code, text=text)
+    # the ties' definition, stated where ties are named ("1e-9": no "-0" to read as a negative zero)
+    env.globals["resolution"] = f"{RELATIVE_RESOLUTION:.0e}".replace("e-0", "e-")
     return env
 
 

@@ -113,6 +113,24 @@ def check_finite(name: str, a: np.ndarray, shape: tuple) -> None:
         raise OutputError(f"{name} has {bad} non-finite values")
 
 
+def check_traces(traces, shape: tuple, reserved_prefixes: tuple[str, ...] = ()) -> None:
+    """OutputError unless ``traces`` maps names to real arrays of ``shape`` (n, K), none named
+    like the series the task records itself (``reserved_prefixes``): each is recorded whole
+    (NaN allowed, e.g. at a ragged batch's missing steps), so none may be dropped."""
+    if not isinstance(traces, dict):
+        raise OutputError(f"traces must be a dict of name -> {shape} arrays, got {type(traces).__name__}")
+    for name, values in traces.items():
+        if not isinstance(name, str) or not name:
+            raise OutputError(f"traces: every name must be a non-empty str, got {name!r}")
+        if name.startswith(reserved_prefixes):
+            raise OutputError(f"traces[{name!r}]: names starting with {' or '.join(map(repr, reserved_prefixes))} "
+                              "are the task's own recorded series; rename the trace")
+        a = np.asarray(values)
+        if a.dtype.kind not in "biuf" or a.shape != shape:
+            raise OutputError(f"traces[{name!r}] must be a real array of shape {shape}, "
+                              f"got {a.dtype} of shape {a.shape}")
+
+
 #: How far a covariance may be from symmetric positive semi-definite and still be taken as
 #: one, on the scale of the matrix scaled to unit variances (D^-1/2 P D^-1/2, D its
 #: diagonal; entries in [-1, 1]): its largest asymmetry, and the shift t such that

@@ -45,6 +45,7 @@ from radarbench.bench.config import (
     TOP_KEYS,
     parse_sweep_text,
 )
+from conftest import scaled
 
 registry.discover()
 
@@ -558,7 +559,7 @@ def test_the_console_script_rejects_hostile_files_the_same_way(tmp_path):
         procs.append((root, field, subprocess.Popen([*cmd, "run", "sweep.toml", "--quiet"], cwd=root, text=True,
                                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE)))
     for root, field, proc in procs:
-        out, err = proc.communicate(timeout=300)
+        out, err = proc.communicate(timeout=scaled())
         lines = err.splitlines()
         assert proc.returncode == 2, (field, err[-2000:])
         assert len(lines) == 1 and lines[0].startswith("error: sweep.toml: ") and field in lines[0], err

@@ -32,7 +32,7 @@ from radarbench.bench.recording.draw import log_series
 from radarbench.bench.recording.layout import TrialLayout
 from radarbench.bench.recording.paths import rerun_path
 from radarbench.bench.recording.record import MethodTrace, TrialRecord, check_shape
-from radarbench.bench.tasks.base import OutputError, RecordedScene, ReportContext, Task
+from radarbench.bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, check_traces
 from radarbench.bench.tasks.detection.metrics import detection_trial_metrics, equal_chance_pd, summarise_detection
 
 #: this module computes stored numbers: its code belongs to the identity of every config
@@ -198,6 +198,7 @@ class DetectionTask(Task):
         bad = int(np.count_nonzero(~np.isfinite(out.statistic)))
         if bad:
             raise OutputError(f"statistic has {bad} non-finite values")
+        check_traces(out.traces, shape)
         return out
 
     def null_start(self, batch: Batch, out: DetectionOutput) -> int:

@@ -34,8 +34,8 @@ from radarbench.bench.recording.draw import log_static_points, log_track, north_
 from radarbench.bench.recording.layout import TrialLayout
 from radarbench.bench.recording.record import MethodTrace, TrialRecord, check_shape
 from radarbench.bench.tasks.base import (OutputError, RecordedScene, ReportContext, Task, check_covariance, check_estimate,
-                              check_finite, check_range, time_series)
-from radarbench.bench.tasks.tracking.metrics import (SWITCH_TRACES, maneuver_trial_metrics, summarise_tracking,
+                              check_finite, check_range, check_traces, time_series)
+from radarbench.bench.tasks.tracking.metrics import (maneuver_trial_metrics, summarise_tracking,
                                           tracking_steps, tracking_trial_metrics)
 
 #: this module computes stored numbers: its code belongs to the identity of every config
@@ -51,6 +51,9 @@ _GLINT_COLOR = (255, 40, 90)
 SCORED_TRACES = {"mode": (0.0, 1.0, "the maneuver mode's probability, or 1 where it is in use"),
                  "switch": (0.0, 1.0, "a switch decision, 0 or 1"),
                  "q_k": (0.0, np.inf, "a noise variance")}
+#: The series a recorded trial keeps of a tracker besides its own traces (every one of which
+#: is recorded): its error and estimate per state component, named by these prefixes.
+RECORDED_PREFIXES = ("error_", "estimate_")
 
 
 def _labels(value) -> bool:
@@ -191,6 +194,7 @@ class TrackingTask(Task):
             d = batch.truth.shape[-1]
             check_finite("covariance", np.asarray(out.covariance, float), (*batch.truth.shape[:2], d, d))
             check_covariance("covariance", out.covariance, where="(trial, step) pairs")
+        check_traces(out.traces, batch.truth.shape[:2], RECORDED_PREFIXES)
         for name, (low, high, what) in SCORED_TRACES.items():
             if name in out.traces:
                 check_finite(f"traces[{name!r}]", np.asarray(out.traces[name], float), batch.truth.shape[:2])
@@ -230,7 +234,7 @@ class TrackingTask(Task):
         traces = {f"error_{label}": err[:, j] for j, label in enumerate(labels)}
         if batch.scene.maneuver_mask is not None:
             traces |= {f"estimate_{label}": out.estimate[i, :, j] for j, label in enumerate(labels)}
-            traces |= {name: np.asarray(out.traces[name][i], float) for name in SWITCH_TRACES if name in out.traces}
+        traces |= {name: np.asarray(values[i], float) for name, values in out.traces.items()}
         return method_trace(batch.scene.drawn_xy(out.estimate[i], batch.t), traces)
 
     # -------------------------------------------------------------- driver side
