@@ -156,6 +156,72 @@ class _Split:
                           snr_definition=next((p.snr_definition for p in ok if p.snr_definition), ""))
 
 
+#: the user's record of seconds per trial, by what computes them (content keys, not labels)
+UNIT_SECONDS_FILE = "unit-seconds.json"
+
+
+def _seconds_file() -> Path | None:
+    from radarbench.bench import listing
+    folder = listing.cache_dir()
+    return folder / UNIT_SECONDS_FILE if listing.private_dir(folder) else None
+
+
+def _known_seconds() -> dict[str, float]:
+    """Seconds per trial kept from earlier runs: ``SCENARIO_KEY`` (generating the scenes)
+    and ``SCENARIO_KEY/METHOD_KEY`` (a method config on them)."""
+    import json
+
+    from radarbench.bench import listing
+    path = _seconds_file()
+    text = listing.read_cached(path) if path is not None else None
+    try:
+        known = json.loads(text) if text else {}
+    except ValueError:
+        return {}
+    return {k: v for k, v in known.items() if isinstance(v, float)} if isinstance(known, dict) else {}
+
+
+def longest_first(plan: Plan, tasks: list[UnitTask]) -> list[UnitTask]:
+    """``tasks`` by expected seconds, longest first (from earlier runs' seconds per trial,
+    :func:`remember_seconds`), so a phase ends near its critical path rather than waiting
+    on a long unit handed out last; tasks of unknown cost keep their order, after the known."""
+    known = _known_seconds()
+    if not known:
+        return tasks
+    keys = content_keys(plan)
+
+    def expected(task: UnitTask) -> float:
+        scenario = keys["scenarios"][task.unit.scenario_label]
+        parts = [known.get(scenario)] + [known.get(f"{scenario}/{keys['methods'][m.label]}")
+                                         for m in unit_methods(task)]
+        return -sum(p for p in parts if p is not None) * task.unit.n
+    return sorted(tasks, key=expected)
+
+
+def remember_seconds(plan: Plan, store: Store) -> None:
+    """Keep the seconds per trial of this run's units and runs in the user's cache folder
+    (for :func:`longest_first`); a cache that cannot be written costs only the ordering."""
+    import json
+
+    from radarbench.bench import listing
+    path = _seconds_file()
+    if path is None:
+        return
+    keys, known = content_keys(plan), _known_seconds()
+    for _key, scenario, n, seconds in store.db.execute("SELECT key, scenario, n, generate_seconds FROM units"):
+        if scenario in keys["scenarios"] and n:
+            known[keys["scenarios"][scenario]] = float(seconds) / n
+    for scenario, method, n, seconds in store.db.execute(
+            "SELECT units.scenario, runs.method, units.n, runs.seconds FROM runs JOIN units ON runs.unit = units.key "
+            "WHERE runs.error IS NULL"):
+        if scenario in keys["scenarios"] and method in keys["methods"] and n:
+            known[f"{keys['scenarios'][scenario]}/{keys['methods'][method]}"] = float(seconds) / n
+    try:
+        listing.write_cached(path, json.dumps(dict(list(known.items())[-10_000:])))
+    except OSError:
+        return
+
+
 def _run_phase(executor, tasks, store: Store, progress: Progress, stop=None, timeout: float | None = None,
                on_result=None) -> None:
     queue = _TaskQueue(tasks)
@@ -300,8 +366,8 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
             done = store.done_units()
             failed = store.failed_runs() if retry_failed else {}
             failed = {u: failed.get(u, set()) | changed.get(u, set()) for u in {*failed, *changed}}
-            cal_tasks = [UnitTask(plan, u) for u in cal_units if u.key not in done] \
-                + retry_tasks(plan, cal_units, failed)
+            cal_tasks = longest_first(plan, [UnitTask(plan, u) for u in cal_units if u.key not in done]
+                                      + retry_tasks(plan, cal_units, failed))
             to_run = len(cal_tasks) + sum(u.key not in done for u in eval_units) \
                 + sum(u.key in failed for u in eval_units)
             if to_run == 0 and not quiet:
@@ -327,8 +393,8 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
                                       plan.calibration.pfa, plan.calibration.mode, plan.calibration.chance_pd,
                                       per_cell):
                     thresholds[c.scenario][c.method] = c.used if np.isfinite(c.used) else None
-                tasks = [UnitTask(plan, u, thresholds[u.scenario_label]) for u in eval_units
-                         if u.key not in done] + retry_tasks(plan, eval_units, failed, thresholds)
+                tasks = longest_first(plan, [UnitTask(plan, u, thresholds[u.scenario_label]) for u in eval_units
+                                             if u.key not in done] + retry_tasks(plan, eval_units, failed, thresholds))
                 if tasks:
                     stored = sum(u.key in done for u in eval_units)
                     progress.phase("evaluation", stored + len(tasks), stored)
@@ -351,6 +417,7 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
         raise Interrupted(len(store.done_units()), total)
     if to_run:                             # the units' wall time of the last run that computed any
         store.set_meta("last_wall_seconds", repr(time.monotonic() - started))
+        remember_seconds(plan, store)
     return store
 
 
