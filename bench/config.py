@@ -436,7 +436,12 @@ class Overrides:
 def apply_overrides(data: Mapping[str, Any], overrides: Overrides) -> dict[str, Any]:
     """A copy of sweep ``data`` with ``overrides`` applied; the result is checked like any
     sweep (:func:`parse_sweep`), so the command line gets the TOML's messages."""
-    out = copy.deepcopy(dict(data))
+    if not overrides:
+        return dict(data)
+    try:
+        out = copy.deepcopy(dict(data))
+    except RecursionError:
+        raise ConfigError("", "invalid TOML: nested too deeply") from None
     if overrides.methods:
         out["methods"] = _chosen(out.get("methods"), overrides.methods, "--methods")
     if overrides.scenarios:
