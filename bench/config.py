@@ -46,8 +46,11 @@ SCENARIO_KEYS = {"name", "params", "label", "snr_db", "trials"}
 METHOD_KEYS = {"name", "params", "label", "optional"}
 CALIBRATION_MODES = ("nominal", "empirical", "gumbel", "pot")
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}\Z")     # \Z: "$" would let a final newline in
-#: config labels: readable like "cumulant-as-printed" or "glint[epsilon=0.05]", never path-like
-LABEL_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.,=+\-\[\]() ]{0,199}\Z")
+#: config labels: readable like "cumulant-as-printed", "glint[epsilon=0.05]" or "mylab:glr" (a
+#: qualified name, bench.registry), never path-like: a file or entity name made of a label
+#: goes through bench.recording.paths.entity_name, which keeps only letters, digits and '_.-'
+
+LABEL_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.,:=+\-\[\]() ]{0,199}\Z")
 MAX_SNR_LEVELS = 1000
 #: |SNR| bound (dB): beyond it powers overflow and nothing physical is left to measure
 MAX_ABS_SNR_DB = 200.0
@@ -166,11 +169,12 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...], base: str 
         cls = registry.get_method(entry["name"], f"{field}.name")
         _check_runs_somewhere(cls, scenarios, f"{field}.name")
         params = _expect_table(entry.get("params", {}), f"{field}.params")
-        expanded = expand(cls.name, cls.Params, params, f"{field}.params", base=base)
+        # the name as written: a qualified name ("mylab:glr") stays in the labels and plan.toml
+        expanded = expand(entry["name"], cls.Params, params, f"{field}.params", base=base)
         if "label" in entry:
             label = entry["label"]
             if not isinstance(label, str) or not LABEL_PATTERN.match(label):
-                raise ConfigError(f"{field}.label", "expected letters, digits, spaces or '_.,=+-[]()' "
+                raise ConfigError(f"{field}.label", "expected letters, digits, spaces or '_.,:=+-[]()' "
                                                     f"(at most 200, no path separators), got {label!r}"[:200])
             if len(expanded) != 1:
                 raise ConfigError(f"{field}.label", "a label names one config; remove the grid (list) values")
@@ -224,17 +228,17 @@ def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, .
                       identity: str, label: Any = None, base: str | None = None) -> list[ScenarioConfig]:
     cls = registry.get_scenario(name, f"{field}.name" if field != "scenario_params" else "scenario")
     table = _expect_table(params, field)
-    expanded = expand(cls.name, cls.Params, table, field, identity=identity, base=base)
+    expanded = expand(name, cls.Params, table, field, identity=identity, base=base)
     if label is not None:
         if not isinstance(label, str) or not LABEL_PATTERN.match(label):
             raise ConfigError(field.replace(".params", ".label"), "expected letters, digits, spaces or "
-                                                                  f"'_.,=+-[]()' (at most 200), got {label!r}"[:200])
+                                                                  f"'_.,:=+-[]()' (at most 200), got {label!r}"[:200])
         if len(expanded) != 1:
             raise ConfigError(field.replace(".params", ".label"), "a label names one config; remove the grid")
-        problem = label_problem(cls.name, label, expanded[0].params, bare_means_defaults=False)
+        problem = label_problem(name, label, expanded[0].params, bare_means_defaults=False)
         if problem:
             raise ConfigError(field.replace(".params", ".label"), problem)
-        expanded = [ComponentConfig(cls.name, expanded[0].params, label, expanded[0].params_text)]
+        expanded = [ComponentConfig(name, expanded[0].params, label, expanded[0].params_text)]
     labels = [c.label for c in expanded]
     for i, label in enumerate(labels):
         if label in labels[:i]:                  # e.g. a float axis [1, 1.0]

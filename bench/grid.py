@@ -88,7 +88,7 @@ def label_problem(name: str, label: str, params: Any, *, bare_means_defaults: bo
     generated label would write them); a bare ``name`` (for a method, whose
     generated label lists every parameter the sweep set) only the defaults."""
     others = (set(registry.methods()) | set(registry.scenarios())) - {name}
-    match = re.fullmatch(r"([A-Za-z0-9][A-Za-z0-9_.\-]*)\[(.*)\]", label, re.DOTALL)
+    match = re.fullmatch(r"([A-Za-z0-9][A-Za-z0-9_.:\-]*)\[(.*)\]", label, re.DOTALL)
     if match is None:
         if label in others:
             return f"{label!r} is the label of a {label} config; this is a {name} config"

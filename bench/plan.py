@@ -47,10 +47,11 @@ class ComponentConfig:
     @property
     def key(self) -> int:
         """Stable integer identity, from the name and *all* resolved params (a data file
-        by its name: the random streams do not depend on the folder the data lives in)."""
+        by its name: the random streams do not depend on the folder the data lives in; a
+        qualified name by its registry name: ``radarbench:glr`` draws what ``glr`` draws)."""
         values = {k: os.path.basename(v) if _is_path(self.params, k) else v
                   for k, v in params_as_dict(self.params).items()}
-        return stable_key([self.name, values])
+        return stable_key([registry.bare_name(self.name), values])
 
 
 @dataclass(frozen=True)
