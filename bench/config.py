@@ -355,7 +355,7 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     method_tasks = tuple(registry.get_method(m.name).task for m in methods)
     calibration = _parse_calibration(data.get("calibration", {}))
     for i, (m, task) in enumerate(zip(methods, method_tasks)):
-        modes = registry.get_task(task).calibration_modes
+        modes = registry.get_task(task, f"{method_fields[i]}.name").calibration_modes
         if calibration.mode not in modes:
             raise ConfigError("calibration.mode", f"{calibration.mode!r} does not apply to {m.label!r} ({task}); "
                                                   f"use one of {', '.join(map(repr, modes))}")

@@ -97,19 +97,11 @@ def distribution_of(module: str, dist=None) -> str:
     return said + (f", git commit {commit}" if commit else "")
 
 
-def plugin_origin(cls: type) -> dict[str, str]:
-    """``{"module": ..., "distribution": ...}`` of a registered plugin class: the distribution
-    whose entry point registered it, else the one installing its package (:func:`distribution_of`)."""
-    from radarbench.bench import registry
-
-    return {"module": cls.__module__, "distribution": distribution_of(cls.__module__, registry.distribution(cls))}
-
-
 def provenance() -> dict:
     return {"created": time.strftime("%Y-%m-%d %H:%M:%S %Z"), "git_commit": git_commit(),
             "machine": f"{platform.machine()}, {platform.system()}", **_versions()}
 
 
 def origin_text(origin: dict) -> str:
-    """``mylab.glr (mylab 0.1)`` of a :func:`plugin_origin`."""
+    """``mylab.glr (mylab 0.1)`` of a :func:`bench.registry.origin`."""
     return f"{origin['module']} ({origin['distribution']})"

@@ -58,12 +58,12 @@ _TASKS: dict = {}        # name -> the instance of its class (bench.tasks.base.T
 _INSTANCES: dict = {}    # task class -> its instance (every claimant of a task name)
 #: kind -> name -> the classes registered under a name after the first, in order
 _RIVALS: dict[str, dict[str, list[type]]] = {"method": {}, "scenario": {}, "task": {}}
-#: class -> its qualifier (the distribution whose entry point registered it)
+#: class -> its qualifier, for a class an entry point registered (else: qualifier())
 _QUALIFIERS: dict[type, str] = {}
 #: class -> the distribution (importlib.metadata) whose entry point registered it
 _DISTRIBUTIONS: dict[type, object] = {}
-#: the distribution whose entry point is being loaded: what it registers is its
-_LOADING = None
+#: (qualifier, distribution) of the entry point being loaded: what its module registers is theirs
+_LOADING: tuple[str, object] | None = None
 
 
 @dataclass(frozen=True)
@@ -388,10 +388,13 @@ def qualifier(cls: type) -> str:
     return _QUALIFIERS.get(cls) or cls.__module__.split(".")[0]
 
 
-def distribution(cls: type):
-    """The distribution (:mod:`importlib.metadata`) whose entry point registered ``cls``;
-    None for a built-in or a class registered by importing its module."""
-    return _DISTRIBUTIONS.get(cls)
+def origin(cls: type) -> dict[str, str]:
+    """``{"module": ..., "distribution": ...}`` of a registered class: the distribution whose
+    entry point registered it, else the one installing its package
+    (:func:`bench.provenance.distribution_of`)."""
+    from radarbench.bench.provenance import distribution_of
+
+    return {"module": cls.__module__, "distribution": distribution_of(cls.__module__, _DISTRIBUTIONS.get(cls))}
 
 
 def _qualifiers_of(cls: type) -> list[str]:
@@ -418,10 +421,12 @@ def collisions() -> dict[str, dict[str, str]]:
 
 def _collision(kind: str, name: str, claims: list[type]) -> str:
     """``method 'glr' is registered twice (a.glr (dist-a 1.0), b.glr (dist-b 0.1)): name 'a:glr' or 'b:glr'``."""
-    from radarbench.bench.provenance import origin_text, plugin_origin
+    from radarbench.bench.provenance import origin_text
 
     times = "twice" if len(claims) == 2 else f"{len(claims)} times"
-    where = ", ".join(origin_text(plugin_origin(c)) for c in claims)
+    where = ", ".join(origin_text(origin(c)) for c in claims)
+    if kind == "task":             # methods and scenarios name their task bare: a sweep cannot choose
+        return f"task {name!r} is registered {times} ({where}): its methods cannot say which; uninstall one of them"
     choices = [repr(q) for q in _choices(claims)]
     return f"{kind} {name!r} is registered {times} ({where}): name {', '.join(choices[:-1])} or {choices[-1]}"
 

@@ -37,7 +37,7 @@ from radarbench.bench.executors import SerialExecutor, UnitFailure, make_executo
 from radarbench.bench.processes import STOP_SIGNALS, restore_handler
 from radarbench.bench.identity import PREVIOUS, set_aside_changed
 from radarbench.bench.progress import Progress
-from radarbench.bench.provenance import origin_text, plugin_origin, provenance
+from radarbench.bench.provenance import origin_text, provenance
 from radarbench.bench.recording.record import TrialRecord
 from radarbench.bench.store import Store, UnitResult
 from radarbench.bench.units import Unit, UnitTask, execute_unit, failed_result, plan_units, unit_methods
@@ -360,10 +360,10 @@ def plan_record(plan: Plan, command: str) -> dict:
         "source": plan.source,
         "command": command,
         "methods": [{"label": m.label, "name": m.name, "params": m.params_text,
-                     "task": registry.get_method(m.name).task, **plugin_origin(registry.get_method(m.name))}
+                     "task": registry.get_method(m.name).task, **registry.origin(registry.get_method(m.name))}
                     for m in plan.methods],
         "scenarios": [{"label": s.label, "name": s.name, "params": s.params_text, "tasks": list(s.tasks),
-                       "snr_db": list(s.snr_db), "trials": s.trials, **plugin_origin(registry.get_scenario(s.name))}
+                       "snr_db": list(s.snr_db), "trials": s.trials, **registry.origin(registry.get_scenario(s.name))}
                       for s in plan.scenarios],
         "unavailable": [{"label": entry.get("label", entry["name"]), "name": entry["name"], "reason": reason}
                     for entry, reason in plan.skipped_methods],
@@ -375,9 +375,9 @@ def write_plan_toml(path: Path, plan: Plan, command: str, identities: dict | Non
     """The resolved sweep, re-runnable as a sweep file, with provenance: the identities
     (config label -> short hash, ``Store.stamps``) the results were computed with, and the
     plugins (config label -> "module (distribution)") that computed them."""
-    plugins = {"scenarios": {s.label: origin_text(plugin_origin(registry.get_scenario(s.name)))
+    plugins = {"scenarios": {s.label: origin_text(registry.origin(registry.get_scenario(s.name)))
                              for s in plan.scenarios},
-               "methods": {m.label: origin_text(plugin_origin(registry.get_method(m.name))) for m in plan.methods}}
+               "methods": {m.label: origin_text(registry.origin(registry.get_method(m.name))) for m in plan.methods}}
     body = {**plan.to_dict(), "provenance": {"command": command, "fingerprint": plan.fingerprint(),
                                              **provenance(), "identities": identities, "plugins": plugins}}
     text = "# Resolved plan written by bench; `bench run plan.toml` reproduces the results.\n" + tomlw.dumps(body)
