@@ -162,7 +162,7 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...], base: str 
         optional = entry.get("optional", False)
         if not isinstance(optional, bool):
             raise ConfigError(f"{field}.optional", f"expected true or false, got {optional!r}"[:200])
-        reason = None if entry["name"] in registry.methods() else registry.unavailable_reason(entry["name"])
+        reason = registry.missing_reason("method", entry["name"])
         if optional and reason is not None:
             skipped.append(({k: v for k, v in entry.items() if k != "optional"}, reason))
             continue

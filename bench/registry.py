@@ -437,8 +437,7 @@ def _find(kind: str, name: str) -> tuple[type | None, str]:
     bare = match.group(2) if match else name
     claims = _claimants(kind, bare)
     if match:
-        wanted = _normal(match.group(1))
-        chosen = [c for c in claims if wanted in {_normal(q) for q in _qualifiers_of(c)}]
+        chosen = _picked(kind, *match.groups())
         if len(chosen) > 1:
             return None, _collision(kind, bare, chosen)
         if chosen:
@@ -455,6 +454,23 @@ def _find(kind: str, name: str) -> tuple[type | None, str]:
     if reason is not None:
         return None, f"{kind} {name!r} is unavailable: {reason}"
     return None, unknown_name(kind, name, _named(kind))
+
+
+def _picked(kind: str, qualifier: str, bare: str) -> list[type]:
+    """The classes registered under ``bare`` that ``qualifier`` names."""
+    wanted = _normal(qualifier)
+    return [c for c in _claimants(kind, bare) if wanted in {_normal(q) for q in _qualifiers_of(c)}]
+
+
+def missing_reason(kind: str, name: str) -> str | None:
+    """Why ``name`` names nothing installed here (its plugin is unavailable, or its
+    qualifier registered no such name), for an ``optional`` sweep entry to be skipped;
+    None when it is registered, even twice (refused where used, never skipped)."""
+    discover()
+    match = QUALIFIED.match(name)
+    if match and not _picked(kind, *match.groups()):
+        return unavailable_reason(name) or _find(kind, name)[1]
+    return None if _claimants(kind, bare_name(name)) else unavailable_reason(name)
 
 
 def problem(kind: str, name: str) -> str:

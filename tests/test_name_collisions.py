@@ -139,3 +139,13 @@ def test_a_qualified_name_draws_the_streams_of_its_bare_name_and_names_no_path()
     assert qualified.scenarios[0].label == "radarbench:cv-turn-cv" and qualified.methods[0].label == "radarbench:cusum"
     assert qualified.scenarios[0].key == bare.scenarios[0].key         # the qualifier changes no number
     assert entity_name("mylab:glr[window=5]") == "mylab-glr_window-5"   # recordings and figure files
+
+
+def test_an_optional_entry_whose_distribution_is_not_installed_is_skipped_with_the_reason():
+    from radarbench.bench.config import parse_sweep
+
+    plan = parse_sweep({"name": "q", "scenario": "cv-turn-cv", "snr_db": [0],
+                        "methods": [{"name": "cusum"}, {"name": "mylab:glr", "optional": True}]})
+    [(entry, reason)] = plan.skipped_methods
+    assert entry == {"name": "mylab:glr"} and [m.label for m in plan.methods] == ["cusum"]
+    assert reason.startswith("method 'mylab:glr': no method 'glr' registered by 'mylab'")
