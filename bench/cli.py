@@ -481,10 +481,8 @@ def cmd_export(args) -> int:
 def cmd_perf(args) -> int:
     from radarbench.bench import registry
     from radarbench.bench.perf import check_sizes, prepare_out, run_perf
-    known = set(registry.methods())
-    for name in args.methods or []:
-        if name not in known:
-            raise ConfigError("--methods", unknown_name("method", name, known))
+    listed = {cls: name for name, cls in registry.methods().items()}     # a qualified name as bench list names it
+    args.methods = args.methods and [listed[registry.get_method(name, "--methods")] for name in args.methods]
     check_sizes(args.methods, args.sizes)  # every bad argument is refused before the folder is touched
     prepare_out(Path(args.out))            # a file, a read-only folder: refused before hours of measuring
     report = run_perf(Path(args.out), methods=args.methods, sizes=args.sizes, executors=args.executors,

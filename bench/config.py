@@ -159,14 +159,15 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...], base: str 
         optional = entry.get("optional", False)
         if not isinstance(optional, bool):
             raise ConfigError(f"{field}.optional", f"expected true or false, got {optional!r}"[:200])
-        reason = None if entry["name"] in registry.methods() else registry.unavailable_reason(entry["name"])
+        reason = registry.missing_reason("method", entry["name"])
         if optional and reason is not None:
             skipped.append(({k: v for k, v in entry.items() if k != "optional"}, reason))
             continue
         cls = registry.get_method(entry["name"], f"{field}.name")
         _check_runs_somewhere(cls, scenarios, f"{field}.name")
         params = _expect_table(entry.get("params", {}), f"{field}.params")
-        expanded = expand(cls.name, cls.Params, params, f"{field}.params", base=base)
+        # the name as written: a qualified name ("mylab:glr") stays in the labels and plan.toml
+        expanded = expand(entry["name"], cls.Params, params, f"{field}.params", base=base)
         if "label" in entry and len(expanded) != 1:
             raise ConfigError(f"{field}.label", "a label names one config; remove the grid (list) values")
         expanded = [named(c, entry.get("label"), f"{field}.params", bare_means_defaults=True) for c in expanded]
@@ -215,7 +216,7 @@ def _scenario_configs(name: str, params: Any, field: str, snr_db: tuple[float, .
                       identity: str, label: Any = None, base: str | None = None) -> list[ScenarioConfig]:
     cls = registry.get_scenario(name, f"{field}.name" if field != "scenario_params" else "scenario")
     table = _expect_table(params, field)
-    expanded = expand(cls.name, cls.Params, table, field, identity=identity, base=base)
+    expanded = expand(name, cls.Params, table, field, identity=identity, base=base)
     if label is not None and len(expanded) != 1:
         raise ConfigError(field.replace(".params", ".label"), "a label names one config; remove the grid")
     # a scenario config's params column stays what its parameters say, whatever its label
@@ -326,7 +327,7 @@ def parse_sweep(data: Mapping[str, Any], source: str = "<sweep>", *, allow_large
     methods, method_fields, skipped = _parse_methods(data["methods"], scenarios, base)
     method_tasks = tuple(registry.get_method(m.name).task for m in methods)
     for i, (m, task) in enumerate(zip(methods, method_tasks)):
-        modes = registry.get_task(task).calibration_modes
+        modes = registry.get_task(task, f"{method_fields[i]}.name").calibration_modes
         if calibration.mode not in modes:
             raise ConfigError("calibration.mode", f"{calibration.mode!r} does not apply to {m.label!r} ({task}); "
                                                   f"use one of {', '.join(map(repr, modes))}")

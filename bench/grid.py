@@ -31,8 +31,8 @@ from radarbench.bench.plan import ComponentConfig, label_value
 MAX_CONFIGS = 1000
 #: config labels: readable like "cumulant-as-printed" or "glint[epsilon=0.05]", never path-like
 #: nor markup
-LABEL_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.,=+\-\[\]() ]{0,199}\Z")
-LABEL_ALPHABET = "letters, digits, spaces or '_.,=+-[]()' (at most 200, no path separators)"
+LABEL_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.,:=+\-\[\]() ]{0,199}\Z")
+LABEL_ALPHABET = "letters, digits, spaces or '_.,:=+-[]()' (at most 200, no path separators)"
 
 
 def _grid_axes(params_cls: type, values: Mapping[str, Any], field: str) -> list[list[tuple[str, Any]]]:
@@ -96,7 +96,7 @@ def label_problem(name: str, label: str, params: Any, *, bare_means_defaults: bo
     generated label would write them); a bare ``name`` (for a method, whose
     generated label lists every parameter the sweep set) only the defaults."""
     others = (set(registry.methods()) | set(registry.scenarios())) - {name}
-    match = re.fullmatch(r"([A-Za-z0-9][A-Za-z0-9_.\-]*)\[(.*)\]", label, re.DOTALL)
+    match = re.fullmatch(r"([A-Za-z0-9][A-Za-z0-9_.:\-]*)\[(.*)\]", label, re.DOTALL)
     if match is None:
         if label in others:
             return f"{label!r} is the label of a {label} config; this is a {name} config"

@@ -186,6 +186,10 @@ def _render(verbose: bool) -> str:
     if verbose:
         lines.append("capabilities:")
         lines += [f"  {name:<18} {meaning}" for name, meaning in CAPABILITIES.items()]
+    taken_twice = [line for table in registry.collisions().values() for line in table.values()]
+    if taken_twice:
+        lines.append("names registered twice (a sweep names one by its qualified name):")
+        lines += [f"  {line}" for line in taken_twice]
     missing = registry.unavailable()
     if missing:
         lines.append("unavailable:")

@@ -50,13 +50,13 @@ class ComponentConfig:
         streams do not depend on the folder the data lives in (docs/architecture.md,
         'Random streams')."""
         from radarbench.bench.rng import stable_key   # NumPy: not before a sweep's own fields are checked
-        cls = registry.scenarios().get(self.name)
+        cls = registry.find_scenario(self.name)
         always = set(getattr(cls, "stream_params", None) or ())
         defaults = params_as_dict(type(self.params)())
         paths = path_fields(type(self.params))
         values = {k: os.path.basename(v) if k in paths else v
                   for k, v in params_as_dict(self.params).items() if k in always or v != defaults[k]}
-        return stable_key([self.name, values])
+        return stable_key([registry.bare_name(self.name), values])   # radarbench:x draws what x draws
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,13 @@
-"""Where a result came from: versions, git commit, machine, time."""
+"""Where a result came from: versions, git commit, machine, time, and the module and
+distribution of each config's plugin (:func:`distribution_of`)."""
 
 from __future__ import annotations
 
+import functools
+import json
 import platform
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -22,22 +27,81 @@ def _versions() -> dict[str, str]:
     return out
 
 
-def git_commit() -> str:
-    import subprocess
-    root = Path(__file__).resolve().parent.parent
+def _git(folder: Path, *args: str) -> subprocess.CompletedProcess | None:
+    """``git -C folder ARGS``; None where git cannot run (not installed, hung)."""
     try:
-        out = subprocess.run(["git", "-C", str(root), "rev-parse", "--short=12", "HEAD"], capture_output=True,
-                             text=True, timeout=5)
-        # the committed reports are outputs, not code: their changes do not make the code dirty
-        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no",
-                                "--", ".", ":!reports"], capture_output=True, text=True, timeout=5)
+        return subprocess.run(["git", "-C", str(folder), *args], capture_output=True, text=True, timeout=5)
     except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def git_commit() -> str:
+    root = Path(__file__).resolve().parent.parent
+    out = _git(root, "rev-parse", "--short=12", "HEAD")
+    # the committed reports are outputs, not code: their changes do not make the code dirty
+    dirty = _git(root, "status", "--porcelain", "--untracked-files=no", "--", ".", ":!reports")
+    if out is None or dirty is None:
         return "unknown"
     if out.returncode != 0:
         return "unknown (not a git checkout)"
     return out.stdout.strip() + (" (with uncommitted changes)" if dirty.stdout.strip() else "")
 
 
+@functools.lru_cache(maxsize=None)
+def _git_head(folder: Path) -> str | None:
+    """The commit checked out where ``folder`` lies; None outside a checkout or without git."""
+    out = _git(folder, "rev-parse", "--short=12", "HEAD")
+    return out.stdout.strip() if out is not None and out.returncode == 0 else None
+
+
+@functools.lru_cache(maxsize=1)
+def _package_owners() -> dict[str, list[str]]:
+    import importlib.metadata as md
+    return md.packages_distributions()
+
+
+def _is_editable(dist) -> bool:
+    """Installed with ``pip install -e`` (PEP 660: ``direct_url.json`` says so)."""
+    try:
+        return bool(json.loads(dist.read_text("direct_url.json") or "{}").get("dir_info", {}).get("editable"))
+    except (ValueError, AttributeError):
+        return False
+
+
+@functools.lru_cache(maxsize=None)
+def _installing(top: str):
+    """The distribution that installs top-level package ``top`` (None: none does)."""
+    import importlib.metadata as md
+
+    for name in _package_owners().get(top, []):
+        try:
+            return md.distribution(name)
+        except md.PackageNotFoundError:
+            continue
+    return None
+
+
+def distribution_of(module: str, dist=None) -> str:
+    """The distribution that provides ``module`` (``dist``, else the one installing its
+    top-level package), as a report names it: ``name version``; for an editable install
+    ``name, editable, git commit X`` (the commit checked out where the module's top-level
+    package lies; ``name, editable`` without git or a checkout); for code that no
+    distribution installs, ``not installed`` (with the commit likewise)."""
+    top = module.split(".")[0]
+    dist = dist if dist is not None else _installing(top)
+    if dist is not None and not _is_editable(dist):
+        return f"{dist.metadata['Name']} {dist.version}"
+    where = getattr(sys.modules.get(top), "__file__", None)
+    commit = _git_head(Path(where).resolve().parent) if where else None
+    said = f"{dist.metadata['Name']}, editable" if dist is not None else "not installed"
+    return said + (f", git commit {commit}" if commit else "")
+
+
 def provenance() -> dict:
     return {"created": time.strftime("%Y-%m-%d %H:%M:%S %Z"), "git_commit": git_commit(),
             "machine": f"{platform.machine()}, {platform.system()}", **_versions()}
+
+
+def origin_text(origin: dict) -> str:
+    """``mylab.glr (mylab 0.1)`` of a :func:`bench.registry.origin`."""
+    return f"{origin['module']} ({origin['distribution']})"

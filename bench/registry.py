@@ -15,16 +15,23 @@ is a helper and left out) and every entry point of the groups ``bench.methods`` 
 ``bench.scenarios`` (third-party packages). Tasks (:mod:`bench.tasks`) are
 the built-ins and the entry points of the group ``bench.tasks``. The built-ins
 come first (tasks, scenarios, methods), then the entry points (tasks before the
-scenarios and methods that may name them), so a plugin can never take a
-built-in's name.
+scenarios and methods that may name them).
+
+A name two classes claim (a built-in and a plugin, two plugins) keeps both: the bare
+name is refused wherever a sweep names it, in one line naming both modules and the
+qualified names to choose between, ``qualifier:name`` (:data:`QUALIFIED`). A class's
+qualifier is the name of the distribution whose entry point registered it, else the
+top-level package of its module (``radarbench`` for the built-ins); its top-level
+package and its module are accepted too. A qualified name works whether or not the
+bare name is contested, so a sweep can say which plugin it means before a collision
+happens (docs/architecture.md, 'Plugins').
 
 One bad plugin never breaks the tool: a module that fails to import (whatever
 it raises, ``SystemExit`` from a ``sys.exit`` at import included), an entry
-point that reuses a registered name, names a class of another group, or
-declares an unknown task is kept as an :class:`Unavailable` entry with the
-reason, shown by ``bench list``; a sweep that names it is told it is
-unavailable and why. The harness never imports a plugin by name
-(docs/architecture.md, 'Plugins').
+point that names a class of another group, or declares an unknown task is kept
+as an :class:`Unavailable` entry with the reason, shown by ``bench list``; a
+sweep that names it is told it is unavailable and why. The harness never
+imports a plugin by name (docs/architecture.md, 'Plugins').
 """
 
 from __future__ import annotations
@@ -43,10 +50,20 @@ from radarbench.bench.errors import ConfigError, is_out_of_memory, unknown_name
 if TYPE_CHECKING:  # pragma: no cover - typing only; bench.core (NumPy) is imported on discovery
     from radarbench.bench.core import Method, Scenario
 
+#: name -> the first class registered under it (the later ones are in _RIVALS)
 _METHODS: dict[str, type[Method]] = {}
 _SCENARIOS: dict[str, type[Scenario]] = {}
 _TASK_CLASSES: dict[str, type] = {}
 _TASKS: dict = {}        # name -> the instance of its class (bench.tasks.base.Task)
+_INSTANCES: dict = {}    # task class -> its instance (every claimant of a task name)
+#: kind -> name -> the classes registered under a name after the first, in order
+_RIVALS: dict[str, dict[str, list[type]]] = {"method": {}, "scenario": {}, "task": {}}
+#: class -> its qualifier, for a class an entry point registered (else: qualifier())
+_QUALIFIERS: dict[type, str] = {}
+#: class -> the distribution (importlib.metadata) whose entry point registered it
+_DISTRIBUTIONS: dict[type, object] = {}
+#: (qualifier, distribution) of the entry point being loaded: what its module registers is theirs
+_LOADING: tuple[str, object] | None = None
 
 
 @dataclass(frozen=True)
@@ -68,6 +85,9 @@ class PluginError(TypeError):
 
 #: registry names: what a sweep file can spell and a terminal can print
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}\Z")
+#: a qualified name, ``qualifier:name``: the class registered under ``name`` by the
+#: distribution, top-level package or module ``qualifier`` (a registry name has no ':')
+QUALIFIED = re.compile(r"^([A-Za-z0-9][A-Za-z0-9_.-]{0,199}):([^:]*)\Z")
 
 
 _UNAVAILABLE: list[Unavailable] = []
@@ -83,12 +103,19 @@ def _register(table: dict, cls: type, kind: str) -> type:
     if not NAME_PATTERN.match(name):
         raise PluginError(f"{kind} name {name!r}: expected letters, digits and '_.+-' (at most 64)", "")
     existing = table.get(name)
-    if existing is not None and existing is not cls and \
-            f"{existing.__module__}.{existing.__qualname__}" != f"{cls.__module__}.{cls.__qualname__}":
-        raise PluginError(f"{kind} name {name!r} registered twice "
-                          f"({existing.__module__} and {cls.__module__})")
-    table[name] = cls
+    if existing is None or _same_class(existing, cls):
+        table[name] = cls
+    else:                            # a rival: kept, and the bare name refused (_find)
+        rivals = _RIVALS[kind].setdefault(name, [])
+        rivals[:] = [c for c in rivals if not _same_class(c, cls)] + [cls]
+    if _LOADING is not None:
+        _QUALIFIERS[cls], _DISTRIBUTIONS[cls] = _LOADING
     return cls
+
+
+def _same_class(a: type, b: type) -> bool:
+    """One class (a module imported again defines it anew)."""
+    return a is b or f"{a.__module__}.{a.__qualname__}" == f"{b.__module__}.{b.__qualname__}"
 
 
 def _check_params(cls: type, kind: str) -> None:
@@ -104,17 +131,19 @@ def _check_params(cls: type, kind: str) -> None:
 
 
 def register_method(cls: type[Method]) -> type[Method]:
-    known = tasks()
+    tasks()
+    known = tuple(_TASKS)            # the names claimed: one claimed twice is refused where used
     task = getattr(cls, "task", None)
     if not isinstance(task, str) or task not in known:
         raise PluginError(f"method {getattr(cls, 'name', cls.__qualname__)!r}: task {task!r} is not one of "
-                          f"{tuple(known)}", getattr(cls, "name", ""))
+                          f"{known}", getattr(cls, "name", ""))
     _check_params(cls, "method")
     return _register(_METHODS, cls, "method")
 
 
 def register_scenario(cls: type[Scenario]) -> type[Scenario]:
-    known = tasks()
+    tasks()
+    known = tuple(_TASKS)
     served = getattr(cls, "tasks", ())
     name = getattr(cls, "name", cls.__qualname__)
     if not isinstance(served, (tuple, list)) or not all(isinstance(t, str) for t in served):
@@ -134,7 +163,9 @@ def register_task(cls: type) -> type:
         raise PluginError(f"{cls!r} is not a Task subclass")
     instance = cls()
     _register(_TASK_CLASSES, cls, "task")
-    _TASKS[cls.name] = instance
+    _INSTANCES[cls] = instance
+    if _TASK_CLASSES[cls.name] is cls:
+        _TASKS[cls.name] = instance
     return cls
 
 
@@ -184,20 +215,41 @@ def _load_entry_points(group: str) -> None:
         _failure(exc)
         _unavailable(group, exc)
         return
+    global _LOADING
     for ep in eps:
         source = f"{group}:{ep.name}"
+        _LOADING = (_entry_point_qualifier(ep), getattr(ep, "dist", None))
         try:
-            obj = ep.load()
-        except BaseException as exc:  # noqa: BLE001 - SystemExit at import too
-            _failure(exc)
-            _unavailable(source, exc, ep.name)
-            continue
-        # An entry point may name a module (whose decorators register) or a class of its group.
-        try:
-            _register_class(obj, group)
-        except BaseException as exc:  # noqa: BLE001
-            _failure(exc)
-            _unavailable(source, exc, ep.name)
+            _load_entry_point(ep, group, source)
+        finally:
+            _LOADING = None
+
+
+def _load_entry_point(ep, group: str, source: str) -> None:
+    try:
+        obj = ep.load()
+    except BaseException as exc:  # noqa: BLE001 - SystemExit at import too
+        _failure(exc)
+        _unavailable(source, exc, ep.name)
+        return
+    # An entry point may name a module (whose decorators register) or a class of its group.
+    try:
+        _register_class(obj, group)
+    except BaseException as exc:  # noqa: BLE001
+        _failure(exc)
+        _unavailable(source, exc, ep.name)
+
+
+def _entry_point_qualifier(ep) -> str:
+    """The qualifier of what an entry point registers: its distribution's name (normalised
+    as pip does, ``My_Lab`` -> ``my-lab``), else the top-level package it names."""
+    dist = getattr(ep, "dist", None)
+    name = getattr(dist, "name", None) or ep.value.split(":")[0].split(".")[0]
+    return _normal(name)
+
+
+def _normal(qualifier: str) -> str:
+    return re.sub(r"[-_.]+", "-", qualifier).lower()
 
 
 def _register_class(obj, group: str) -> None:
@@ -269,25 +321,30 @@ def _discover_tasks() -> None:
 
 
 def tasks() -> dict:
-    """Task name -> :class:`bench.tasks.base.Task`: the built-ins, then the plugins'."""
+    """Task name -> :class:`bench.tasks.base.Task`: the built-ins, then the plugins' (a
+    name claimed twice as each claimant's qualified name)."""
     if not _DISCOVERED:
         discover()
-    return dict(_TASKS)
+    return {name: _INSTANCES.get(cls) or _TASKS[cls.name] for name, cls in _named("task").items()}
 
 
 def get_task(name: str, field: str = "task"):
-    """The task ``name`` (ConfigError naming ``field`` when unknown or unavailable)."""
-    return _lookup(tasks(), name, "task", field)
+    """The task ``name`` (ConfigError naming ``field`` when unknown, unavailable or claimed twice)."""
+    if not _DISCOVERED:
+        discover()
+    cls = _lookup("task", name, field)
+    return _INSTANCES.get(cls) or _TASKS[cls.name]
 
 
 def methods() -> dict[str, type[Method]]:
+    """Method name -> class; a name claimed twice as each claimant's qualified name."""
     discover()
-    return dict(sorted(_METHODS.items()))
+    return dict(sorted(_named("method").items()))
 
 
 def scenarios() -> dict[str, type[Scenario]]:
     discover()
-    return dict(sorted(_SCENARIOS.items()))
+    return dict(sorted(_named("scenario").items()))
 
 
 def unavailable() -> list[Unavailable]:
@@ -298,23 +355,157 @@ def unavailable() -> list[Unavailable]:
 def unavailable_reason(name: str) -> str | None:
     """Why the plugin ``name`` (or the module of that name) could not be
     registered, in one line; None when it is not among the unavailable ones."""
+    name = bare_name(name)
     hint = next((u for u in unavailable()
                  if name in (u.name, re.split(r"[.:]", u.source)[-1].replace("_", "-"))), None)
     return None if hint is None else hint.error
 
 
-def _lookup(table: dict, name: str, kind: str, field: str):
-    if name in table:
-        return table[name]
-    reason = unavailable_reason(name)
+def bare_name(name: str) -> str:
+    """``glr`` of ``mylab:glr`` (a bare name is its own)."""
+    match = QUALIFIED.match(name)
+    return match.group(2) if match else name
+
+
+def _table(kind: str) -> dict:
+    return {"method": _METHODS, "scenario": _SCENARIOS, "task": _TASK_CLASSES}[kind]
+
+
+def _claimants(kind: str, name: str) -> list[type]:
+    """Every class registered under ``name``, the first first."""
+    first = _table(kind).get(name)
+    return ([first] if first is not None else []) + _RIVALS[kind].get(name, [])
+
+
+def _named(kind: str) -> dict[str, type]:
+    """Name -> class, a name claimed twice under each claimant's qualified name."""
+    out = {}
+    for name in _table(kind):
+        claims = _claimants(kind, name)
+        out |= {name: claims[0]} if len(claims) == 1 else dict(zip(_choices(claims), claims))
+    return out
+
+
+def qualifier(cls: type) -> str:
+    """The qualifier of a registered class (see the module doc)."""
+    return _QUALIFIERS.get(cls) or cls.__module__.split(".")[0]
+
+
+def origin(cls: type) -> dict[str, str]:
+    """``{"module": ..., "distribution": ...}`` of a registered class: the distribution whose
+    entry point registered it, else the one installing its package
+    (:func:`bench.provenance.distribution_of`)."""
+    from radarbench.bench.provenance import distribution_of
+
+    return {"module": cls.__module__, "distribution": distribution_of(cls.__module__, _DISTRIBUTIONS.get(cls))}
+
+
+def _qualifiers_of(cls: type) -> list[str]:
+    """What a qualified name may say to pick ``cls``, from the shortest."""
+    return [qualifier(cls), cls.__module__.split(".")[0], cls.__module__, f"{cls.__module__}.{cls.__qualname__}"]
+
+
+def _choices(claims: list[type]) -> list[str]:
+    """A qualified name for each claimant: the first kind of qualifier that tells them all apart."""
+    for level in range(4):
+        names = [f"{_qualifiers_of(c)[level]}:{c.name}" for c in claims]
+        if len({_normal(n) for n in names}) == len(names):
+            return names
+    return names
+
+
+def collisions() -> dict[str, dict[str, str]]:
+    """Kind -> name -> the one line that refuses it, for every name claimed twice."""
+    discover()
+    return {kind: {name: _collision(kind, name, _claimants(kind, name))
+                   for name, rivals in table.items() if rivals and name in _table(kind)}
+            for kind, table in _RIVALS.items()}
+
+
+def _collision(kind: str, name: str, claims: list[type]) -> str:
+    """``method 'glr' is registered twice (a.glr (dist-a 1.0), b.glr (dist-b 0.1)): name 'a:glr' or 'b:glr'``."""
+    from radarbench.bench.provenance import origin_text
+
+    times = "twice" if len(claims) == 2 else f"{len(claims)} times"
+    where = ", ".join(origin_text(origin(c)) for c in claims)
+    if kind == "task":             # methods and scenarios name their task bare: a sweep cannot choose
+        return f"task {name!r} is registered {times} ({where}): its methods cannot say which; uninstall one of them"
+    choices = [repr(q) for q in _choices(claims)]
+    return f"{kind} {name!r} is registered {times} ({where}): name {', '.join(choices[:-1])} or {choices[-1]}"
+
+
+def _find(kind: str, name: str) -> tuple[type | None, str]:
+    """(the class ``name`` means, "") or (None, why it means none)."""
+    match = QUALIFIED.match(name)
+    bare = match.group(2) if match else name
+    claims = _claimants(kind, bare)
+    if match:
+        chosen = _picked(kind, *match.groups())
+        if len(chosen) > 1:
+            return None, _collision(kind, bare, chosen)
+        if chosen:
+            return chosen[0], ""
+        if claims:
+            choices = " or ".join(map(repr, _choices(claims)))
+            return None, (f"{kind} {name!r}: no {kind} {bare!r} registered by {match.group(1)!r} (it is registered "
+                          f"by {', '.join(c.__module__ for c in claims)}: name {choices})")
+    if len(claims) == 1:
+        return claims[0], ""
+    if len(claims) > 1:
+        return None, _collision(kind, bare, claims)
+    reason = unavailable_reason(bare)
     if reason is not None:
-        raise ConfigError(field, f"{kind} {name!r} is unavailable: {reason}")
-    raise ConfigError(field, unknown_name(kind, name, table))
+        return None, f"{kind} {name!r} is unavailable: {reason}"
+    return None, unknown_name(kind, name, _named(kind))
+
+
+def _picked(kind: str, qualifier: str, bare: str) -> list[type]:
+    """The classes registered under ``bare`` that ``qualifier`` names."""
+    wanted = _normal(qualifier)
+    return [c for c in _claimants(kind, bare) if wanted in {_normal(q) for q in _qualifiers_of(c)}]
+
+
+def missing_reason(kind: str, name: str) -> str | None:
+    """Why ``name`` names nothing installed here (its plugin is unavailable, or its
+    qualifier registered no such name), for an ``optional`` sweep entry to be skipped;
+    None when it is registered, even twice (refused where used, never skipped)."""
+    discover()
+    match = QUALIFIED.match(name)
+    if match and not _picked(kind, *match.groups()):
+        return unavailable_reason(name) or _find(kind, name)[1]
+    return None if _claimants(kind, bare_name(name)) else unavailable_reason(name)
+
+
+def problem(kind: str, name: str) -> str:
+    """Why ``name`` names no single registered ``kind`` ("method", "scenario" or "task"); "" if it does."""
+    discover()
+    return _find(kind, name)[1]
+
+
+def claimed(kind: str, name: str) -> bool:
+    """Whether some ``kind`` is registered under the registry name of ``name``."""
+    discover()
+    return bool(_claimants(kind, bare_name(name)))
+
+
+def _lookup(kind: str, name: str, field: str):
+    cls, why = _find(kind, name)
+    if cls is None:
+        raise ConfigError(field, why)
+    return cls
 
 
 def get_method(name: str, field: str = "method") -> type[Method]:
-    return _lookup(methods(), name, "method", field)
+    discover()
+    return _lookup("method", name, field)
+
+
+def find_scenario(name: str) -> type[Scenario] | None:
+    """The scenario class ``name`` (bare or qualified) means, None when it means none."""
+    discover()
+    return _find("scenario", name)[0]
 
 
 def get_scenario(name: str, field: str = "scenario") -> type[Scenario]:
-    return _lookup(scenarios(), name, "scenario", field)
+    discover()
+    return _lookup("scenario", name, field)

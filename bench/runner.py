@@ -37,7 +37,7 @@ from radarbench.bench.executors import SerialExecutor, UnitFailure, make_executo
 from radarbench.bench.processes import STOP_SIGNALS, restore_handler
 from radarbench.bench.identity import PREVIOUS, content_keys, set_aside_changed
 from radarbench.bench.progress import Progress
-from radarbench.bench.provenance import provenance
+from radarbench.bench.provenance import origin_text, provenance
 from radarbench.bench.recording.record import TrialRecord
 from radarbench.bench.store import Store, UnitResult
 from radarbench.bench.units import Unit, UnitTask, execute_unit, failed_result, plan_units, unit_methods
@@ -422,7 +422,8 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
 
 
 def plan_record(plan: Plan, command: str) -> dict:
-    """What the store keeps of the plan: the sweep, the configs, the command."""
+    """What the store keeps of the plan: the sweep, the configs (with the module and
+    distribution of each one's plugin), the command."""
     return {
         "sweep": plan.to_dict(),
         "source": plan.source,
@@ -430,9 +431,11 @@ def plan_record(plan: Plan, command: str) -> dict:
         "contents": content_keys(plan),
         "command": command,
         "methods": [{"label": m.label, "name": m.name, "params": m.params_text,
-                     "task": registry.get_method(m.name).task} for m in plan.methods],
+                     "task": registry.get_method(m.name).task, **registry.origin(registry.get_method(m.name))}
+                    for m in plan.methods],
         "scenarios": [{"label": s.label, "name": s.name, "params": s.params_text, "tasks": list(s.tasks),
-                       "snr_db": list(s.snr_db), "trials": s.trials} for s in plan.scenarios],
+                       "snr_db": list(s.snr_db), "trials": s.trials, **registry.origin(registry.get_scenario(s.name))}
+                      for s in plan.scenarios],
         "unavailable": [{"label": entry.get("label", entry["name"]), "name": entry["name"], "reason": reason}
                     for entry, reason in plan.skipped_methods],
         "skipped_pairs": [{"scenario": sc, "method": m, "reason": why} for sc, m, why in plan.skipped],
@@ -442,10 +445,14 @@ def plan_record(plan: Plan, command: str) -> dict:
 def write_plan_toml(path: Path, plan: Plan, command: str, identities: dict | None = None) -> None:
     """The resolved sweep, re-runnable as a sweep file (its data files named relative to
     its folder, from which a sweep's relative paths are read), with provenance: the
-    identities (config label -> short hash, ``Store.stamps``) the results were computed with."""
+    identities (config label -> short hash, ``Store.stamps``) the results were computed
+    with, and the plugins (config label -> "module (distribution)") that computed them."""
+    plugins = {"scenarios": {s.label: origin_text(registry.origin(registry.get_scenario(s.name)))
+                             for s in plan.scenarios},
+               "methods": {m.label: origin_text(registry.origin(registry.get_method(m.name))) for m in plan.methods}}
     body = {**plan.to_dict(paths_from=path.parent),
             "provenance": {"command": command, "fingerprint": plan.fingerprint(), **provenance(),
-                           "identities": identities}}
+                           "identities": identities, "plugins": plugins}}
     text = "# Resolved plan written by bench; `bench run plan.toml` reproduces the results.\n" + tomlw.dumps(body)
     from radarbench.bench.runfolder import write_text      # whole, a unique temporary name, listed in the manifest
     write_text(path, text)

@@ -112,16 +112,20 @@ def test_bad_plugins_are_listed_as_unavailable_and_every_command_still_works(hos
         line = next((x for x in unavailable.splitlines() if x.split()[0] == source), None)
         assert line is not None and reason in line, (source, unavailable)
     assert "crash " in head and "broken-cv " in head                   # the good ones of the same plugin
-    innovation = next(x for x in head.splitlines() if x.split()[0] == "innovation")
-    assert "NIS" in innovation                                        # the built-in, not the impostor
+    innovation = next(x for x in head.splitlines() if x.split()[0] == "radarbench:innovation")
+    assert "NIS" in innovation                                        # the built-in, by its qualified name
+    assert "method 'innovation' is registered twice (radarbench.methods.maneuver.innovation" in head
 
-    for name, reason in (("exits-at-import", "SystemExit"), ("bad-task", "task 'cfar' is not one of")):
+    for name, says in (("exits-at-import", ("method 'exits-at-import' is unavailable: ", "SystemExit")),
+                       ("bad-task", ("method 'bad-task' is unavailable: ", "task 'cfar' is not one of")),
+                       ("innovation", ("method 'innovation' is registered twice", "hostile_plugin.duplicate",
+                                       "name 'radarbench:innovation' or 'hostile-plugin:innovation'"))):
         sweep = tmp_path / f"{name}.toml"
         sweep.write_text(f'name = "x"\nscenario = "cv-turn-cv"\nsnr_db = [0]\n[[methods]]\nname = "{name}"\n')
         run = _bench(hostile, "run", sweep, "--out", tmp_path / name, "--quiet")
         lines = run.stderr.strip().splitlines()
         assert run.returncode == 2 and len(lines) == 1, run.stderr
-        assert f"method '{name}' is unavailable: " in lines[0] and reason in lines[0], lines[0]
+        assert all(part in lines[0] for part in says), lines[0]
         assert not (tmp_path / name).exists()
 
 
@@ -145,7 +149,7 @@ name = "crash"
 params = { how = ["os-exit", "system-exit", "keyboard-interrupt"] }
 
 [[methods]]
-name = "innovation"
+name = "radarbench:innovation"
 
 [calibration]
 h0_trials = 20
@@ -213,8 +217,9 @@ def _only_the_culprits_failed(run, clean, death: str) -> None:
     assert death in failures and "SystemExit" in failures and "generate" in failures
     trials = pd.read_csv(run / "trials.csv")
     reference = pd.read_csv(clean / "trials.csv")
-    pd.testing.assert_frame_equal(trials[trials.config == "innovation"].reset_index(drop=True),
-                                  reference[(reference.config == "innovation") & ((reference.scenario == "cv-turn-cv")
+    ours = "radarbench:innovation"
+    pd.testing.assert_frame_equal(trials[trials.config == ours].reset_index(drop=True),
+                                  reference[(reference.config == ours) & ((reference.scenario == "cv-turn-cv")
                                             | (reference.snr_db == 0))].reset_index(drop=True))
 
 
@@ -234,7 +239,7 @@ name = "crash"
 params = { how = "sleep" }
 
 [[methods]]
-name = "innovation"
+name = "radarbench:innovation"
 
 [calibration]
 h0_trials = 10

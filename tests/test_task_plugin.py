@@ -170,22 +170,32 @@ name = "argmax"
 """
 
 
-@pytest.fixture
-def plugin_env(tmp_path):
-    """Environment whose PYTHONPATH holds the benchdemo distribution."""
-    site = tmp_path / "site"
-    pkg = site / "benchdemo"
+def install(site, name: str, modules: dict[str, str], entry_points: str) -> None:
+    """Distribution ``name`` 0.1 in the folder ``site``: package ``name`` holding
+    ``modules`` (module name -> source) and a ``.dist-info`` with ``entry_points``."""
+    pkg = site / name
     pkg.mkdir(parents=True)
     (pkg / "__init__.py").write_text("")
-    for name, text in (("task", TASK), ("scenario", SCENARIO), ("method", METHOD)):
-        (pkg / f"{name}.py").write_text(textwrap.dedent(text))
-    info = site / "benchdemo-0.1.dist-info"
+    for module, text in modules.items():
+        (pkg / f"{module}.py").write_text(textwrap.dedent(text))
+    info = site / f"{name}-0.1.dist-info"
     info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: benchdemo\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(ENTRY_POINTS)
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(entry_points)
+
+
+def env_with(site) -> dict:
+    """This process's environment with ``site`` first on PYTHONPATH."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(site), *filter(None, [env.get("PYTHONPATH")])])
     return env
+
+
+@pytest.fixture
+def plugin_env(tmp_path):
+    """Environment whose PYTHONPATH holds the benchdemo distribution."""
+    install(tmp_path / "site", "benchdemo", {"task": TASK, "scenario": SCENARIO, "method": METHOD}, ENTRY_POINTS)
+    return env_with(tmp_path / "site")
 
 
 def _bench(env, *args):

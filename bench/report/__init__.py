@@ -33,7 +33,7 @@ from radarbench.bench.processes import default_workers, process_pool
 from radarbench.bench.markdown import code, fmt_db, text
 from radarbench.bench.markdown import fmt as _fmt
 from radarbench.bench.markdown import table as _table
-from radarbench.bench.provenance import WALL_TIME_ROW, provenance
+from radarbench.bench.provenance import WALL_TIME_ROW, origin_text, provenance
 from radarbench.bench.report.glance import comparisons_frame, glance
 from radarbench.bench.report.html import interactive_figures, interactive_specs, markdown_to_html
 from radarbench.bench.report.render import comparisons_markdown, glance_markdown, render, section_macro
@@ -92,12 +92,14 @@ def require_plugins(record: dict, db: Path) -> None:
     one line naming the store and what is not installed here (with the reason ``bench
     list`` gives, when the plugin is there but failed to load)."""
     missing = []
-    for kind, known, names in (
-            ("task", registry.tasks(), [m["task"] for m in record["methods"]]),
-            ("scenario", registry.scenarios(), [s["name"] for s in record["scenarios"]]),
-            ("method", registry.methods(), [m["name"] for m in record["methods"]])):
+    for kind, names in (("task", [m["task"] for m in record["methods"]]),
+                        ("scenario", [s["name"] for s in record["scenarios"]]),
+                        ("method", [m["name"] for m in record["methods"]])):
         for name in dict.fromkeys(names):
-            if name not in known:
+            problem = registry.problem(kind, name)
+            if problem and registry.claimed(kind, name):      # claimed twice, or not by that qualifier
+                raise ConfigError(str(db), problem)
+            if problem:
                 reason = registry.unavailable_reason(name)
                 missing.append(f"{kind} {name!r}" + (f" ({reason})" if reason else ""))
     if missing:
@@ -380,13 +382,15 @@ def _identities_text(record: dict, store: Store) -> list[str]:
             versions = d.get("versions", versions)
             data = ", ".join(f"{text(Path(p).name)} {code(h)}" for p, h in d.get("data", {}).items()) or "–"
             source = code(d.get("code", "?")) + (f" ({text(d['distribution'])})" if d.get("distribution") else "")
+            plugin = text(origin_text(config)) if "module" in config else "not recorded"
             old = ", ".join(code(x) for x in replaced.get(kind, {}).get(label, [])) or "–"
-            rows.append([code(label), kind[:-1], code(identity), source, data, old])
+            rows.append([code(label), kind[:-1], plugin, code(identity), source, data, old])
     lines = ", ".join(f"{text(k)} {text(v)}" for k, v in versions.items())
     return [f"Code and data identities ({lines}): a stored result is re-computed when its config's identity "
             "changes; the results the last run replaced are in `previous/` "
             "(`bench compare DIR/previous DIR`).",
-            _table(["config", "kind", "identity", "code", "data files", "replaced (previous/)"], rows)]
+            _table(["config", "kind", "module (distribution)", "identity", "code", "data files",
+                    "replaced (previous/)"], rows)]
 
 
 def _section_recording(n: int, out_dir: Path, tasks: list) -> str:
