@@ -119,7 +119,8 @@ _IMPORTERS = {"import_module", "__import__"}
 def _loaded_names(tree: ast.Module, module: str, is_package: bool) -> set[str]:
     """Absolute dotted names a module's code may load, wherever the statement stands
     (``from a.b import c``: ``a.b`` and ``a.b.c``, since ``c`` may be a module; relative
-    imports resolved; ``importlib.import_module("x")`` and ``__import__("x")``)."""
+    imports resolved; a call of ``importlib.import_module`` or of the ``__import__``
+    builtin with a literal name)."""
     package = module if is_package else module.rpartition(".")[0]
     names = set()
     for node in ast.walk(tree):

@@ -447,7 +447,6 @@ def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None, worke
         raise ConfigError("", f"{out_dir} has no results.sqlite (not a bench run folder)")
     store = Store(db)
     try:
-        store.set_meta(runfolder.OUTPUTS_DIGEST, "")          # outputs being rewritten: current no more
         with runfolder.writing(out_dir):
             report = _build(store, out_dir, recording, on_phase, workers)
         if digest:
