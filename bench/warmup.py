@@ -4,8 +4,8 @@ Plugins compile their numba kernels on first call and keep them in numba's on-di
 cache. On a fresh install every worker would compile the same kernels, inside the
 units it times. So when the cache looks cold (:func:`cache_is_cold`) the runner first
 hands the workers a warm-up: per (scenario config, method config) pair, one task that
-runs its one-trial calibration unit (where its task needs a threshold) and evaluation
-unit (at the lowest SNR), results thrown away. Each method's kernels are compiled by the
+runs a :data:`WARM_UP_TRIALS`-trial calibration unit (where its task needs a threshold)
+and evaluation unit (at the lowest SNR), results thrown away. Each method's kernels are compiled by the
 one worker that takes its pair (the pairs spread over the workers), with the types the
 sweep passes, and cached; a kernel two methods share may compile in two workers at
 once. The first worker to compile says so on stderr (:data:`COMPILING`, once per run).
@@ -27,6 +27,11 @@ from radarbench.bench.progress import say
 from radarbench.bench.units import Unit, UnitTask, calibrated_configs, execute_unit
 
 __all__ = ["cache_is_cold", "plan_key", "remember_unused", "warm_up_tasks", "run_warm_up", "COMPILING"]
+
+#: trials of a warm-up unit: two, never one, since a one-trial batch makes arrays a larger one
+#: does not (a shared prior broadcast to (1, d) is already contiguous, so it stays a read-only
+#: view), and numba compiles another specialisation for them inside the timed units
+WARM_UP_TRIALS = 2
 
 #: the line on stderr when the warm-up compiles
 COMPILING = "compiling kernels (first run only)…"
@@ -123,8 +128,8 @@ def remember_unused(key: str) -> None:
 
 
 def warm_up_tasks(plan: Plan, announce: str | None = None) -> list:
-    """One task per (scenario config, method config) pair of ``plan``: its one-trial
-    calibration unit (when its task is calibrated) then its one-trial evaluation unit at
+    """One task per (scenario config, method config) pair of ``plan``: its warm-up
+    calibration unit (when its task is calibrated) then its warm-up evaluation unit at
     the lowest SNR (thresholds zero), for one worker to run both (:func:`run_warm_up`), so
     each method's kernels compile in one process, with the types a sweep passes them.
     ``announce``: the marker file whose creation elects the one process that says it
@@ -134,10 +139,11 @@ def warm_up_tasks(plan: Plan, announce: str | None = None) -> list:
     for i, sc in enumerate(plan.scenarios):
         calibrated = {m.label for m in calibrated_configs(plan, sc)}
         for mc in plan.pairs(sc):
-            units = [UnitTask(plan, Unit("calibration", i, sc.label, None, 0, 1), methods=(mc.label,))] \
+            units = [UnitTask(plan, Unit("calibration", i, sc.label, None, 0, WARM_UP_TRIALS),
+                              methods=(mc.label,))] \
                 if mc.label in calibrated else []
             if sc.snr_db:
-                units.append(UnitTask(plan, Unit("evaluation", i, sc.label, min(sc.snr_db), 0, 1), zero,
+                units.append(UnitTask(plan, Unit("evaluation", i, sc.label, min(sc.snr_db), 0, WARM_UP_TRIALS), zero,
                                       methods=(mc.label,)))
             tasks.append((units, announce))
     return tasks
