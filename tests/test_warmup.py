@@ -16,14 +16,14 @@ from radarbench.bench.config import load_sweep
 from conftest import scaled
 
 
-def test_warm_up_is_one_task_per_pair_with_both_phases_and_one_trial(write_sweep):
+def test_warm_up_is_one_task_per_pair_with_both_phases_and_two_trials(write_sweep):
     plan = load_sweep(write_sweep(snr="[8, 0]"))
     tasks = warmup.warm_up_tasks(plan, announce="marker")
     assert [units[0].methods for units, _ in tasks] == [(m.label,) for m in plan.methods]   # one pair each
     for units, announce in tasks:
         assert announce == "marker" and len({u.methods for u in units}) == 1
-        assert [(u.unit.phase, u.unit.snr_db, u.unit.n) for u in units] == [("calibration", None, 1),
-                                                                           ("evaluation", 0.0, 1)]  # lowest SNR
+        assert [(u.unit.phase, u.unit.snr_db, u.unit.n) for u in units] == [("calibration", None, 2),
+                                                                           ("evaluation", 0.0, 2)]  # lowest SNR
         assert units[1].thresholds == {m.label: 0.0 for m in plan.methods}
 
 
