@@ -265,6 +265,23 @@ def test_html_report_is_valid_and_self_contained(mixed):
     assert headings[0] == "Results at a glance"
     md_tables = len(re.findall(r"^\|-[-| ]+\|$", (mixed / "report.md").read_text(), re.M))
     assert len(list(doc.iter("table"))) == md_tables     # every table of report.md, the folded ones too
+    # a table of contents first, linking every section and subsection, the glance first
+    nav = next(doc.iter("nav"))
+    links = [a.get("href") for a in nav.iter("a")]
+    sections = [el for el in doc.iter() if el.tag in ("h2", "h3")]
+    assert links == [f"#{el.get('id')}" for el in sections] and len(set(links)) == len(links)
+    assert next(nav.iter("a")).text == "Results at a glance" and len(links) >= 5
+
+
+def test_the_contents_link_each_heading_once_with_its_text_escaped():
+    from radarbench.bench.report.html import with_contents
+    body, contents = with_contents("<h2>A &amp; B</h2><p>x</p><h3>Sub <code>c</code></h3><h2>A &amp; B</h2>")
+    assert body == ('<h2 id="a-b">A &amp; B</h2><p>x</p><h3 id="sub-c">Sub <code>c</code></h3>'
+                    '<h2 id="a-b-2">A &amp; B</h2>')
+    assert contents == ('<nav class="toc" aria-label="Contents"><p>Contents</p><ul>'
+                        '<li class="toc-h2"><a href="#a-b">A &amp; B</a></li>'
+                        '<li class="toc-h3"><a href="#sub-c">Sub c</a></li>'
+                        '<li class="toc-h2"><a href="#a-b-2">A &amp; B</a></li></ul></nav>')
 
 
 # ------------------------------------------------------------------ bench compare

@@ -174,12 +174,36 @@ def with_policy(page: str) -> str:
     return page.replace(charset, f'{charset}<meta http-equiv="Content-Security-Policy" content="{policy}">\n', 1)
 
 
+_HEADING = re.compile(r"<h([23])>(.*?)</h\1>", re.S)
+
+
+def with_contents(body: str) -> tuple[str, str]:
+    """(``body`` with an anchor on each section heading, the page's table of contents: a
+    link to each, sections and their subsections), for a long report one can navigate."""
+    taken: dict[str, int] = {}
+    entries: list[str] = []
+
+    def anchor(match) -> str:
+        level, inner = match.groups()
+        shown = re.sub(r"<[^>]+>", "", inner)                 # escaped text: it stays escaped
+        slug = re.sub(r"[^a-z0-9]+", "-", html.unescape(shown).lower()).strip("-") or "section"
+        taken[slug] = taken.get(slug, 0) + 1
+        slug = slug if taken[slug] == 1 else f"{slug}-{taken[slug]}"
+        entries.append(f'<li class="toc-h{level}"><a href="#{slug}">{shown}</a></li>')
+        return f'<h{level} id="{slug}">{inner}</h{level}>'
+    body = _HEADING.sub(anchor, body)
+    return body, f'<nav class="toc" aria-label="Contents"><p>Contents</p><ul>{"".join(entries)}</ul></nav>'
+
+
 def markdown_to_html(text: str, title: str, out_dir: Path, interactive: str = "") -> str:
     """The whole page: ``text`` (Markdown) converted, figures embedded, ``interactive`` at
-    the placeholder, the policy added (the page is final: a changed script would not run)."""
+    the placeholder, a table of contents beside it, the policy added (the page is final: a
+    changed script would not run)."""
     from markupsafe import Markup
-    body = _embed_images(_body(text), out_dir).replace(PLACEHOLDER, interactive)
-    return with_policy(environment().get_template("page.html.j2").render(title=title, body=Markup(body)))
+    body, contents = with_contents(_embed_images(_body(text), out_dir).replace(PLACEHOLDER, interactive))
+    page = environment().get_template("page.html.j2").render(title=title, body=Markup(body), contents=Markup(contents))
+    return with_policy(page)
 
 
-__all__ = ["PLACEHOLDER", "interactive_figures", "interactive_specs", "markdown_to_html", "safe_url", "with_policy"]
+__all__ = ["PLACEHOLDER", "interactive_figures", "interactive_specs", "markdown_to_html", "safe_url", "with_contents",
+           "with_policy"]
