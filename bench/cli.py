@@ -149,6 +149,12 @@ def build_parser() -> argparse.ArgumentParser:
                                                                "the gRPC server takes the next one)")
     view.add_argument("--renderer", choices=["webgl", "webgpu"], default="webgl",
                       help="--web: the browser's graphics backend (default webgl: works without WebGPU)")
+    data = sub.add_parser("data", help="public data the scenarios read by default")
+    data_verbs = data.add_subparsers(dest="data_command", required=True, parser_class=_Parser)
+    fetch = data_verbs.add_parser("fetch", help="download it into the user's data folder, checked by its hash "
+                                                "(the real-trajectories preset's ADS-B samples)")
+    fetch.add_argument("--from", dest="source", metavar="FILE",
+                       help="a file already downloaded (e.g. the wheel, on a machine offline): checked, then used")
     perf = sub.add_parser("perf", help="measure every method's speed and memory against its reference, "
                                        "and scene generation")
     perf.add_argument("--out", default=str(RUNS_DIR / "perf"),
@@ -478,6 +484,20 @@ def cmd_export(args) -> int:
     return 0
 
 
+def cmd_data(args) -> int:
+    """``bench data fetch``: every scenario's public data (:meth:`bench.core.Scenario.fetch_data`)."""
+    from radarbench.bench import registry
+    source = Path(args.source) if args.source else None
+    if source is not None and not source.is_file():
+        raise ConfigError("--from", f"{source}: no such file")
+    said = [line for cls in registry.scenarios().values() if (line := cls().fetch_data(source))]
+    for line in said:
+        print(line)
+    if not said:
+        print("nothing to fetch: every scenario's data is here already")
+    return 0
+
+
 def cmd_perf(args) -> int:
     from radarbench.bench import registry
     from radarbench.bench.perf import check_sizes, prepare_out, run_perf
@@ -498,7 +518,7 @@ def one_line(text: str, limit: int = 400) -> str:
     return safe if len(safe) <= limit else safe[:limit - 3] + "..."
 
 
-COMMANDS = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "view": cmd_view, "perf": cmd_perf,
+COMMANDS = {"list": cmd_list, "run": cmd_run, "report": cmd_report, "view": cmd_view, "perf": cmd_perf, "data": cmd_data,
             "compare": cmd_compare, "export": cmd_export}
 
 

@@ -325,6 +325,13 @@ class Scenario(Component):
         """
         raise NotImplementedError
 
+    def fetch_data(self, source: Path | None = None) -> str | None:
+        """Download the public data the scenario's configs read by default into the user's
+        data folder (``bench data fetch``; ``source``: a file already downloaded, for a
+        machine offline), checked before it is kept; one line saying what it fetched, or
+        None when the scenario reads nothing it could fetch (the default)."""
+        return None
+
     def perf_data(self, size: str, folder: Path) -> dict[str, Any]:
         """Params added to ``bench perf`` size ``size`` (:attr:`perf_sizes`) when it reads a
         data file: the file written into ``folder`` (a temporary folder of the measuring

@@ -93,7 +93,7 @@ def parse_sweep_or_skip(sweep: dict, source: str):
     try:
         return parse_sweep(sweep, source)
     except ConfigError as err:
-        if "the optional extra: pip install" in err.problem:
+        if "the optional extra: pip install" in err.problem or "run `bench data fetch`" in err.problem:
             pytest.skip(f"{source} needs an optional extra: {err.problem}")
         raise
 

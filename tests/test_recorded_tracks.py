@@ -3,9 +3,13 @@ the onset truth, the segments, the trackers and detectors on it, common random n
 the file's content in the config's identity, and bad files refused in one line (exit 2,
 nothing written). The traffic samples are tried only where the package is installed."""
 
+import gzip
+import hashlib
 import importlib.util
+import json
 import os
 import re
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +24,7 @@ from radarbench.bench.identity import config_identity
 from radarbench.bench.params import build_params
 from radarbench.bench.rng import TrialRNG
 from radarbench.bench.tasks.tracking import TrackingScene
-from radarbench.scenarios.recorded_tracks import RecordedTracks
+from radarbench.scenarios.recorded_tracks import RecordedTracks, files
 from tests.conftest import run_bench
 
 SPEED = 100.0                     # m/s
@@ -281,16 +285,59 @@ def test_too_short_tracks_are_refused(csv):
         RecordedTracks().check_config(params_for(csv, steps=400, onset_step=10))
 
 
+def _samples_here() -> bool:
+    return importlib.util.find_spec("traffic") is not None or files.samples_folder().is_dir()
+
+
 @pytest.mark.skipif(importlib.util.find_spec("traffic") is not None, reason="the traffic package is installed")
-def test_without_traffic_the_samples_say_what_to_install():
+def test_without_the_samples_they_say_how_to_get_them(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "nothing"))
     p = build_params(RecordedTracks.Params, {"traffic_samples": ["calibration/ajaccio"]})
     for check in (RecordedTracks().data_files, RecordedTracks().check_config):
-        with pytest.raises(ConfigError, match=r"pip install '\.\[data\]'"):
+        with pytest.raises(ConfigError, match=r"the traffic samples are not here: run `bench data fetch`"):
             check(p)
 
 
-@pytest.mark.skipif(importlib.util.find_spec("traffic") is None,
-                    reason="needs the optional extra [data] (the traffic package)")
+def _wheel(path: Path, samples: dict[str, bytes]) -> Path:
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, data in samples.items():
+            archive.writestr(f"{files.SAMPLES_DIR}/{name}.json.gz", data)
+        archive.writestr("traffic/__init__.py", "")
+    return path
+
+
+def _sample(lat0: float) -> bytes:
+    rows = [{"icao24": "4ca1fa", "timestamp": f"2024-01-01T00:00:{i:02d}Z", "latitude": lat0 + 1e-4 * i,
+             "longitude": 8.0, "altitude": 3000.0} for i in range(40)]
+    return gzip.compress(json.dumps(rows).encode())
+
+
+@pytest.mark.skipif(importlib.util.find_spec("traffic") is not None, reason="the traffic package is installed")
+def test_data_fetch_keeps_the_samples_of_a_wheel_it_has_checked(tmp_path, monkeypatch, capsys):
+    from radarbench.bench.cli import main
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    wheel = _wheel(tmp_path / "traffic-2.13-py3-none-any.whl", {"calibration/ajaccio": _sample(41.9)})
+    assert main(["data", "fetch", "--from", str(wheel)]) == 2          # not the pinned wheel
+    err = capsys.readouterr().err
+    assert err.startswith("error: --from: traffic-2.13-py3-none-any.whl: SHA-256") and err.count("\n") == 1
+    assert not files.samples_folder().exists()
+    digest = hashlib.sha256(wheel.read_bytes()).hexdigest()
+    monkeypatch.setattr(files, "TRAFFIC_WHEEL", (*files.TRAFFIC_WHEEL[:2], digest))
+    assert main(["data", "fetch", "--from", str(wheel)]) == 0
+    assert "1 sample trajectories in" in capsys.readouterr().out
+    assert files.sample_file("calibration/ajaccio") == files.samples_folder() / "calibration" / "ajaccio.json.gz"
+    table = files.read_sample("calibration/ajaccio")
+    assert len(table) == 40 and set(table["track"]) == {"calibration/ajaccio:4ca1fa"}
+    with pytest.raises(ConfigError, match="no sample 'calibration/cardiff' in the fetched samples"):
+        files.sample_file("calibration/cardiff")
+    # fetched again from another wheel: the folder is replaced whole
+    other = _wheel(tmp_path / "other.whl", {"calibration/cardiff": _sample(51.0)})
+    monkeypatch.setattr(files, "TRAFFIC_WHEEL", (*files.TRAFFIC_WHEEL[:2], hashlib.sha256(other.read_bytes()).hexdigest()))
+    assert main(["data", "fetch", "--from", str(other)]) == 0
+    assert sorted(p.name for p in files.samples_folder().rglob("*.json.gz")) == ["cardiff.json.gz"]
+
+
+@pytest.mark.skipif(not _samples_here(), reason="needs the traffic samples (bench data fetch)")
 def test_a_traffic_sample_gives_real_turns():
     p = build_params(RecordedTracks.Params, RecordedTracks.small_params)
     RecordedTracks().check_config(p)

