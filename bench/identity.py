@@ -87,10 +87,21 @@ def library_versions() -> dict[str, str]:
 
 # --- one module: its content and what it loads -------------------------------------------
 
+_IMPORTERS = {"import_module", "__import__"}
+
+
 class _Content(ast.NodeTransformer):
-    """What of a module's syntax tree is executed code: docstrings dropped, and the module
-    paths of imports (``from radarbench.models.kalman import KalmanFilter``, ``import a.b
-    as c``) blanked, so a module moved or renamed leaves its importers' content as it was."""
+    """What of a module's syntax tree is executed code, and what it loads, in one pass:
+    docstrings dropped, and the module paths of imports (``from radarbench.models.kalman
+    import KalmanFilter``, ``import a.b as c``) blanked, so a module moved or renamed leaves
+    its importers' content as it was; :attr:`names`, the absolute dotted names the code may
+    load, wherever the statement stands (``from a.b import c``: ``a.b`` and ``a.b.c``, since
+    ``c`` may be a module; relative imports resolved; a call of ``importlib.import_module``
+    or of the ``__import__`` builtin with a literal name)."""
+
+    def __init__(self, module: str, is_package: bool):
+        self.package = module if is_package else module.rpartition(".")[0]
+        self.names: set[str] = set()
 
     def _body(self, node):
         self.generic_visit(node)
@@ -103,43 +114,36 @@ class _Content(ast.NodeTransformer):
     visit_Module = visit_ClassDef = visit_FunctionDef = visit_AsyncFunctionDef = _body
 
     def visit_ImportFrom(self, node):
+        base = node.module or ""
+        if node.level:
+            parts = self.package.split(".")
+            parent = ".".join(parts[:len(parts) - node.level + 1])
+            base = f"{parent}.{base}" if base else parent
+        self.names.add(base)
+        self.names.update(f"{base}.{alias.name}" for alias in node.names if alias.name != "*")
         node.module, node.level = None, 0
         return node
 
     def visit_Import(self, node):
         for alias in node.names:
+            self.names.add(alias.name)
             if alias.asname:
                 alias.name = ""
         return node
 
-
-_IMPORTERS = {"import_module", "__import__"}
+    def visit_Call(self, node):
+        if node.args and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str) \
+                and getattr(node.func, "attr", getattr(node.func, "id", None)) in _IMPORTERS:
+            self.names.add(node.args[0].value.lstrip("."))
+        self.generic_visit(node)
+        return node
 
 
 def _loaded_names(tree: ast.Module, module: str, is_package: bool) -> set[str]:
-    """Absolute dotted names a module's code may load, wherever the statement stands
-    (``from a.b import c``: ``a.b`` and ``a.b.c``, since ``c`` may be a module; relative
-    imports resolved; a call of ``importlib.import_module`` or of the ``__import__``
-    builtin with a literal name)."""
-    package = module if is_package else module.rpartition(".")[0]
-    names = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            names.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                parts = package.split(".")
-                parent = ".".join(parts[:len(parts) - node.level + 1])
-                base = f"{parent}.{base}" if base else parent
-            names.add(base)
-            names.update(f"{base}.{alias.name}" for alias in node.names if alias.name != "*")
-        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant) \
-                and isinstance(node.args[0].value, str) \
-                and getattr(node.func, "attr", getattr(node.func, "id", None)) in _IMPORTERS:
-            names.add(node.args[0].value.lstrip("."))
-    names.discard("")
-    return names
+    """Absolute dotted names a module's code may load (:class:`_Content`)."""
+    content = _Content(module, is_package)
+    content.visit(tree)
+    return content.names - {""}
 
 
 def _with_parents(names) -> set[str]:
@@ -195,10 +199,10 @@ def _content_of(name: str, file: Path, data: bytes) -> tuple[str, list[str], boo
         tree = ast.parse(data, filename=str(file))
     except (SyntaxError, ValueError):                          # not ours to judge: its bytes
         return digest(data), [], False
-    names = _loaded_names(tree, name, file.name == "__init__.py")
-    loads = sorted(_with_parents(names))
     marked = _marked(tree)
-    content = ast.dump(_Content().visit(tree), annotate_fields=False, include_attributes=False)
+    executed = _Content(name, file.name == "__init__.py")
+    content = ast.dump(executed.visit(tree), annotate_fields=False, include_attributes=False)
+    loads = sorted(_with_parents(executed.names - {""}))
     return digest(content.encode()), loads, marked
 
 
