@@ -215,7 +215,7 @@ def test_real_trajectories_preset_at_reduced_size(bench_cli, tmp_path):
     sweep["calibration"]["h0_trials"] = 100
     out = _run_reduced(bench_cli, tmp_path, sweep)
     summary = pd.read_csv(out / "summary.csv")
-    assert set(summary.scenario) == {"calibration", "mixed"}
+    assert set(summary.scenario) == {s["label"] for s in _preset("real-trajectories")["scenarios"]}
     assert {"imm-cv-ca", "ar-adaptive", "innovation[window=1]", "cumulant[window=16]"} <= set(summary.config)
     assert summary[summary.method == "cv-kf"].rmse_maneuver.notna().all()
     report = (out / "report.md").read_text()

@@ -185,7 +185,12 @@ def assert_report_inert(out):
     page = (out / "report.html").read_text()
     doc = parse(page)
     tags = {el.tag for el in doc.iter()}
-    assert not tags & {"iframe", "svg", "a", "object", "embed", "form", "base", "link"}, tags
+    assert not tags & {"iframe", "svg", "object", "embed", "form", "base", "link"}, tags
+    # the only links: the table of contents', each to a heading's anchor (never the input's)
+    contents = {id(a) for nav in doc.iter("nav") for a in nav.iter("a")}
+    for a in doc.iter("a"):
+        assert id(a) in contents and set(a.attrib) == {"href"} and re.fullmatch(r"#[a-z0-9-]+", a.get("href")), \
+            a.attrib
     for el in doc.iter():
         for name, value in el.attrib.items():
             assert not name.startswith("on"), (el.tag, name)
@@ -206,7 +211,7 @@ def assert_report_inert(out):
 def test_hostile_text_in_every_field_of_a_run_is_inert_in_report_html(plugins, tmp_path_factory, s, label):
     out = run_report(tmp_path_factory.mktemp("hostile"), s, label)
     assert_report_inert(out)
-    failures = (out / "report.html").read_text().split("<h2>Failures</h2>")[1]
+    failures = (out / "report.html").read_text().split('<h2 id="failures">Failures</h2>')[1]
     assert "RuntimeError" in failures                        # the plugin's error is there, as text
 
 
@@ -220,5 +225,5 @@ def test_the_issues_cases_are_inert_in_report_html(plugins, tmp_path):
     doc = parse((out / "report.html").read_text())
     words = "".join(doc.find("body").itertext())
     assert "<script>alert(1)</script>" in words and "<img src=x onerror=alert(2)>" in words   # shown as written
-    failures = (out / "report.html").read_text().split("<h2>Failures</h2>")[1]
+    failures = (out / "report.html").read_text().split('<h2 id="failures">Failures</h2>')[1]
     assert "RuntimeError: &lt;script&gt;alert(1)&lt;/script&gt;" in failures
