@@ -210,25 +210,16 @@ def _content_of(name: str, file: Path, data: bytes) -> tuple[str, list[str], boo
 CACHED_MODULES = 4096
 
 
-def _cache_file() -> Path | None:
-    """Where parsed modules are kept between runs (parsing is most of an identity's cost):
-    the user's cache folder of bench, when it is private (:func:`bench.listing.private_dir`)."""
-    from radarbench.bench import listing
-    folder = listing.cache_dir()
-    return folder / f"identity-modules-{SCHEME}.json" if listing.private_dir(folder) else None
+#: the user's cache of parsed modules (bench.listing.read_table)
+PARSED_FILE = f"identity-modules-{SCHEME}.json"
 
 
 @functools.lru_cache(maxsize=1)
 def _parsed() -> dict[str, tuple[str, list[str], bool]]:
-    """Parsed modules by the hash of their name and bytes: the user's cache, read once."""
-    from radarbench.bench import listing
-    path = _cache_file()
-    text = listing.read_cached(path) if path is not None else None
-    try:
-        entries = json.loads(text) if text else {}
-    except ValueError:
-        entries = {}
-    return entries if isinstance(entries, dict) else {}
+    """Parsed modules by the hash of their name and bytes: the user's cache, read once
+    (parsing is most of an identity's cost)."""
+    from radarbench.bench.listing import read_table
+    return read_table(PARSED_FILE)
 
 
 _parsed.new = False
@@ -237,16 +228,9 @@ _parsed.new = False
 def save_parsed() -> None:
     """Keep this process's parsed modules in the user's cache (the newest
     :data:`CACHED_MODULES`); a cache that cannot be written costs only speed."""
-    from radarbench.bench import listing
-    path = _cache_file()
-    if not _parsed.new or path is None:
-        return
-    entries = dict(list(_parsed().items())[-CACHED_MODULES:])
-    try:
-        listing.write_cached(path, json.dumps(entries))
-    except OSError:
-        return
-    _parsed.new = False
+    from radarbench.bench.listing import write_table
+    if _parsed.new and write_table(PARSED_FILE, _parsed(), CACHED_MODULES):
+        _parsed.new = False
 
 
 # --- where a module lives: ours, the harness, a library, the standard library -------------

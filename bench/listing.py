@@ -166,6 +166,31 @@ def write_cached(path: Path, text: str) -> None:
         raise
 
 
+def read_table(name: str) -> dict:
+    """The JSON object kept as ``name`` in the user's cache folder (:func:`cache_dir`); {}
+    when there is none, it is damaged, or the folder is not private (:func:`private_dir`)."""
+    folder = cache_dir()
+    text = read_cached(folder / name) if private_dir(folder) else None
+    try:
+        table = json.loads(text) if text else {}
+    except ValueError:
+        return {}
+    return table if isinstance(table, dict) else {}
+
+
+def write_table(name: str, table: dict, keep: int) -> bool:
+    """Keep ``table``'s newest ``keep`` entries as ``name`` in the user's cache folder;
+    whether it was written (a folder that is not private or cannot be written: not)."""
+    folder = cache_dir()
+    if not private_dir(folder):
+        return False
+    try:
+        write_cached(folder / name, json.dumps(dict(list(table.items())[-keep:])))
+    except OSError:
+        return False
+    return True
+
+
 def _render(verbose: bool) -> str:
     """The plugin listing from the registry (imports every plugin)."""
     from radarbench.bench import registry

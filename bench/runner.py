@@ -160,25 +160,15 @@ class _Split:
 UNIT_SECONDS_FILE = "unit-seconds.json"
 
 
-def _seconds_file() -> Path | None:
-    from radarbench.bench import listing
-    folder = listing.cache_dir()
-    return folder / UNIT_SECONDS_FILE if listing.private_dir(folder) else None
+#: seconds per trial remembered at most (the oldest forgotten first)
+KNOWN_SECONDS = 10_000
 
 
 def _known_seconds() -> dict[str, float]:
     """Seconds per trial kept from earlier runs: ``SCENARIO_KEY`` (generating the scenes)
     and ``SCENARIO_KEY/METHOD_KEY`` (a method config on them)."""
-    import json
-
-    from radarbench.bench import listing
-    path = _seconds_file()
-    text = listing.read_cached(path) if path is not None else None
-    try:
-        known = json.loads(text) if text else {}
-    except ValueError:
-        return {}
-    return {k: v for k, v in known.items() if isinstance(v, float)} if isinstance(known, dict) else {}
+    from radarbench.bench.listing import read_table
+    return {k: v for k, v in read_table(UNIT_SECONDS_FILE).items() if isinstance(v, float)}
 
 
 def longest_first(plan: Plan, tasks: list[UnitTask]) -> list[UnitTask]:
@@ -201,12 +191,7 @@ def longest_first(plan: Plan, tasks: list[UnitTask]) -> list[UnitTask]:
 def remember_seconds(plan: Plan, store: Store) -> None:
     """Keep the seconds per trial of this run's units and runs in the user's cache folder
     (for :func:`longest_first`); a cache that cannot be written costs only the ordering."""
-    import json
-
-    from radarbench.bench import listing
-    path = _seconds_file()
-    if path is None:
-        return
+    from radarbench.bench.listing import write_table
     keys, known = content_keys(plan), _known_seconds()
     for _key, scenario, n, seconds in store.db.execute("SELECT key, scenario, n, generate_seconds FROM units"):
         if scenario in keys["scenarios"] and n:
@@ -216,10 +201,7 @@ def remember_seconds(plan: Plan, store: Store) -> None:
             "WHERE runs.error IS NULL"):
         if scenario in keys["scenarios"] and method in keys["methods"] and n:
             known[f"{keys['scenarios'][scenario]}/{keys['methods'][method]}"] = float(seconds) / n
-    try:
-        listing.write_cached(path, json.dumps(dict(list(known.items())[-10_000:])))
-    except OSError:
-        return
+    write_table(UNIT_SECONDS_FILE, known, KNOWN_SECONDS)
 
 
 def _run_phase(executor, tasks, store: Store, progress: Progress, stop=None, timeout: float | None = None,

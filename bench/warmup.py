@@ -15,11 +15,9 @@ unit excludes compilation (the warm-up's seconds are stored apart).
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import sys
-from pathlib import Path
 
 from radarbench.bench import registry
 from radarbench.bench.plan import Plan
@@ -86,12 +84,6 @@ UNUSED_FILE = "warm-up-unused.json"
 UNUSED_PLANS = 32
 
 
-def _unused_path() -> Path | None:
-    from radarbench.bench.listing import cache_dir, private_dir
-    folder = cache_dir()
-    return folder / UNUSED_FILE if private_dir(folder) else None
-
-
 def plan_key(plan: Plan) -> str:
     """A plan's code and parameters (:func:`bench.identity.plan_identities`) as one digest:
     a changed method or scenario is a new plan to warm up."""
@@ -100,14 +92,8 @@ def plan_key(plan: Plan) -> str:
 
 
 def _read_unused() -> dict:
-    from radarbench.bench.listing import read_cached
-    path = _unused_path()
-    text = read_cached(path) if path is not None else None
-    try:
-        data = json.loads(text) if text is not None else {}
-    except ValueError:                   # damaged: every stale kernel counts
-        return {}
-    return data if isinstance(data, dict) else {}
+    from radarbench.bench.listing import read_table
+    return read_table(UNUSED_FILE)           # damaged or absent: every stale kernel counts
 
 
 def remember_unused(key: str) -> None:
@@ -117,14 +103,10 @@ def remember_unused(key: str) -> None:
     would warm up again until some sweep called every kernel of it. Kept in the user's
     cache folder (:func:`bench.listing.cache_dir`); where it cannot be written, the
     warm-up simply runs again."""
-    from radarbench.bench.listing import write_cached
-    path = _unused_path()
-    if path is None:
-        return
+    from radarbench.bench.listing import write_table
     data = {k: v for k, v in _read_unused().items() if k != key}
     data[key] = _stale_kernels()
-    with contextlib.suppress(OSError):
-        write_cached(path, json.dumps(dict(list(data.items())[-UNUSED_PLANS:])))
+    write_table(UNUSED_FILE, data, UNUSED_PLANS)
 
 
 def warm_up_tasks(plan: Plan, announce: str | None = None) -> list:
