@@ -22,6 +22,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from radarbench.bench.tables import identical_curves  # noqa: E402
+
 DPI = 110
 #: zlib level of the PNGs: 1 encodes several times faster than Pillow's default 6, for files a little larger
 PNG_COMPRESS_LEVEL = 1
@@ -130,28 +132,33 @@ def _legend_outside(ax) -> None:
 STYLES = ("o-", "s--", "^-.", "D:", "v-", "P--", "X-.", "*:")
 
 
-def _curves(summary: pd.DataFrame, x: str = "snr_db"):
-    """(colour, marker/line style, label, rows sorted by ``x``) per config; styles differ so equal curves stay visible."""
-    for i, (label, g) in enumerate(summary.groupby("config", sort=False)):
+def _curves(summary: pd.DataFrame, x: str = "snr_db", column: str | None = None):
+    """(colour, marker/line style, label, rows sorted by ``x``) per config; styles differ so
+    equal curves stay visible, and a config whose ``column`` equals an earlier one's at
+    every level says so in its label (:func:`bench.tables.identical_curves`)."""
+    same = identical_curves(summary, column) if column and x == "snr_db" else {}
+    for i, (config, g) in enumerate(summary.groupby("config", sort=False)):
+        label = config if config not in same else f"{config} (identical to {same[config]})"
         yield f"C{i % 10}", STYLES[i % len(STYLES)], label, g.sort_values(x)
 
 
 def pd_vs_snr(summary: pd.DataFrame, path: Path, pfa: float, title: str,
               chance: dict[str, float] | None = None, column: str = "pd",
-              ylabel: str = "probability of detection $P_D$") -> Path:
+              ylabel: str = "probability of detection $P_D$", condition: str | None = None) -> Path:
     """Pd (the summary's ``column``, default ``pd``) against SNR per method config, with
     its 95% band (``column`` + ``_low``/``_high``) and, dotted, the chance level of
-    that Pd measured on null trials (``chance``: config -> level)."""
+    that Pd measured on null trials (``chance``: config -> level); ``condition`` names
+    how the thresholds were set (default: the per-step Pfa)."""
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
-    for color, style, label, g in _curves(summary):
+    for color, style, label, g in _curves(summary, column=column):
         ax.plot(g.snr_db, g[column], style, color=color, ms=4, lw=1.5, label=label, mfc="none")
         ax.fill_between(g.snr_db, g[f"{column}_low"], g[f"{column}_high"], color=color, alpha=0.18, lw=0)
-        level = (chance or {}).get(label, np.nan)
+        level = (chance or {}).get(g.config.iloc[0], np.nan)
         if np.isfinite(level):
             ax.axhline(level, color=color, lw=1, ls=":", alpha=0.8)
     ax.axhline(0.5, color="0.6", lw=0.8, ls=":")
     ax.set(xlabel="SNR (dB)", ylabel=ylabel, ylim=(-0.02, 1.02),
-           title=f"{title}: $P_D$ vs SNR at $P_{{FA}}$ = {pfa:g} (95% bands)")
+           title=f"{title}: $P_D$ vs SNR {condition or f'at $P_{{FA}}$ = {pfa:g}'} (95% bands)")
     ax.grid(alpha=0.3)
     _legend_outside(ax)
     return _save(fig, path)
@@ -160,7 +167,7 @@ def pd_vs_snr(summary: pd.DataFrame, path: Path, pfa: float, title: str,
 def delay_vs_snr(summary: pd.DataFrame, path: Path, title: str) -> Path:
     """Mean detection delay of detected trials, with its bootstrap band."""
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
-    for color, style, label, g in _curves(summary):
+    for color, style, label, g in _curves(summary, column="delay_mean"):
         ok = g.delay_mean.notna()
         ax.plot(g.snr_db[ok], g.delay_mean[ok], style, color=color, ms=4, lw=1.5, label=label, mfc="none")
         ax.fill_between(g.snr_db[ok], g.delay_low[ok], g.delay_high[ok], color=color, alpha=0.18, lw=0)
@@ -243,7 +250,7 @@ def metric_vs(summary: pd.DataFrame, x: str, path: Path, title: str, column: str
     """A summary metric against the summary column ``x`` per config, with its
     interval band (``*_low``, ``*_high`` beside ``*_mean``) when present."""
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
-    for color, style, label, g in _curves(summary, x):
+    for color, style, label, g in _curves(summary, x, column):
         ok = g[column].notna()
         ax.plot(g[x][ok], g[column][ok], style, color=color, ms=4, lw=1.5, label=label, mfc="none")
         low, high = column.replace("_mean", "_low"), column.replace("_mean", "_high")

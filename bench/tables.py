@@ -32,3 +32,23 @@ def read_csv(text_or_path):
         return pd.read_csv(text_or_path)
     except pd.errors.EmptyDataError:
         return pd.DataFrame()
+
+
+def identical_curves(summary, column: str) -> dict[str, str]:
+    """config -> the first config listed before it whose ``column`` (with ``_low`` and
+    ``_high`` where the summary has them) equals its own at every SNR level: drawn
+    against SNR, the later curve hides exactly under the earlier one, so the figures'
+    legends say so. ``summary``: one scenario config's rows."""
+    import numpy as np
+
+    columns = [c for c in (column, f"{column}_low", f"{column}_high") if c in summary]
+    seen: dict[bytes, str] = {}
+    same: dict[str, str] = {}
+    for config, g in summary.groupby("config", sort=False):
+        g = g.sort_values("snr_db")
+        key = np.ascontiguousarray(g[["snr_db", *columns]].to_numpy(float)).tobytes()
+        if key in seen:
+            same[config] = seen[key]
+        else:
+            seen[key] = config
+    return same

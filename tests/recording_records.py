@@ -60,6 +60,7 @@ def records() -> list[TrialRecord]:
 def _summary() -> pd.DataFrame:
     rows = [(m, s, p) for m in (CUM, INNO) for s, p in ((-5.0, 0.1), (2.5, 0.4), (5.0, 0.8))]
     df = pd.DataFrame(rows, columns=["method", "snr_db", "pd"])
+    df["pd_equal_chance"] = df["pd"] / 2
     df["scenario"] = "cv-turn-cv"
     df["n_trials"] = 100
     return df

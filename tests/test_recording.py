@@ -81,8 +81,8 @@ def test_entity_paths(rrd, records):
         f"{cum}/statistic", f"{cum}/threshold", f"{cum}/alarms", f"{cum}/innovation",
         f"{inno}/statistic", f"{inno}/threshold", f"{root}/ekf/estimate",
         "/summary/table",
-        "/summary/maneuver-detection/pd_vs_snr/cumulant_window-32",
-        "/summary/maneuver-detection/pd_vs_snr/innovation_window-5_variant-fading",
+        "/summary/maneuver-detection/pd_equal_chance_vs_snr/cumulant_window-32",
+        "/summary/maneuver-detection/pd_equal_chance_vs_snr/innovation_window-5_variant-fading",
     ]
     for p in expected:
         assert rerun_path(p) in paths, p

@@ -8,7 +8,8 @@ import pytest
 
 from radarbench.bench.recording import blueprint as bp
 from radarbench.bench.recording.layout import PALETTE, TrialLayout, method_colors
-from radarbench.bench.recording.summary import informative_snr, legend_corner, snr_axis, summary_charts, summary_markdown
+from radarbench.bench.recording.plot import PLOT_WIDTH, Plot, legend_heights, ticks
+from radarbench.bench.recording.summary import SNR_AXIS_TITLE, informative_snr, summary_charts, summary_markdown
 from radarbench.bench.tasks.detection import DetectionTask
 from radarbench.bench.tasks.tbd import TBDTask
 from radarbench.bench.tasks.tracking import TrackingTask
@@ -49,8 +50,8 @@ def _summary() -> tuple[pd.DataFrame, dict]:
     rows = []
     for scenario, snrs, pds in (("cv-a", (-6, 0, 6), (0.1, 0.45, 0.9)), ("cv-b", (-6, 0, 6), (0.05, 0.2, 0.52))):
         for method, shift in (("cum", 0.0), ("nis", 0.05)):
-            rows += [dict(scenario=scenario, method=method, snr_db=s, pd=min(1.0, p + shift), delay_mean=5.0)
-                     for s, p in zip(snrs, pds)]
+            rows += [dict(scenario=scenario, method=method, snr_db=s, pd=min(1.0, p + shift),
+                          pd_equal_chance=min(1.0, p + shift) / 2, delay_mean=5.0) for s, p in zip(snrs, pds)]
     rows += [dict(scenario="glint", method="ekf", snr_db=s, rmse_mean=r, divergence_rate=0.0)
              for s, r in ((0, 100.0), (10, 20.0))]
     rows += [dict(scenario="grid", method="dp", snr_db=s, pd=p, rmse_mean=2.0) for s, p in ((0, 0.3), (6, 0.8))]
@@ -61,7 +62,8 @@ def test_summary_charts_are_split_by_task_unit_and_scenario_config():
     summary, tasks = _summary()
     charts = {c.root: c for c in summary_charts(summary, tasks)}
     assert set(charts) == {
-        "/summary/maneuver-detection/pd_vs_snr/cv-a", "/summary/maneuver-detection/pd_vs_snr/cv-b",
+        "/summary/maneuver-detection/pd_equal_chance_vs_snr/cv-a",
+        "/summary/maneuver-detection/pd_equal_chance_vs_snr/cv-b",
         "/summary/maneuver-detection/delay_vs_snr/cv-a", "/summary/maneuver-detection/delay_vs_snr/cv-b",
         "/summary/tracking/rmse_vs_snr", "/summary/tracking/divergence_rate_vs_snr",
         "/summary/tbd/pd_vs_snr", "/summary/tbd/rmse_vs_snr"}
@@ -70,13 +72,15 @@ def test_summary_charts_are_split_by_task_unit_and_scenario_config():
         assert {tasks[m].name for m in methods} == {chart.task}              # one task per chart
         assert all(s.rows["scenario"].nunique() == 1 and set(s.rows["method"]) == {s.label} for s in chart.series)
     # the scenario config leads (the task is the chart's tab); one SNR level: "at", not "vs"
-    assert charts["/summary/tracking/rmse_vs_snr"].title == "glint · RMSE (m) vs SNR (dB)"
-    assert charts["/summary/tbd/rmse_vs_snr"].title == "grid · RMSE of detected tracks (m) vs SNR (dB)"
-    assert charts["/summary/maneuver-detection/pd_vs_snr/cv-b"].title == "cv-b · Pd vs SNR (dB)"
+    assert charts["/summary/tracking/rmse_vs_snr"].title == "glint · RMSE (m) vs SNR"
+    assert charts["/summary/tbd/rmse_vs_snr"].title == "grid · RMSE of detected tracks (m) vs SNR"
+    # a detector's first chart is what the glance ranks on
+    assert charts["/summary/maneuver-detection/pd_equal_chance_vs_snr/cv-b"].title == \
+        "cv-b · Pd at equal chance Pd vs SNR"
     # in the summary's order: task by task, scenario config by scenario config
     assert [c.root.split("/")[2:] for c in summary_charts(summary, tasks)][:4] == [
-        ["maneuver-detection", "pd_vs_snr", "cv-a"], ["maneuver-detection", "delay_vs_snr", "cv-a"],
-        ["maneuver-detection", "pd_vs_snr", "cv-b"], ["maneuver-detection", "delay_vs_snr", "cv-b"]]
+        ["maneuver-detection", "pd_equal_chance_vs_snr", "cv-a"], ["maneuver-detection", "delay_vs_snr", "cv-a"],
+        ["maneuver-detection", "pd_equal_chance_vs_snr", "cv-b"], ["maneuver-detection", "delay_vs_snr", "cv-b"]]
 
 
 def test_one_colour_per_config_distinct_within_a_task():
@@ -100,13 +104,23 @@ def test_a_chart_with_one_snr_level_is_a_comparison_at_it():
     assert chart.single_level and chart.title == "glint · RMSE (m) at +10 dB"
 
 
-def test_snr_levels_that_are_not_whole_db_are_drawn_in_tenths():
-    assert snr_axis([-3.0, 0.0, 6.0]) == (1, "dB")
-    assert snr_axis([-2.5, 0.0, 6.0]) == (10, "0.1 dB")
-    assert snr_axis([0.25, 1.0]) == (100, "0.01 dB")
+def test_a_chart_plots_its_values_between_round_ticks_of_each_axis():
+    assert list(ticks(-15.0, 10.0)) == [-15.0, -10.0, -5.0, 0.0, 5.0, 10.0]
+    assert list(ticks(0.03, 0.97)) == pytest.approx([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
+    plot = Plot.covering(np.array([-2.5, 0.0, 6.5]), np.array([0.1, 0.5, 0.9]))
+    corners = plot.screen([plot.x_ticks[0], plot.x_ticks[-1]], [plot.y_ticks[0], plot.y_ticks[-1]])
+    assert corners[0, 0] == 0.0 and corners[1, 0] == PLOT_WIDTH          # x right
+    assert corners[0, 1] == 0.0 and corners[1, 1] < 0.0                  # y up (negated on screen)
+    xy = plot.screen([-2.5, 6.5], [0.1, 0.9])
+    assert (xy[:, 0] >= 0).all() and (xy[:, 0] <= PLOT_WIDTH).all()       # every value inside the plot
+
+
+def test_identical_configs_are_named_so_in_every_chart():
     summary, tasks = _summary()
-    summary["snr_db"] = summary["snr_db"].astype(float).replace(6.0, 6.5)
-    assert summary_charts(summary, tasks)[0].title == "cv-a · Pd vs SNR (0.1 dB)"
+    twin = summary[summary.method == "cum"].assign(method="cum2")
+    charts = summary_charts(pd.concat([summary, twin]), {**tasks, "cum2": DET})
+    legends = {s.legend for c in charts for s in c.series}
+    assert "cum2 (identical to cum)" in legends and "cum" in legends
 
 
 def test_informative_snr_is_where_pd_is_nearest_one_half():
@@ -115,15 +129,15 @@ def test_informative_snr_is_where_pd_is_nearest_one_half():
     assert informative_snr(summary, tasks) == {"cv-a": 0.0, "cv-b": 6.0, "grid": 0.0}
 
 
-def test_the_legend_goes_where_the_curves_are_not():
-    x = np.arange(-15.0, 10.0, 3.0)
-    rising = 1 / (1 + np.exp(-x / 3))
-    assert legend_corner([(x, rising), (x, rising ** 2)], 20) == "LeftTop"             # a Pd: top left is free
-    assert legend_corner([(x, rising[::-1])], 20) == "RightTop"                          # an RMSE: top right
-    assert legend_corner([(x, np.abs(x + 3))], 20) == "LeftBottom"                      # high at both ends
-    summary, tasks = _summary()
-    assert {c.root: c.legend_corner for c in summary_charts(summary, tasks)}["/summary/tracking/rmse_vs_snr"] == \
-        "RightTop"                                                                       # its RMSE falls
+def test_legend_entries_stay_apart_and_near_where_their_curves_end():
+    ends = np.array([-30.0, -31.0, -30.5, 0.0])
+    placed = legend_heights(ends, line=5.0)
+    order = np.sort(placed)
+    assert np.all(np.diff(order) >= 5.0 - 1e-9)                               # none overlaps
+    assert abs(placed[3] - 0.0) < 1e-9 or placed[3] > placed[:3].max()       # the far one keeps its place
+    assert abs(placed[:3].mean() - ends[:3].mean()) < 5.0                     # the crowd stays centred
+    far = np.array([-50.0, -20.0, 0.0])
+    assert np.array_equal(legend_heights(far, line=5.0), far)                 # no crowding: as wished
 
 
 def test_summary_table_starts_with_the_colour_key():
@@ -194,7 +208,7 @@ def test_the_first_screen_is_the_summary_with_a_named_curve_per_config(small_run
     empty."""
     import pandas as pd
 
-    from tests.rrd_blueprint import TABS, axes_of, read_blueprint, track_views
+    from tests.rrd_blueprint import TABS, axes_of, read_blueprint, static_values, track_views
     from tests.rrd_blueprint import entities as entities_of
 
     rrd = small_run / "recording.rrd"
@@ -206,12 +220,15 @@ def test_the_first_screen_is_the_summary_with_a_named_curve_per_config(small_run
     assert [blueprint.child(c).name for c in summary.contents] == ["maneuver-detection", "summary table"]
     configs = sorted(pd.read_csv(small_run / "summary.csv")["config"].unique())
     charts = blueprint.views_under(blueprint.tab("summary", "maneuver-detection"))
-    assert [v.name for v in charts] == ["cv-turn-cv · Pd vs SNR (dB)", "cv-turn-cv · mean delay (steps) vs SNR (dB)"]
-    for view in charts:
-        assert view.kind == "TimeSeries" and view.legend_visible
-        shown = view.shows(entities)
-        assert sorted(name for path in shown for name in set(_series_names(rrd, path))) == configs
-        assert all(_series_names(rrd, path).count(_series_names(rrd, path)[0]) == 2 for path in shown)  # line and points
+    assert [v.name for v in charts] == ["cv-turn-cv · Pd at equal chance Pd vs SNR",
+                                        "cv-turn-cv · mean delay (steps) vs SNR"]
+    for view, y_title in zip(charts, ["Pd at equal chance Pd", "mean delay (steps)"]):
+        # a plot drawn in a 2-D view: axes titled with their units, every config named beside it
+        assert view.kind == "2D"
+        lines, labels = axes_of(rrd, view, entities)
+        assert labels[-2:] == [SNR_AXIS_TITLE, y_title] and lines >= 5
+        legend = static_values(rrd, f"{view.origin}/legend", "Points2D:labels")
+        assert sorted(name.split(" (identical to ")[0] for name in legend) == configs
     empty = [(v.kind, v.name) for v in blueprint.views.values() if not v.shows(entities)]
     assert not empty
     # every trial's 2-D track: an L with a mark per tick, the ticks' values and the titles in
@@ -244,3 +261,11 @@ def test_nice_ticks_one_step_for_both_axes():
     assert xy_extent(np.full((3, 2), np.nan), None) is None                                 # nothing drawn: no axes
     left, right = frame.bounds()[0]
     assert left < frame.x_ticks[0] and right > frame.x_ticks[-1]                           # room for the labels
+
+
+def test_a_trackers_error_views_name_their_units():
+    assert [TRK.trace_unit(name) for name in ("error_x", "error_vy", "error_az", "estimate_y", "nis")] == \
+        ["m", "m/s", "m/s²", "m", ""]
+    layout = TrialLayout(root="/glint/x/trial_000", scenario="glint", title="t", sort_key=("glint", False, 0.0, 0),
+                         methods=(), tasks=(TRK,), has_xy=False)
+    assert bp._with_unit(layout, "error_vx") == "error_vx (m/s)" and bp._with_unit(layout, "nis") == "nis"

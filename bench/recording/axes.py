@@ -22,7 +22,7 @@ import numpy as np
 from radarbench.bench.recording.layout import NEUTRAL_COLOR
 from radarbench.bench.recording.paths import rerun_path
 
-__all__ = ["DRAWABLE_MAX", "Frame", "frame_of", "log_axes", "xy_extent"]
+__all__ = ["DRAWABLE_MAX", "Frame", "frame_of", "log_axes", "log_frame_lines", "xy_extent"]
 
 #: Intervals the longer side is cut into at a round step (matplotlib's MaxNLocator: at
 #: most MAX_INTERVALS, with at least MIN_TICKS ticks inside the data's range; the frame
@@ -107,6 +107,20 @@ def frame_of(extent: np.ndarray) -> Frame:
     return Frame(ticks[0], ticks[1], "km" if step >= KM_FROM_STEP_M else "m")
 
 
+def log_frame_lines(stream, path: str, xs: np.ndarray, ys: np.ndarray, tick: float) -> None:
+    """An L of two axis lines (left and bottom) through the ticks at screen positions
+    ``xs`` (left to right) and ``ys`` (bottom first, y down), with a tick mark of length
+    ``tick`` at each, as a static entity at ``path``."""
+    import rerun as rr
+
+    left, bottom, top = xs[0], ys[0], ys[-1]
+    strips = [np.array([[left, top], [left, bottom], [xs[-1], bottom]])]
+    strips += [np.array([[x, bottom], [x, bottom + tick]]) for x in xs]
+    strips += [np.array([[left, y], [left - tick, y]]) for y in ys]
+    stream.log(rerun_path(path), rr.LineStrips2D(strips, colors=[NEUTRAL_COLOR],
+                                                 radii=[rr.components.Radius.ui_points(0.75)]), static=True)
+
+
 def log_axes(stream, path: str, frame: Frame, scale: float = 1.0, offset=(0.0, 0.0)) -> None:
     """``frame`` as static entities at ``path`` (the lines) and ``path/labels`` (tick
     values and titles; the viewer draws a label centred below its point). Over an image
@@ -119,11 +133,7 @@ def log_axes(stream, path: str, frame: Frame, scale: float = 1.0, offset=(0.0, 0
                    static=True)
     xs, ys, tick = frame.x_ticks, frame.screen_y, frame.tick
     left, bottom, top = xs[0], ys[0], ys[-1]
-    strips = [np.array([[left, top], [left, bottom], [xs[-1], bottom]])]
-    strips += [np.array([[x, bottom], [x, bottom + tick]]) for x in xs]
-    strips += [np.array([[left, y], [left - tick, y]]) for y in ys]
-    stream.log(rerun_path(path), rr.LineStrips2D(strips, colors=[NEUTRAL_COLOR],
-                                                 radii=[rr.components.Radius.ui_points(0.75)]), static=True)
+    log_frame_lines(stream, path, xs, ys, tick)
     # x values under their tick, y values left of theirs (raised by half a line), the x
     # title under the values, the y title above the y axis
     places = ([(x, bottom + tick, frame.text(x)) for x in xs]

@@ -110,9 +110,16 @@ def _trace_views(layout: TrialLayout) -> list:
     if len(by_key) > MAX_TRACE_VIEWS:
         return [rrb.TimeSeriesView(origin=origin, name="traces", contents=[p for v in by_key.values() for p in v])]
     # The legend only where several methods share the view (else the view's name says it).
-    return [rrb.TimeSeriesView(origin=origin, name=key, contents=paths,
+    return [rrb.TimeSeriesView(origin=origin, name=_with_unit(layout, key), contents=paths,
                                plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=len(paths) > 1))
             for key, paths in by_key.items()]
+
+
+def _with_unit(layout: TrialLayout, trace: str) -> str:
+    """A trace's view name with its unit, as the first of the trial's tasks that knows it
+    says (:meth:`bench.tasks.base.Task.trace_unit`)."""
+    unit = next((u for u in (task.trace_unit(trace) for task in layout.tasks if hasattr(task, "trace_unit")) if u), "")
+    return f"{trace} ({unit})" if unit else trace
 
 
 def _track_view(tab: TrialTab):
@@ -152,12 +159,13 @@ def _trial_container(tab: TrialTab, title: str):
 
 
 def _chart_view(chart):
-    """A chart's time-series view, its legend (the configs' names) in the corner the
-    curves cross least."""
+    """A chart's 2-D view (:mod:`bench.recording.plot`), framed on its plot, axis titles
+    and legend."""
     import rerun.blueprint as rrb
 
-    return rrb.TimeSeriesView(origin=rerun_path(chart.root), name=chart.title,
-                              plot_legend=rrb.PlotLegend(corner=getattr(rrb.Corner2D, chart.legend_corner), visible=True))
+    x_range, y_range = chart.bounds()
+    return rrb.Spatial2DView(origin=rerun_path(chart.root), name=chart.title,
+                             visual_bounds=rrb.VisualBounds2D(x_range=x_range, y_range=y_range))
 
 
 def _summary_tab(charts):

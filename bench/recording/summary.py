@@ -2,19 +2,18 @@
 
 Entities (docs/architecture.md, 'Recordings')::
 
-    /summary/{task}/{chart}/{method}              Scalars: a summary column against SNR (dB)
-    /summary/{task}/{chart}/{scenario}/{method}   the same, one chart per scenario config
+    /summary/{task}/{chart}/...                   a summary column against SNR (dB), drawn as a
+                                                  plot in a 2-D view (:mod:`bench.recording.plot`):
+                                                  axes with titles and units, a curve per method
+                                                  config, the configs' names beside the plot
+    /summary/{task}/{chart}/{scenario}/...        the same, one chart per scenario config
                                                   when the task ran on several
     /summary/table                                static TextDocument (Markdown, :mod:`bench.markdown`)
 
-A chart is a time-series plot with one named series per method config, in the config's
-colour (:func:`~bench.recording.layout.method_colors`), so its legend names the methods:
-a line through the SNR levels, or markers alone where the chart has one SNR level. The
-viewer's time-series x axis is the selected timeline, which the time panel shares with
-the trials (``step``): so a point is indexed by its SNR on ``step`` as well as on its own
-timeline :data:`SNR_TIMELINE`. Both are sequences (integers): SNR levels that are not
-whole dB are drawn in tenths or hundredths of a dB (:func:`snr_axis`), which the
-titles say.
+A chart has one curve per method config, in the config's colour
+(:func:`~bench.recording.layout.method_colors`, as in the trial plots), or points alone
+where the chart has one SNR level. A config whose values equal an earlier config's at
+every level is named "(identical to ...)": its curve lies exactly under that one.
 
 Which charts a task has is its own business (``Task.recording_charts``: the summary
 column and the axis title with its unit, e.g. ``("rmse_mean", "RMSE (m)")``): charts
@@ -34,18 +33,17 @@ import numpy as np
 
 from radarbench.bench.markdown import code, frame_table
 from radarbench.bench.recording.layout import PALETTE, method_colors
-from radarbench.bench.recording.paths import entity_name, method_entity_names, rerun_path
+from radarbench.bench.recording.paths import entity_name, method_entity_names
+from radarbench.bench.recording.plot import Plot, log_plot
+from radarbench.bench.tables import identical_curves
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd
 
-__all__ = ["SNR_TIMELINE", "Chart", "Series", "informative_snr", "legend_corner", "log_summary", "snr_axis", "summary_charts",
-           "summary_markdown"]
+__all__ = ["SNR_AXIS_TITLE", "Chart", "Series", "informative_snr", "log_summary", "summary_charts", "summary_markdown"]
 
-#: The timeline of the summary's curves (besides ``step``, the one the viewer opens on).
-SNR_TIMELINE = "SNR"
-#: Marker sizes (ui points) of a curve's points, and of a chart's points where it has one SNR level.
-CURVE_MARKER, SINGLE_MARKER = 3.0, 6.0
+#: The x axis of every summary chart
+SNR_AXIS_TITLE = "SNR (dB)"
 
 
 @dataclass(frozen=True)
@@ -56,6 +54,8 @@ class Series:
     label: str
     color: tuple[int, int, int]
     rows: pd.DataFrame
+    #: the legend's entry: the label, and "(identical to X)" where its values equal X's
+    legend: str = ""
 
 
 @dataclass(frozen=True)
@@ -67,10 +67,7 @@ class Chart:
     title: str                       # the scenario config first: what tells charts apart
     column: str
     series: tuple[Series, ...]
-    snr_scale: int                   # timeline value = SNR (dB) x snr_scale (snr_axis)
-
-    def _column(self, name: str) -> np.ndarray:
-        return np.concatenate([s.rows[name].to_numpy(float) for s in self.series])
+    y_title: str                     # the column's name with its unit ("RMSE (m)")
 
     @property
     def snrs(self) -> np.ndarray:
@@ -82,39 +79,10 @@ class Chart:
         """One SNR level: a comparison of the configs at it, no curve."""
         return self.snrs.size == 1
 
-    @property
-    def legend_corner(self) -> str:
-        """The plot corner (``rerun.blueprint.Corner2D`` name) whose legend box the series
-        cross least (:func:`legend_corner`)."""
-        return legend_corner([(s.rows["snr_db"].to_numpy(float), s.rows[self.column].to_numpy(float))
-                              for s in self.series], max(len(s.label) for s in self.series))
-
-
-#: The plot a legend is placed for (ui points): half a 1280-point window wide, a grid row
-#: high; and a legend's size in it: an entry's height, its marker and margins, a character.
-PLOT_SIZE, LEGEND_ENTRY, LEGEND_MARGIN, LEGEND_CHAR = (620.0, 400.0), 23.0, 30.0, 7.0
-#: Corners in order of preference when several are as free.
-CORNERS = ("LeftTop", "RightTop", "LeftBottom", "RightBottom")
-
-
-def legend_corner(curves: list[tuple[np.ndarray, np.ndarray]], longest_label: int) -> str:
-    """The corner of a plot of ``curves`` ((x, y) each, drawn as lines) whose legend box
-    (one entry per curve, ``longest_label`` characters wide) covers the fewest points
-    sampled along the lines, in coordinates scaled to the data's range."""
-    x = np.concatenate([c[0] for c in curves])
-    y = np.concatenate([c[1] for c in curves])
-    (x0, x1), (y0, y1) = (x.min(), x.max()), (y.min(), y.max())
-    t = np.linspace(0.0, 1.0, 20)[:, None]
-    samples = np.concatenate([np.column_stack([(cx[:-1] + t * np.diff(cx)).ravel(), (cy[:-1] + t * np.diff(cy)).ravel()])
-                              if cx.size > 1 else np.column_stack([cx, cy]) for cx, cy in curves])
-    u = (samples[:, 0] - x0) / (x1 - x0) if x1 > x0 else np.full(len(samples), 0.5)
-    v = (samples[:, 1] - y0) / (y1 - y0) if y1 > y0 else np.full(len(samples), 0.5)
-    width = min(0.9, (LEGEND_MARGIN + LEGEND_CHAR * longest_label) / PLOT_SIZE[0])
-    height = min(0.9, (LEGEND_MARGIN + LEGEND_ENTRY * len(curves)) / PLOT_SIZE[1])
-    left, bottom = u <= width, v <= height
-    right, top = u >= 1 - width, v >= 1 - height
-    covered = [np.sum(a & b) for a, b in ((left, top), (right, top), (left, bottom), (right, bottom))]
-    return CORNERS[int(np.argmin(covered))]
+    def bounds(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """The x and y ranges of the chart's 2-D view: its plot, labels and legend."""
+        plot = Plot.covering(self.snrs, np.concatenate([s.rows[self.column].to_numpy(float) for s in self.series]))
+        return plot.bounds(max(len(s.legend) for s in self.series))
 
 
 #: Names of the PALETTE colours (tab10), for the colour key.
@@ -138,17 +106,6 @@ def _by_task(summary: pd.DataFrame, tasks: Mapping[str, Any]) -> list[tuple[Any,
     return [(task, summary[summary["method"].astype(str).isin(labels)]) for task, labels in groups.values()]
 
 
-def snr_axis(snrs) -> tuple[int, str]:
-    """(scale, unit): the SNR levels ``snrs`` (dB) times ``scale`` (1, 10 or 100, the
-    smallest that makes them whole; finer levels are rounded to 0.01 dB) are the
-    sequence timeline's values, in ``unit``."""
-    snrs = np.asarray(snrs, float)
-    for scale, unit in ((1, "dB"), (10, "0.1 dB")):
-        if np.allclose(snrs * scale, np.rint(snrs * scale), rtol=0.0, atol=1e-6):
-            return scale, unit
-    return 100, "0.01 dB"
-
-
 def summary_charts(summary: pd.DataFrame | None, tasks: Mapping[str, Any] | None = None) -> list[Chart] | None:
     """None for no/empty summary, else every chart with data (possibly none: the
     table alone), task by task and scenario config by scenario config in the order
@@ -160,7 +117,6 @@ def summary_charts(summary: pd.DataFrame | None, tasks: Mapping[str, Any] | None
         raise ValueError(f"summary: missing column(s) {', '.join(sorted(missing))}")
     tasks = tasks or {}
     colors = method_colors({label: tasks.get(label) for label in set(tasks) | set(summary["method"].astype(str))})
-    scale, unit = snr_axis(summary["snr_db"].dropna().to_numpy(float))
     out = []
     for task, rows in _by_task(summary, tasks):
         scenarios = list(rows["scenario"].astype(str).unique()) if "scenario" in rows.columns else [None]
@@ -176,9 +132,9 @@ def summary_charts(summary: pd.DataFrame | None, tasks: Mapping[str, Any] | None
                 if not series:
                     continue
                 levels = _levels(series)
-                where = f"at {levels[0]:+g} dB" if levels.size == 1 else f"vs SNR ({unit})"
+                where = f"at {levels[0]:+g} dB" if levels.size == 1 else "vs SNR"
                 out.append(Chart(root, _task_name(task), (f"{scenario} · " if scenario else "") + f"{title} {where}",
-                                 column, tuple(series), scale))
+                                 column, tuple(series), title))
     return out
 
 
@@ -192,8 +148,9 @@ def _series(rows: pd.DataFrame, column: str, root: str, colors: Mapping[str, tup
     df = rows.dropna(subset=["snr_db", column])
     labels = sorted(df["method"].astype(str).unique())
     names = method_entity_names(labels)
-    return [Series(f"{root}/{names[label]}", label, colors[label],
-                   df[df["method"].astype(str) == label].sort_values("snr_db")) for label in labels]
+    same = identical_curves(df.assign(config=df["method"].astype(str)).sort_values("config", kind="stable"), column)
+    return [Series(f"{root}/{names[label]}", label, colors[label], df[df["method"].astype(str) == label].sort_values("snr_db"),
+                   label if label not in same else f"{label} (identical to {same[label]})") for label in labels]
 
 
 def informative_snr(summary: pd.DataFrame | None, tasks: Mapping[str, Any] | None = None) -> dict[str, float]:
@@ -217,21 +174,8 @@ def informative_snr(summary: pd.DataFrame | None, tasks: Mapping[str, Any] | Non
 
 
 def log_chart(stream, chart: Chart) -> None:
-    """Each series of ``chart``: its style (static), then its values in one column indexed
-    by SNR on ``step`` and on :data:`SNR_TIMELINE` (see the module docstring)."""
-    import rerun as rr
-
-    for s in chart.series:
-        path = rerun_path(s.path)
-        snr = np.rint(s.rows["snr_db"].to_numpy(float) * chart.snr_scale).astype(np.int64)
-        points = rr.SeriesPoints(names=s.label, colors=[s.color], markers=["circle"],
-                                 marker_sizes=[SINGLE_MARKER if chart.single_level else CURVE_MARKER])
-        stream.log(path, points, static=True)
-        if not chart.single_level:
-            stream.log(path, rr.SeriesLines(names=s.label, colors=[s.color], widths=[2.0]), static=True)
-        stream.send_columns(path, indexes=[rr.TimeColumn("step", sequence=snr),
-                                           rr.TimeColumn(SNR_TIMELINE, sequence=snr)],
-                            columns=rr.Scalars.columns(scalars=s.rows[chart.column].to_numpy(np.float64)))
+    """``chart`` as a plot in its 2-D view (:func:`bench.recording.plot.log_plot`)."""
+    log_plot(stream, chart.root, chart.series, chart.column, SNR_AXIS_TITLE, chart.y_title)
 
 
 def summary_markdown(summary: pd.DataFrame, tasks: Mapping[str, Any] | None = None) -> str:

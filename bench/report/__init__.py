@@ -475,8 +475,10 @@ def _task_contexts(present: list, task_of: dict, summary, trials, steps, series,
 
 
 def _recording_summary(summary: pd.DataFrame, tasks) -> pd.DataFrame:
-    """The summary as the recording shows it: configs as methods, the headline columns."""
-    wanted = set(RECORDING_KEYS).union(*(t.headline_columns for t in tasks))
+    """The summary as the recording shows it: configs as methods, the headline columns and
+    those the tasks chart."""
+    wanted = set(RECORDING_KEYS).union(*(t.headline_columns for t in tasks),
+                                       *((column for column, _ in t.recording_charts) for t in tasks))
     summary = summary.assign(method=summary.config)
     return summary[[c for c in summary.columns if c in wanted]]
 

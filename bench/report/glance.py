@@ -36,11 +36,12 @@ import itertools
 import numpy as np
 import pandas as pd
 
-from radarbench.bench.metrics import CONFIDENCE, bootstrap_mean_ci, mcnemar_exact, paired_difference
+from radarbench.bench.metrics import (CONFIDENCE, RELATIVE_RESOLUTION, bootstrap_mean_ci, mcnemar_exact,
+                                      paired_difference, resolved_differences)
 
 COMPARISON_COLUMNS = ["scenario", "task", "metric", "snr_db", "config_a", "config_b", "n_pairs", "mean_a", "mean_b",
                       "difference", "difference_low", "difference_high", "only_a", "only_b", "mcnemar_p",
-                      "significant", "better"]
+                      "significant", "better", "degenerate"]
 #: ``snr_db`` of the comparison over every level of a scenario config (blank in the CSV)
 ALL_LEVELS = np.nan
 
@@ -60,16 +61,36 @@ def _wide(g: pd.DataFrame, metric: str) -> pd.DataFrame:
 def compare_pair(a: np.ndarray, b: np.ndarray, snr_db: np.ndarray, binary: bool, higher_is_better: bool) -> dict:
     """The paired comparison of two configs' per-trial values ``a`` and ``b`` (NaN where
     a config has none), trial by trial, ``snr_db`` each trial's level."""
-    diff, low, high = paired_difference(a, b, snr_db)
+    ok = np.isfinite(a) & np.isfinite(b)
+    mean_a, mean_b = _mean(a[ok]), _mean(b[ok])
+    diff, low, high = _snapped(paired_difference(a, b, snr_db), mean_a, mean_b)
     only_a, only_b, p = mcnemar_exact(a, b) if binary else (np.nan, np.nan, np.nan)
     significant = bool(np.isfinite(low) and (low > 0 or high < 0) and (not binary or p < 1 - CONFIDENCE))
-    ok = np.isfinite(a) & np.isfinite(b)
     better = "tie"
     if significant:
         better = "b" if (diff > 0) == higher_is_better else "a"
-    return {"n_pairs": int(ok.sum()), "mean_a": _mean(a[ok]), "mean_b": _mean(b[ok]),
+    return {"n_pairs": int(ok.sum()), "mean_a": mean_a, "mean_b": mean_b,
             "difference": diff, "difference_low": low, "difference_high": high, "only_a": only_a, "only_b": only_b,
-            "mcnemar_p": p, "significant": significant, "better": better}
+            "mcnemar_p": p, "significant": significant, "better": better,
+            "degenerate": _degenerate(a[ok], b[ok], low, high)}
+
+
+def _snapped(values, mean_a: float, mean_b: float) -> tuple[float, ...]:
+    """``values`` (a difference and its interval) with those within the metric's
+    resolution of 0 (:data:`~bench.metrics.RELATIVE_RESOLUTION` of the larger mean) set to
+    exactly 0: an average over levels of equal values leaves float noise (-2e-17) that
+    would read as an interval excluding 0."""
+    scale = RELATIVE_RESOLUTION * max(abs(mean_a), abs(mean_b)) if np.isfinite(mean_a + mean_b) else 0.0
+    return tuple(0.0 if np.isfinite(v) and abs(v) <= scale else float(v) for v in values)
+
+
+def _degenerate(a: np.ndarray, b: np.ndarray, low: float, high: float) -> str:
+    """Why an interval is a single point, for comparisons.csv: "identical" (every pair
+    equal: the two configs gave the same values on every trial), "zero-width" (every
+    pair differs by the same amount, so resampling changes nothing), else ""."""
+    if a.size and not np.any(resolved_differences(a, b)):
+        return "identical"
+    return "zero-width" if np.isfinite(low) and low == high else ""
 
 
 def _mean(values: np.ndarray) -> float:

@@ -4,7 +4,7 @@ Built from the same Markdown as report.md (``report.md.j2`` with ``html``
 set, :mod:`bench.report.render`), converted by the ``markdown`` package
 (tables, fenced code), then made self-contained: every ``figures/*.png``
 embedded as a base64 data URI, the CSS and the table-sorting script inline
-(``page.html.j2``), and, where a task declares a ``curve_column``, an
+(``page.html.j2``), and, where a task declares ``curves``, an
 interactive plotly figure of it against SNR with hover, plotly.js embedded
 inline once (about 4.8 MB: the file is that much larger than the Markdown; no
 network is needed to open it).
@@ -32,6 +32,7 @@ from pathlib import Path
 import pandas as pd
 
 from radarbench.bench.report.render import environment, sentence_case
+from radarbench.bench.tables import identical_curves
 
 PLACEHOLDER = '<div id="bench-interactive"></div>'
 _IMG = re.compile(r'(<img[^>]*?src=")(figures/[^"]+\.png)(")')
@@ -65,28 +66,32 @@ def _plotly_text(label: str) -> str:
 
 def interactive_specs(summary: pd.DataFrame, task_of: dict) -> list[dict]:
     """What :func:`interactive_figures` draws, as plain data (a pool's process can draw it):
-    one figure per (task with a ``curve_column``, scenario config with two or more SNR
-    levels): the column against SNR per method config, its 95% interval as error bars."""
+    one figure per (task, scenario config with two or more SNR levels, column of the
+    task's ``curves``), the glance's metric first: the column against SNR per method
+    config, its 95% interval as error bars. A config whose curve equals another's at every
+    level says so in its legend entry (it is drawn exactly under that one)."""
     specs = []
     for task in dict.fromkeys(task_of.values()):
-        col = task.curve_column
-        if not col or col not in summary:
-            continue
         mine = summary[summary.config.isin([c for c, t in task_of.items() if t is task])]
-        for scenario, g in mine.groupby("scenario", sort=False):
-            if g.snr_db.nunique() < 2 or g[col].isna().all():
+        for col, label in task.curves:
+            if col not in summary:
                 continue
-            traces = []
-            for config, c in g.groupby("config", sort=False):
-                c = c.sort_values("snr_db")
-                y = c[col].to_numpy(float)
-                low, high = c.get(f"{col}_low"), c.get(f"{col}_high")
-                error = None if low is None or high is None else dict(
-                    type="data", array=high.to_numpy(float) - y, arrayminus=y - low.to_numpy(float), thickness=1)
-                traces.append({"label": _plotly_text(config), "x": c.snr_db, "y": y, "error": error})
-            specs.append({"title": f"{sentence_case(task.noun)} on {_plotly_text(scenario)}: {col} (summary.csv) "
-                                   "against SNR", "column": col, "traces": traces,
-                          "log": not task.ranking_binary})        # a probability; an error
+            for scenario, g in mine.groupby("scenario", sort=False):
+                if g.snr_db.nunique() < 2 or g[col].isna().all():
+                    continue
+                same = identical_curves(g, col)
+                traces = []
+                for config, c in g.groupby("config", sort=False):
+                    c = c.sort_values("snr_db")
+                    y = c[col].to_numpy(float)
+                    low, high = c.get(f"{col}_low"), c.get(f"{col}_high")
+                    error = None if low is None or high is None else dict(
+                        type="data", array=high.to_numpy(float) - y, arrayminus=y - low.to_numpy(float), thickness=1)
+                    name = config if config not in same else f"{config} (identical to {same[config]})"
+                    traces.append({"label": _plotly_text(name), "x": c.snr_db, "y": y, "error": error})
+                specs.append({"title": f"{sentence_case(task.noun)} on {_plotly_text(scenario)}: "
+                                       f"{_plotly_text(label)} against SNR", "column": col, "axis": _plotly_text(label),
+                              "traces": traces, "log": not task.ranking_binary})   # a probability; an error
     return specs
 
 
@@ -97,13 +102,12 @@ def interactive_figures(specs: list[dict]) -> str:
     figures = []
     for spec in specs:
         fig = go.Figure()
-        col = spec["column"]
         for trace in spec["traces"]:
             label = trace["label"]
             fig.add_trace(go.Scatter(
                 x=trace["x"], y=trace["y"], mode="lines+markers", name=label, error_y=trace["error"],
-                hovertemplate=f"{label}<br>SNR %{{x:.1f}} dB<br>{col} %{{y:.3g}}<extra></extra>"))
-        fig.update_layout(title=spec["title"], xaxis_title="SNR (dB)", yaxis_title=f"{col} (95% interval)",
+                hovertemplate=f"{label}<br>SNR %{{x:.1f}} dB<br>{spec['axis']} %{{y:.3g}}<extra></extra>"))
+        fig.update_layout(title=spec["title"], xaxis_title="SNR (dB)", yaxis_title=f"{spec['axis']} (95% interval)",
                           template="plotly_white", height=420, yaxis_type="log" if spec["log"] else "linear",
                           legend=dict(orientation="h", y=-0.2))
         figures.append(fig)

@@ -105,6 +105,8 @@ def _better(r) -> str:
     (no trial where both have the metric: it is not defined on the scene)."""
     if r.n_pairs == 0:
         return "not defined"
+    if getattr(r, "degenerate", "") == "identical":
+        return "identical on every trial"
     return "**tie**" if r.better == "tie" else code(r.better)
 
 

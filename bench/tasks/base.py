@@ -253,14 +253,30 @@ class Task:
     #: why no trial of a scene has ``ranking_metric`` when none has (the glance says so instead
     #: of ranking), e.g. "no targets"
     ranking_undefined: ClassVar[str] = "no trial has a value"
-    #: the summary.csv column (with ``_low``/``_high``) drawn against SNR in report.html's
-    #: interactive figure and crossed at 0.5 for "SNR at Pd = 0.5"; "": none
-    curve_column: ClassVar[str] = ""
+    #: the summary.csv column that is the mean over trials of ``ranking_metric`` (with
+    #: ``_low``/``_high``), and of ``equal_chance_metric`` where set: what the glance ranks,
+    #: as the figures draw it; "": none
+    ranking_column: ClassVar[str] = ""
+    equal_chance_column: ClassVar[str] = ""
+    #: the summary.csv columns (with ``_low``/``_high``) drawn against SNR in report.html's
+    #: interactive figures, each with its axis title and unit: the glance's metric first
+    #: (:meth:`glance_column`; a test holds every task to it), other views after; (): none
+    curves: ClassVar[tuple[tuple[str, str], ...]] = ()
     #: whether the task's report draws a ROC (Pd against per-step Pfa from the stored statistics)
     has_roc: ClassVar[bool] = False
     #: the recording's summary charts: (summary.csv column, axis title with its unit), one
     #: curve per config against SNR, per scenario config (docs/architecture.md, 'Recordings')
     recording_charts: ClassVar[tuple[tuple[str, str], ...]] = (("pd", "Pd"), ("rmse_mean", "RMSE (m)"))
+    def trace_unit(self, name: str) -> str:
+        """The unit of a recorded trace (a view's y axis names it), "" for none or unknown."""
+        return ""
+
+    @classmethod
+    def glance_column(cls) -> str:
+        """The summary column of what *Results at a glance* ranks on: the outcome at
+        equal chance Pd where the task has one, else the ranking metric."""
+        return cls.equal_chance_column or cls.ranking_column
+
     #: the summary column that finds a scenario config's most informative SNR level, the
     #: one whose value (averaged over configs) is nearest ``informative_target``: the
     #: recording's tabs open there (e.g. Pd = 0.5); "" for none (the middle level)

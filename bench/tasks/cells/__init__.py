@@ -171,7 +171,8 @@ class CellDetectionTask(Task):
     ranking_higher_is_better = True
     ranking_label = "fraction of a map's targets detected"
     ranking_undefined = "no targets"
-    curve_column = "pd"
+    ranking_column = "pd"
+    curves = (("pd", "Pd (fraction of the targets detected)"),)
     recording_charts = (("pd", "Pd"), ("false_alarms_per_map", "false alarms per map"))
     informative_column = "pd"
 

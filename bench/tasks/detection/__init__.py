@@ -162,9 +162,10 @@ class DetectionTask(Task):
     ranking_binary = True
     equal_chance_metric = "detected_equal_chance"
     equal_chance_label = "Pd at equal chance Pd"
-    curve_column = "pd"
+    ranking_column, equal_chance_column = "pd", "pd_equal_chance"
+    curves = (("pd_equal_chance", "Pd at equal chance Pd"), ("pd", "Pd, any alarm in the window"))
     has_roc = True
-    recording_charts = (("pd", "Pd"), ("delay_mean", "mean delay (steps)"))
+    recording_charts = (("pd_equal_chance", "Pd at equal chance Pd"), ("delay_mean", "mean delay (steps)"))
     informative_column = "pd"
     method_entities = ("statistic", "threshold", "alarms", "onset")
 

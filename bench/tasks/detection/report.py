@@ -28,7 +28,7 @@ def sections(ctx: ReportContext) -> list[str]:
         return []
     chance = {c.method: c.chance_pd for c in ctx.calibrations}
     floors = {k: v for k, v in chance.items() if np.isfinite(v)}
-    return [_section_detection(summary, ctx.fig_dir, ctx.title, ctx.pfa, chance, floors),
+    return [_section_detection(summary, ctx.fig_dir, ctx.title, ctx.pfa, chance, floors, ctx.chance_pd),
             _section_ranking(summary, floors),
             _section_pd_definitions(summary, ctx.chance_pd, floors, ctx.fig_dir, ctx.title, ctx.pfa,
                                     {c.method: c.used_pfa for c in ctx.calibrations}),
@@ -37,10 +37,15 @@ def sections(ctx: ReportContext) -> list[str]:
 
 
 def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: float,
-                       chance: dict[str, float], floors: dict[str, float]) -> str:
+                       chance: dict[str, float], floors: dict[str, float], chance_pd: float) -> str:
+    """Pd against SNR: first at equal chance Pd (what the glance ranks on), then with any
+    alarm in the window at the calibrated per-step Pfa (each detector's own chance Pd
+    dotted), the SNR at Pd = 0.5 of the latter and the detection delay."""
     if summary.empty:
         return "## Detection\n\nNo results."
-    figures.pd_vs_snr(summary, fig_dir / "pd_vs_snr.png", pfa, title, chance)
+    fair = _equal_chance_figure(summary, fig_dir, title, chance_pd)
+    figures.pd_vs_snr(summary, fig_dir / "pd_vs_snr.png", pfa, title, chance,
+                      ylabel="$P_D$, any alarm in the window")
     figures.delay_vs_snr(summary, fig_dir / "delay_vs_snr.png", title)
     rows = []
     for c in snr50(summary, floors=floors).itertuples():
@@ -51,7 +56,10 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
     detail_rows = [[fmt_db(s)] + [fmt(v) for v in r] for s, r in zip(detail.index, detail.to_numpy())]
     return "\n\n".join([
         "## Detection probability",
-        "![Pd vs SNR](figures/pd_vs_snr.png)",
+        *fair,
+        "![Pd vs SNR, any alarm in the window](figures/pd_vs_snr.png)",
+        "Pd with any alarm in the window at the calibrated per-step Pfa; dotted: each detector's chance Pd "
+        "(how often it alarms on null trials' windows).",
         SNR50_TEXT,
         table(["config", "SNR at Pd = 0.5 (dB)", "95% interval (dB)", "Pd at the highest SNR",
                 "mean delay there (steps)"], rows),
@@ -61,6 +69,20 @@ def _section_detection(summary: pd.DataFrame, fig_dir: Path, title: str, pfa: fl
         "![delay vs SNR](figures/delay_vs_snr.png)",
         "Delay = first alarm at or after the onset minus the onset, over detected trials only.",
     ])
+
+
+def _equal_chance_figure(summary: pd.DataFrame, fig_dir: Path, title: str, chance_pd: float) -> list[str]:
+    """The figure and caption of Pd at equal chance Pd against SNR; none where no config
+    has that Pd (no null trials to set its thresholds on)."""
+    if "pd_equal_chance" not in summary or summary.pd_equal_chance.isna().all():
+        return []
+    name = "pd_equal_chance_vs_snr.png"
+    figures.pd_vs_snr(summary, fig_dir / name, float("nan"), title, {c: chance_pd for c in summary.config.unique()},
+                      column="pd_equal_chance", ylabel="$P_D$ at equal chance $P_D$",
+                      condition=f"at equal chance $P_D$ = {chance_pd:g}")
+    return [f"![Pd at equal chance Pd vs SNR](figures/{name})",
+            f"Pd with every detector's threshold set so that it alarms in {chance_pd:g} of null trials' windows "
+            "(dotted): the basis *Results at a glance* ranks on."]
 
 
 def _section_ranking(summary: pd.DataFrame, floors: dict[str, float]) -> str:

@@ -212,7 +212,8 @@ class MultiTargetTask(Task):
     ranking_metric = "gospa_m"
     ranking_higher_is_better = False
     ranking_label = "time-averaged GOSPA (m)"
-    curve_column = "gospa_mean"
+    ranking_column = "gospa_mean"
+    curves = (("gospa_mean", "time-averaged GOSPA (m)"),)
     recording_charts = (("gospa_mean", "GOSPA (m)"), ("false_track_rate_mean", "false tracks per hour"))
     scene_entities = ("truths", "plots")                 # bench/tasks/multitarget/draw.py draws them
     method_entities = ("tracks", "gates", "track_lines")

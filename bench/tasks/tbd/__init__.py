@@ -284,7 +284,8 @@ class TBDTask(Task):
     ranking_higher_is_better = True
     ranking_label = "Pd (track detection)"
     ranking_binary = True
-    curve_column = "pd"
+    ranking_column = "pd"
+    curves = (("pd", "Pd (track detection)"),)
     method_entities = ("score", "threshold", "value")
 
     # -------------------------------------------------------------- worker side

@@ -179,7 +179,8 @@ class TrackingTask(Task):
     ranking_metric = "rmse"
     ranking_higher_is_better = False
     ranking_label = "mean per-trial position RMSE (m)"
-    curve_column = "rmse_mean"
+    ranking_column = "rmse_mean"
+    curves = (("rmse_mean", "mean per-trial position RMSE (m)"),)
     recording_charts = (("rmse_mean", "RMSE (m)"), ("divergence_rate", "divergence rate"))
     method_entities = ("estimate",)
 
@@ -227,6 +228,15 @@ class TrackingTask(Task):
             rec.arrays |= {f"truth_{label}": np.asarray(batch.truth[i, :, j], float)
                            for j, label in enumerate(self.labels(batch))}
         return rec
+
+    def trace_unit(self, name: str) -> str:
+        """Errors and estimates of a state component: metres for a position (``x``), m/s
+        for a velocity (``vx``), m/s² for an acceleration (``ax``), the state labels of
+        the scenes (``Scene.state_labels``)."""
+        for prefix in RECORDED_PREFIXES:
+            if name.startswith(prefix):
+                return {"": "m", "v": "m/s", "a": "m/s²"}.get(name[len(prefix):-1], "")
+        return ""
 
     def recorded_method(self, batch: Batch, out: TrackingOutput, i: int, threshold: float) -> MethodTrace:
         err = out.estimate[i] - batch.truth[i]
