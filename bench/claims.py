@@ -324,7 +324,7 @@ def _rounded_up(n: float) -> int:
 def _unresolved_reason(c: Claim, v: Value) -> str:
     if math.isnan(v.value) or not (math.isfinite(v.low) and math.isfinite(v.high)):
         return "the SNR levels bound its interval (a crossing between or beyond them): more levels would resolve it"
-    if math.isnan(v.n):
+    if not v.n > 0:
         return "the trials behind its interval are not known"
     n = trials_needed(c, v)
     if math.isnan(n):

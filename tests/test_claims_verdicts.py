@@ -163,6 +163,8 @@ def test_no_estimate_where_trials_cannot_settle_it():
      "the estimate is the claimed value and the claim states no tolerance: no number of trials would resolve it"),
     (_claim("positive"), Value(0.1, -0.1, 0.3),
      "the trials behind its interval are not known"),
+    (_claim("positive"), Value(0.1, -0.1, 0.3, n=0),
+     "the trials behind its interval are not known"),
     (_claim("between", min=1.0, max=100.0), Value(math.nan, 2.0, INF, n=100),
      "the SNR levels bound its interval (a crossing between or beyond them): more levels would resolve it"),
     (_claim("positive"), Value(math.nan, -1.0, 2.0, n=100),
