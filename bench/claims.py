@@ -6,7 +6,10 @@ docs/architecture.md, 'Report'). Each claim names the quantity that tests it
 as a query over the run's summary, calibration and comparison tables (exactly
 as written to summary.csv, calibration.csv and comparisons.csv, so a committed
 report's claims are evaluated again from its committed CSVs alone), the
-direction or value the paper claims, and the verdict rule. The report prints
+direction or value the paper claims, and how large an effect counts as the
+paper's (``minimal_effect``, ``tolerance``): the verdict (:func:`verdict`) reads
+"reproduces" or "does not reproduce" only where the interval settles it, else "not
+resolved" with the trials that would resolve it. The report prints
 the "Paper vs ours" table from the results and renders the preset's notes
 (``NAME.md``) and each claim's ``reason`` as Jinja2 templates filled from them:
 no number the run produces is ever typed.
@@ -44,14 +47,17 @@ from radarbench.bench.tables import write_csv
 CLAIMS_COLUMNS = ["id", "claim", "where", "original", "english", "quantity", "value", "low", "high", "unit",
                   "verdict", "scope", "reason"]
 REPRODUCES, DOES_NOT, NOT_COMPARABLE, CONVERSION = "reproduces", "does not reproduce", "not comparable", "conversion"
+NOT_RESOLVED = "not resolved"
 
 _ID = re.compile(r"^[a-z0-9]+(-[a-z0-9]+)*$")
 _CLAIM_KEYS = {"id", "claim", "where", "original", "english", "quantity", "unit", "expect", "value", "tolerance",
-               "min", "max", "reason", "scope", "also"}
+               "minimal_effect", "min", "max", "reason", "scope", "also"}
 _REQUIRED = ("id", "claim", "where", "expect")
 #: expect -> the keys it needs besides the required ones
 _EXPECT_NEEDS = {"negative": ("quantity",), "positive": ("quantity",), "value": ("quantity", "value"),
                  "between": ("quantity", "min", "max"), "not-comparable": ("reason",), "conversion": ("reason",)}
+#: the size keys (non-negative, in the claim's unit) -> the expects they belong to
+_SIZES = {"minimal_effect": ("positive", "negative"), "tolerance": ("value",)}
 #: kind -> (required keys, optional keys); every kind may carry ``scale`` (a multiplier applied to the result)
 _KINDS = {
     "summary": ({"config", "snr_db", "column"}, {"scenario"}),
@@ -79,7 +85,8 @@ class Claim:
     english: str = ""
     unit: str = ""
     value: float | None = None
-    tolerance: float = 0.0
+    tolerance: float = 0.0          # value ± tolerance is the paper's value
+    minimal_effect: float = 0.0     # the smallest size of a directional effect that is the paper's
     min: float | None = None
     max: float | None = None
     reason: str = ""
@@ -163,7 +170,13 @@ def _claim(raw: Any, field: str) -> Claim:
     for name in also:
         if not re.match(r"^[A-Za-z_][A-Za-z0-9_]*$", name):
             raise ConfigError(f"{field}.also.{name}", "expected a template name (letters, digits, _)")
-    numbers = {k: _number(raw[k], f"{field}.{k}") for k in ("value", "tolerance", "min", "max") if k in raw}
+    numbers = {k: _number(raw[k], f"{field}.{k}") for k in ("value", "tolerance", "minimal_effect", "min", "max")
+               if k in raw}
+    for key, expects in _SIZES.items():
+        if key in numbers and expect not in expects:
+            raise ConfigError(f"{field}.{key}", f"only for expect = {' or '.join(map(repr, expects))}, not {expect!r}")
+        if numbers.get(key, 0.0) < 0:
+            raise ConfigError(f"{field}.{key}", f"expected a size >= 0 (in the claim's unit), got {numbers[key]:g}")
     if "min" in numbers and "max" in numbers and numbers["min"] > numbers["max"]:
         raise ConfigError(f"{field}.max", f"expected >= min ({numbers['min']:g}), got {numbers['max']:g}")
     needed = {"claim", "where", *_EXPECT_NEEDS[expect]}          # not-comparable and conversion need a reason
@@ -246,8 +259,87 @@ def _bounds(v: Value) -> tuple[float, float]:
     return v.low, v.high
 
 
+def claimed_range(c: Claim) -> tuple[float, float]:
+    """(lo, hi): the effects claim ``c`` counts as the paper's. A directional claim's is
+    open at its threshold, the minimal effect (0 unless stated): (m, +∞) or (−∞, −m); a
+    value's is value ± tolerance and a between's [min, max], both closed."""
+    if c.expect == "positive":
+        return c.minimal_effect, math.inf
+    if c.expect == "negative":
+        return -math.inf, -c.minimal_effect
+    if c.expect == "value":
+        return c.value - c.tolerance, c.value + c.tolerance
+    return c.min, c.max
+
+
+def settled(c: Claim, low: float, high: float) -> str:
+    """The verdict an interval [low, high] settles: REPRODUCES when it lies within the
+    claimed range (:func:`claimed_range`), DOES_NOT when it lies entirely outside it
+    (it excludes the paper's effect), else NOT_RESOLVED."""
+    lo, hi = claimed_range(c)
+    if c.expect in ("positive", "negative"):   # open at the threshold: beyond it to reproduce, at or short of it to exclude
+        inside = (lo == -math.inf or low > lo) and (hi == math.inf or high < hi)
+        outside = high <= lo or low >= hi
+    else:
+        inside, outside = lo <= low and high <= hi, high < lo or low > hi
+    return REPRODUCES if inside else DOES_NOT if outside else NOT_RESOLVED
+
+
+def trials_needed(c: Claim, v: Value) -> float:
+    """The trials (per level, or null trials for a calibration value; as ``v.n`` counts
+    them) that would resolve a claim not resolved by ``v``, if the estimate holds.
+
+    A 95% interval's half-width scales as 1/sqrt(n), so with n' trials the interval
+    around the estimate x is x − w_lo·sqrt(n/n') .. x + w_hi·sqrt(n/n'), where
+    w_lo = x − low and w_hi = high − x. It settles when the half-width facing a
+    threshold of the claimed range is smaller than the estimate's distance d to it:
+
+        n_needed ≈ n · (w / d)²
+
+    with w and d the half-width and distance on the threshold's side (for a directional
+    claim the threshold is 0 or the minimal effect). An estimate outside the claimed
+    range settles "does not reproduce" at its near threshold; one inside it settles
+    "reproduces" once both sides are inside: the larger of the two. NaN where no number
+    of trials settles it (the estimate on a threshold) or ``v`` gives no estimate, no
+    finite interval or no trial count."""
+    x, lo, hi = v.value, *claimed_range(c)
+    if not all(math.isfinite(y) for y in (x, v.low, v.high, v.n)) or x in (lo, hi):
+        return math.nan
+    w_lo, w_hi = x - v.low, v.high - x
+    if x > hi:
+        ratios = [w_lo / (x - hi)]
+    elif x < lo:
+        ratios = [w_hi / (lo - x)]
+    else:
+        ratios = [w / d for w, d in ((w_lo, x - lo), (w_hi, hi - x)) if math.isfinite(d)]
+    return v.n * max(ratios) ** 2
+
+
+def _rounded_up(n: float) -> int:
+    """n rounded up to two significant digits: an estimate, not a count."""
+    step = 10 ** max(0, math.floor(math.log10(n)) - 1)
+    return int(math.ceil(n / step - 1e-9) * step)      # 1e-9: not up for a float's last bit
+
+
+def _unresolved_reason(c: Claim, v: Value) -> str:
+    if math.isnan(v.value) or not (math.isfinite(v.low) and math.isfinite(v.high)):
+        return "the SNR levels bound its interval (a crossing between or beyond them): more levels would resolve it"
+    if not v.n > 0:
+        return "the trials behind its interval are not known"
+    n = trials_needed(c, v)
+    if math.isnan(n):
+        if c.expect == "value" and not c.tolerance:
+            return "the estimate is the claimed value and the claim states no tolerance: no number of trials would resolve it"
+        return "the estimate sits on the claim's threshold: no number of trials would resolve it"
+    per = "null trials" if v.null else "trials per level"
+    towards = REPRODUCES if claimed_range(c)[0] <= v.value <= claimed_range(c)[1] else DOES_NOT
+    return f"~{_rounded_up(n):,} {per} (this run: {v.n:,.0f}) would resolve it, as “{towards}” if the estimate holds"
+
+
 def verdict(c: Claim, v: Value | None) -> tuple[str, str]:
-    """(verdict, generated reason) of claim ``c`` whose quantity is ``v`` (None: no quantity)."""
+    """(verdict, generated reason) of claim ``c`` whose quantity is ``v`` (None: no quantity):
+    :func:`settled` on v's interval (v's value alone where it has none); a claim not
+    resolved gets the trials that would resolve it (:func:`trials_needed`)."""
     if c.expect == "not-comparable":
         return NOT_COMPARABLE, ""
     if c.expect == "conversion":
@@ -255,34 +347,38 @@ def verdict(c: Claim, v: Value | None) -> tuple[str, str]:
     low, high = _bounds(v)
     if math.isnan(low) or math.isnan(high):
         return NOT_COMPARABLE, "the run gives no value for it"
+    word = settled(c, low, high)
+    if word == NOT_RESOLVED:
+        return word, _unresolved_reason(c, v)
+    if word == REPRODUCES:
+        return word, ""
     unit = (lambda x: _number_text(x, c.unit))
-    if c.expect in ("negative", "positive"):
+    if c.expect in ("positive", "negative"):
         sign = 1.0 if c.expect == "positive" else -1.0
-        if sign * low > 0 and sign * high > 0:
-            return REPRODUCES, ""
-        if sign * low < 0 and sign * high < 0:
-            return DOES_NOT, "the opposite sign"
-        return DOES_NOT, "tie: the interval covers 0"
+        if sign * high < 0 and sign * low < 0:
+            return word, "the opposite sign"
+        if c.minimal_effect:
+            return word, f"smaller than the minimal effect {unit(c.minimal_effect)}"
+        return word, "none in the claimed direction: the interval reaches 0 at most"
     if c.expect == "value":
-        if low - c.tolerance <= c.value <= high + c.tolerance:
-            return REPRODUCES, ""
         side = "below" if c.value < low - c.tolerance else "above"
-        return DOES_NOT, (f"the claimed {unit(c.value)} lies {side} our interval"
-                          + (f" widened by its tolerance {unit(c.tolerance)}" if c.tolerance else ""))
-    if c.min <= low and high <= c.max:
-        return REPRODUCES, ""
-    return DOES_NOT, f"not inside [{unit(c.min)}, {unit(c.max)}]"
+        return word, (f"the claimed {unit(c.value)} lies {side} our interval"
+                      + (f" widened by its tolerance {unit(c.tolerance)}" if c.tolerance else ""))
+    return word, f"outside [{unit(c.min)}, {unit(c.max)}]"
 
 
 @dataclass(frozen=True)
 class Result:
     """A claim's or a named quantity's outcome, as templates see it: ``value``, ``low``,
-    ``high``, ``p``, ``text``, ``verdict``, ``reason`` (and ``tie``: the interval covers 0)."""
+    ``high``, ``p``, ``n`` (the trials behind the interval; ``null``: null trials),
+    ``text``, ``verdict``, ``reason`` (and ``tie``: the interval covers 0)."""
 
     value: float = math.nan
     low: float = math.nan
     high: float = math.nan
     p: float = math.nan
+    n: float = math.nan
+    null: bool = False
     text: str = "–"
     verdict: str = ""
     reason: str = ""
@@ -315,7 +411,7 @@ def _result(q: dict | None, t: Tables, unit: str = "") -> Result:
         v = quantity(q, t)
     except Missing as m:
         return Result(missing=str(m.args[0]))
-    return Result(v.value, v.low, v.high, v.p, value_text(v, unit))
+    return Result(v.value, v.low, v.high, v.p, v.n, v.null, value_text(v, unit))
 
 
 def _environment():
@@ -371,7 +467,8 @@ def evaluate(file: ClaimsFile, tables: Tables) -> Evaluation:
         if r.missing:
             results[c.id] = replace(r, verdict=NOT_COMPARABLE, reason=f"{r.missing} did not run")
             continue
-        word, generated = verdict(c, Value(r.value, r.low, r.high)) if c.quantity else verdict(c, None)
+        word, generated = verdict(c, Value(r.value, r.low, r.high, n=r.n, null=r.null)) if c.quantity \
+            else verdict(c, None)
         results[c.id] = replace(r, verdict=word, reason=generated)
     evaluation = Evaluation(file, results, q)
     for i, c in enumerate(file.claims):

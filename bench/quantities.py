@@ -2,7 +2,9 @@
 'Report'): a config's summary value at an SNR, a calibration value, a paired difference, the
 SNR at which a Pd column crosses a level, and differences and ratios of those.
 
-Each gives (value, low, high): a 95% interval where the table has one. Crossings are
+Each gives (value, low, high): a 95% interval where the table has one, and the trials
+behind it (``n``: per SNR level, or the calibration's null trials) from which a verdict
+estimates how many trials would resolve a claim (:func:`bench.claims.trials_needed`). Crossings are
 computed as the report's SNR-at-Pd tables compute them (:func:`bench.markdown.snr50`); a
 difference of two quantities has the conservative interval [a.low − b.high, a.high − b.low]
 (the Minkowski difference of the two 95% intervals). A quantity whose config or scenario
@@ -15,8 +17,9 @@ from __future__ import annotations
 import io
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 import pandas as pd
@@ -36,13 +39,22 @@ INLINE = ("difference", "ratio")
 @dataclass(frozen=True)
 class Tables:
     """The run's tables as written to CSV (and read back: :func:`read_tables`),
-    and the chance Pd every detector is calibrated to for equal-chance Pd
-    (the sweep's ``[calibration] chance_pd``: the floor of that Pd column)."""
+    the chance Pd every detector is calibrated to for equal-chance Pd
+    (the sweep's ``[calibration] chance_pd``: the floor of that Pd column) and the
+    null trials of each calibration (``[calibration] h0_trials``; NaN: unknown)."""
 
     summary: pd.DataFrame
     comparisons: pd.DataFrame
     calibration: pd.DataFrame
     equal_chance: float
+    h0_trials: float = math.nan
+
+
+def plan_calibration(calibration: Mapping) -> dict:
+    """The :class:`Tables` fields read from a resolved plan's ``[calibration]`` table."""
+    from radarbench.bench.calibration import EQUAL_CHANCE_PD
+    return {"equal_chance": float(calibration.get("chance_pd", EQUAL_CHANCE_PD)),
+            "h0_trials": float(calibration.get("h0_trials", math.nan))}
 
 
 def csv_frame(df: pd.DataFrame) -> pd.DataFrame:
@@ -53,13 +65,12 @@ def csv_frame(df: pd.DataFrame) -> pd.DataFrame:
 
 def read_tables(folder: str | Path) -> Tables:
     """A report folder's committed tables: summary.csv, comparisons.csv,
-    calibration.csv and plan.toml's ``[calibration] chance_pd``."""
-    from radarbench.bench.calibration import EQUAL_CHANCE_PD
+    calibration.csv and plan.toml's ``[calibration]`` (:func:`plan_calibration`)."""
     folder = Path(folder)
     frames = [read_csv(folder / f"{name}.csv") if (folder / f"{name}.csv").exists() else pd.DataFrame()
               for name in ("summary", "comparisons", "calibration")]
     plan = tomllib.loads((folder / "plan.toml").read_text(encoding="utf-8")) if (folder / "plan.toml").exists() else {}
-    return Tables(*frames, float(plan.get("calibration", {}).get("chance_pd", EQUAL_CHANCE_PD)))
+    return Tables(*frames, **plan_calibration(plan.get("calibration", {})))
 
 
 # ------------------------------------------------------------------ quantities
@@ -74,10 +85,19 @@ class Value:
     low: float = math.nan
     high: float = math.nan
     p: float = math.nan
+    n: float = math.nan        # the trials behind the interval: per SNR level, or null trials (``null``)
+    null: bool = False         # n counts the calibration's null trials
 
     def scaled(self, k: float) -> Value:
         low, high = self.low * k, self.high * k
-        return Value(self.value * k, *((high, low) if k < 0 else (low, high)), self.p)
+        return replace(self, value=self.value * k, low=high if k < 0 else low, high=low if k < 0 else high)
+
+    def combined(self, other: Value, value: float, low: float, high: float) -> Value:
+        """A value computed from this one and ``other`` (a difference, a ratio). Its n is
+        the larger of the two: n trials at every level give each part at least its own
+        count. NaN where one is unknown or they count different trials (per level, null)."""
+        n = max(self.n, other.n) if self.null == other.null and not math.isnan(self.n + other.n) else math.nan
+        return Value(value, low, high, n=n, null=self.null)
 
 
 def _scenario(df: pd.DataFrame, q: dict) -> str:
@@ -110,15 +130,16 @@ def _column(columns, column: str) -> str:
     return column
 
 
-def _interval_of(row: pd.Series, column: str) -> Value:
+def _interval_of(row: pd.Series, column: str, n: float) -> Value:
     """``column`` of one row, with ``column_low`` / ``column_high`` where the table has
-    them (for a mean ``X_mean``, ``X_low`` / ``X_high``: summary.csv's ``delay_mean``)."""
+    them (for a mean ``X_mean``, ``X_low`` / ``X_high``: summary.csv's ``delay_mean``),
+    from ``n`` trials."""
     stem = column[:-len("_mean")] if column.endswith("_mean") else column
 
     def bound(side: str) -> float:
         name = next((c for c in (f"{column}_{side}", f"{stem}_{side}") if c in row.index), None)
         return float(row[name]) if name else math.nan
-    return Value(float(row[_column(row.index, column)]), bound("low"), bound("high"))
+    return Value(float(row[_column(row.index, column)]), bound("low"), bound("high"), n=n)
 
 
 def _summary(q: dict, t: Tables) -> Value:
@@ -127,11 +148,17 @@ def _summary(q: dict, t: Tables) -> Value:
     if at.empty:
         raise ConfigError("snr_db", f"no level {q['snr_db']:g} dB for `{q['config']}` (levels: "
                                     f"{', '.join(fmt_db(s) for s in rows.snr_db)})")
-    return _interval_of(at.iloc[0], q["column"])
+    return _interval_of(at.iloc[0], q["column"], _trials(at))
 
 
 def _calibration(q: dict, t: Tables) -> Value:
-    return _interval_of(_rows(t.calibration, q, "method", q["config"]).iloc[0], q["column"])
+    return replace(_interval_of(_rows(t.calibration, q, "method", q["config"]).iloc[0], q["column"], t.h0_trials),
+                   null=True)
+
+
+def _trials(rows: pd.DataFrame, column: str = "n_trials") -> float:
+    """The most trials any of ``rows`` ran (NaN where the table does not say)."""
+    return float(rows[column].max()) if column in rows and len(rows) else math.nan
 
 
 def _paired(q: dict, t: Tables) -> Value:
@@ -149,7 +176,10 @@ def _paired(q: dict, t: Tables) -> Value:
     if same.empty and swapped.empty:
         raise ConfigError("snr_db", f"no comparison of `{q['a']}` and `{q['b']}` on {metric} at {q['snr_db']}")
     r = (same if len(same) else swapped).iloc[0]
-    v = Value(float(r.difference), float(r.difference_low), float(r.difference_high), float(r.mcnemar_p))
+    # over all levels, n_pairs counts every level's pairs: the trials per level are the levels' own rows'
+    pair = df[(df.metric == metric) & (df.config_a == r.config_a) & (df.config_b == r.config_b) & df.snr_db.notna()]
+    n = _trials(pair, "n_pairs") if q["snr_db"] == ALL_LEVELS and len(pair) else float(r.get("n_pairs", math.nan))
+    v = Value(float(r.difference), float(r.difference_low), float(r.difference_high), float(r.mcnemar_p), n=n)
     return v if len(same) else v.scaled(-1.0)
 
 
@@ -162,13 +192,13 @@ def _task_metric(df: pd.DataFrame, q: dict) -> str:
     return registry.get_task(tasks.pop()).ranking_metric
 
 
-def _crossing_value(crossing) -> Value:
+def _crossing_value(crossing, n: float) -> Value:
     """A :class:`bench.metrics.Crossing` as (value, low, high): NaN value unless fitted;
     outside the swept range an open bound (±inf) on the far side."""
     value = crossing.mid if crossing.kind == "fit" else math.nan
     low = -math.inf if crossing.kind == "below" else crossing.low
     high = math.inf if crossing.kind == "above" else crossing.high
-    return Value(value, low, high)
+    return Value(value, low, high, n=n)
 
 
 def _crossing(q: dict, t: Tables) -> Value:
@@ -179,12 +209,12 @@ def _crossing(q: dict, t: Tables) -> Value:
     chance = {config: float(r.chance_pd) for r in _rows(cal, q, "method", config).itertuples()} \
         if not cal.empty and "chance_pd" in cal and config in set(cal.method) else {}
     found = snr50(rows, column, crossing_floors(column, chance, t.equal_chance), q.get("level", 0.5))
-    return _crossing_value(found.crossing.iloc[0])
+    return _crossing_value(found.crossing.iloc[0], _trials(rows))
 
 
 def _minus(a: Value, b: Value) -> Value:
     """a − b with the conservative interval [a.low − b.high, a.high − b.low]."""
-    return Value(a.value - b.value, a.low - b.high, a.high - b.low)
+    return a.combined(b, a.value - b.value, a.low - b.high, a.high - b.low)
 
 
 def _crossing_difference(q: dict, t: Tables) -> Value:
@@ -198,9 +228,9 @@ def _ratio(a: Value, b: Value) -> Value:
     extremes of a's ends over b's ends (a may be of either sign); NaN ends where b's
     interval reaches 0, where the ratio is unbounded."""
     if not b.low > 0:
-        return Value(a.value / b.value, np.nan, np.nan)
+        return a.combined(b, a.value / b.value, np.nan, np.nan)
     ends = [a.low / b.low, a.low / b.high, a.high / b.low, a.high / b.high]
-    return Value(a.value / b.value, min(ends), max(ends))
+    return a.combined(b, a.value / b.value, min(ends), max(ends))
 
 
 def quantity(q: dict, t: Tables) -> Value:

@@ -1,7 +1,8 @@
 """Claims as code (bench/claims.py; docs/architecture.md, 'Report').
 
 (a) a claims file is validated at load: one line naming the file and the field;
-(b) each quantity kind and verdict rule on small hand-built tables;
+(b) each quantity kind and verdict rule on small hand-built tables (the rule's every branch
+    on synthetic intervals: tests/test_claims_verdicts.py);
 (c) every committed report with a claims file and a committed claims.csv gets the same
     claims.csv again from its committed CSVs;
 (d) no preset note and no claim reason types a number the run produces.
@@ -61,6 +62,13 @@ def _parse(text: str) -> claims.ClaimsFile:
     (("expect = \"positive\"", "expect = \"conversion\"\nreason = \" \""), "claim[0].reason", "non-empty"),
     (("paper = \"A paper\"", "paper = \"\""), "paper", "non-empty"),
     (("paper = \"A paper\"", "paper = \"A paper\"\nauthors = 2"), "authors", "unknown key"),
+    (("expect = \"positive\"", "expect = \"positive\"\nminimal_effect = -0.1"), "claim[0].minimal_effect", "size >= 0"),
+    (("expect = \"positive\"", "expect = \"positive\"\nminimal_effect = \"big\""), "claim[0].minimal_effect",
+     "finite number"),
+    (("expect = \"positive\"", "expect = \"value\"\nvalue = 1\nminimal_effect = 0.1"), "claim[0].minimal_effect",
+     "only for expect = 'positive' or 'negative'"),
+    (("expect = \"positive\"", "expect = \"positive\"\ntolerance = 0.1"), "claim[0].tolerance", "only for expect = 'value'"),
+    (("expect = \"positive\"", "expect = \"value\"\nvalue = 1\ntolerance = -1"), "claim[0].tolerance", "size >= 0"),
 ])
 def test_a_bad_claims_file_is_one_line_naming_the_file_and_the_field(change, field, words):
     assert GOOD.count(change[0]) == 1
@@ -68,6 +76,12 @@ def test_a_bad_claims_file_is_one_line_naming_the_file_and_the_field(change, fie
         _parse(GOOD.replace(*change))
     message = str(err.value)
     assert "\n" not in message and message.startswith(f"x.claims.toml: {field}: ") and words in message
+
+
+def test_the_sizes_load_into_the_claim():
+    c = _parse(GOOD.replace('expect = "positive"', 'expect = "positive"\nminimal_effect = 1.5')).claims[0]
+    assert (c.minimal_effect, c.tolerance) == (1.5, 0.0)
+    assert _parse(GOOD).claims[0].minimal_effect == 0.0
 
 
 def test_repeated_ids_names_and_bad_toml_are_refused():
@@ -132,9 +146,10 @@ def _tables(summary=None, comparisons=None, calibration=None) -> claims.Tables:
                          calibration if calibration is not None else empty, 0.05)
 
 
-def _comparison(a, b, diff, low, high, p=np.nan, snr=np.nan) -> dict:
+def _comparison(a, b, diff, low, high, p=np.nan, snr=np.nan, n=100) -> dict:
     return {"scenario": "s", "task": "maneuver-detection", "metric": "detected", "snr_db": snr, "config_a": a,
-            "config_b": b, "difference": diff, "difference_low": low, "difference_high": high, "mcnemar_p": p}
+            "config_b": b, "n_pairs": n, "difference": diff, "difference_low": low, "difference_high": high,
+            "mcnemar_p": p}
 
 
 def _claim(quantity: dict, **keys) -> claims.Claim:
@@ -151,10 +166,11 @@ PAIRED = {"kind": "paired", "a": "x", "b": "y", "snr_db": "all"}
 
 @pytest.mark.parametrize("row, expect, word, reason", [
     ((0.1, 0.05, 0.15), "positive", "reproduces", ""),
-    ((0.1, -0.01, 0.15), "positive", "does not reproduce", "tie: the interval covers 0"),
+    ((0.1, -0.01, 0.15), "positive", "not resolved",            # n · (0.11 / 0.1)² = 121, rounded up
+     "~130 trials per level (this run: 100) would resolve it, as “reproduces” if the estimate holds"),
     ((-0.1, -0.15, -0.05), "positive", "does not reproduce", "the opposite sign"),
     ((-0.1, -0.15, -0.05), "negative", "reproduces", ""),
-    ((0.0, 0.0, 0.0), "negative", "does not reproduce", "tie: the interval covers 0"),
+    ((0.0, 0.0, 0.0), "negative", "does not reproduce", "none in the claimed direction: the interval reaches 0 at most"),
 ])
 def test_sign_rules_read_the_interval(row, expect, word, reason):
     comparisons = pd.DataFrame([_comparison("x", "y", *row, p=0.01)])
@@ -176,9 +192,10 @@ def test_a_paired_quantity_at_one_level():
     assert (r.value, r.verdict) == (-0.2, "reproduces")
 
 
-@pytest.mark.parametrize("paper, tolerance, word", [(0.5, 0.0, "reproduces"), (0.3, 0.0, "does not reproduce"),
-                                                   (0.3, 0.16, "reproduces"), (0.8, 0.0, "does not reproduce")])
-def test_value_rule_widens_the_interval_by_the_tolerance(paper, tolerance, word):
+@pytest.mark.parametrize("paper, tolerance, word", [(0.5, 0.0, "not resolved"), (0.5, 0.05, "reproduces"),
+                                                   (0.3, 0.0, "does not reproduce"), (0.3, 0.16, "not resolved"),
+                                                   (0.3, 0.26, "reproduces"), (0.8, 0.0, "does not reproduce")])
+def test_value_rule_needs_the_interval_within_the_tolerance(paper, tolerance, word):
     summary = _summary("x", [0.2, 0.5, 0.9])                 # pd 0.5 [0.45, 0.55] at 1 dB
     claim = _claim({"kind": "summary", "config": "x", "snr_db": 1, "column": "pd"}, expect="value", value=paper,
                    tolerance=tolerance)
@@ -186,7 +203,8 @@ def test_value_rule_widens_the_interval_by_the_tolerance(paper, tolerance, word)
     assert r.verdict == word and (word == "reproduces") == (r.reason == "")
 
 
-@pytest.mark.parametrize("lo, hi, word", [(0.4, 0.6, "reproduces"), (0.46, 0.6, "does not reproduce")])
+@pytest.mark.parametrize("lo, hi, word", [(0.4, 0.6, "reproduces"), (0.46, 0.6, "not resolved"),
+                                          (0.56, 0.9, "does not reproduce")])
 def test_between_rule_needs_the_whole_interval_inside(lo, hi, word):
     claim = _claim({"kind": "summary", "config": "x", "snr_db": 1, "column": "pd"}, expect="between", min=lo, max=hi)
     assert _verdict(claim, _tables(summary=_summary("x", [0.2, 0.5, 0.9]))).verdict == word
@@ -227,8 +245,32 @@ def test_crossing_is_the_reports_probit_and_a_difference_is_conservative():
     assert (r.value, r.low, r.high) == (ca.mid - cb.mid, ca.low - cb.high, ca.high - cb.low)
     assert r.verdict == "reproduces" and r.text.endswith(" dB")
     one = _verdict(_claim({"kind": "crossing", "config": "a", "level": 0.5}, expect="value", value=-3.0,
-                          tolerance=0.0, unit="dB"), _tables(summary=summary))
-    assert one.value == ca.mid and one.verdict == "reproduces"
+                          tolerance=1.0, unit="dB"), _tables(summary=summary))
+    assert one.value == ca.mid and -4 < ca.low < ca.high < -2 and one.verdict == "reproduces"
+
+
+def test_each_quantity_carries_the_trials_behind_its_interval():
+    """n per level: summary.csv's n_trials, comparisons.csv's per-level n_pairs (over all
+    levels too), the plan's h0_trials for a calibration value; a difference the larger of
+    its two; per-level and null trials do not mix."""
+    summary = pd.concat([_summary("x", [0.2, 0.5, 0.9], n=100), _summary("y", [0.1, 0.4, 0.8], n=250)])
+    comparisons = pd.DataFrame([_comparison("x", "y", 0.1, 0.05, 0.15, n=300),
+                                _comparison("x", "y", 0.1, 0.05, 0.15, n=100, snr=0.0),
+                                _comparison("x", "y", 0.1, 0.05, 0.15, n=200, snr=1.0)])
+    calibration = pd.DataFrame({"scenario": ["s"], "method": ["x"], "used_pfa": [0.01], "used_pfa_low": [0.005],
+                                "used_pfa_high": [0.02]})
+    tables = claims.Tables(summary, comparisons, calibration, 0.05, h0_trials=1000.0)
+    pd_at = (lambda c, s: {"kind": "summary", "config": c, "snr_db": s, "column": "pd"})
+    cal = {"kind": "calibration", "config": "x", "column": "used_pfa"}
+    for q, n, null in [(pd_at("x", 1), 100, False), (PAIRED, 200, False), ({**PAIRED, "snr_db": 0.0}, 100, False),
+                       ({"kind": "crossing", "config": "y"}, 250, False), (cal, 1000, True),
+                       ({"kind": "difference", "a": pd_at("x", 1), "b": pd_at("y", 1)}, 250, False),
+                       ({"kind": "ratio", "a": pd_at("x", 2), "b": pd_at("y", 1), "scale": 100}, 250, False),
+                       ({"kind": "difference", "a": cal, "b": cal}, 1000, True)]:
+        v = claims.quantity(q, tables)
+        assert (v.n, v.null) == (n, null), q
+    assert math.isnan(claims.quantity({"kind": "difference", "a": cal, "b": pd_at("x", 1)}, tables).n)
+    assert math.isnan(claims.quantity(cal, _tables(calibration=calibration)).n)      # a plan without h0_trials
 
 
 def test_a_crossing_above_the_swept_range_is_an_open_interval():
@@ -236,7 +278,7 @@ def test_a_crossing_above_the_swept_range_is_an_open_interval():
     r = _verdict(_claim({"kind": "crossing", "config": "a"}, expect="between", min=1.0, max=100.0, unit="dB"),
                  _tables(summary=summary))
     assert math.isnan(r.value) and math.isinf(r.high) and r.text.startswith("> ")
-    assert r.verdict == "does not reproduce"          # [2, inf) is not inside [1, 100]
+    assert r.verdict == "not resolved" and "more levels" in r.reason      # [2, inf) overlaps [1, 100]
 
 
 def test_the_crossing_of_pd_has_the_configs_chance_pd_as_floor():
@@ -385,7 +427,8 @@ def parameters(folder: Path, file: claims.ClaimsFile | None) -> set[str]:
     """Numbers a note may type (as :func:`fmt` prints them): the plan's values (its
     ``[calibration] chance_pd`` default included), the harness's fixed settings (95%
     intervals, the crossing level), and the paper's own printed numbers (the claims'
-    ``where``, ``original``, ``english``, ``value``, ``min``, ``max``, ``tolerance``, ``level``)."""
+    ``where``, ``original``, ``english``, ``value``, ``min``, ``max``, ``tolerance``,
+    ``minimal_effect``, ``level``)."""
     from radarbench.bench.calibration import EQUAL_CHANCE_PD
     from radarbench.bench.metrics import CONFIDENCE
     plan = tomllib.loads((folder / "plan.toml").read_text(encoding="utf-8"))
@@ -394,7 +437,7 @@ def parameters(folder: Path, file: claims.ClaimsFile | None) -> set[str]:
     for c in (file.claims if file else ()):
         values += [float(w.replace("−", "-")) for w in _NUMBER.findall(f"{c.where} {c.original} {c.english}")
                    for w in [w[0]]]
-        values += [x for x in (c.value, c.min, c.max, c.tolerance) if x is not None]
+        values += [x for x in (c.value, c.min, c.max, c.tolerance, c.minimal_effect) if x is not None]
         values += [q["level"] for q in [c.quantity, *c.also.values()] if q and "level" in q]
     return {fmt(v) for v in values}
 

@@ -34,6 +34,7 @@ from radarbench.bench.markdown import code, fmt_db, text
 from radarbench.bench.markdown import fmt as _fmt
 from radarbench.bench.markdown import table as _table
 from radarbench.bench.provenance import WALL_TIME_ROW, origin_text, provenance
+from radarbench.bench.quantities import plan_calibration
 from radarbench.bench.report.glance import comparisons_frame, glance
 from radarbench.bench.report.html import interactive_figures, interactive_specs, markdown_to_html
 from radarbench.bench.report.render import comparisons_markdown, glance_markdown, render, section_macro
@@ -414,17 +415,18 @@ def preset_notes(source: str) -> str:
     return path.read_text(encoding="utf-8").strip() if path.is_file() else ""
 
 
-def _paper_vs_ours(source: str, tables: dict[str, pd.DataFrame], equal_chance: float) -> tuple:
+def _paper_vs_ours(source: str, tables: dict[str, pd.DataFrame], calibration: dict) -> tuple:
     """A preset's *Paper vs ours*: (its claims, ``NAME.claims.toml``, evaluated on the
     tables as written to CSV; the section: the table, then the rendered notes), or
-    (None, the notes as they are) for a preset without a claims file. Called before
+    (None, the notes as they are) for a preset without a claims file; ``calibration``: the
+    plan's ``[calibration]`` (:func:`bench.quantities.plan_calibration`). Called before
     anything is written: a claim the tables cannot answer stops the report with one
     line, nothing written."""
     file = claims.preset_claims(_preset_name(source)) if _preset_name(source) else None
     if file is None:
         return None, preset_notes(source)
     evaluation = claims.evaluate(file, claims.Tables(**{k: claims.csv_frame(v) for k, v in tables.items()},
-                                                     equal_chance=equal_chance))
+                                                     **plan_calibration(calibration)))
     return evaluation, claims.claims_markdown(evaluation, preset_notes(source))
 
 
@@ -547,7 +549,7 @@ def _build_with(store: Store, out_dir: Path, recording: bool, on_phase, pool) ->
         comparisons = comparisons_frame(trials, task_of)
         evaluation, paper_vs_ours = _paper_vs_ours(   # the paper-vs-ours table leads a preset's sections
             record.get("source", ""), {"summary": summary, "comparisons": comparisons, "calibration": calibration},
-            sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD))
+            sweep["calibration"])
         _write_tables(out_dir, trials=trials, summary=summary, calibration=calibration, steps=steps,
                       comparisons=comparisons, claims=evaluation.frame() if evaluation is not None else None)
         parts = [paper_vs_ours, _section_plan(record, store, present), _section_calibration(cals, summary, task_of),
