@@ -137,6 +137,11 @@ def register_method(cls: type[Method]) -> type[Method]:
     if not isinstance(task, str) or task not in known:
         raise PluginError(f"method {getattr(cls, 'name', cls.__qualname__)!r}: task {task!r} is not one of "
                           f"{known}", getattr(cls, "name", ""))
+    if "scenarios" in vars(cls) or any("scenarios" in vars(base) for base in cls.__mro__[1:-1]):
+        # the pairing by a list of scenario names gave way to capabilities: a class that
+        # still sets one would be paired with every scenario of its task, without a word
+        raise PluginError(f"method {getattr(cls, 'name', cls.__qualname__)!r}: 'scenarios' is no longer read; "
+                          "declare what it reads from a scene in 'needs' (docs/extending.md)", getattr(cls, "name", ""))
     _check_params(cls, "method")
     return _register(_METHODS, cls, "method")
 

@@ -175,7 +175,7 @@ def execute_unit(work: UnitTask) -> UnitResult:
                 run.null_values = task.null_values(batch, out)
                 run.null_peaks = task.null_peaks(batch, out)
                 run.null_cells = task.null_cells(batch, out)
-                run.nominal_threshold = float(method.nominal_threshold(mc.params, plan.calibration.pfa, batch))
+                run.nominal_threshold = _nominal(method.nominal_threshold(mc.params, plan.calibration.pfa, batch))
             else:
                 threshold = work.thresholds.get(mc.label)
                 threshold = float("nan") if threshold is None else float(threshold)
@@ -194,3 +194,11 @@ def execute_unit(work: UnitTask) -> UnitResult:
                       for i in recorded]
     result.snr_definition = batch.scene.snr_definition
     return result
+
+
+def _nominal(value) -> float:
+    """A method's nominal threshold as a float: a number, or NaN for none (never None: an
+    override that falls through would otherwise fail as a TypeError deep in the unit)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise TypeError(f"nominal_threshold returned {type(value).__name__}, expected a float (NaN for none)")
+    return float(value)
