@@ -43,3 +43,25 @@ def test_the_first_interactive_figure_plots_the_glance_metric_of_the_run(small_r
         mine = evaluated[evaluated.config == config]
         by_level = mine.assign(v=metric_values(mine[task.equal_chance_metric])).groupby("snr_db").v.mean()
         np.testing.assert_allclose(trace["y"], by_level.loc[list(trace["x"])].to_numpy(), rtol=0, atol=1e-12)
+
+
+def test_a_glance_figure_draws_the_top_six_configs_in_rank_order(monkeypatch, tmp_path):
+    from radarbench.bench import figures
+    import importlib
+
+    glance_module = importlib.import_module("radarbench.bench.report.glance")
+
+    task = registry.tasks()["maneuver-detection"]
+    configs = [f"c{i}" for i in range(8)]
+    summary = pd.DataFrame([{"scenario": "s", "config": c, "snr_db": snr, "pd": 0.5, "pd_low": 0.4, "pd_high": 0.6,
+                             "pd_equal_chance": i / 10, "pd_equal_chance_low": 0.0, "pd_equal_chance_high": 1.0}
+                            for i, c in enumerate(configs) for snr in (0.0, 6.0)])
+    ranking = [{"config": c, "unranked": "no Pfa" if c == "c7" else ""} for c in reversed(configs)]
+    drawn = {}
+    monkeypatch.setattr(figures, "pd_vs_snr", lambda rows, path, *a, column, **k: drawn.update(
+        path=path.name, column=column, configs=list(dict.fromkeys(rows.config))))
+    entries = [{"task": task, "scenario": "s", "equal_chance": True, "ranking": ranking}]
+    glance_module.draw_glance_figures(entries, summary, tmp_path)
+    assert drawn == {"path": "glance-1.png", "column": "pd_equal_chance",
+                     "configs": ["c6", "c5", "c4", "c3", "c2", "c1"]}          # ranked, the unranked left out
+    assert entries[0]["figure"] == "glance-1.png"

@@ -35,7 +35,7 @@ from radarbench.bench.markdown import fmt as _fmt
 from radarbench.bench.markdown import table as _table
 from radarbench.bench.provenance import WALL_TIME_ROW, origin_text, provenance
 from radarbench.bench.quantities import plan_calibration
-from radarbench.bench.report.glance import comparisons_frame, glance
+from radarbench.bench.report.glance import comparisons_frame, draw_glance_figures, glance
 from radarbench.bench.report.html import interactive_figures, interactive_specs, markdown_to_html
 from radarbench.bench.report.render import comparisons_markdown, glance_markdown, render, section_macro
 from radarbench.bench.recording import TrialRecord, write_recording
@@ -554,7 +554,9 @@ def _build_with(store: Store, out_dir: Path, recording: bool, on_phase, pool) ->
                       comparisons=comparisons, claims=evaluation.frame() if evaluation is not None else None)
         parts = [paper_vs_ours, _section_plan(record, store, present), _section_calibration(cals, summary, task_of),
                  *task_parts, comparisons_markdown(comparisons, task_of), *trial_parts, *runtime_parts]
-        at_a_glance = glance_markdown(glance(trials, task_of, comparisons, chance))
+        entries = glance(trials, task_of, comparisons, chance)
+        draw_glance_figures(entries, summary, fig_dir)
+        at_a_glance = glance_markdown(entries)
     if recording and records:
         on_phase("recording")
         write_recording(out_dir / "recording.rrd", records, _recording_summary(summary, present),

@@ -208,3 +208,33 @@ def glance(trials: pd.DataFrame, task_of: dict, comparisons: pd.DataFrame, chanc
                                               "enough": enough_trials(r)})
         out.append(entry)
     return out
+
+
+#: Curves in a glance figure: the top-ranked configs, legible at a glance (every config is
+#: in the report's sections)
+GLANCE_CURVES = 6
+
+
+def draw_glance_figures(entries: list[dict], summary: pd.DataFrame, fig_dir) -> None:
+    """Per glance entry with two or more SNR levels, its metric against SNR for its
+    :data:`GLANCE_CURVES` top-ranked configs, in rank order (``figures/glance-K.png``,
+    K from 1 in the glance's order); the entry gets the figure's name as ``figure``."""
+    from radarbench.bench import figures
+
+    for k, g in enumerate(entries, start=1):
+        task = g["task"]
+        column = task.equal_chance_column if g["equal_chance"] else task.ranking_column
+        top = [r["config"] for r in g["ranking"] if not r["unranked"]][:GLANCE_CURVES]
+        rows = summary[(summary.scenario == g["scenario"]) & summary.config.isin(top)] if column in summary else None
+        if rows is None or rows.snr_db.nunique() < 2:
+            continue
+        rows = pd.concat([rows[rows.config == config] for config in top])       # in rank order
+        label = task.equal_chance_label if g["equal_chance"] else task.ranking_label
+        title = f"{g['scenario']}: the top {len(top)} of {len(g['ranking'])} configs"
+        name = f"glance-{k}.png"
+        if task.ranking_binary:
+            figures.pd_vs_snr(rows, fig_dir / name, float("nan"), title, column=column, ylabel=label,
+                              condition="at equal chance $P_D$" if g["equal_chance"] else "as ranked at a glance")
+        else:
+            figures.metric_vs_snr(rows, fig_dir / name, title, column=column, ylabel=label, log=True)
+        g["figure"] = name
