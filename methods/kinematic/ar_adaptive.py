@@ -351,7 +351,8 @@ class ARAdaptive(Method):
         alpha: float = param(0.01, "significance level alpha of the chi-square maneuver test", gt=0.0, lt=0.5,
                              why="a probability; a test at level 0.5 or above rejects more often than not")
         coefficients: str = param("filter", "filter: MMSE coefficients under the filter's P_k|k "
-                                  "(the patent's); min-norm: least-squares extrapolation (P = I)",
+                                  "(our MMSE reading of the patent's steps (2)/(5), which print no "
+                                  "equation); min-norm: least-squares extrapolation (P = I)",
                                   choices=("filter", "min-norm"))
         switching: str = param("per-step", "per-step: each step starts from the low order (the patent's "
                                "flow chart); latched: high order until the acceleration is insignificant",
