@@ -291,9 +291,12 @@ class ARAdaptive(Method):
     unchanged, so the paired difference between ``state_noise = "matching"``
     and ``"fixed"`` at the same Q₀ is the effect of the covariance matching
     alone; the fixed value is a parameter rather than, say, the CV filter's
-    Q because the AR state has no velocity for a CV Q to act on (Q₀ is the
-    variance added to the new position per step; the CV filter's
-    σ_a² T⁴/4 on the position is its analogue).
+    Q because the AR state has no velocity for a CV Q to act on. Q₀ is the
+    variance added to the new position per step, so to the first difference
+    x_k − x_k−1 (T times the velocity) too; the CV filter's DWNA adds
+    σ_a² T⁴/4 to the position and σ_a² T⁴ to that difference: equal noise on
+    the velocity is σ_a = √Q₀ / T², equal noise on the position σ_a = 2√Q₀ / T²
+    (the ar-tracking preset sweeps both models on the first).
 
     **Step (4), the χ² switching rule.** At every tested step the low-order
     prediction's innovation ν_k with S_k = e_0' P_k|k−1 e_0 + R gives
