@@ -178,8 +178,8 @@ def place_targets(labels: np.ndarray, names: tuple[str, ...], *, per_region: int
     fit (:func:`_take_free`); ``allowed`` (region index -> (R, D) bool) keeps a
     region's isolated targets to those of its cells (e.g. :func:`beside_lines`):
     the region's shuffle is drawn as without it and only walked over the allowed
-    cells, so the draws of every other region stay those of the unrestricted
-    layout. Returns the (T, 2) cells, the (T,) paired flags and what could not
+    cells, so every other region's shuffle stays that of the unrestricted layout
+    (its picks move only where a moved target blocks one). Returns the (T, 2) cells, the (T,) paired flags and what could not
     be placed ("" if nothing)."""
     R, D = labels.shape
     rng = np.random.default_rng(seed)

@@ -79,8 +79,9 @@ class RdMap(Scenario):
     (``layout_seed``); with ``bragg_target_offsets_bins`` the Bragg region's
     targets only in the Doppler columns that many cells either side of a
     line's centre (0: on the line), where a CFAR window reaching over the
-    line masks them (:func:`models.rd_map.beside_lines`; the shuffle is the
-    same, so the other regions' targets do not move); then ``pairs`` close
+    line masks them (:func:`models.rd_map.beside_lines`; the shuffles are the
+    same, so another region's target moves only where a moved Bragg target
+    blocks its cell); then ``pairs`` close
     pairs in the homogeneous region,
     the second target ``pair_offset_cells`` = (range, Doppler) from the first
     (``target_paired``). Each target puts its power in one cell (no straddle):

@@ -137,7 +137,8 @@ def line_distance(cells: np.ndarray, doppler_cells: int, line_offset: int) -> np
 def test_bragg_targets_sit_at_the_stated_doppler_offsets_from_a_line(offsets):
     """``bragg_target_offsets_bins``: every Bragg-region target is that many Doppler cells
     from the centre of a line (either line, either side), inside the Bragg region; the
-    labels and the other regions' targets are those of the unrestricted layout."""
+    labels are those of the unrestricted layout, and so are the other regions' targets
+    here (the same shuffles; none of their cells is blocked by a moved Bragg target)."""
     p = dict(interference=False, clutter_edge=False, targets_per_region=2, pairs=0)
     free = make(10.0, n=1, **p).scene
     placed = make(10.0, n=1, bragg_target_offsets_bins=list(offsets), **p).scene
