@@ -168,15 +168,19 @@ def _shifted(mask: np.ndarray, dr: int, dd: int) -> np.ndarray:
 
 def place_targets(labels: np.ndarray, names: tuple[str, ...], *, per_region: int, pairs: int,
                   pair_offset: tuple[int, int], spacing: int, margin: int,
-                  seed: int) -> tuple[np.ndarray, np.ndarray, str]:
+                  seed: int, allowed: dict[int, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, str]:
     """A fixed target layout: ``per_region`` isolated targets in each region
     present (smallest region first), then ``pairs`` pairs in the homogeneous
     region (second target at ``pair_offset`` from the first, also
     homogeneous). Targets that are not partners are at least ``spacing``
     apart (Chebyshev), every target at least ``margin`` from the border.
     Candidates are each region's cells in a shuffle of ``seed``, taken first
-    fit (:func:`_take_free`). Returns the (T, 2) cells, the (T,) paired flags
-    and what could not be placed ("" if nothing)."""
+    fit (:func:`_take_free`); ``allowed`` (region index -> (R, D) bool) keeps a
+    region's isolated targets to those of its cells (e.g. :func:`beside_lines`):
+    the region's shuffle is drawn as without it and only walked over the allowed
+    cells, so every other region's shuffle stays that of the unrestricted layout
+    (its picks move only where a moved target blocks one). Returns the (T, 2) cells, the (T,) paired flags and what could not
+    be placed ("" if nothing)."""
     R, D = labels.shape
     rng = np.random.default_rng(seed)
     inside = np.zeros(labels.shape, bool)
@@ -186,11 +190,15 @@ def place_targets(labels: np.ndarray, names: tuple[str, ...], *, per_region: int
     paired: list = []
     missing = []
     present = [k for k in range(len(names)) if np.any(labels == k)]
+    allowed = allowed or {}
     for k in sorted(present, key=lambda k: int(np.count_nonzero(labels == k))):
         region = (labels == k) & inside
         candidates = np.flatnonzero(region)
-        got = _take_free(candidates, rng.permutation(len(candidates)), per_region, blocked, spacing,
-                         lambda: bool((region & ~blocked).any()))
+        order = rng.permutation(len(candidates))
+        if k in allowed:
+            order = order[allowed[k].reshape(-1)[candidates[order]]]
+            region = region & allowed[k]
+        got = _take_free(candidates, order, per_region, blocked, spacing, lambda: bool((region & ~blocked).any()))
         placed += [cell for cell, in got]
         paired += [False] * len(got)
         if len(got) < per_region:
@@ -216,6 +224,17 @@ def place_targets(labels: np.ndarray, names: tuple[str, ...], *, per_region: int
         missing.append(f"{pairs - len(got)} of {pairs} pairs in region 'homogeneous'")
     cells = np.stack(np.divmod(np.asarray(placed, np.int64), D), axis=-1).reshape(-1, 2)
     return cells, np.asarray(paired, bool), "; ".join(missing)
+
+
+def beside_lines(shape: tuple[int, int], line_offset: int, offsets: tuple[int, ...]) -> np.ndarray:
+    """(R, D) bool: the Doppler columns ``offsets`` cells either side of each Bragg
+    line's centre (D//2 ± ``line_offset``, as :func:`background_power` places them);
+    offset 0 is the line's own column. Columns outside the map are left out."""
+    R, D = shape
+    columns = {D // 2 + sign * line_offset + side * k for sign in (1, -1) for side in (1, -1) for k in offsets}
+    mask = np.zeros(shape, bool)
+    mask[:, sorted(c for c in columns if 0 <= c < D)] = True
+    return mask
 
 
 def target_cell_power(signal_power: np.ndarray, noise_power: np.ndarray, phase: np.ndarray) -> np.ndarray:

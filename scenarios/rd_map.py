@@ -24,8 +24,8 @@ from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_scenario
 from radarbench.bench.tasks.cells import CELL_DETECTION, REGION_NAMES, MapScene
-from radarbench.models.rd_map import (LAYOUT_BYTES_PER_CELL, RegionLevels, background_power, label_regions, place_targets,
-                           target_cell_power)
+from radarbench.models.rd_map import (LAYOUT_BYTES_PER_CELL, RegionLevels, background_power, beside_lines, label_regions,
+                                      place_targets, target_cell_power)
 
 SNR_DEFINITION = (
     "SNR = 10 log10(S / N) per target: S its mean power in its cell (over the Swerling draw for Swerling 1), "
@@ -76,7 +76,13 @@ class RdMap(Scenario):
     ``targets_per_region`` isolated point targets in each region present, at
     least ``target_spacing_cells`` apart (Chebyshev) and ``margin_cells`` from
     the map's border, chosen by a fixed-seed shuffle of each region's cells
-    (``layout_seed``); then ``pairs`` close pairs in the homogeneous region,
+    (``layout_seed``); with ``bragg_target_offsets_bins`` the Bragg region's
+    targets only in the Doppler columns that many cells either side of a
+    line's centre (0: on the line), where a CFAR window reaching over the
+    line masks them (:func:`models.rd_map.beside_lines`; the shuffles are the
+    same, so another region's target moves only where a moved Bragg target
+    blocks its cell); then ``pairs`` close
+    pairs in the homogeneous region,
     the second target ``pair_offset_cells`` = (range, Doppler) from the first
     (``target_paired``). Each target puts its power in one cell (no straddle):
     z = |√(S X) e^(jθ) + √(N E)|² = S X + N E + 2√(S X N E) cos θ, with E the
@@ -161,6 +167,11 @@ class RdMap(Scenario):
                                         "side, each with targets_per_region targets (Pd and Pfa per side)")
         targets_per_region: int = param(2, "isolated targets in each region present", ge=0, le=64,
                                         why="none to 64 a region (fewer when the region has no room, checked)")
+        bragg_target_offsets_bins: tuple[int, ...] = param(
+            (), "Doppler offsets (cells) from a Bragg line's centre, either side, at which the Bragg region's "
+                "targets are placed (0: on the line); empty: anywhere in the region", ge=0, le=64, min_len=0,
+            max_len=8, why="on the line to beyond any line's region (a region with no cell at the offsets is "
+                           "refused, checked with the layout)")
         pairs: int = param(2, "close target pairs in the homogeneous region", ge=0, le=32,
                            why="none to 32 pairs (checked against the room)")
         pair_offset_cells: tuple[int, ...] = param((0, 4), "(range, Doppler) offset of a pair's second target "
@@ -192,6 +203,9 @@ class RdMap(Scenario):
             if self.clutter_edge and self.edge_range_cell >= self.range_cells:
                 raise ConfigError("edge_range_cell", f"the edge must lie inside the map: < range_cells = "
                                   f"{self.range_cells}, got {self.edge_range_cell}")
+            if self.bragg_target_offsets_bins and not self.bragg:
+                raise ConfigError("bragg_target_offsets_bins", "places targets beside the Bragg lines: needs "
+                                  "bragg = true")
             if tuple(self.pair_offset_cells) == (0, 0):
                 raise ConfigError("pair_offset_cells", "a pair's targets must be in different cells, got (0, 0)")
             if 2 * self.margin_cells >= min(self.range_cells, self.doppler_cells):
@@ -202,7 +216,9 @@ class RdMap(Scenario):
         memory check (a map of 4096 x 16384 cells takes seconds and GBs)."""
         layout = scene_layout(params)
         if layout.shortfall:
-            raise ConfigError("targets_per_region", f"no room for every target: {layout.shortfall}")
+            field = "bragg_target_offsets_bins" if params.bragg_target_offsets_bins and "'bragg'" in \
+                layout.shortfall else "targets_per_region"
+            raise ConfigError(field, f"no room for every target: {layout.shortfall}")
 
     def unit_memory_bytes(self, params, n: int) -> int:
         """The float64 draws and the float32 map and noise power: about 24 bytes a cell a map;
@@ -272,9 +288,11 @@ def scene_layout(p) -> Layout:
     labels = label_regions(parts, REGION_NAMES, RegionLevels(edge_range_cell=p.edge_range_cell if p.clutter_edge
                                                              else None, edge_band_cells=p.edge_band_cells,
                                                              edge_sides=p.edge_sides))
+    allowed = {REGION_NAMES.index("bragg"): beside_lines((R, D), p.bragg_offset_bins, tuple(p.bragg_target_offsets_bins))} \
+        if p.bragg_target_offsets_bins else None
     cells, paired, shortfall = place_targets(labels, REGION_NAMES, per_region=p.targets_per_region, pairs=p.pairs,
                                              pair_offset=tuple(p.pair_offset_cells), spacing=p.target_spacing_cells,
-                                             margin=p.margin_cells, seed=p.layout_seed)
+                                             margin=p.margin_cells, seed=p.layout_seed, allowed=allowed)
     # the strength varies after the layout is fixed (bragg_scale_db)
     power = dataclasses.replace(parts, bragg=parts.bragg * 10.0 ** (p.bragg_scale_db / 10.0)).total
     for a in (power, labels, cells, paired):

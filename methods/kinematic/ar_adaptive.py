@@ -291,9 +291,12 @@ class ARAdaptive(Method):
     unchanged, so the paired difference between ``state_noise = "matching"``
     and ``"fixed"`` at the same Q₀ is the effect of the covariance matching
     alone; the fixed value is a parameter rather than, say, the CV filter's
-    Q because the AR state has no velocity for a CV Q to act on (Q₀ is the
-    variance added to the new position per step; the CV filter's
-    σ_a² T⁴/4 on the position is its analogue).
+    Q because the AR state has no velocity for a CV Q to act on. Q₀ is the
+    variance added to the new position per step, so to the first difference
+    x_k − x_k−1 (T times the velocity) too; the CV filter's DWNA adds
+    σ_a² T⁴/4 to the position and σ_a² T⁴ to that difference: equal noise on
+    the velocity is σ_a = √Q₀ / T², equal noise on the position σ_a = 2√Q₀ / T²
+    (the ar-tracking preset sweeps both models on the first).
 
     **Step (4), the χ² switching rule.** At every tested step the low-order
     prediction's innovation ν_k with S_k = e_0' P_k|k−1 e_0 + R gives
@@ -351,7 +354,8 @@ class ARAdaptive(Method):
         alpha: float = param(0.01, "significance level alpha of the chi-square maneuver test", gt=0.0, lt=0.5,
                              why="a probability; a test at level 0.5 or above rejects more often than not")
         coefficients: str = param("filter", "filter: MMSE coefficients under the filter's P_k|k "
-                                  "(the patent's); min-norm: least-squares extrapolation (P = I)",
+                                  "(our MMSE reading of the patent's steps (2)/(5), which print no "
+                                  "equation); min-norm: least-squares extrapolation (P = I)",
                                   choices=("filter", "min-norm"))
         switching: str = param("per-step", "per-step: each step starts from the low order (the patent's "
                                "flow chart); latched: high order until the acceleration is insignificant",

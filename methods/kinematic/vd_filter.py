@@ -168,7 +168,7 @@ def _vd_kernel(z, valid, x0, P0, F_cv, Q_cv, F_ca, Q_ca, H, R, rho, detect_thres
 
 @register_method
 class VariableDimension(KinematicTracker):
-    """Variable-dimension filter (Bar-Shalom & Birmiwal): CV, CA on a chi-square maneuver detection, back to CV when the acceleration is insignificant.
+    """Variable-dimension filter (Bar-Shalom & Birmiwal): CV, CA on a chi-square maneuver detection with a back-dated restart (s steps before the detection, re-filtered), back to CV when the acceleration is insignificant.
 
     Bar-Shalom & Birmiwal, "Variable dimension filter for maneuvering target
     tracking" (IEEE Trans. AES, 1982), as described in the AR-model patent's
@@ -187,7 +187,7 @@ class VariableDimension(KinematicTracker):
       scaled chi-square c chi2(nu), c = 1/(1 + rho), nu = m (1 + rho)/(1 - rho),
       the one with eps_bar's steady-state mean m/(1 - rho) and variance
       2m/(1 - rho^2) (our choice of the threshold's law).
-    * **Switch to CA** at step k (trace ``switch`` = 1): the maneuver is
+    * **Switch to CA, back-dated** at step k (trace ``switch`` = 1): the maneuver is
       taken to have begun ``window_steps`` = s steps earlier; the CA filter
       restarts from the estimate at k - s (position, velocity and their
       covariance kept; acceleration 0 with std ``accel_init_std_m_s2``,
@@ -195,7 +195,10 @@ class VariableDimension(KinematicTracker):
       z_{k-s+1..k}, so the acceleration is estimated from the window.
       Bar-Shalom & Birmiwal initialise the acceleration from the innovation
       at k - s instead; our diffuse restart lets the window's measurements
-      estimate it. Estimates already output are not revised.
+      estimate it. Estimates already output are not revised, but from k on
+      the CA filter has seen the window's s measurements as a maneuver's: a
+      head start over a tracker that switches at k without looking back (the
+      AR tracker's seamless switch), which the comparisons against it carry.
     * **Switch back to CV** (the acceleration insignificant): after s steps
       in CA mode, when delta_k = sum of a_j' P_aa,j^-1 a_j over the last s
       steps is below the (1 - ``back_level``) quantile of chi2(m s) (delta's
@@ -218,8 +221,8 @@ class VariableDimension(KinematicTracker):
                               ge=0.0, le=0.99, why="0 is the NIS alone; at most a 100-step memory")
         detect_level: float = param(0.01, "per-step false-detection probability of the maneuver test",
                                     ge=1e-12, le=0.5, why=LEVEL_WHY)
-        window_steps: int = param(5, "window s: steps re-filtered at a restart, and over which the "
-                                  "acceleration's significance is tested", ge=1, le=100,
+        window_steps: int = param(5, "window s: steps the CA restart is back-dated by and re-filters, and "
+                                  "over which the acceleration's significance is tested", ge=1, le=100,
                                   why="one step at least; at most 100, a re-run per detection")
         back_level: float = param(0.05, "level of the acceleration's significance test (back to CV below "
                                   "its threshold)", ge=1e-12, le=0.5, why=LEVEL_WHY)
