@@ -3,7 +3,7 @@
 A claims file may declare named selections of baselines instead of naming one config by hand::
 
     [baseline.conventional]
-    best_of = ["innovation", "glr", "cusum[score=glr,drift=8]"]   # configs, or methods: all their configs
+    best_of = ["innovation[*]", "glr[*]", "cusum[score=glr,drift=8]"]   # configs; METHOD[*]: all its configs
     by = "ranking"          # the order of *Results at a glance* (the default)
     scenario = "cv-turn-cv" # optional: else the scenario config of the quantity that names it
 
@@ -13,8 +13,8 @@ the run's comparisons.csv alone (so a committed report's claims regenerate from 
 each candidate the mean of the task's ranking metric at each SNR level, averaged over the levels
 (each level weighing the same, as the glance averages), ``by = "ranking"`` on the outcome at
 equal chance Pd where the run has it (the glance's metric), ``by = "ranking_metric"`` on the
-task's ranking metric itself. Candidates are the entries of ``best_of`` in file order, a method
-expanded to its configs in the run's order; one that did not run is left out (an optional method
+task's ranking metric itself. Candidates are the entries of ``best_of`` in file order: a config's
+label, or ``METHOD[*]`` for every config of that method in the run's order; one that did not run is left out (an optional method
 unavailable here), and if none ran the claim is *not comparable*. Means equal within
 :data:`bench.metrics.RELATIVE_RESOLUTION` are a tie, which goes to the earlier candidate.
 Templates read the chosen config as ``baseline`` (a claim's reason: the one its quantity names)
@@ -38,6 +38,8 @@ from radarbench.bench.quantities import INLINE, Missing, Tables
 BY = {"ranking": True, "ranking_metric": False}
 #: the keys of a quantity that name a config, which a baseline reference may take
 CONFIG_KEYS = ("config", "a", "b")
+#: ``METHOD[*]`` in ``best_of``: every config of the method
+EVERY = "[*]"
 
 
 @dataclass(frozen=True)
@@ -85,7 +87,7 @@ def _selection(name: str, table: Any, field: str) -> Selection:
             raise ConfigError(f"{field}.{key}", "unknown key (allowed: best_of, by, scenario)")
     best_of = table.get("best_of")
     if not isinstance(best_of, list) or not best_of or not all(isinstance(x, str) and x.strip() for x in best_of):
-        raise ConfigError(f"{field}.best_of", f"expected a non-empty list of config labels or method names, "
+        raise ConfigError(f"{field}.best_of", f"expected a non-empty list of config labels or METHOD{EVERY}, "
                                               f"got {best_of!r}"[:200])
     by = table.get("by", "ranking")
     if by not in BY:
@@ -122,13 +124,14 @@ def _only_scenario(t: Tables) -> str:
 
 
 def candidates(selection: Selection, t: Tables, scenario: str) -> list[str]:
-    """The configs of ``best_of`` that ran on ``scenario``, in file order, a method's in the run's order."""
+    """The configs of ``best_of`` that ran on ``scenario``, in file order, a ``METHOD[*]``'s in the run's order."""
     rows = t.summary[t.summary.scenario == scenario] if not t.summary.empty else t.summary
     configs = list(dict.fromkeys(rows.config)) if not rows.empty else []
     method_of = dict(zip(rows.config, rows.method)) if not rows.empty else {}
     out: list[str] = []
     for entry in selection.best_of:
-        out += [c for c in configs if (c == entry or method_of[c] == entry) and c not in out]
+        method = entry[:-len(EVERY)] if entry.endswith(EVERY) else None
+        out += [c for c in configs if (method_of[c] == method if method else c == entry) and c not in out]
     return out
 
 

@@ -4,7 +4,7 @@
 (a) the chosen config is the candidate ranked first by the task's ranking metric, averaged over the
     SNR levels as the glance averages (on the outcome at equal chance Pd where the run has it),
     higher or lower being better as the task says;
-(b) ties go to the earlier candidate (file order; a method's configs in the run's order), whatever
+(b) ties go to the earlier candidate (file order; a ``METHOD[*]``'s configs in the run's order), whatever
     order the table lists them in;
 (c) a candidate that did not run is left out; none ran: the claim is not comparable;
 (d) a claim names the choice in its reason (``baseline``), notes in ``baselines.NAME``, and
@@ -109,13 +109,14 @@ def test_a_tie_within_the_numerical_resolution_is_a_tie():
     assert _choose(t, "y", "x").config == "y"
 
 
-def test_a_method_stands_for_its_configs_in_the_runs_order():
-    t = _tables(_comparisons({"glr[window=20]": [0.7], "cusum": [0.6], "glr[window=40]": [0.7]}, DETECTION,
-                             "detected"))
-    assert baselines.candidates(baselines.Selection("x", ("cusum", "glr")), t, "s") == \
-        ["cusum", "glr[window=20]", "glr[window=40]"]
-    assert _choose(t, "cusum", "glr").config == "glr[window=20]"
-    assert _choose(t, "glr[window=40]", "glr").config == "glr[window=40]"
+def test_method_star_stands_for_its_configs_in_the_runs_order_and_a_label_for_itself():
+    t = _tables(_comparisons({"glr[window=20]": [0.7], "cusum": [0.6], "glr[window=40]": [0.7], "glr": [0.9]},
+                             DETECTION, "detected"))
+    assert baselines.candidates(baselines.Selection("x", ("cusum", "glr[*]")), t, "s") == \
+        ["cusum", "glr[window=20]", "glr[window=40]", "glr"]
+    assert baselines.candidates(baselines.Selection("x", ("glr[window=40]", "glr")), t, "s") == ["glr[window=40]", "glr"]
+    assert _choose(t, "cusum", "glr[window=20]", "glr[*]").config == "glr"
+    assert _choose(t, "glr[window=40]", "glr[window=20]").config == "glr[window=40]"
 
 
 # ------------------------------------------------------------------ (c) candidates that did not run
@@ -140,7 +141,7 @@ FILE = """
 paper = "A paper"
 
 [baseline.strongest]
-best_of = ["glr", "cusum"]
+best_of = ["glr[*]", "cusum[*]"]
 
 [[claim]]
 id = "ours-beats-the-strongest"
@@ -180,9 +181,9 @@ def test_a_selection_none_of_whose_candidates_ran_makes_its_claim_not_comparable
 # ------------------------------------------------------------------ (e) validation
 
 @pytest.mark.parametrize("change, field, words", [
-    (('best_of = ["glr", "cusum"]', 'best_of = []'), "baseline.strongest.best_of", "non-empty list"),
-    (('best_of = ["glr", "cusum"]', 'best_of = ["glr"]\nby = "pd"'), "baseline.strongest.by", "expected one of"),
-    (('best_of = ["glr", "cusum"]', 'best_of = ["glr"]\nfrom = 1'), "baseline.strongest.from", "unknown key"),
+    (('best_of = ["glr[*]", "cusum[*]"]', 'best_of = []'), "baseline.strongest.best_of", "non-empty list"),
+    (('best_of = ["glr[*]", "cusum[*]"]', 'best_of = ["glr"]\nby = "pd"'), "baseline.strongest.by", "expected one of"),
+    (('best_of = ["glr[*]", "cusum[*]"]', 'best_of = ["glr"]\nfrom = 1'), "baseline.strongest.from", "unknown key"),
     (('a = { baseline = "strongest" }', 'a = { baseline = "strong" }'), "claim[0].quantity.a.baseline",
      "no [baseline.strong]"),
     (('config = { baseline = "strongest" }', 'config = { baseline = "strongest", x = 1 }'),
@@ -201,12 +202,12 @@ CLAIM_FILES = sorted(name for name in presets() if claims.preset_claims(name) is
 @pytest.mark.parametrize("name", CLAIM_FILES)
 def test_every_packaged_selection_names_configs_or_methods_of_its_presets_sweep(name):
     """A misspelt candidate would silently drop out of the choice: only an optional method
-    unavailable here may be absent from a run."""
+    unavailable here may be absent from a run (a label, or METHOD[*] of a method the sweep runs)."""
     from tests.conftest import parse_sweep_or_skip
     plan = parse_sweep_or_skip(tomllib.loads(presets()[name].read_text(encoding="utf-8")), f"preset {name}")
-    known = {m.label for m in plan.methods} | {m.name for m in plan.methods}
+    known = {m.label for m in plan.methods} | {f"{m.name}[*]" for m in plan.methods}
     known |= {entry.get("label", entry["name"]) for entry, _ in plan.skipped_methods}
-    known |= {entry["name"] for entry, _ in plan.skipped_methods}
+    known |= {f"{entry['name']}[*]" for entry, _ in plan.skipped_methods}
     scenarios = {sc.label for sc in plan.scenarios}
     for selection in claims.preset_claims(name).baselines.values():
         assert set(selection.best_of) <= known, (selection.name, set(selection.best_of) - known)
