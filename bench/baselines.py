@@ -2,21 +2,22 @@
 
 A claims file may declare named selections of baselines instead of naming one config by hand::
 
-    [baseline.conventional]
-    best_of = ["innovation[*]", "glr[*]", "cusum[score=glr,drift=8]"]   # configs; METHOD[*]: all its configs
-    by = "ranking"          # the order of *Results at a glance* (the default)
-    scenario = "cv-turn-cv" # optional: else the scenario config of the quantity that names it
+    [baseline.strongest]
+    best_of = ["method-a[*]", "method-b[window=8]"]   # config labels; METHOD[*]: all its configs
+    by = "ranking"            # the order of *Results at a glance* (the default)
+    scenario = "scene-label"  # optional: else the scenario config of the quantity that names it
 
 and a quantity names one wherever it names a config (``config``, ``a``, ``b``):
-``b = { baseline = "conventional" }``. The selection is the candidate ranked first, read from
+``b = { baseline = "strongest" }``. The selection is the candidate ranked first, read from
 the run's comparisons.csv alone (so a committed report's claims regenerate from its CSVs): for
 each candidate the mean of the task's ranking metric at each SNR level, averaged over the levels
 (each level weighing the same, as the glance averages), ``by = "ranking"`` on the outcome at
 equal chance Pd where the run has it (the glance's metric), ``by = "ranking_metric"`` on the
 task's ranking metric itself. Candidates are the entries of ``best_of`` in file order: a config's
-label, or ``METHOD[*]`` for every config of that method in the run's order; one that did not run is left out (an optional method
-unavailable here), and if none ran the claim is *not comparable*. Means equal within
-:data:`bench.metrics.RELATIVE_RESOLUTION` are a tie, which goes to the earlier candidate.
+label, or ``METHOD[*]`` for every config of that method in the run's order; one that did not run
+is left out (an optional method unavailable here), and if none ran the claim is *not comparable*.
+Means equal within :data:`bench.metrics.RELATIVE_RESOLUTION` are a tie, which goes to the earlier
+candidate.
 Templates read the chosen config as ``baseline`` (a claim's reason: the one its quantity names)
 and ``baselines.NAME`` (every template), both :class:`Chosen`.
 """
@@ -176,7 +177,8 @@ def choose(selection: Selection, t: Tables, scenario: str = "") -> Chosen:
     scenario = selection.scenario or scenario or _only_scenario(t)
     configs = candidates(selection, t, scenario)
     if not configs:
-        raise Missing(f"none of baseline {selection.name!r} ({', '.join(selection.best_of)}) on `{scenario}`")
+        listed = ", ".join(selection.best_of)
+        raise Missing(f"every candidate of baseline {selection.name!r} ({listed}) on `{scenario}`")
     df = t.comparisons
     rows = df[(df.scenario == scenario) & (df.config_a.isin(configs) | df.config_b.isin(configs))] \
         if not df.empty else df
