@@ -36,6 +36,8 @@ from typing import Any, Mapping
 
 import pandas as pd
 
+from radarbench.bench.baselines import Chosen, Selection, check_reference, is_reference, parse_selections, resolve
+from radarbench.bench.baselines import template_values as baseline_values
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.listing import CLAIMS_SUFFIX
 from radarbench.bench.markdown import fmt, fmt_db, table
@@ -101,6 +103,7 @@ class ClaimsFile:
     name: str          # the file's name, for error messages
     paper: str
     claims: tuple[Claim, ...]
+    baselines: dict[str, Selection] = field(default_factory=dict)   # [baseline.NAME]: bench.baselines
 
 
 def _text(value: Any, field: str, *, empty: bool = False) -> str:
@@ -142,11 +145,33 @@ def _quantity(q: Any, field: str) -> dict:
         raise ConfigError(f"{field}.scenario", "give scenario, or scenario_a and scenario_b, not both")
     for key in ("a", "b"):
         if key in q:
-            out[key] = _quantity(q[key], f"{field}.{key}") if kind in INLINE else _text(q[key], f"{field}.{key}")
-    for key in ("config", "column", "scenario", "scenario_a", "scenario_b", "metric"):
+            out[key] = _quantity(q[key], f"{field}.{key}") if kind in INLINE else _config(q[key], f"{field}.{key}")
+    if "config" in q:
+        out["config"] = _config(q["config"], f"{field}.config")
+    for key in ("column", "scenario", "scenario_a", "scenario_b", "metric"):
         if key in q:
             _text(q[key], f"{field}.{key}")
     return out
+
+
+def _config(value: Any, field: str) -> str | dict:
+    """A quantity's config: a label, or ``{ baseline = "NAME" }`` (checked against the file's
+    selections once they are all read, :func:`_check_references`)."""
+    return check_reference(value, field) if isinstance(value, dict) else _text(value, field)
+
+
+def _check_references(claims: tuple[Claim, ...], selections: dict[str, Selection]) -> None:
+    """Every ``{ baseline = "NAME" }`` of the claims names a ``[baseline.NAME]``."""
+    def walk(q: dict, field: str):
+        for key, value in q.items():
+            if is_reference(value):
+                check_reference(value, f"{field}.{key}", selections)
+            elif isinstance(value, dict):
+                walk(value, f"{field}.{key}")
+    for i, c in enumerate(claims):
+        for name, q in [("quantity", c.quantity), *((f"also.{k}", v) for k, v in c.also.items())]:
+            if q:
+                walk(q, f"claim[{i}].{name}")
 
 
 def _claim(raw: Any, field: str) -> Claim:
@@ -196,12 +221,14 @@ def parse(text: str, name: str) -> ClaimsFile:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError("", f"not valid TOML: {exc}") from None
-        _unknown(data, {"paper", "claim"}, "")
+        _unknown(data, {"paper", "claim", "baseline"}, "")
         paper = _text(data.get("paper"), "paper")
         raws = data.get("claim")
         if not isinstance(raws, list) or not raws:
             raise ConfigError("claim", "missing: give at least one [[claim]]")
         claims = tuple(_claim(raw, f"claim[{i}]") for i, raw in enumerate(raws))
+        selections = parse_selections(data.get("baseline", {}), "baseline")
+        _check_references(claims, selections)
         seen, named = set(), set()
         for i, c in enumerate(claims):
             if c.id in seen:
@@ -213,7 +240,7 @@ def parse(text: str, name: str) -> ClaimsFile:
                 named.add(also)
     except ConfigError as err:
         raise ConfigError(f"{name}: {err.field.lstrip('.')}" if err.field else name, err.problem) from None
-    return ClaimsFile(name, paper, claims)
+    return ClaimsFile(name, paper, claims, selections)
 
 
 def load(path: str | Path) -> ClaimsFile:
@@ -403,12 +430,12 @@ def default_unit(q: dict) -> str:
     return ""
 
 
-def _result(q: dict | None, t: Tables, unit: str = "") -> Result:
+def _result(q: dict | None, t: Tables, unit: str = "", selections: dict | None = None) -> Result:
     if q is None:
         return Result()
     unit = unit or default_unit(q)
     try:
-        v = quantity(q, t)
+        v = quantity(resolve(q, selections or {}, t)[0], t)
     except Missing as m:
         return Result(missing=str(m.args[0]))
     return Result(v.value, v.low, v.high, v.p, v.n, v.null, value_text(v, unit))
@@ -436,6 +463,7 @@ class Evaluation:
     file: ClaimsFile
     claims: dict[str, Result]
     q: dict[str, Result]
+    baselines: dict[str, Chosen] = field(default_factory=dict)    # baselines.NAME: bench.baselines
 
     def frame(self) -> pd.DataFrame:
         """claims.csv: one row per claim (:data:`CLAIMS_COLUMNS`)."""
@@ -446,7 +474,7 @@ class Evaluation:
         return pd.DataFrame(rows, columns=CLAIMS_COLUMNS)
 
     def render(self, text: str, field: str) -> str:
-        return render_template(text, field, claims=self.claims, q=self.q)
+        return render_template(text, field, claims=self.claims, q=self.q, baselines=self.baselines)
 
 
 def evaluate(file: ClaimsFile, tables: Tables) -> Evaluation:
@@ -459,25 +487,32 @@ def evaluate(file: ClaimsFile, tables: Tables) -> Evaluation:
             raise ConfigError(f"{file.name}: {field}.{err.field}" if err.field else f"{file.name}: {field}",
                               err.problem) from None
 
-    q = {name: named(f"claim[{i}].also.{name}", lambda: _result(quantity_, tables))
+    q = {name: named(f"claim[{i}].also.{name}", lambda: _result(quantity_, tables, selections=file.baselines))
          for i, c in enumerate(file.claims) for name, quantity_ in c.also.items()}
     results = {}
     for i, c in enumerate(file.claims):
-        r = named(f"claim[{i}].quantity", lambda: _result(c.quantity, tables, c.unit))
+        r = named(f"claim[{i}].quantity", lambda: _result(c.quantity, tables, c.unit, file.baselines))
         if r.missing:
             results[c.id] = replace(r, verdict=NOT_COMPARABLE, reason=f"{r.missing} did not run")
             continue
         word, generated = verdict(c, Value(r.value, r.low, r.high, n=r.n, null=r.null)) if c.quantity \
             else verdict(c, None)
         results[c.id] = replace(r, verdict=word, reason=generated)
-    evaluation = Evaluation(file, results, q)
+    evaluation = Evaluation(file, results, q, baseline_values(file.baselines, tables))
     for i, c in enumerate(file.claims):
         r = results[c.id]
         if c.reason and not r.missing:
             own = render_template(c.reason, f"{file.name}: claim[{i}].reason", claims=results, q=q,
+                                  baselines=evaluation.baselines, baseline=_claims_baseline(c, file, tables),
                                   value=r.value, low=r.low, high=r.high, text=r.text, verdict=r.verdict)
             results[c.id] = replace(r, reason="; ".join(s for s in (r.reason, own) if s))
     return evaluation
+
+
+def _claims_baseline(c: Claim, file: ClaimsFile, tables: Tables) -> Chosen | None:
+    """The baseline the claim's own quantity chose (its first), for ``baseline`` in its reason."""
+    chosen = resolve(c.quantity, file.baselines, tables)[1] if c.quantity else []
+    return chosen[0] if chosen else None
 
 
 # ------------------------------------------------------------------ the report's section

@@ -250,5 +250,7 @@ def describe(q: dict | None) -> str:
     """A quantity as one line: ``crossing(config=..., column=pd_step)``."""
     if q is None:
         return ""
+    if "baseline" in q:                  # a config chosen by the run (bench.baselines)
+        return f"baseline:{q['baseline']}"
     show = (lambda v: describe(v) if isinstance(v, dict) else f"{v:g}" if isinstance(v, float) else str(v))
     return f"{q['kind']}({', '.join(f'{k}={show(v)}' for k, v in q.items() if k != 'kind')})"

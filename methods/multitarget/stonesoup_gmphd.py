@@ -45,6 +45,8 @@ from radarbench.models.hfswr import cv_process_noise, cv_transition  # noqa: E40
 
 #: the ``cardinality`` parameter: Stone Soup's point-process updaters
 UPDATERS = {"phd": PHDUpdater, "lcc": LCCUpdater}
+#: the ``births`` parameter: how the birth rate is spread over the last scan's plots
+BIRTHS = ("adaptive", "unheld")
 
 
 @dataclass(frozen=True)
@@ -55,11 +57,16 @@ class GmPhdParams:
                              "second-order GM-LCC update (Clark & De Melo 2018, Stone Soup's LCCUpdater), the "
                              "clutter count Poisson with the scene's mean (variance = mean)",
                              choices=tuple(UPDATERS))
-    birth_rate: float = param(0.25, "expected new targets per scan, spread evenly over the birth components "
-                                    "(one per plot of the last scan that no extracted component's gate held)",
+    birth_rate: float = param(0.2, "expected new targets per scan, the same at every scan and set without "
+                                   "the scene's arrivals: Vo & Ma 2006's birth intensity (two components of "
+                                   "weight 0.1); spread over the last scan's plots as ``births`` says",
                               gt=0.0, le=10.0, why="positive; more than 10 ships appearing per scan is no "
-                                                   "HFSWR scene (hfswr-targets: 6 ships appearing over the "
-                                                   "first third of the run, about 0.5 per scan early, none late)")
+                                                   "HFSWR scene")
+    births: str = param("adaptive", "adaptive: every plot of the last scan is a birth, weighted by the "
+                                     "probability that no component of the mixture produced it (Ristic, Clark, "
+                                     "Vo & Vo 2012: birth_rate (1 - rho(z)) / sum (1 - rho)); unheld: the plots "
+                                     "no extracted component's gate held, birth_rate split evenly (the earlier "
+                                     "rule)", choices=BIRTHS)
     survival_probability: float = param(0.99, "P_S: probability that a target present at one scan is present "
                                               "at the next (Vo & Ma's 0.99)", ge=0.5, le=1.0,
                                         why="a target lasting two scans on average is no track; 1: no deaths")
@@ -109,6 +116,14 @@ class StoneSoupGmPhd(StoneSoupPeer):
     the radial velocity along the line of sight with a N(0, v_max²) prior per
     axis — Stone Soup's ``MultiMeasurementInitiator`` prior of the JPDA peer —
     each weighted ``birth_rate`` / (number of such plots).
+    With ``births = "adaptive"`` (the default) every plot z of the last scan
+    is a birth, weighted ``birth_rate`` (1 − ρ(z)) / Σ (1 − ρ), ρ(z) the
+    updated weight of the mixture's own components on z, the probability that
+    z came from a target already in the mixture (Ristic et al. 2012's
+    measurement-driven birth): a plot a tentative component explains gives
+    little birth mass, an unexplained one most of it. The birth rate is the
+    same at every scan and set without the scene's arrivals, so targets may
+    appear anywhere and at any scan.
 
     Outputs: at each scan, every component whose weight exceeds
     ``extraction_threshold`` is a confirmed track (2) identified by its label
@@ -160,14 +175,42 @@ class StoneSoupGmPhd(StoneSoupPeer):
             plots = [Detection(StateVector(p), timestamp=when, measurement_model=measurement)
                      for p in z[k, :int(n_plots[k])]]
             hypotheses = hypothesiser.hypothesise(mixture + births, plots, when)
-            mixture = sorted(reducer.reduce(list(updater.update(hypotheses).components)), key=_component_key)
+            updated = list(updater.update(hypotheses).components)
+            spread = _birth_weights(params, plots, hypotheses, updated)     # before the reducer merges
+            mixture = sorted(reducer.reduce(updated), key=_component_key)
             extracted = _heaviest_per_label(mixture, params.extraction_threshold)
             for label, component in extracted.items():
                 slots.record(buf, k, label, kern.CONFIRMED, component)
             slots.release_missing(set(extracted))
-            unheld = _plots_no_extracted_gate_held(hypotheses[:-1], plots, params.extraction_threshold)
-            births = [_birth(measurement, p, params.birth_rate / len(unheld), vmax) for p in unheld]
+            births = [_birth(measurement, p, w, vmax) for p, w in spread if w > params.prune_threshold]
         return buf, slots.used
+
+
+def _birth_weights(params, plots, hypotheses, updated) -> list:
+    """(plot, birth weight) for the next scan, as ``params.births`` says."""
+    if params.births == "unheld":
+        unheld = _plots_no_extracted_gate_held(hypotheses[:-1], plots, params.extraction_threshold)
+        return [(p, params.birth_rate / len(unheld)) for p in unheld]
+    free = 1.0 - np.clip(_persistent_share(hypotheses[:-1], updated), 0.0, 1.0)
+    total = float(free.sum())
+    return [(p, params.birth_rate * f / total) for p, f in zip(plots, free)] if total > 0 else []
+
+
+def _persistent_share(per_plot, updated) -> np.ndarray:
+    """ρ(z) per plot: the summed updated weight of the mixture's own components (not this
+    scan's births) on each plot. Stone Soup's point-process updater appends, plot by plot in
+    hypothesis order, one component per single hypothesis (its missed-detection terms after);
+    an updated component keeps its prediction's tag, which checks the alignment."""
+    rho, offset = np.zeros(len(per_plot)), 0
+    for i, multi in enumerate(per_plot):
+        for h in multi:
+            tag = h.prediction.tag
+            if tag not in (None, TaggedWeightedGaussianState.BIRTH):
+                if updated[offset].tag != tag:
+                    raise RuntimeError("Stone Soup's updater no longer lists components plot by plot")
+                rho[i] += float(updated[offset].weight)
+            offset += 1
+    return rho
 
 
 def _component_key(c):
