@@ -269,3 +269,13 @@ def test_a_trackers_error_views_name_their_units():
     layout = TrialLayout(root="/glint/x/trial_000", scenario="glint", title="t", sort_key=("glint", False, 0.0, 0),
                          methods=(), tasks=(TRK,), has_xy=False)
     assert bp._with_unit(layout, "error_vx") == "error_vx (m/s)" and bp._with_unit(layout, "nis") == "nis"
+
+
+def test_a_trials_plots_show_its_own_steps():
+    layout = TrialLayout(root="/mt/x/trial_000", scenario="mt", title="t", sort_key=("mt", False, 0.0, 0),
+                         methods=(), tasks=(), has_xy=False, steps=25)
+    axis = bp.trial_time_axis(layout)
+    text = repr(axis)
+    assert axis is not None and "24" in text and "160" not in text
+    assert bp.trial_time_axis(TrialLayout(root="/x", scenario="x", title="t", sort_key=("x", False, 0.0, 0),
+                                          methods=(), tasks=(), has_xy=False)) is None

@@ -23,7 +23,7 @@ from radarbench.bench.recording.layout import TrialLayout
 from radarbench.bench.recording.paths import rerun_path
 from radarbench.bench.recording.record import TrialRecord
 
-__all__ = ["MAX_TABS", "TrialTab", "Views", "blueprint", "legend_headroom", "relative", "trial_tab"]
+__all__ = ["MAX_TABS", "TrialTab", "Views", "blueprint", "legend_headroom", "relative", "trial_tab", "trial_time_axis"]
 
 #: Trials that get their own tab in the default blueprint; more tabs are unusable.
 MAX_TABS = 12
@@ -87,6 +87,18 @@ def legend_headroom(lo: float, hi: float) -> float:
     return hi + LEGEND_HEADROOM * span
 
 
+def trial_time_axis(layout: TrialLayout):
+    """A trial's time-series views show its own steps: a recording whose trials differ in
+    length (25 scans beside 160 steps) would otherwise stretch every plot, and put the
+    time cursor, to the longest; None when the length is unknown."""
+    import rerun.blueprint as rrb
+
+    if layout.steps < 2:
+        return None
+    return rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.absolute(seq=0),
+                                                 end=rrb.TimeRangeBoundary.absolute(seq=layout.steps - 1)))
+
+
 def relative(layout: TrialLayout, path: str) -> str:
     """A view's content entry for ``path``, relative to the trial root.
 
@@ -108,9 +120,10 @@ def _trace_views(layout: TrialLayout) -> list:
         return []
     origin = rerun_path(layout.root)
     if len(by_key) > MAX_TRACE_VIEWS:
-        return [rrb.TimeSeriesView(origin=origin, name="traces", contents=[p for v in by_key.values() for p in v])]
+        return [rrb.TimeSeriesView(origin=origin, name="traces", contents=[p for v in by_key.values() for p in v],
+                                   axis_x=trial_time_axis(layout))]
     # The legend only where several methods share the view (else the view's name says it).
-    return [rrb.TimeSeriesView(origin=origin, name=_with_unit(layout, key), contents=paths,
+    return [rrb.TimeSeriesView(origin=origin, name=_with_unit(layout, key), contents=paths, axis_x=trial_time_axis(layout),
                                plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=len(paths) > 1))
             for key, paths in by_key.items()]
 

@@ -78,6 +78,7 @@ class TrialLayout:
     methods: tuple[MethodLayout, ...]
     tasks: tuple[Any, ...]           # the tasks of the methods, each once, in the order given
     has_xy: bool                     # truth or measurements in metres
+    steps: int = 0                   # the trial's steps (its time axis runs 0 .. steps - 1); 0: unknown
 
     def path(self, child: str) -> str:
         return f"{self.root}/{child}"
@@ -114,4 +115,4 @@ def trial_layout(rec: TrialRecord, tasks: Mapping[str, Any]) -> TrialLayout:
     return TrialLayout(root=root, scenario=rec.scenario, title=f"{snr} · trial {rec.trial}",
                        sort_key=(rec.scenario, rec.snr_db is None, rec.snr_db or 0.0, rec.trial),
                        methods=tuple(methods), tasks=present,
-                       has_xy=rec.truth_xy is not None or rec.measurements_xy is not None)
+                       has_xy=rec.truth_xy is not None or rec.measurements_xy is not None, steps=len(rec.t))

@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from radarbench.bench.core import MANEUVER_DETECTION, Batch, DetectionOutput, Scene, has_shape, require
-from radarbench.bench.recording.blueprint import Views, legend_headroom, relative
+from radarbench.bench.recording.blueprint import Views, legend_headroom, relative, trial_time_axis
 from radarbench.bench.recording.draw import log_series
 from radarbench.bench.recording.layout import TrialLayout
 from radarbench.bench.recording.paths import rerun_path
@@ -314,7 +314,7 @@ class DetectionTask(Task):
                 continue
             if _onset(rec) is not None:
                 shown.append("onset")
-            views.append(rrb.TimeSeriesView(origin=origin, name=m.label,
+            views.append(rrb.TimeSeriesView(origin=origin, name=m.label, axis_x=trial_time_axis(layout),
                                             contents=[relative(layout, m.path(c)) for c in shown],
                                             plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=True)))
         if not views:

@@ -42,7 +42,7 @@ from radarbench.bench.calibration import cell_order_statistics
 from radarbench.bench.core import TBD, Batch, Scene, TBDOutput, has_shape, require
 from radarbench.bench.metrics import per_step_rmse
 from radarbench.bench.recording.axes import frame_of, log_axes
-from radarbench.bench.recording.blueprint import Views, relative
+from radarbench.bench.recording.blueprint import Views, relative, trial_time_axis
 from radarbench.bench.recording.draw import COLOUR_SCALE, log_image, log_image_series, log_series, log_track
 from radarbench.bench.recording.layout import TRUTH_COLOR, MethodLayout, TrialLayout
 from radarbench.bench.recording.paths import rerun_path
@@ -411,7 +411,8 @@ class TBDTask(Task):
                 images.append(rrb.Spatial2DView(origin=origin, name=f"{m.label} value", contents=contents))
             scores += [relative(layout, m.path(c)) for c in ("score", "threshold") if drawn[c]]
         top = [rrb.Grid(*images) if len(images) > 3 else rrb.Horizontal(*images)] if images else []
-        bottom = [rrb.TimeSeriesView(origin=origin, name="scores", contents=scores)] if scores else []
+        bottom = ([rrb.TimeSeriesView(origin=origin, name="scores", contents=scores, axis_x=trial_time_axis(layout))]
+                  if scores else [])
         return Views(top=top, bottom=bottom, draws_scene=bool(images))
 
     def report_sections(self, ctx: ReportContext) -> list[str]:
