@@ -112,6 +112,28 @@ def fenced(body: str, info: str = "text") -> str:
     return f"{fence}{info}\n{body}\n{fence}"
 
 
+#: a Sphinx cross-reference role (``:func:`~a.b` ``): the docstrings' way of naming code
+_ROLE = re.compile(r":(?:func|class|meth|mod|data|attr|obj|exc|const):`(~?)([^`<>]+?)(?:\s*<([^`>]+)>)?`")
+#: a NumPy-style section: its title, then a line of dashes as long
+_SECTION = re.compile(r"^(\S[^\n]*)\n-{3,}[ \t]*$", re.M)
+
+
+def docstring_markdown(doc: str) -> str:
+    """A docstring as Markdown for the docs site: cross-reference roles become inline code
+    (``~`` keeps the last name, as Sphinx shows it), NumPy-style section titles headings,
+    and a paragraph ending in ``::`` introduces the indented block after it, which Markdown
+    then shows as code (equations laid out by hand keep their layout). The rest (``code``,
+    ``*`` lists, emphasis) is Markdown already."""
+    def role(m: re.Match) -> str:
+        target = m.group(3) or m.group(2)
+        shown = target.rpartition(".")[2] if m.group(1) else (m.group(2) if m.group(3) else target)
+        return f"`{shown.strip()}`"
+
+    doc = _ROLE.sub(role, doc)
+    doc = _SECTION.sub(lambda m: f"#### {m.group(1).strip()}\n", doc)
+    return re.sub(r"(\S)::[ \t]*$", r"\1:", doc, flags=re.M)
+
+
 def links(names, folder: str, page: str) -> str:
     return ", ".join(f"[{code(n)}]({relative(f'{folder}/{n}.md', page)})" for n in sorted(names)) or "–"
 
@@ -174,7 +196,7 @@ def base_docstrings(cls: type) -> list[str]:
     for base in cls.__mro__[1:]:
         doc = base.__dict__.get("__doc__")
         if doc and inspect.cleandoc(doc) != own and not _harness_or_builtin(base.__module__):
-            parts += [f"### From {code(f'{base.__module__}.{base.__qualname__}')}", fenced(inspect.cleandoc(doc))]
+            parts += [f"### From {code(f'{base.__module__}.{base.__qualname__}')}", docstring_markdown(inspect.cleandoc(doc))]
     return parts
 
 
@@ -184,7 +206,7 @@ def component_page(kind: str, cls: type, page: str, facts: list[tuple[str, str]]
     return "\n\n".join([
         f"# {text(cls.name)}", text(cls.summary()),
         facts_list(facts + [("class", code(f"{cls.__module__}.{cls.__qualname__}"))]),
-        "## Description", f"The {kind}'s docstring, as written.", fenced(inspect.getdoc(cls) or ""),
+        "## Description", f"The {kind}'s docstring.", docstring_markdown(inspect.getdoc(cls) or ""),
         *base_docstrings(cls),
         "## Parameters", "Set in a sweep's `params` table; `bench list -v` prints the same.", params_table(cls.Params),
         "## Performance", perf]) + "\n"
@@ -212,7 +234,7 @@ def plugin_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Pre
     for name, task in tasks.items():
         page = f"tasks/{name}.md"
         pages[page] = "\n\n".join([
-            f"# {text(name)}", text(task.summary()), fenced(inspect.getdoc(type(task)) or ""),
+            f"# {text(name)}", text(task.summary()), docstring_markdown(inspect.getdoc(type(task)) or ""),
             facts_list([("scenarios", links([s for s, c in scenarios.items() if name in c.tasks], "scenarios", page)),
                         ("methods", links([m for m, c in methods.items() if c.task == name], "methods", page)),
                         ("class", code(f"{type(task).__module__}.{type(task).__qualname__}"))])]) + "\n"

@@ -17,7 +17,7 @@ import pytest
 
 from radarbench.bench import registry
 from radarbench.bench.cli import build_parser
-from radarbench.bench.docs import base_docstrings, main, pages, published, presets, subcommands
+from radarbench.bench.docs import base_docstrings, docstring_markdown, main, pages, published, presets, subcommands
 from radarbench.bench.markdown import code, text
 from radarbench.bench.provenance import WALL_TIME_ROW
 from conftest import scaled
@@ -61,6 +61,17 @@ def test_a_plugin_registered_later_has_its_page(monkeypatch):
     assert "x_k = F x_(k-1)" in generated["methods/docs-probe.md"]
     assert {"docs-probe": "methods/docs-probe.md"} in next(s["Methods"] for s in nav if "Methods" in s)
     assert "[`docs-probe`](../methods/docs-probe.md)" in generated[f"tasks/{base.task}.md"]
+
+
+def test_no_generated_page_shows_a_raw_cross_reference_role(site):
+    """Docstrings are rendered (docs/architecture.md): a role such as :func:`x` becomes
+    inline code, so the site shows none of them as typed."""
+    role = re.compile(r":(?:func|class|meth|mod|data|attr|obj|exc|const):`")
+    pages_with_roles = [str(p.relative_to(site)) for p in site.rglob("*.md")
+                        if p.parts[len(site.parts)] in ("methods", "scenarios", "tasks") and role.search(p.read_text("utf-8"))]
+    assert not pages_with_roles
+    assert docstring_markdown("a :func:`~m.f`, :class:`m.C` and :meth:`run <m.C.run>`") == "a `f`, `m.C` and `run`"
+    assert docstring_markdown("Notes\n-----\nx") == "#### Notes\n\nx"
 
 
 def test_every_task_page_lists_its_methods(site):
@@ -109,7 +120,7 @@ def test_a_method_page_shows_the_docstrings_of_its_family_base_classes(site):
         for base in cls.__mro__[1:]:
             doc = base.__dict__.get("__doc__")
             if doc and base.__module__.startswith("radarbench.methods") and inspect.cleandoc(doc) != inspect.getdoc(cls):
-                assert inspect.cleandoc(doc).splitlines()[0] in page, f"{name}: {base.__qualname__}"
+                assert docstring_markdown(inspect.cleandoc(doc)).splitlines()[0] in page, f"{name}: {base.__qualname__}"
                 shown += 1
         assert "bench.core" not in "".join(base_docstrings(cls))
     assert shown
