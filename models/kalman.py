@@ -175,7 +175,7 @@ def covariance_sequence(model: LinearGaussianModel, P0: np.ndarray, steps: int):
     It depends on the model, ``P0`` and ``steps`` only, never on the data, so
     it is computed once per distinct (F, H, Q, R, P0, steps), keyed on their
     bytes, and kept in a small LRU memo: a sweep calls the filter once per
-    chunk of trials with the same model (the fixed cost per call, issue 28).
+    chunk of trials with the same model (the fixed cost per call).
     """
     P0 = np.asarray(P0, dtype=float)
     key = (steps, *((a.shape, a.dtype.str, a.tobytes()) for a in (model.F, model.H, model.Q, model.R, P0)))
@@ -240,7 +240,7 @@ def _state_kernel(z, x0, F, H, gain):
     (the module docstring). Each product is summed in index order, with no fused
     multiply-add, as :func:`bench.batched.matvec` does: a trial's numbers are the same
     bits whatever its batch, and the same as the NumPy loop this kernel replaced (one
-    call per step was the filter's fixed cost, issue 28). Returns x_prior, x_post
+    call per step was the filter's fixed cost). Returns x_prior, x_post
     (n, K, d) and nu (n, K, m)."""
     n, steps, m = z.shape
     d = F.shape[0]

@@ -86,7 +86,7 @@ def ca(dt: float, sigma_j: float) -> tuple[np.ndarray, np.ndarray]:
 
 def singer(dt: float, alpha: float, sigma_m: float) -> tuple[np.ndarray, np.ndarray]:
     """:func:`_singer`, computed once per (dt, alpha, sigma_m) (a tracker builds its model
-    on every call: the matrix exponential was a third of a small batch's time, issue 28);
+    on every call: the matrix exponential was a third of a small batch's time);
     the arrays are read-only."""
     return _singer(float(dt), float(alpha), float(sigma_m))
 

@@ -116,7 +116,7 @@ class RdMap(Scenario):
                     "interference_range_cells": 8, "interference_doppler_bins": 20.0, "edge_range_cell": 34,
                     "edge_band_cells": 4, "target_spacing_cells": 10, "margin_cells": 6, "targets_per_region": 1,
                     "pairs": 1}
-    #: "large": a long-range, fine-Doppler map (issue 28's 512 x 1024), where scratch no longer fits in cache
+    #: "large": a long-range, fine-Doppler map (512 x 1024), where scratch no longer fits in cache
     perf_sizes = {"small": (small_params, 100), "default": ({}, 100),
                   "large": ({"range_cells": 512, "doppler_cells": 1024}, 4)}
     perf_snr_db = 15.0

@@ -1,4 +1,4 @@
-"""Kinematic trackers as they were computed before their compiled kernels (issue 28):
+"""Kinematic trackers as they were computed before their compiled kernels:
 batched NumPy steps over trials (and modes), one call per step. Kept as the kernels'
 bit-for-bit oracles: the committed results were made by these steps.
 
@@ -48,7 +48,7 @@ def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
 
 def stepwise_imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: np.ndarray, z: np.ndarray,
                         x0: np.ndarray, P0: np.ndarray, valid: np.ndarray | None = None) -> IMMResult:
-    """The IMM as the batched NumPy steps it was before its compiled kernel (issue 28)."""
+    """The IMM as the batched NumPy steps it was before its compiled kernel."""
     n, K, _ = z.shape
     r, d = len(models), models[0].dim_x
     H, R = models[0].H, models[0].R

@@ -1,4 +1,4 @@
-"""``bench compare`` never hides anything (issue 30, 4 and 4a; issue 25, 3): a config
+"""``bench compare`` never hides anything: a config
 failed in one run is listed as failed and gates CI; an incomplete run is compared on
 the trials both runs hold; configs, scenario configs and SNR levels of one run only
 are listed with their metrics; Pd at two false-alarm levels is refused; claims whose

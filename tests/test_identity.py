@@ -1,4 +1,4 @@
-"""Issue 25: results bound to the code and data that made them, loud failures, bounds at
+"""Results bound to the code and data that made them, loud failures, bounds at
 discovery, one nominal-threshold contract, data paths read from the sweep's folder.
 
 The method author's loop is tried as a user types it, from an outside plugin package

@@ -118,7 +118,7 @@ def test_a_misshapen_filter_names_the_field(setup, field, change):
 
 
 def _state_recursion_in_numpy(model, z, x0, gain):
-    """The per-step NumPy loop the compiled state recursion replaced (issue 28), kept as
+    """The per-step NumPy loop the compiled state recursion replaced, kept as
     its bit-for-bit oracle: products by :func:`bench.batched.matvec`, in index order."""
     from radarbench.bench.batched import matvec
     n, steps, _ = z.shape

@@ -143,3 +143,16 @@ def test_the_wheel_lists_every_package_folder():
     for name in listed:
         parent = max((m for m in mapped if name == m or name.startswith(m + ".")), key=len)
         assert (mapped[parent] / name.removeprefix(parent).strip(".").replace(".", "/")).is_dir(), name
+
+
+def test_comments_explain_the_code_not_the_ticket():
+    """No "issue N" in the code, its comments or docstrings, nor in the presets: a tracker's
+    number means nothing to a reader of the code."""
+    import re
+
+    cited = re.compile(r"\b[Ii]ssues? ?#?\d+")
+    roots = ("bench", "methods", "models", "scenarios", "tests", "radarbench", "benchmarks")
+    found = [f"{p.relative_to(ROOT)}:{i}" for root in roots for p in (ROOT / root).rglob("*")
+             if p.suffix in (".py", ".toml", ".j2") and p.is_file()
+             for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if cited.search(line)]
+    assert not found

@@ -330,7 +330,7 @@ def test_task_rrd_verify_and_blueprint(task_rrd):
 
 
 def test_no_view_is_empty(rrd, task_rrd):
-    """Every view of the default blueprint shows some entity of the recording (issue 29)."""
+    """Every view of the default blueprint shows some entity of the recording."""
     from tests.rrd_blueprint import entities, read_blueprint
 
     for path in (rrd, task_rrd):
@@ -381,7 +381,7 @@ def test_a_method_without_a_task_is_refused_before_any_io(tmp_path, records):
 
 
 def test_track_view_has_axes_and_names_every_track(task_rrd, task_records):
-    """The 2-D track view reads without the side panel (issue 29): a frame in km with a
+    """The 2-D track view reads without the side panel: a frame in km with a
     tick at every round step covering what it draws, and the truth and each tracker named
     once on the plot, in its colour, at its own place along its track."""
     from radarbench.bench.recording.axes import frame_of, xy_extent

@@ -202,7 +202,7 @@ def _series_names(rrd, path: str) -> list[str]:
 
 
 def test_the_first_screen_is_the_summary_with_a_named_curve_per_config(small_run):
-    """What the viewer opens on (issue 29): the side panels collapsed, the summary tab, in
+    """What the viewer opens on: the side panels collapsed, the summary tab, in
     it a sub-tab per task whose views are time series with their legend on, one series per
     config named by its label, lines through the SNR levels; and no view of the recording
     empty."""

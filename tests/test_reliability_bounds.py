@@ -1,4 +1,4 @@
-"""Issue 30, point 4: the documented bounds of every parameter are the enforced ones, and
+"""The documented bounds of every parameter are the enforced ones, and
 validation is bounded in time and memory (a huge map is refused before any layout search).
 
 Every refusal is met as in ``tests/test_reliability_validation.py``: exit code 2, one

@@ -1,5 +1,5 @@
 """Faults of the file system, of the store and of other runs, as a hostile user or a flaky
-machine produces them (issue 16, causes 1, 2, 5 and 9's control characters).
+machine produces them.
 
 Each fault ends with exit code 2 (bad input), 3 (the machine refused) or 4 (the folder is
 in use), exactly one line on stderr naming the path and the cause, no traceback, nothing

@@ -1,4 +1,4 @@
-"""Issue 30, points 3 and 5: impossible outputs are a method's failure, parameters that
+"""Impossible outputs are a method's failure, parameters that
 cannot work are refused up front, undefined and degenerate numbers are said to be what they
 are. The documented bounds and validation bounded in time and memory:
 ``tests/test_reliability_bounds.py``.

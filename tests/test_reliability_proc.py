@@ -1,5 +1,5 @@
-"""Processes and plugins on a flaky machine, driven as a hostile user would (issue 16,
-causes 3, 4, 7, 8 and 9): a plugin on PYTHONPATH whose method calls ``os._exit``,
+"""Processes and plugins on a flaky machine, driven as a hostile user would: a plugin on PYTHONPATH
+whose method calls ``os._exit``,
 raises SystemExit or KeyboardInterrupt, sleeps past the time limit or holds its
 unit; a scenario whose ``generate`` raises; plugins that exit at import, reuse a
 built-in name, declare an unknown task; the driver killed with -9 or stopped with
@@ -180,7 +180,7 @@ def test_a_dying_or_exiting_plugin_fails_its_units_and_the_run_completes(hostile
 
 @pytest.mark.slow
 def test_under_dask_a_dying_plugin_fails_its_units_alone(hostile, tmp_path):
-    """Issue 30, 4b: Dask fails every unit of a worker that dies; the units beside the culprit
+    """Dask fails every unit of a worker that dies; the units beside the culprit
     are run again alone, the culprit's unit config by config (the runner's isolation, as for
     the local pool): the failures are those of the local pool, the innocent configs' results
     those of a clean run."""

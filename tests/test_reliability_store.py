@@ -1,4 +1,4 @@
-"""Issue 30, point 6: a damaged store is exit 2 in every command, out of memory is exit 3
+"""A damaged store is exit 2 in every command, out of memory is exit 3
 wherever it strikes and leaves nothing behind, and the advice in a message works.
 
 Commands run as a user runs them (``run_bench``: a subprocess) where the exit code and

@@ -1,4 +1,4 @@
-"""Issue 16, causes 6 and 7: validation that covers what runs, numbers that stay true.
+"""Validation that covers what runs, numbers that stay true.
 
 Every refusal is checked the way a user meets it: ``bench run`` (the CLI's
 ``main`` in-process, a fresh folder) ends with exit code 2, exactly one line

@@ -1,4 +1,4 @@
-"""Issue 15, reports: what a user reads is right, results come first, comparisons
+"""What a user reads is right, results come first, comparisons
 are paired, ``bench compare`` gates a change, report.html stands alone.
 
 Small runs (seconds); every check could fail on a wrong report."""

@@ -1,4 +1,4 @@
-"""Issue 30, 'Security': each case found, as a regression test.
+"""Each case found, as a regression test.
 
 * a sweep's file name and the ``--out`` path holding a backtick and markup (the
   real console script, so the command and the recording's paths are the CLI's);

@@ -46,7 +46,7 @@ PANEL_MAX_PIXELS = 6000
 #: The plots' rows in a 1280 x 800 screenshot: below the top bar and the two tab bars (the
 #: summary's and its task's) and the views' titles, above the time panel's play bar.
 PLOT_ROWS = slice(120, 760)
-#: The window a newcomer's laptop gives the viewer (issue 29: legible at 1280 x 800).
+#: The window a newcomer's laptop gives the viewer (legible at 1280 x 800).
 VIEWPORT = (1280, 800)
 
 pytestmark = pytest.mark.skipif(not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} is absent (apt-get install chromium)")

@@ -124,7 +124,7 @@ def _current_statistical_kernel(z, valid, x0, P0, H, R, F, Q_axes, U_axes, acc, 
     variance per axis (:func:`models.kinematics.current_statistical_variance`, the same
     operations), Q_k = sum_j sigma_j^2 Q_j and u = sum_j a_bar_j U_j in axis order, and the
     prediction (:func:`models.kalman.predict_one`). One compiled loop instead of a dozen
-    NumPy calls per step, the fixed cost of a small batch (issue 28), with the same bits.
+    NumPy calls per step, the fixed cost of a small batch, with the same bits.
     Returns x, P after each update and the first axis's sigma_a (n, K)."""
     n, K, m = z.shape
     d, dims = F.shape[0], acc.shape[0]

@@ -129,7 +129,7 @@ def _imm_kernel(z, valid, x0, P0, F, Q, H, R, log_cbar0, log_M):
     prediction by :func:`models.kalman.update_one` / :func:`models.kalman.predict_one`;
     F, Q (r, d, d) per mode. The same operations in the same order as the batched NumPy
     steps it replaced (a per-step loop of a dozen calls was the fixed cost of a small
-    batch, issue 28), so the same bits. Returns x (n, K, d), P (n, K, d, d), mu (n, K, r)."""
+    batch), so the same bits. Returns x (n, K, d), P (n, K, d, d), mu (n, K, r)."""
     n, K, m = z.shape
     r, d = F.shape[0], F.shape[1]
     xs, Ps, mus = np.empty((n, K, d)), np.empty((n, K, d, d)), np.empty((n, K, r))

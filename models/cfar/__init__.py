@@ -35,7 +35,7 @@ quantile at the edges: k' = ceil(k N' / N) (:func:`edge_rank`).
 
 **Nominal significance.** For square-law detected (exponential) noise of
 any level, the false-alarm probability of "x > K mu" is (Rohling's closed
-forms, as issue 13 quotes them)
+forms, as the HFSWR chapter's sources give them)
 
     CA:  Pfa(K) = (1 + K/N)^(-N)
     OS:  Pfa(K) = prod_{i=0}^{k-1} (N - i) / (N - i + K),

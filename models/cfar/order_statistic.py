@@ -11,7 +11,7 @@ No sort is needed for one order statistic: a selection network (Batcher's
 odd-even merge sort pruned to the comparators the k-th wire depends on)
 finds it branch-free, as element-wise min/max across the cells of a row.
 Under exponential noise its false-alarm probability is
-Pfa(t) = prod_{i<k} (N - i)/(N - i + t) (issue 13's closed form), whose
+Pfa(t) = prod_{i<k} (N - i)/(N - i + t) (the closed form), whose
 negative natural log :func:`_os_log_survival` computes per cell.
 """
 

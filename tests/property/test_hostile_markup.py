@@ -1,5 +1,4 @@
-"""No text that is not ours reaches report.html, report.md or a terminal as live markup
-(issue 30, point 1).
+"""No text that is not ours reaches report.html, report.md or a terminal as live markup.
 
 Hypothesis draws hostile strings — HTML tags and event handlers, ``javascript:`` and
 ``data:`` links (plain, entity-encoded, split by blanks), backtick runs, pipes,
@@ -216,7 +215,7 @@ def test_hostile_text_in_every_field_of_a_run_is_inert_in_report_html(plugins, t
 
 
 def test_the_issues_cases_are_inert_in_report_html(plugins, tmp_path):
-    """Issue 30's own: a description with a script, an image with onerror, an iframe and a
+    """The reported case: a description with a script, an image with onerror, an iframe and a
     javascript: link; a plugin's error text with a script."""
     s = ('<script>alert(1)</script> <img src=x onerror=alert(2)> <iframe src="x"></iframe> '
          '[x](javascript:alert(3)) `<svg onload=alert(4)>`')

@@ -1,5 +1,5 @@
-"""Every number a method or scenario declares, tried at its bounds and beyond (issue 16,
-cause 6): beyond, refused as any hostile sweep file is (``tests/property/test_hostile_input.py``:
+"""Every number a method or scenario declares, tried at its bounds and beyond: beyond, refused as
+any hostile sweep file is (``tests/property/test_hostile_input.py``:
 exit code 2, one line, nothing written); at a bound, refused up front in one line or run to
 completion at a small size within a per-case time budget, with no failed unit.
 """
