@@ -108,6 +108,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true",
                      help="no progress (a bar on a terminal, else a line per phase and every 10 s)")
     run.add_argument("--no-record", action="store_true", help="do not write recording.rrd")
+    run.add_argument("--no-cache", action="store_true",
+                     help="neither take results from the user's results cache nor keep this run's there "
+                          "(~/.cache/radar-maneuver-bench/results, or $BENCH_RESULTS_CACHE_DIR)")
     run.add_argument("--viewer", action="store_true", help="stream trials live to a spawned Rerun viewer")
     run.add_argument("--yes", action="store_true", help="run a very large sweep without asking")
     over = run.add_argument_group("changes to the sweep (checked like the sweep file; plan.toml keeps the result)")
@@ -254,6 +257,9 @@ def _check_arguments(args) -> None:
         raise ConfigError("--preset", unknown_name("preset", args.preset, presets()))
     if args.scheduler is not None and args.executor != "dask":
         raise ConfigError("--scheduler", "only with --executor dask")
+    if not args.no_cache:
+        from radarbench.bench.results_cache import bound_bytes
+        bound_bytes()          # a bad size bound in the environment: one line, before anything runs
 
 
 def _workers(args) -> int:
@@ -365,7 +371,8 @@ def _run_locked(args, plan, out_dir: Path, command: str) -> int:
     try:
         store = run_sweep(plan, out_dir, plan_record=plan_record(plan, command), workers=_workers(args),
                           executor=args.executor, fresh=False, quiet=args.quiet, on_result=on_result,
-                          scheduler=args.scheduler, retry_failed=args.retry_failed, progress=progress)
+                          scheduler=args.scheduler, retry_failed=args.retry_failed, progress=progress,
+                          cache=not args.no_cache)
     except Interrupted as exc:
         return _interrupted(out_dir, command, exc.stored, exc.total)
     except KeyboardInterrupt:              # outside the units (opening the store, closing the executor)

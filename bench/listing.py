@@ -137,8 +137,9 @@ def private_dir(path: Path) -> bool:
     return stat.S_ISDIR(st.st_mode) and st.st_uid == os.getuid() and not st.st_mode & 0o022
 
 
-def read_cached(path: Path) -> str | None:
-    """The cached listing at ``path``, a regular file of this user read without following a link; None if none."""
+def read_own(path: Path, limit: int = -1) -> bytes | None:
+    """The bytes of ``path`` (at most ``limit``), a regular file of this user read without
+    following a link; None if it is not one, or cannot be read."""
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_NONBLOCK", 0))
     except OSError:
@@ -148,22 +149,37 @@ def read_cached(path: Path) -> str | None:
         if not stat.S_ISREG(st.st_mode) or st.st_uid != os.getuid():
             return None
         try:
-            text = json.loads(f.read(1 << 22).decode("utf-8"))["text"]
-        except (OSError, ValueError, KeyError, TypeError):
+            return f.read(limit)
+        except OSError:
             return None
+
+
+def read_cached(path: Path) -> str | None:
+    """The cached listing at ``path`` (:func:`read_own`); None if none."""
+    data = read_own(path, 1 << 22)
+    try:
+        text = json.loads(data.decode("utf-8"))["text"] if data is not None else None
+    except (ValueError, KeyError, TypeError):
+        return None
     return text if isinstance(text, str) else None
 
 
-def write_cached(path: Path, text: str) -> None:
-    """``text`` to ``path``: a new file of an unpredictable name, created exclusively, renamed into place."""
+def write_whole(path: Path, data: bytes) -> None:
+    """``data`` as ``path``: a new file of an unpredictable name in its folder, created
+    exclusively, renamed into place (a reader sees the old file or the new one, whole)."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(json.dumps({"text": text}))
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
         os.replace(tmp, path)
     except BaseException:
         os.unlink(tmp)
         raise
+
+
+def write_cached(path: Path, text: str) -> None:
+    """``text`` to ``path``, whole (:func:`write_whole`)."""
+    write_whole(path, json.dumps({"text": text}).encode("utf-8"))
 
 
 def read_table(name: str) -> dict:

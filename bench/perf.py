@@ -436,7 +436,7 @@ def executor_scaling(workers: int, progress=print, plan=None) -> pd.DataFrame:
             t0 = time.perf_counter()
             try:
                 store = run_sweep(plan, Path(tmp), plan_record=plan_record(plan, "bench perf"), workers=n,
-                                  executor=executor, quiet=True)
+                                  executor=executor, quiet=True, cache=False)   # timed: every unit computed
                 store.close()
             except Exception as exc:  # noqa: BLE001 - e.g. dask not installed: reported, not fatal
                 rows.append({"executor": executor, "workers": n, "seconds": np.nan, "error": str(exc)})

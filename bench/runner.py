@@ -38,7 +38,8 @@ from radarbench.bench.processes import STOP_SIGNALS, restore_handler
 from radarbench.bench.identity import PREVIOUS, content_keys, set_aside_changed
 from radarbench.bench.progress import Progress
 from radarbench.bench.provenance import origin_text, provenance
-from radarbench.bench.recording.record import TrialRecord
+from radarbench.bench.results_cache import ResultsCache
+from radarbench.bench.reuse import Reuse, merge_records
 from radarbench.bench.store import Store, UnitResult
 from radarbench.bench.units import Unit, UnitTask, execute_unit, failed_result, plan_units, unit_methods
 
@@ -108,32 +109,6 @@ class _TaskQueue:
         self._items.extend(tasks)
 
 
-def _merge_records(parts: list[UnitResult], order: list[str]) -> list[tuple[int, bytes]]:
-    """The trial records of one unit whose method configs ran separately: one record per
-    trial holding every config's trace (in plan order) and every task's view of the scene."""
-    if len(parts) == 1:
-        return parts[0].records
-    merged: dict[int, TrialRecord] = {}
-    for part in parts:
-        for trial, blob in part.records:
-            rec = TrialRecord.from_bytes(blob)
-            if trial not in merged:
-                merged[trial] = rec
-                continue
-            base = merged[trial]
-            base.methods.update(rec.methods)
-            base.arrays.update(rec.arrays)
-            base.images.update(rec.images)
-            base.info.update(rec.info)
-    rank = {label: i for i, label in enumerate(order)}
-    out = []
-    for trial in sorted(merged):
-        rec = merged[trial]
-        rec.methods = dict(sorted(rec.methods.items(), key=lambda kv: rank.get(kv[0], len(rank))))
-        out.append((trial, rec.to_bytes()))
-    return out
-
-
 @dataclass
 class _Split:
     """A unit whose whole run failed to come back (its worker died, it timed out), run
@@ -152,7 +127,7 @@ class _Split:
         runs = {run.label: run for part in self.parts for run in part.runs}
         return UnitResult(base.key, base.phase, base.scenario, base.snr_db, base.trial_start, base.n,
                           base.generate_seconds, runs=[runs[label] for label in self.labels if label in runs],
-                          common=base.common, records=_merge_records(ok, self.labels) if ok else [],
+                          common=base.common, records=merge_records(ok, self.labels) if ok else [],
                           snr_definition=next((p.snr_definition for p in ok if p.snr_definition), ""))
 
 
@@ -204,8 +179,14 @@ def remember_seconds(plan: Plan, store: Store) -> None:
     write_table(UNIT_SECONDS_FILE, known, KNOWN_SECONDS)
 
 
+def _save(store: Store, result: UnitResult) -> None:
+    store.save_unit(result)
+    if result.snr_definition and store.meta("snr_definition") is None:
+        store.set_meta("snr_definition", result.snr_definition)
+
+
 def _run_phase(executor, tasks, store: Store, progress: Progress, stop=None, timeout: float | None = None,
-               on_result=None) -> None:
+               on_result=None, reuse: Reuse | None = None) -> None:
     queue = _TaskQueue(tasks)
     splits: dict[str, _Split] = {}
     for item in executor.imap_unordered(execute_unit, queue, stop=stop, timeout=timeout):
@@ -226,12 +207,35 @@ def _run_phase(executor, tasks, store: Store, progress: Progress, stop=None, tim
             if not split.done():
                 continue
             result = splits.pop(result.key).merged()
-        store.save_unit(result)
-        if result.snr_definition and store.meta("snr_definition") is None:
-            store.set_meta("snr_definition", result.snr_definition)
+        if reuse is not None:     # a split's parts record only their own tasks' scenes: not a whole unit
+            result = reuse.completed(result, whole=split is None)
+        _save(store, result)
         progress.advance()
         if on_result is not None:
             on_result(result)
+
+
+def _served(reuse: Reuse | None, store: Store, tasks: list[UnitTask], on_result=None) -> list[UnitTask]:
+    """The tasks left to compute once the results cache served what it holds: a unit it
+    holds whole is stored now; one it holds in part runs only its other method configs
+    (:class:`bench.reuse.Reuse`)."""
+    if reuse is None:
+        return tasks
+    left = []
+    for task in tasks:
+        result, missing = reuse.serve(task)
+        if result is None:
+            left.append(task)
+        elif missing:
+            reuse.pending[task.unit.key] = result
+            reuse.partly += 1
+            left.append(replace(task, methods=missing))
+        else:
+            _save(store, result)
+            reuse.whole += 1
+            if on_result is not None:
+                on_result(result)
+    return left
 
 
 class _StopOnSignal:
@@ -309,17 +313,62 @@ def _warm_up(executor, plan: Plan, store: Store, progress: Progress, timeout: fl
     return whole
 
 
+def _thresholds(plan: Plan, store: Store) -> dict[str, dict[str, float | None]]:
+    """Scenario config label -> method config label -> the threshold its evaluation runs at
+    (None: an uncalibrated task, or a calibration that failed), from the stored null values."""
+    thresholds: dict[str, dict[str, float | None]] = {
+        sc.label: {m.label: None for m in plan.methods} for sc in plan.scenarios}
+    per_cell = frozenset(m.label for m in plan.methods
+                         if registry.get_task(registry.get_method(m.name).task).pfa_per_cell)
+    for c in calibrations(store, [s.label for s in plan.scenarios], [m.label for m in plan.methods],
+                          plan.calibration.pfa, plan.calibration.mode, plan.calibration.chance_pd, per_cell):
+        thresholds[c.scenario][c.method] = c.used if np.isfinite(c.used) else None
+    return thresholds
+
+
+def _evaluation_tasks(plan: Plan, store: Store, units: list[Unit], done: set[str], failed: dict[str, set[str]],
+                      reuse: Reuse | None, on_result) -> list[UnitTask]:
+    """The evaluation units to compute, at the thresholds the calibration chose, less what
+    the results cache serves."""
+    thresholds = _thresholds(plan, store)
+    if reuse is not None:
+        reuse.thresholds = thresholds
+    tasks = [UnitTask(plan, u, thresholds[u.scenario_label]) for u in units if u.key not in done] \
+        + retry_tasks(plan, units, failed, thresholds)
+    return longest_first(plan, _served(reuse, store, tasks, on_result))
+
+
+def _phase(progress: Progress, name: str, units: list[Unit], tasks: list[UnitTask], store: Store) -> None:
+    """Start showing phase ``name`` when it has ``tasks`` to compute (the units stored count as done)."""
+    if tasks:
+        done = store.done_units()
+        stored = sum(u.key in done for u in units)
+        progress.phase(name, stored + len(tasks), stored)
+
+
+def _reused_line(total: int, computed: int, reuse: Reuse | None, out_dir: Path) -> str:
+    """One line: how many units the run took from its folder, from the results cache, and computed."""
+    cached = reuse.whole if reuse is not None else 0
+    line = (f"units: {total - computed - cached} reused from {out_dir}, "
+            + (f"{cached} from the results cache" if reuse is not None else "the results cache not used (--no-cache)")
+            + f", {computed} computed")
+    return line + (f" ({reuse.partly} of them in part from the results cache)" if reuse and reuse.partly else "")
+
+
 def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
               executor: str = "local", fresh: bool = False, quiet: bool = False,
               on_result=None, scheduler: str | None = None, retry_failed: bool = False,
-              progress: Progress | None = None) -> Store:
+              progress: Progress | None = None, cache: bool = True) -> Store:
     """Run (or resume) a sweep into ``out_dir``; returns the open store.
 
     ``retry_failed``: also re-run the (unit, method config) pairs whose run failed,
     the calibration ones before the thresholds are computed. ``progress`` (default: a
     new :class:`~bench.progress.Progress`, silent when ``quiet``) shows the phases
     ``calibration`` and ``evaluation``; the caller closes it. A run with nothing left
-    to compute says so in one line (unless ``quiet``).
+    to compute says so in one line (unless ``quiet``); otherwise one line says how many
+    units it reused from the folder, took from the results cache and computed.
+    ``cache``: take results from the user's results cache and keep the computed ones
+    there (:mod:`bench.reuse`; ``bench run --no-cache``: neither).
 
     A unit whose worker dies or overruns the plan's ``unit_timeout_s`` is run again one
     method config at a time; the configs that fail alone are stored as failed with the
@@ -330,7 +379,7 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
     cal_units, eval_units = plan_units(plan)
     total = len(cal_units) + len(eval_units)
     timeout = getattr(plan, "unit_timeout_s", None)
-    ex = store = None
+    ex = store = reuse = None
     progress = progress or Progress(quiet=quiet)
     with _StopOnSignal() as stop:
         try:
@@ -345,14 +394,19 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
             store.bind_plan(plan.fingerprint(), plan_record)
             # before the first unit: a report of a run stopped short says it is incomplete
             store.set_meta("units_total", str(total))
+            reuse = Reuse(plan, store.stamps, ResultsCache()) if cache else None
             done = store.done_units()
             failed = store.failed_runs() if retry_failed else {}
             failed = {u: failed.get(u, set()) | changed.get(u, set()) for u in {*failed, *changed}}
-            cal_tasks = longest_first(plan, [UnitTask(plan, u) for u in cal_units if u.key not in done]
-                                      + retry_tasks(plan, cal_units, failed))
-            to_run = len(cal_tasks) + sum(u.key not in done for u in eval_units) \
-                + sum(u.key in failed for u in eval_units)
-            if to_run == 0 and not quiet:
+            cal_tasks = longest_first(plan, _served(reuse, store, [UnitTask(plan, u) for u in cal_units
+                                                                   if u.key not in done]
+                                                    + retry_tasks(plan, cal_units, failed)))
+            # calibrated from what is stored already: the evaluation's cached units are known before any worker
+            tasks = None if cal_tasks else _evaluation_tasks(plan, store, eval_units, done, failed, reuse, on_result)
+            to_run = len(cal_tasks) + (len(tasks) if tasks is not None else
+                                       sum(u.key not in done or u.key in failed for u in eval_units))
+            computed = {t.unit.key for t in cal_tasks + (tasks or [])}
+            if to_run == 0 and not quiet and not (reuse and reuse.whole):
                 print(f"Nothing to run: all {total} units stored in {out_dir}", file=sys.stderr)
             if ex is None:
                 ex = SerialExecutor() if to_run == 0 else \
@@ -362,25 +416,14 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
                 key = warmup.plan_key(plan)
                 if warmup.cache_is_cold(key) and _warm_up(ex, plan, store, progress, timeout):
                     warmup.remember_unused(key)       # not after a failed pair: it may not have reached a kernel
-            if cal_tasks:
-                stored = sum(u.key in done for u in cal_units)
-                progress.phase("calibration", stored + len(cal_tasks), stored)
-            _run_phase(ex, cal_tasks, store, progress, stop, timeout)
+            _phase(progress, "calibration", cal_units, cal_tasks, store)
+            _run_phase(ex, cal_tasks, store, progress, stop, timeout, reuse=reuse)
             if not stop():
-                thresholds: dict[str, dict[str, float | None]] = {
-                    sc.label: {m.label: None for m in plan.methods} for sc in plan.scenarios}
-                per_cell = frozenset(m.label for m in plan.methods
-                                     if registry.get_task(registry.get_method(m.name).task).pfa_per_cell)
-                for c in calibrations(store, [s.label for s in plan.scenarios], [m.label for m in plan.methods],
-                                      plan.calibration.pfa, plan.calibration.mode, plan.calibration.chance_pd,
-                                      per_cell):
-                    thresholds[c.scenario][c.method] = c.used if np.isfinite(c.used) else None
-                tasks = longest_first(plan, [UnitTask(plan, u, thresholds[u.scenario_label]) for u in eval_units
-                                             if u.key not in done] + retry_tasks(plan, eval_units, failed, thresholds))
-                if tasks:
-                    stored = sum(u.key in done for u in eval_units)
-                    progress.phase("evaluation", stored + len(tasks), stored)
-                _run_phase(ex, tasks, store, progress, stop, timeout, on_result)
+                if tasks is None:
+                    tasks = _evaluation_tasks(plan, store, eval_units, done, failed, reuse, on_result)
+                    computed |= {t.unit.key for t in tasks}
+                _phase(progress, "evaluation", eval_units, tasks, store)
+                _run_phase(ex, tasks, store, progress, stop, timeout, on_result, reuse)
         except KeyboardInterrupt:              # a second signal: the units in flight are lost
             progress.close()
             if ex is not None:
@@ -397,6 +440,11 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
         progress.close()
     if stop():
         raise Interrupted(len(store.done_units()), total)
+    if computed or (reuse and reuse.whole):
+        if not quiet:
+            print(_reused_line(total, len(computed), reuse, out_dir), file=sys.stderr)
+        if reuse is not None:
+            reuse.cache.evict()
     if to_run:                             # the units' wall time of the last run that computed any
         store.set_meta("last_wall_seconds", repr(time.monotonic() - started))
         remember_seconds(plan, store)

@@ -201,7 +201,20 @@ def private_cache_home(tmp_path_factory):
     cache = tmp_path_factory.mktemp("cache-home")
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("XDG_CACHE_HOME", str(cache))
+        patch.delenv("BENCH_RESULTS_CACHE_DIR", raising=False)     # the user's own setting: not in tests
+        patch.delenv("BENCH_RESULTS_CACHE_GB", raising=False)
         yield cache
+
+
+@pytest.fixture(autouse=True)
+def private_results_cache(tmp_path_factory, monkeypatch):
+    """The results cache (``$BENCH_RESULTS_CACHE_DIR``) of each test: a folder of its own, so
+    no test takes results another computed (a test that counts what a run computes, or makes
+    a method fail, sees its own runs only). The module and session fixtures, set up before
+    it, share the session's cache folder under ``private_cache_home``."""
+    folder = tmp_path_factory.mktemp("results-cache")
+    monkeypatch.setenv("BENCH_RESULTS_CACHE_DIR", str(folder))
+    return folder
 
 
 @pytest.fixture

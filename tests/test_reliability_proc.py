@@ -166,7 +166,9 @@ def test_a_dying_or_exiting_plugin_fails_its_units_and_the_run_completes(hostile
     sweep = tmp_path / "crash.toml"
     sweep.write_text(CRASH_SWEEP)
     clean, run = tmp_path / "clean", tmp_path / "run"
-    assert _bench(hostile, "run", sweep, "--out", clean, "--workers", 2, "--quiet", HOSTILE_OFF="1").returncode == 0
+    # --no-cache: the clean results (HOSTILE_OFF, which no identity sees) must not serve the hostile run
+    assert _bench(hostile, "run", sweep, "--out", clean, "--workers", 2, "--quiet", "--no-cache",
+                  HOSTILE_OFF="1").returncode == 0
 
     first = _bench(hostile, "run", sweep, "--out", run, "--workers", 1, "--quiet")
     assert first.returncode == 6 and "Traceback" not in first.stderr, first.stderr
@@ -188,7 +190,9 @@ def test_under_dask_a_dying_plugin_fails_its_units_alone(hostile, tmp_path):
     sweep = tmp_path / "crash.toml"
     sweep.write_text(CRASH_SWEEP)
     clean, run = tmp_path / "clean", tmp_path / "run"
-    assert _bench(hostile, "run", sweep, "--out", clean, "--workers", 2, "--quiet", HOSTILE_OFF="1").returncode == 0
+    # --no-cache: the clean results (HOSTILE_OFF, which no identity sees) must not serve the hostile run
+    assert _bench(hostile, "run", sweep, "--out", clean, "--workers", 2, "--quiet", "--no-cache",
+                  HOSTILE_OFF="1").returncode == 0
     first = _bench(hostile, "run", sweep, "--out", run, "--executor", "dask", "--workers", 2, "--quiet")
     assert (run / "report.md").is_file() and "Traceback" not in first.stderr, first.stderr
     _only_the_culprits_failed(run, clean, "worker process died while running this unit (alone on the Dask")

@@ -1,6 +1,7 @@
 """An edited sweep in the same run folder reuses every stored result whose scenario config,
 method config, calibration and code are unchanged (docs/running.md, 'Edit, re-run,
-compare'), and its results equal a fresh run's, byte for byte outside timing columns."""
+compare'), and its results equal a fresh run's (computed: --no-cache), byte for byte outside
+timing columns."""
 
 from __future__ import annotations
 
@@ -35,10 +36,10 @@ name = "cusum"
 """
 
 
-def _run(folder: Path, out: Path, capsys, **values) -> str:
+def _run(folder: Path, out: Path, capsys, *options: str, **values) -> str:
     sweep = folder / "sweep.toml"
     sweep.write_text(SWEEP.format(**({"trials": 40, "pfa": 0.01, "windows": "[1, 5]"} | values)))
-    assert main(["run", str(sweep), "--out", str(out), "--workers", "1", "--no-record"]) == 0
+    assert main(["run", str(sweep), "--out", str(out), "--workers", "1", "--no-record", *options]) == 0
     return capsys.readouterr().err
 
 
@@ -66,7 +67,7 @@ def test_an_edited_method_parameter_computes_only_that_config(tmp_path, capsys):
     assert {m for _, m in before - after} == {"innovation[window=5]"}
     summary = pd.read_csv(out / "summary.csv")
     assert "innovation[window=5]" not in set(summary["config"]) and "innovation[window=3]" in set(summary["config"])
-    _run(tmp_path, tmp_path / "fresh", capsys, windows="[1, 3]")
+    _run(tmp_path, tmp_path / "fresh", capsys, "--no-cache", windows="[1, 3]")
     _same_as_fresh(out, tmp_path / "fresh")
 
 
@@ -78,7 +79,7 @@ def test_more_trials_compute_only_the_new_trials(tmp_path, capsys):
     assert "the sweep changed: reusing 6 stored units and the units it adds" in said and "previous" not in said, said
     added = {u for u, _ in _runs(out) - before}
     assert added == {f"evaluation/cv-turn-cv/{snr}/000000040+20" for snr in ("+0", "+10")}
-    _run(tmp_path, tmp_path / "fresh", capsys, trials=60)
+    _run(tmp_path, tmp_path / "fresh", capsys, "--no-cache", trials=60)
     _same_as_fresh(out, tmp_path / "fresh")
 
 
@@ -87,5 +88,5 @@ def test_a_new_calibration_recomputes_the_calibrated_runs(tmp_path, capsys):
     _run(tmp_path, out, capsys)
     said = _run(tmp_path, out, capsys, pfa=0.05)
     assert "computing 18 (unit, method config) runs" in said, said     # 3 detector configs x 6 units (a nominal threshold is stored)
-    _run(tmp_path, tmp_path / "fresh", capsys, pfa=0.05)
+    _run(tmp_path, tmp_path / "fresh", capsys, "--no-cache", pfa=0.05)
     _same_as_fresh(out, tmp_path / "fresh")
