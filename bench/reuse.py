@@ -120,6 +120,21 @@ def code_key(module: str) -> str:
     return _code_keys[module]
 
 
+_harness_key: list[str] = []
+
+
+def harness_key() -> str:
+    """The harness's code (:func:`bench.runfolder.harness_files`), for an output drawn by
+    more of it than one module (the recording)."""
+    if not _harness_key:
+        from radarbench.bench import runfolder
+        h = hashlib.sha256()
+        for path in sorted(runfolder.harness_files()):
+            h.update(str(path.name).encode() + b"\0" + path.read_bytes())
+        _harness_key.append(h.hexdigest())
+    return _harness_key[0]
+
+
 def _read_regular(path: Path, limit: int = 1 << 30) -> bytes | None:
     """The bytes of the regular file ``path`` (never through a link), None if there is none."""
     try:
@@ -193,34 +208,37 @@ class FigureReuse:
         """The key of the figure ``fn(**arguments)`` (its path left out of ``arguments``)."""
         return key_of(fn.__module__, fn.__qualname__, code_key(fn.__module__), arguments)
 
-    def reuse(self, path: Path, key: str) -> bool:
-        """Whether the figure ``key`` is already at ``path`` (left alone) or in the user's
-        cache (copied there); either way it is counted as reused."""
+    def reuse(self, path: Path, key: str, figure: bool = True) -> bool:
+        """Whether the output ``key`` (a figure, or with ``figure`` False another output made
+        from its key's inputs alone) is already at ``path`` (left alone) or in the user's
+        cache (copied there); a figure either way counted as reused."""
         entry = self.previous.get(path.name)
         if entry and entry[0] == key:
             data = _read_regular(path)
             if data is not None and _sha(data) == entry[1]:
-                return self._reused(path, key, data)
-        data = self.fetch(key, ".png")
+                return self._reused(path, key, data, figure)
+        data = self.fetch(key, path.suffix)
         if data is None:
             return False
         write_if_changed(path, data)
-        return self._reused(path, key, data)
+        return self._reused(path, key, data, figure)
 
-    def _reused(self, path: Path, key: str, data: bytes) -> bool:
+    def _reused(self, path: Path, key: str, data: bytes, figure: bool) -> bool:
         self.current[path.name] = [key, _sha(data)]
-        self.reused += 1
+        self.reused += figure
         return True
 
-    def written(self, path: Path, key: str | None, data: bytes) -> None:
-        """The figure ``key`` was drawn as ``data``: written to ``path`` (if its bytes changed)."""
+    def written(self, path: Path, key: str | None, data: bytes, figure: bool = True) -> None:
+        """The output ``key`` was made as ``data``: written to ``path`` (if its bytes changed);
+        a figure counted as drawn."""
         write_if_changed(path, data)
-        self.drawn += 1
-        self.drawn_files.append(path.name)
+        if figure:
+            self.drawn += 1
+            self.drawn_files.append(path.name)
         if key is None:
             return
         self.current[path.name] = [key, _sha(data)]
-        self.keep(key, ".png", data)
+        self.keep(key, path.suffix, data)
 
     def keep(self, key: str, suffix: str, data: bytes) -> None:
         """Keep ``data`` as ``KEY+suffix`` in the user's cache folder (if it is used)."""

@@ -28,7 +28,8 @@ from radarbench.bench.calibration import EQUAL_CHANCE_PD
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.escapes import escape_controls
 from radarbench.bench.progress import Progress
-from radarbench.bench.report.building import Sections, each_done, figure_pool, interactive_html, interactive_job
+from radarbench.bench.report.building import (Sections, each_done, figure_pool, interactive_html, interactive_job,
+                                              reused_output)
 from radarbench.bench.markdown import code, fmt_db, text
 from radarbench.bench.markdown import fmt as _fmt
 from radarbench.bench.markdown import table as _table
@@ -541,9 +542,11 @@ def _build_with(store: Store, out_dir: Path, recording: bool, progress: Progress
     sections.done("figures written")
     if recording and records:
         progress.phase("recording")
-        write_recording(out_dir / "recording.rrd", records, _recording_summary(summary, present),
-                        tasks=task_of, recording_id=f"{title}-{store.meta('fingerprint')}",
-                        application_id=title, recording_name=f"{title} · {str(store.meta('fingerprint'))[:12]}")
+        shown = _recording_summary(summary, present)
+        ids = {"recording_id": f"{title}-{store.meta('fingerprint')}", "application_id": title,
+               "recording_name": f"{title} · {str(store.meta('fingerprint'))[:12]}"}
+        reused_output(out_dir / "recording.rrd", (records, shown, {k: t.name for k, t in task_of.items()}, ids),
+                      lambda path: write_recording(path, records, shown, tasks=task_of, **ids))
         parts.append(_section_recording(sweep["record"]["trials"], out_dir, present))
     # dated by its results, not by the build: an unchanged store gives the same report
     parts.append(_section_provenance(record, store, provenance(units.finished.max() if len(units) else None)))

@@ -12,7 +12,7 @@ from radarbench.bench import figures
 from radarbench.bench.processes import default_workers, process_pool
 from radarbench.bench.progress import Progress
 from radarbench.bench.report.html import interactive_figures
-from radarbench.bench.reuse import code_key, key_of
+from radarbench.bench.reuse import code_key, harness_key, key_of
 
 
 #: the most processes that render a report's figures (:func:`figure_pool`)
@@ -104,3 +104,17 @@ def each_done(parts, sections: Sections, what: str) -> list:
     parts = list(parts)
     sections.done(what)
     return parts
+
+
+def reused_output(path, inputs, write) -> None:
+    """``write(path)`` (an output drawn by the harness from ``inputs`` alone, the
+    recording), unless the run folder or the user's cache holds it for the same inputs and
+    harness code (:mod:`bench.reuse`)."""
+    reuse = figures.reuse_in_effect()
+    key = key_of(inputs, harness_key()) if reuse is not None else None
+    if key is not None and reuse.reuse(path, key, figure=False):
+        return
+    write(path)
+    if key is not None:
+        with open(path, "rb") as f:
+            reuse.written(path, key, f.read(), figure=False)
