@@ -390,7 +390,7 @@ def _run_locked(args, plan, out_dir: Path, command: str) -> int:
             return _failures_exit(out_dir, command)
         write_plan_toml(out_dir / "plan.toml", plan, command, store.stamps)
         from radarbench.bench.report import build_outputs
-        report = build_outputs(out_dir, recording=not args.no_record, on_phase=progress.phase,
+        report = build_outputs(out_dir, recording=not args.no_record, progress=progress,
                                workers=_workers(args), digest=digest)   # --workers bounds the figures' processes too
     except KeyboardInterrupt:
         return _interrupted(out_dir, command, *_stored_units(plan, out_dir))
@@ -441,7 +441,7 @@ def cmd_report(args) -> int:
     progress = Progress(quiet=True)       # `bench report` stays one line on error (its tests, its users)
     with runfolder.open_for_report(out_dir), _store_errors(out_dir):
         try:
-            report = build_outputs(out_dir, recording=not args.no_record, on_phase=progress.phase)
+            report = build_outputs(out_dir, recording=not args.no_record, progress=progress)
         finally:
             progress.close()
     print(f"wrote {report}")

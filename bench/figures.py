@@ -3,13 +3,17 @@
 Each figure function builds its figure and hands it to :func:`_save`. Inside
 :func:`rendering_in` a pool's processes render them (a figure pickles in a few
 milliseconds and renders in a few hundred: the drawing is the cost) while the report
-goes on; the PNGs are written, each whole, when the block ends.
+goes on; the PNGs are written, each whole, when the block ends. Inside
+:func:`reusing`, a figure function marked :func:`cached` is not even built when the
+same figure was drawn before from the same inputs and code (:mod:`bench.figure_cache`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import contextvars
+import functools
+import inspect
 import io
 import pickle
 from concurrent.futures import BrokenExecutor
@@ -31,6 +35,63 @@ PNG_COMPRESS_LEVEL = 1
 #: the figures of the :func:`rendering_in` block in progress: [(path, pickled figure, future of its PNG or None)]
 _pending: contextvars.ContextVar[list | None] = contextvars.ContextVar("pending_figures", default=None)
 _pool: contextvars.ContextVar = contextvars.ContextVar("figure_pool", default=None)
+#: the figures a build reuses (bench.figure_cache.FigureReuse) inside :func:`reusing`, else None
+_reuse: contextvars.ContextVar = contextvars.ContextVar("figure_reuse", default=None)
+#: the key of the figure a :func:`cached` function is drawing (None: not known)
+_key: contextvars.ContextVar = contextvars.ContextVar("figure_key", default=None)
+
+
+@contextlib.contextmanager
+def reusing(reuse):
+    """Within the block, the figures of :func:`cached` functions are reused and counted
+    by ``reuse`` (a :class:`bench.figure_cache.FigureReuse`)."""
+    token = _reuse.set(reuse)
+    try:
+        yield reuse
+    finally:
+        _reuse.reset(token)
+
+
+def reuse_in_effect():
+    """The :class:`bench.figure_cache.FigureReuse` of the :func:`reusing` block in progress, else None."""
+    return _reuse.get()
+
+
+def cached(fn):
+    """Mark the figure function ``fn`` (whose argument ``path`` names its PNG) as drawn
+    from its arguments alone: inside :func:`reusing`, a figure drawn before from equal
+    arguments by the same code is reused, not built (:mod:`bench.figure_cache`)."""
+    signature = inspect.signature(fn)
+
+    @functools.wraps(fn)
+    def figure(*args, **kwargs):
+        reuse = _reuse.get()
+        if reuse is None:
+            return fn(*args, **kwargs)
+        bound = signature.bind(*args, **kwargs)
+        bound.apply_defaults()
+        arguments = dict(bound.arguments)
+        path = Path(arguments.pop("path"))
+        key = reuse.key(fn, arguments)
+        if key is not None and reuse.reuse(path, key):
+            return path
+        token = _key.set(key)
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            _key.reset(token)
+    return figure
+
+
+def _write(path: Path, data: bytes, key: str | None) -> None:
+    """The PNG ``data`` of the figure ``key`` to ``path`` (inside :func:`reusing`: only if
+    its bytes changed, counted as drawn)."""
+    from radarbench.bench import runfolder
+    reuse = _reuse.get()
+    if reuse is None:
+        runfolder.write_bytes(path, data)
+    else:
+        reuse.written(path, key, data)
 
 
 def png(fig) -> bytes:
@@ -55,11 +116,11 @@ def _save(fig, path: Path) -> Path:
     try:
         runfolder.folder_for(path.parent)
         if pending is None:
-            runfolder.write_bytes(path, png(fig))
+            _write(path, png(fig), _key.get())
         else:
             # pickled now, in this thread: the pool's feeder thread would pickle it later, after the close below
             data = pickle.dumps(fig)
-            pending.append((path, data, submitted(_pool.get(), _png_of_pickled, data)))
+            pending.append((path, data, submitted(_pool.get(), _png_of_pickled, data), _key.get()))
     finally:
         plt.close(fig)
     return path
@@ -108,21 +169,20 @@ def rendering_in(pool):
     if pool is None:
         yield
         return
-    from radarbench.bench import runfolder
     pending: list = []
     tokens = _pending.set(pending), _pool.set(pool)
     try:
         yield
     except BaseException:
-        for *_, job in pending:
+        for _, _, job, _ in pending:
             if job is not None:
                 job.cancel()
         raise
     finally:
         _pending.reset(tokens[0])
         _pool.reset(tokens[1])
-    for path, data, job in pending:
-        runfolder.write_bytes(path, result_of(job, _png_of_pickled, data))
+    for path, data, job, key in pending:
+        _write(path, result_of(job, _png_of_pickled, data), key)
 
 
 def _legend_outside(ax) -> None:
@@ -142,6 +202,7 @@ def _curves(summary: pd.DataFrame, x: str = "snr_db", column: str | None = None)
         yield f"C{i % 10}", STYLES[i % len(STYLES)], label, g.sort_values(x)
 
 
+@cached
 def pd_vs_snr(summary: pd.DataFrame, path: Path, pfa: float, title: str,
               chance: dict[str, float] | None = None, column: str = "pd",
               ylabel: str = "probability of detection $P_D$", condition: str | None = None) -> Path:
@@ -164,6 +225,7 @@ def pd_vs_snr(summary: pd.DataFrame, path: Path, pfa: float, title: str,
     return _save(fig, path)
 
 
+@cached
 def delay_vs_snr(summary: pd.DataFrame, path: Path, title: str) -> Path:
     """Mean detection delay of detected trials, with its bootstrap band."""
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
@@ -179,6 +241,7 @@ def delay_vs_snr(summary: pd.DataFrame, path: Path, title: str) -> Path:
     return _save(fig, path)
 
 
+@cached
 def roc(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, snr_db: float, pfa: float,
         title: str) -> Path:
     """Pd against per-step Pfa at one SNR, per method config (log Pfa axis)."""
@@ -194,19 +257,21 @@ def roc(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, snr_db: fl
     return _save(fig, path)
 
 
+@cached
 def runtime(per_method: pd.DataFrame, path: Path) -> Path:
-    """Seconds per trial per method config (log scale)."""
+    """CPU seconds per trial per method config (log scale)."""
     fig, ax = plt.subplots(figsize=(7.5, 0.5 + 0.45 * len(per_method)))
     y = np.arange(len(per_method))
     ax.barh(y, per_method.seconds_per_trial * 1e3, color=[f"C{i % 10}" for i in y])
     ax.set_yticks(y, per_method.config, fontsize=8)
     ax.invert_yaxis()
     ax.set_xscale("log")
-    ax.set(xlabel="milliseconds per trial (one core)", title="runtime per method config")
+    ax.set(xlabel="CPU milliseconds per trial", title="runtime per method config")
     ax.grid(alpha=0.3, axis="x")
     return _save(fig, path)
 
 
+@cached
 def trial_timeline(t: np.ndarray, series: dict[str, tuple[np.ndarray, float, np.ndarray]], path: Path,
                    title: str) -> Path:
     """One trial's statistic and threshold per method over time (the paper's single-run figure);
@@ -227,6 +292,7 @@ def trial_timeline(t: np.ndarray, series: dict[str, tuple[np.ndarray, float, np.
     return _save(fig, path)
 
 
+@cached
 def rmse_per_step(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, title: str,
                   xlabel: str = "frame", ylabel: str = "position RMSE (m)") -> Path:
     """Per-step RMSE curves, one per label."""
@@ -245,6 +311,7 @@ def metric_vs_snr(summary: pd.DataFrame, path: Path, title: str, column: str = "
     return metric_vs(summary, "snr_db", path, title, column, ylabel, "SNR (dB)", log=log)
 
 
+@cached
 def metric_vs(summary: pd.DataFrame, x: str, path: Path, title: str, column: str, ylabel: str, xlabel: str,
               log: bool = False, logx: bool = False) -> Path:
     """A summary metric against the summary column ``x`` per config, with its
@@ -266,6 +333,7 @@ def metric_vs(summary: pd.DataFrame, x: str, path: Path, title: str, column: str
     return _save(fig, path)
 
 
+@cached
 def grouped_bars(values: pd.DataFrame, low: pd.DataFrame, high: pd.DataFrame, path: Path, title: str,
                  ylabel: str, log: bool = False) -> Path:
     """Bars per (row = group, column = series) with interval whiskers."""
@@ -289,6 +357,7 @@ def grouped_bars(values: pd.DataFrame, low: pd.DataFrame, high: pd.DataFrame, pa
     return _save(fig, path)
 
 
+@cached
 def mean_estimates(t: np.ndarray, panels: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]], path: Path,
                    title: str) -> Path:
     """Mean estimate across trials against the mean truth, per step: one panel
@@ -313,6 +382,7 @@ def mean_estimates(t: np.ndarray, panels: dict[str, tuple[np.ndarray, dict[str, 
     return _save(fig, path)
 
 
+@cached
 def trial_in_plane(truth_xy: np.ndarray, measurements_xy: np.ndarray | None, estimates: dict[str, np.ndarray],
                    maneuvering: np.ndarray | None, path: Path, title: str) -> Path:
     """One trial in the plane (metres, equal scales): the truth (its maneuvering steps
@@ -337,6 +407,7 @@ def trial_in_plane(truth_xy: np.ndarray, measurements_xy: np.ndarray | None, est
     return _save(fig, path)
 
 
+@cached
 def null_score_fits(fits: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, float, str]], path: Path,
                     pfa: float, title: str) -> Path:
     """Empirical survival function of the null scene scores (steps) against the

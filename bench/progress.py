@@ -100,7 +100,8 @@ class Progress:
         self.quiet = quiet
         self.terminal = bool(getattr(self.stream, "isatty", lambda: False)())
         self.period_s = period_s
-        self.label = label
+        self.label = self._default_label = label
+        self.detail_text = ""
         self.name: str | None = None
         self.total: int | None = None
         self.done = 0
@@ -113,11 +114,13 @@ class Progress:
 
     # ---------------------------------------------------------------- the phases
 
-    def phase(self, name: str, total: int | None = None, done: int = 0) -> None:
-        """Start phase ``name`` (``total`` units of which ``done`` are already stored)."""
+    def phase(self, name: str, total: int | None = None, done: int = 0, label: str | None = None) -> None:
+        """Start phase ``name`` (``total`` units of which ``done`` are already stored;
+        ``label``: what it counts, if not the command's units)."""
         self._end_phase()
         with self._lock:
             self.name, self.total, self.done, self._start_done = name, total, done, done
+            self.label, self.detail_text = label or self._default_label, ""
             self._started = time.monotonic()
         if self.quiet:
             return
@@ -129,6 +132,13 @@ class Progress:
         else:
             self._line(f"{name}: started" if total is None else None)
             self._start_timer()
+
+    def detail(self, text: str) -> None:
+        """What the phase is at, shown after its count (e.g. the figures drawn so far)."""
+        with self._lock:
+            self.detail_text = text
+        if self._bar is not None:
+            self._bar.set_postfix_str(text, refresh=False)
 
     def advance(self, k: int = 1) -> None:
         with self._lock:
@@ -148,12 +158,13 @@ class Progress:
         with self._lock:
             name, total, done, start_done = self.name, self.total, self.done, self._start_done
             elapsed = time.monotonic() - self._started
+        detail = f" ({self.detail_text})" if self.detail_text else ""
         if total is None:
             return f"{name}: {_fmt_seconds(elapsed)} elapsed"
         pct = f" ({100 * done // total}%)" if total else ""
         new = done - start_done
         eta = f", ETA {_fmt_seconds(elapsed / new * (total - done))}" if new and done < total else ""
-        return f"{name}: {done}/{total} {self.label}{pct}, {_fmt_seconds(elapsed)} elapsed{eta}"
+        return f"{name}: {done}/{total} {self.label}{pct}{detail}, {_fmt_seconds(elapsed)} elapsed{eta}"
 
     def _line(self, text: str | None = None) -> None:
         say(text or self.status(), self.stream)
@@ -181,8 +192,9 @@ class Progress:
             self._bar = None
         elif not self.quiet:
             with self._lock:
-                total, done = self.total, self.done
+                total, done, detail = self.total, self.done, self.detail_text
                 elapsed = _fmt_seconds(time.monotonic() - self._started)
             counted = f"{done}/{total} {self.label} " if total is not None else ""
-            self._line(f"{self.name}: done, {counted}in {elapsed}")
+            detail = f"({detail}) " if detail else ""
+            self._line(f"{self.name}: done, {counted}{detail}in {elapsed}")
         self.name = None

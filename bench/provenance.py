@@ -97,8 +97,9 @@ def distribution_of(module: str, dist=None) -> str:
     return said + (f", git commit {commit}" if commit else "")
 
 
-def provenance() -> dict:
-    return {"created": time.strftime("%Y-%m-%d %H:%M:%S %Z"), "git_commit": git_commit(),
+def provenance(created: float | None = None) -> dict:
+    """Where and when (``created``: seconds since the epoch; None: now) a result was made."""
+    return {"created": time.strftime("%Y-%m-%d %H:%M:%S %Z", time.localtime(created)), "git_commit": git_commit(),
             "machine": f"{platform.machine()}, {platform.system()}", **_versions()}
 
 

@@ -147,6 +147,14 @@ def claim(root: Path, names: list[str]) -> None:
         _write_manifest(root, entries + new)
 
 
+def remove_output(root: Path, name: str) -> None:
+    """Remove the output ``root/name`` a build no longer makes, and its manifest entry."""
+    _remove(root, PurePosixPath(name))
+    entries = read_manifest(root)
+    if entries is not None and name in entries:
+        _write_manifest(root, [e for e in entries if e != name])
+
+
 def _prune_temporaries(root: Path) -> None:
     """Drop the entries of temporary files that no longer exist (renamed into place)."""
     entries = read_manifest(root)

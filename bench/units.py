@@ -8,7 +8,6 @@ stores their results is :mod:`bench.runner`; the warm-up runs units too (:mod:`b
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,6 +18,7 @@ from radarbench.bench.executors import in_worker
 from radarbench.bench.recording.record import TrialRecord
 from radarbench.bench.rng import CALIBRATION, EVALUATION, TrialRNG
 from radarbench.bench.store import MethodRun, UnitResult
+from radarbench.bench.worktime import work_seconds
 from radarbench.bench.tasks.base import RecordedScene
 
 
@@ -140,7 +140,7 @@ def execute_unit(work: UnitTask) -> UnitResult:
     domain = CALIBRATION if unit.phase == "calibration" else EVALUATION
     rng = TrialRNG(plan.seed, domain, sc.key, range(unit.trial_start, unit.trial_start + unit.n))
     methods = unit_methods(work)
-    t0 = time.perf_counter()
+    t0 = work_seconds()
     scenario_cls = None
     try:
         scenario_cls = registry.get_scenario(sc.name)
@@ -156,13 +156,13 @@ def execute_unit(work: UnitTask) -> UnitResult:
         cause, trace = failures.describe(exc, scenario_cls)
         return failed_result(work, f"the scenario failed to generate the unit: {cause}", trace)
     result = UnitResult(unit.key, unit.phase, sc.label, unit.snr_db, unit.trial_start, unit.n,
-                        time.perf_counter() - t0)
+                        work_seconds() - t0)
     result.common = common
     traces: dict[int, dict] = {i: {} for i in recorded}
     for mc in methods:
         method_cls = registry.get_method(mc.name)
         run = MethodRun(mc.label, 0.0)
-        t1 = time.perf_counter()
+        t1 = work_seconds()
         try:
             task = registry.get_task(method_cls.task)
             task.check_scene(batch)
@@ -187,7 +187,7 @@ def execute_unit(work: UnitTask) -> UnitResult:
             if _let_through(exc):
                 raise
             run.error, run.traceback = failures.describe(exc, method_cls)
-        run.seconds = time.perf_counter() - t1
+        run.seconds = work_seconds() - t1
         result.runs.append(run)
     tasks = list(dict.fromkeys(task_of(mc) for mc in methods))
     result.records = [(int(batch.trials[i]), _trial_record(plan, unit, batch, i, traces[i], tasks))

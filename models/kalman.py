@@ -204,6 +204,15 @@ def _covariance_sequence(model: LinearGaussianModel, P0: np.ndarray, steps: int)
     return P_prior, P_post, S, K
 
 
+def kernel_array(a, dtype=float) -> np.ndarray:
+    """``a`` as the compiled kernels take their arrays: C-contiguous and writeable, copied
+    if it is not. Numba types a read-only array apart from a writeable one, so a read-only
+    view (a prior shared by the trials, broadcast to (n, d): at n = 1 it is already
+    contiguous and stays a view) would compile another specialisation of the kernel, on
+    a batch's first call, inside a timed unit."""
+    return np.require(a, dtype=dtype, requirements="CW")
+
+
 def kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray,
                   P0: np.ndarray, valid: np.ndarray | None = None) -> KalmanResult:
     """Run the filter on ``n`` trials of ``K`` measurements at once.
@@ -226,7 +235,7 @@ def kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray,
     F, H = model.F, model.H
     P_prior, P_post, S, K = covariance_sequence(model, P0, steps)
 
-    x0 = np.ascontiguousarray(np.broadcast_to(np.asarray(x0, dtype=float), (n, model.dim_x)))
+    x0 = kernel_array(np.broadcast_to(np.asarray(x0, dtype=float), (n, model.dim_x)))
     x_prior, x_post, nu = _state_kernel(np.ascontiguousarray(z), x0, np.ascontiguousarray(F, dtype=float),
                                         np.ascontiguousarray(H, dtype=float), K)
     return KalmanResult(x_prior=x_prior, x_post=x_post, nu=nu, P_prior=P_prior,
@@ -279,7 +288,7 @@ def masked_kalman_filter(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarr
     per-trial steps below: a trial's numbers do not depend on the others of its batch."""
     z = np.ascontiguousarray(z, dtype=float)
     x0 = np.broadcast_to(np.asarray(x0, dtype=float), (z.shape[0], model.dim_x))
-    arrays = _masked_kernel(z, np.ascontiguousarray(valid, dtype=bool), np.ascontiguousarray(x0),
+    arrays = _masked_kernel(z, np.ascontiguousarray(valid, dtype=bool), kernel_array(x0),
                             np.ascontiguousarray(P0, dtype=float), *(np.ascontiguousarray(A, dtype=float)
                                                                      for A in (model.F, model.H, model.Q, model.R)))
     return KalmanResult(*arrays)

@@ -249,7 +249,14 @@ def test_a_file_size_limit_during_the_run_is_one_line_and_the_run_resumes(clean,
 def test_a_file_size_limit_during_the_report_leaves_every_output_whole(run_copy, limit, culprit):
     """At 35 kB a figure cannot be written, at 150 kB the recording (whose writer,
     rerun's thread, would only log the failure): one line, exit 3, and every file is as it
-    was, none truncated, no temporary file left."""
+    was, none truncated, no temporary file left. The figures and the recording are removed
+    first, with what the report would reuse of them (docs/architecture.md, 'Report')."""
+    shutil.rmtree(run_copy / "figures")
+    (run_copy / "recording.rrd").unlink()
+    with sqlite3.connect(run_copy / "results.sqlite") as con:
+        con.execute("DELETE FROM meta WHERE key = 'report_figures'")
+    con.close()
+    shutil.rmtree(Path(os.environ["XDG_CACHE_HOME"]) / "radar-maneuver-bench" / "figures", ignore_errors=True)
     before = snapshot(run_copy)
     proc = bench("report", run_copy, limit=limit)
     line = one_line_error(proc.returncode, proc.stderr, 3, str(run_copy / culprit), "ulimit -f")

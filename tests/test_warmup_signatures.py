@@ -1,43 +1,105 @@
 """The warm-up compiles every kernel with the types and layouts the units pass it
 (docs/architecture.md, 'Warm-up'): after it, no dispatcher gains a specialisation while a
-preset's units run, so no unit's time holds a compilation."""
+preset's units run, so no unit's time holds a compilation; and a unit's time leaves out
+what compiling costs (:mod:`bench.worktime`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numba
+import numpy as np
 import pytest
 
 from radarbench.bench import registry
-from radarbench.bench.config import load_sweep
+from radarbench.bench.config import load_sweep, parse_sweep
 from radarbench.bench.numba_cache import kernels
-from radarbench.bench.units import Unit, UnitTask, calibrated_configs, execute_unit
+from radarbench.bench.units import UnitTask, execute_unit, plan_units, Unit
 from radarbench.bench.warmup import warm_up_tasks
+from radarbench.bench.worktime import compiling_seconds, work_seconds
 
 
 def _signatures() -> dict[str, int]:
     return {f"{k.py_func.__module__}.{k.py_func.__qualname__}": len(k.signatures) for k in kernels()}
 
 
-@pytest.mark.slow
-def test_no_kernel_compiles_again_after_the_warm_up_of_the_quick_preset():
-    plan = load_sweep(Path(registry.__file__).parent / "presets" / "quick.toml")
+def _warm_up(plan) -> dict[str, int]:
     for units, _ in warm_up_tasks(plan):
         for task in units:
             execute_unit(task)
-    warm = _signatures()
+    return _signatures()
+
+
+def _grown(warm: dict[str, int]) -> dict[str, tuple[int, int]]:
+    return {name: (warm.get(name, 0), count) for name, count in _signatures().items() if count != warm.get(name, 0)}
+
+
+def _ours(plan) -> tuple[str, ...]:
+    """The plan's method configs whose kernels are ours (an installed peer has none)."""
+    return tuple(m.label for m in plan.methods if registry.get_method(m.name).__module__.startswith("radarbench."))
+
+
+@pytest.mark.slow
+def test_no_kernel_compiles_again_after_the_warm_up_of_the_quick_preset():
+    """Every unit of a quick run (its calibration and evaluation units, as the runner
+    plans them) after the warm-up: no dispatcher gains a signature."""
+    plan = load_sweep(Path(registry.__file__).parent / "presets" / "quick.toml")
+    warm = _warm_up(plan)
     assert warm, "the quick preset calls no compiled kernel"
     thresholds = {m.label: 1.0 for m in plan.methods}
-    for i, sc in enumerate(plan.scenarios):
-        n = min(plan.chunk, sc.trials)
-        calibrated = {m.label for m in calibrated_configs(plan, sc)}
-        for mc in plan.pairs(sc):
-            if not registry.get_method(mc.name).__module__.startswith("radarbench."):
-                continue                                   # an installed peer: none of our kernels
-            units = [Unit("evaluation", i, sc.label, max(sc.snr_db), 0, n)]
-            if mc.label in calibrated:
-                units.append(Unit("calibration", i, sc.label, None, 0, min(plan.chunk, plan.calibration.h0_trials)))
-            for unit in units:
-                execute_unit(UnitTask(plan, unit, thresholds, methods=(mc.label,)))
-    grown = {name: (warm.get(name, 0), count) for name, count in _signatures().items() if count != warm.get(name, 0)}
+    calibration, evaluation = plan_units(plan)
+    for unit in calibration + evaluation:
+        execute_unit(UnitTask(plan, unit, thresholds, methods=_ours(plan)))
+    grown = _grown(warm)
     assert not grown, f"compiled inside timed units (kernel: (after the warm-up, after the units)): {grown}"
+
+
+def test_a_one_trial_unit_compiles_nothing_after_a_two_trial_warm_up():
+    """A batch of one trial types its arrays as a larger one does: a prior shared by the
+    trials and broadcast to (1, d) is contiguous but read-only, which numba would type as
+    another array (models.kalman.kernel_array copies it)."""
+    plan = parse_sweep({"name": "one-trial", "scenario": "maneuvering-1d", "trials": 3, "chunk": 2, "seed": 5,
+                        "scenario_params": {"steps": 60, "maneuver_start_s": 20.0, "maneuver_duration_s": 15.0}, "snr_db": [10],
+                        "methods": [{"name": n} for n in ("cv-kf", "imm-cv-ca", "current-statistical")]})
+    warm = _warm_up(plan)
+    calibration, evaluation = plan_units(plan)
+    assert [u.n for u in evaluation] == [2, 1]
+    for unit in evaluation:
+        result = execute_unit(UnitTask(plan, unit))
+        assert all(run.error is None for run in result.runs), [run.error for run in result.runs]
+    grown = _grown(warm)
+    assert not grown, f"a one-trial unit compiled (kernel: (after the warm-up, after the unit)): {grown}"
+
+
+def test_a_units_seconds_leave_out_compilation():
+    """A kernel compiled inside the measured work: its compilation is not in the work's seconds."""
+    @numba.njit
+    def fresh(a):                       # a new function: compiled on its first call
+        s = 0.0
+        for x in a:
+            s += np.sin(x) * np.cos(x)
+        return s
+
+    before_compiling, start = compiling_seconds(), work_seconds()
+    fresh(np.arange(10.0))
+    work, compiling = work_seconds() - start, compiling_seconds() - before_compiling
+    assert compiling > 0.01, compiling
+    assert work < compiling / 2, (work, compiling)
+
+
+def test_a_methods_seconds_in_a_unit_are_its_cpu_time(monkeypatch):
+    """A unit's stored seconds are CPU seconds of its work: a unit whose method sleeps stores almost none."""
+    plan = parse_sweep({"name": "sleepy", "scenario": "maneuvering-1d", "trials": 2, "seed": 1, "snr_db": [10],
+                        "scenario_params": {"steps": 60, "maneuver_start_s": 20.0, "maneuver_duration_s": 15.0}, "methods": [{"name": "cv-kf"}]})
+    method = registry.get_method("cv-kf")
+    original = method.run
+
+    def sleepy(self, batch, params):
+        import time
+        time.sleep(0.3)
+        return original(self, batch, params)
+
+    monkeypatch.setattr(method, "run", sleepy)
+    result = execute_unit(UnitTask(plan, Unit("evaluation", 0, plan.scenarios[0].label, 10.0, 0, 2)))
+    assert result.runs[0].error is None
+    assert result.runs[0].seconds < 0.15, result.runs[0].seconds

@@ -17,9 +17,7 @@ renamed, so no reader ever sees a half-written output.
 
 from __future__ import annotations
 
-import contextlib
 import importlib
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -29,19 +27,22 @@ from radarbench.bench import claims, figures, registry, runfolder
 from radarbench.bench.calibration import EQUAL_CHANCE_PD
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.escapes import escape_controls
-from radarbench.bench.processes import default_workers, process_pool
+from radarbench.bench.progress import Progress
+from radarbench.bench.report.building import (Sections, each_done, figure_pool, interactive_html, interactive_job,
+                                              reused_output)
 from radarbench.bench.markdown import code, fmt_db, text
 from radarbench.bench.markdown import fmt as _fmt
 from radarbench.bench.markdown import table as _table
 from radarbench.bench.provenance import WALL_TIME_ROW, origin_text, provenance
 from radarbench.bench.quantities import plan_calibration
 from radarbench.bench.report.glance import comparisons_frame, draw_glance_figures, glance
-from radarbench.bench.report.html import interactive_figures, interactive_specs, markdown_to_html
+from radarbench.bench.report.html import interactive_specs, markdown_to_html
 from radarbench.bench.report.render import comparisons_markdown, glance_markdown, render, section_macro
 from radarbench.bench.recording import TrialRecord, write_recording
 from radarbench.bench.runner import calibrations
 from radarbench.bench.store import Store
-from radarbench.bench.tables import write_csv
+from radarbench.bench.figure_cache import FigureReuse, write_if_changed
+from radarbench.bench.tables import csv_text
 from radarbench.bench.tasks import ReportContext, summary_columns
 
 TRIAL_KEYS = ["scenario", "method", "config", "params", "snr_db", "trial", "seed", "realised_snr_db",
@@ -51,7 +52,7 @@ RECORDING_KEYS = ("scenario", "method", "snr_db", "n_trials")
 
 
 def _write_text(path: Path, text: str) -> None:
-    runfolder.write_text(path, text)
+    write_if_changed(path, text.encode("utf-8"))
 
 
 def _scenario_order(record: dict) -> dict[str, int]:
@@ -343,7 +344,7 @@ def _section_runtime(runs: pd.DataFrame, units: pd.DataFrame, fig_dir: Path, rec
     gen = units.generate_seconds.sum() / units.n.sum()
     rows = [[code(r.config), f"{r.seconds_per_trial * 1e3:.3g}", f"{r.n:,}", f"{r.seconds:.3g}"]
             for r in per.itertuples()]
-    return _section("runtime", _table(["config", "ms per trial", "trials run", "total seconds"], rows),
+    return _section("runtime", _table(["config", "CPU ms per trial", "trials run", "total CPU seconds"], rows),
                     f"{gen * 1e3:.3g}")
 
 
@@ -430,27 +431,31 @@ def _paper_vs_ours(source: str, tables: dict[str, pd.DataFrame], calibration: di
     return evaluation, claims.claims_markdown(evaluation, preset_notes(source))
 
 
-def build_outputs(out_dir: Path, *, recording: bool = True, on_phase=None, workers: int | None = None,
-                  digest: str | None = None) -> Path:
+def build_outputs(out_dir: Path, *, recording: bool = True, progress: Progress | None = None,
+                  workers: int | None = None, digest: str | None = None) -> Path:
     """(Re)build every output of a run folder from its store; returns report.md's path.
 
     Every file is written whole (a temporary file renamed into place) and listed in the
-    folder's manifest (:mod:`bench.runfolder`); the caller holds the folder's lock.
-    ``on_phase(name)`` is called as each phase starts: ``report`` (CSVs, figures,
-    report.md) and ``recording`` (recording.rrd), for the progress lines. ``workers``: the
-    most processes that draw the figures (None: one per CPU, :func:`_figure_pool`).
-    ``digest``: what the outputs are built from (:func:`bench.runfolder.outputs_digest`),
-    recorded once they are all written, so an unchanged folder is not rebuilt."""
-    on_phase = on_phase or (lambda name: None)
-    on_phase("report")
+    folder's manifest (:mod:`bench.runfolder`), and only when its bytes changed; a figure
+    drawn before from the same inputs and code is not drawn again (:mod:`bench.figure_cache`).
+    The caller holds the folder's lock. ``progress`` shows the phases: ``report`` (CSVs,
+    figures, report.md, counted in sections, with the figures drawn and reused) and
+    ``recording`` (recording.rrd). ``workers``: the most processes that draw the figures
+    (None: one per CPU, :func:`bench.report.building.figure_pool`). ``digest``: what the outputs are built from
+    (:func:`bench.runfolder.outputs_digest`), recorded once they are all written, so an
+    unchanged folder is not rebuilt."""
+    progress = progress or Progress(quiet=True)
     out_dir = Path(out_dir)
     db = out_dir / "results.sqlite"
     if not db.exists():
         raise ConfigError("", f"{out_dir} has no results.sqlite (not a bench run folder)")
     store = Store(db)
     try:
-        with runfolder.writing(out_dir):
-            report = _build(store, out_dir, recording, on_phase, workers)
+        reuse = FigureReuse.of_store(store)
+        with runfolder.writing(out_dir), figures.reusing(reuse):
+            report = _build(store, out_dir, recording, progress, workers)
+            reuse.drop_unmade(out_dir)
+        reuse.save(store)
         if digest:
             store.set_meta(runfolder.OUTPUTS_DIGEST, digest)
         return report
@@ -466,7 +471,9 @@ def _task_contexts(present: list, task_of: dict, summary, trials, steps, series,
     for task in sorted(present, key=lambda t: not t.calibrated):
         configs = frozenset(label for label, t in task_of.items() if t is task)
         out.append((task, ReportContext(
-            summary=summary[summary.config.isin(configs)], trials=trials[trials.config.isin(configs)],
+            # without the runtime (the runtime section's): a task's figures are drawn from its
+            # results alone, so equal results reuse them (bench.figure_cache)
+            summary=summary.loc[summary.config.isin(configs), summary.columns != "seconds_per_trial"], trials=trials[trials.config.isin(configs)],
             steps=steps[steps.config.isin(configs)] if not steps.empty else steps,
             series={k: v for k, v in series.items() if k[1] in configs},
             calibrations=[c for c in cals if c.method in configs], records=records, store=store,
@@ -485,67 +492,47 @@ def _recording_summary(summary: pd.DataFrame, tasks) -> pd.DataFrame:
     return summary[[c for c in summary.columns if c in wanted]]
 
 
-#: the most processes that render a report's figures (:func:`_figure_pool`)
-FIGURE_WORKERS = 4
-
-
-@contextlib.contextmanager
-def _figure_pool(workers: int | None = None):
-    """Processes, one per CPU up to :data:`FIGURE_WORKERS` (and ``workers``), that render the figures while
-    the report goes on (:func:`bench.figures.rendering_in`); on one CPU, none. They are
-    started from a thread (a forkserver that is not running yet takes seconds to load)
-    and import matplotlib as they start, while the tables are built."""
-    workers = min(FIGURE_WORKERS, default_workers(), workers or FIGURE_WORKERS)
-    if workers < 2:
-        yield None
-        return
-    with process_pool(workers) as pool:
-        starting = threading.Thread(target=lambda: [figures.submitted(pool, importlib.import_module, figures.__name__)
-                                                    for _ in range(workers)], name="bench-figure-pool")
-        starting.start()
-        try:
-            yield pool
-        finally:
-            starting.join()
-
-
 def _write_tables(out_dir: Path, **tables) -> None:
     """``name.csv`` per table given (None, or an empty ``steps``: not written)."""
     for name, frame in tables.items():
         if frame is not None and not (name == "steps" and frame.empty):
-            write_csv(frame, out_dir / f"{name}.csv")
+            write_if_changed(out_dir / f"{name}.csv", csv_text(frame).encode("utf-8"))
 
 
-def _build(store: Store, out_dir: Path, recording: bool, on_phase, workers: int | None) -> Path:
+def _build(store: Store, out_dir: Path, recording: bool, progress: Progress, workers: int | None) -> Path:
     runfolder.folder_for(out_dir / "figures")     # refuses a linked figures/ before anything is written
-    with _figure_pool(workers) as pool:
-        return _build_with(store, out_dir, recording, on_phase, pool)
+    with figure_pool(workers) as pool:
+        return _build_with(store, out_dir, recording, progress, pool)
 
 
-def _build_with(store: Store, out_dir: Path, recording: bool, on_phase, pool) -> Path:
+def _build_with(store: Store, out_dir: Path, recording: bool, progress: Progress, pool) -> Path:
     record = store.plan()
     require_plugins(record, store.path)
     sweep = record["sweep"]
     runs, units = store.runs(), store.units()
     task_of = _task_of(record)
     present = _tasks_present(task_of)
+    sections = Sections(progress, len(present))
     trials, series, cals, summary = store_tables(store, record, runs)
     specs = interactive_specs(summary, task_of)      # drawn by the pool while the driver goes on
-    interactive = figures.submitted(pool, interactive_figures, specs) if pool is not None else None
+    interactive = interactive_job(pool, specs)
     t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}
     steps = steps_frame(trials, series, record, t_of)
     records = [TrialRecord.from_bytes(b) for b in store.records()]   # every read before the first write
     calibration = pd.DataFrame([c.as_row() for c in cals])
     fig_dir = out_dir / "figures"
     title = sweep["name"]
+    sections.done("tables")
     with figures.rendering_in(pool):
         # the sections first: their figures draw in the pool while the comparisons are computed
         contexts = _task_contexts(present, task_of, summary, trials, steps, series, cals, records, store, out_dir, sweep)
         done, total = len(units), int(store.meta("units_total") or len(units))
         chance = {(c.scenario, c.method): c.chance_pd for c in cals}
-        task_parts = [s for task, ctx in contexts for s in task.report_sections(ctx)]
-        trial_parts = [s for task, ctx in contexts for s in task.trial_sections(ctx)]
+        task_parts = [s for task, ctx in contexts for s in each_done(task.report_sections(ctx), sections, task.name)]
+        trial_parts = [s for task, ctx in contexts
+                       for s in each_done(task.trial_sections(ctx), sections, f"{task.name}: single trials")]
         runtime_parts = [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
+        sections.done("runtime")
         comparisons = comparisons_frame(trials, task_of)
         evaluation, paper_vs_ours = _paper_vs_ours(   # the paper-vs-ours table leads a preset's sections
             record.get("source", ""), {"summary": summary, "comparisons": comparisons, "calibration": calibration},
@@ -557,21 +544,25 @@ def _build_with(store: Store, out_dir: Path, recording: bool, on_phase, pool) ->
         entries = glance(trials, task_of, comparisons, chance)
         draw_glance_figures(entries, summary, fig_dir)
         at_a_glance = glance_markdown(entries)
+        sections.done("comparisons and at a glance")
+    sections.done("figures written")
     if recording and records:
-        on_phase("recording")
-        write_recording(out_dir / "recording.rrd", records, _recording_summary(summary, present),
-                        tasks=task_of, recording_id=f"{title}-{store.meta('fingerprint')}",
-                        application_id=title, recording_name=f"{title} · {str(store.meta('fingerprint'))[:12]}")
+        progress.phase("recording")
+        shown = _recording_summary(summary, present)
+        ids = {"recording_id": f"{title}-{store.meta('fingerprint')}", "application_id": title,
+               "recording_name": f"{title} · {str(store.meta('fingerprint'))[:12]}"}
+        reused_output(out_dir / "recording.rrd", (records, shown, {k: t.name for k, t in task_of.items()}, ids),
+                      lambda path: write_recording(path, records, shown, tasks=task_of, **ids))
         parts.append(_section_recording(sweep["record"]["trials"], out_dir, present))
-    parts.append(_section_provenance(record, store, provenance()))
+    # dated by its results, not by the build: an unchanged store gives the same report
+    parts.append(_section_provenance(record, store, provenance(units.finished.max() if len(units) else None)))
     page = {"title": text(title), "description": text(sweep.get("description") or "", inline=False),
             "command": code(record.get("command", "")),
             "incomplete": None if done >= total else {"done": done, "total": total},
             "glance": at_a_glance, "parts": [p for p in parts if p]}
     report = out_dir / "report.md"
     _write_text(report, escape_controls(render("report.md.j2", html=False, **page) + "\n"))
-    interactive = figures.result_of(interactive, interactive_figures, specs)
     html = markdown_to_html(escape_controls(render("report.md.j2", html=True, **page)), title, out_dir,
-                            escape_controls(interactive))
+                            escape_controls(interactive_html(*interactive, specs)))
     _write_text(out_dir / "report.html", html)      # escaped before the policy hashed its scripts
     return report

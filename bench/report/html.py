@@ -113,8 +113,9 @@ def interactive_figures(specs: list[dict]) -> str:
         figures.append(fig)
     if not figures:
         return ""
-    parts = [f.to_html(full_html=False, include_plotlyjs=(i == 0), config={"displaylogo": False})
-             for i, f in enumerate(figures)]
+    # named by their place (plotly's default is a random name): the same figures, the same page
+    parts = [f.to_html(full_html=False, include_plotlyjs=(i == 0), config={"displaylogo": False},
+                       div_id=f"interactive-{i}") for i, f in enumerate(figures)]
     return ('<section class="interactive"><h2>Interactive figures</h2><p>Hover for values; click a legend '
             'entry to hide a config. Error bars: 95% intervals.</p>' + "\n".join(parts) + "</section>")
 

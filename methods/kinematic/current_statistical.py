@@ -14,7 +14,7 @@ from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_method
 from radarbench.methods.kinematic.base import SIGMA_WHY, KinematicTracker, output
-from radarbench.models.kalman import predict_one, update_one, update_scratch
+from radarbench.models.kalman import kernel_array, predict_one, update_one, update_scratch
 from radarbench.models.kinematics import (KinematicModel, current_statistical_input, current_statistical_variance, per_axis,
                                singer)
 
@@ -89,7 +89,7 @@ class CurrentStatistical(KinematicTracker):
         valid = batch.scene.valid_steps
         xs, Ps, std = _current_statistical_kernel(
             np.ascontiguousarray(batch.z, dtype=float), np.ones((n, K), bool) if valid is None else
-            np.ascontiguousarray(valid, dtype=bool), np.ascontiguousarray(np.broadcast_to(model.x0, (n, F.shape[0]))),
+            np.ascontiguousarray(valid, dtype=bool), kernel_array(np.broadcast_to(model.x0, (n, F.shape[0]))),
             np.ascontiguousarray(model.P0, dtype=float), np.ascontiguousarray(model.H, dtype=float),
             np.ascontiguousarray(model.R, dtype=float), F, Q_axes, U_axes, np.arange(2, F.shape[0], 3),
             float(params.a_max_m_s2), float(params.a_max_neg_m_s2), float(params.accel_std_floor_m_s2) ** 2)

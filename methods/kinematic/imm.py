@@ -14,7 +14,7 @@ from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_method
 from radarbench.methods.kinematic.base import KinematicTracker, ca_noise_param, cv_ca_modes, cv_noise_param, output
-from radarbench.models.kalman import LinearGaussianModel, predict_one, update_one, update_scratch
+from radarbench.models.kalman import LinearGaussianModel, kernel_array, predict_one, update_one, update_scratch
 from radarbench.models.kinematics import KinematicModel
 
 
@@ -79,7 +79,7 @@ def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: n
     stack = lambda name: np.ascontiguousarray([getattr(mode, name) for mode in models], dtype=float)  # noqa: E731
     x, P, mu = _imm_kernel(np.ascontiguousarray(z, dtype=float),
                            np.ones((n, K), bool) if valid is None else np.ascontiguousarray(valid, dtype=bool),
-                           np.ascontiguousarray(np.broadcast_to(np.asarray(x0, float), (n, d))),
+                           kernel_array(np.broadcast_to(np.asarray(x0, float), (n, d))),
                            np.ascontiguousarray(P0, dtype=float), stack("F"), stack("Q"),
                            np.ascontiguousarray(models[0].H, dtype=float), np.ascontiguousarray(models[0].R, dtype=float),
                            log_cbar0, log_M)

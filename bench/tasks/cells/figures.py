@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from radarbench.bench.figures import STYLES, _legend_outside, _save, plt
+from radarbench.bench.figures import STYLES, _legend_outside, _save, cached, plt
 from radarbench.bench.recording.record import TrialRecord
 from radarbench.bench.tasks.cells.metrics import ideal_pd
 
@@ -25,6 +25,7 @@ def _panels(count: int, width: float = 3.6, height: float = 3.2):
     return fig, list(axes.flat[:count])
 
 
+@cached
 def pd_panels(scene: pd.DataFrame, groups: list[str], columns: list[str], pfa: float, swerling: int, path: Path,
               title: str) -> Path:
     """One panel per target group: Pd vs SNR per config with its 95% band,
@@ -47,6 +48,7 @@ def pd_panels(scene: pd.DataFrame, groups: list[str], columns: list[str], pfa: f
     return _save(fig, path)
 
 
+@cached
 def roc_panels(curves: dict, pfa: float, path: Path, title: str) -> Path:
     """One panel per target group: Pd against the per-cell Pfa on the null maps, per config."""
     groups = [g for g, c in curves.items() if c]
@@ -65,6 +67,7 @@ def roc_panels(curves: dict, pfa: float, path: Path, title: str) -> Path:
     return _save(fig, path)
 
 
+@cached
 def map_detections(rec: TrialRecord, configs: list[str], path: Path, title: str) -> Path:
     """The RD map (dB) with the true targets, the clutter regions, and one
     panel per detector with its declared cells (range up, Doppler across)."""

@@ -1,0 +1,300 @@
+"""What a report build reuses instead of drawing again (docs/architecture.md, 'Report').
+
+A figure is named by a key: the SHA-256 of what it is drawn from — the arguments of its
+figure function (data frames, arrays, records, numbers, labels; the path it is written
+to left out) — and of the code that draws it (the files of the function's module and of
+:mod:`bench.figures`, the versions of the libraries that render it). Its PNG is kept
+
+- in the run folder: the store's meta ``report_figures`` names each figure's key and the
+  SHA-256 of the file written; a figure whose key and file are unchanged is neither
+  drawn nor written again (its modification time stays);
+- in the user's cache folder (``figures/KEY.png``, the most recently used
+  :data:`CACHE_BYTES`), so a new run folder whose results equal an earlier one's copies
+  its figures (and report.html's interactive figures, ``KEY.html``).
+
+An argument the key cannot describe (an object of another kind) makes its figure be
+drawn every time, never reused wrongly. Every other output of a build is written only
+when its bytes changed (:func:`write_if_changed`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import importlib.metadata
+import json
+import os
+import stat
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["FigureReuse", "key_of", "write_if_changed", "CACHE_BYTES"]
+
+#: the most bytes of PNGs the user's cache folder keeps (the least recently used go first)
+CACHE_BYTES = 256 * 2 ** 20
+#: the store's meta entry naming each figure's key and file hash (:class:`FigureReuse`)
+META = "report_figures"
+#: the libraries whose versions change a figure's pixels
+RENDERING_LIBRARIES = ("matplotlib", "numpy", "pandas", "pillow")
+
+
+class Unkeyable(Exception):
+    """An argument :func:`key_of` cannot describe."""
+
+
+def _feed(h, value) -> None:
+    """Feed ``value`` to the hash ``h``: its kind, then its content, in order."""
+    import pandas as pd
+    if value is None or isinstance(value, (bool, int, float, complex, str, np.generic)):
+        h.update(f"{type(value).__name__}:{value!r};".encode())
+    elif isinstance(value, bytes):
+        h.update(b"bytes:%d;" % len(value) + value)
+    elif isinstance(value, Path):
+        h.update(f"path:{value}".encode())
+    elif isinstance(value, np.ndarray):
+        if value.dtype.hasobject:
+            h.update(f"objects{value.shape}".encode())
+            for item in value.ravel():
+                _feed(h, item)
+        else:
+            h.update(f"array:{value.dtype.str}{value.shape};".encode())
+            h.update(np.ascontiguousarray(value).tobytes())
+    elif isinstance(value, pd.DataFrame):
+        h.update(b"frame;")
+        _feed(h, list(map(str, value.columns)))
+        _feed(h, value.index.to_numpy())
+        for name in value.columns:
+            _feed(h, value[name].to_numpy())
+    elif isinstance(value, pd.Series):
+        h.update(f"series:{value.name!r};".encode())
+        _feed(h, value.index.to_numpy())
+        _feed(h, value.to_numpy())
+    elif isinstance(value, pd.Index):
+        _feed(h, value.to_numpy())
+    elif isinstance(value, dict):
+        h.update(b"dict:%d;" % len(value))
+        for k, v in value.items():          # in order: a legend follows it
+            _feed(h, k)
+            _feed(h, v)
+    elif isinstance(value, (list, tuple, frozenset, set)):
+        items = sorted(value, key=repr) if isinstance(value, (set, frozenset)) else value
+        h.update(f"{type(value).__name__}:{len(items)};".encode())
+        for item in items:
+            _feed(h, item)
+    elif callable(getattr(value, "to_bytes", None)) and not isinstance(value, type):
+        h.update(f"{type(value).__qualname__}:".encode())    # a record's own byte format
+        _feed(h, value.to_bytes())
+    else:
+        raise Unkeyable(type(value).__qualname__)
+
+
+def key_of(*values) -> str | None:
+    """The SHA-256 of ``values`` (:func:`_feed`), None if one cannot be described."""
+    h = hashlib.sha256()
+    try:
+        for value in values:
+            _feed(h, value)
+    except Unkeyable:
+        return None
+    return h.hexdigest()
+
+
+_code_keys: dict[str, str] = {}
+
+
+def code_key(module: str) -> str:
+    """What draws a figure of ``module``: that module's file and :mod:`bench.figures`'s,
+    the versions of :data:`RENDERING_LIBRARIES`."""
+    if module not in _code_keys:
+        h = hashlib.sha256()
+        for name in dict.fromkeys((module, "radarbench.bench.figures")):
+            file = getattr(sys.modules.get(name), "__file__", None)
+            h.update(Path(file).read_bytes() if file else name.encode())
+        for name in RENDERING_LIBRARIES:
+            with contextlib.suppress(importlib.metadata.PackageNotFoundError):
+                h.update(f"{name} {importlib.metadata.version(name)};".encode())
+        _code_keys[module] = h.hexdigest()
+    return _code_keys[module]
+
+
+_harness_key: list[str] = []
+
+
+def harness_key() -> str:
+    """The harness's code (:func:`bench.runfolder.harness_files`), for an output drawn by
+    more of it than one module (the recording)."""
+    if not _harness_key:
+        from radarbench.bench import runfolder
+        h = hashlib.sha256()
+        for path in sorted(runfolder.harness_files()):
+            h.update(str(path.name).encode() + b"\0" + path.read_bytes())
+        _harness_key.append(h.hexdigest())
+    return _harness_key[0]
+
+
+def _read_regular(path: Path, limit: int = 1 << 30) -> bytes | None:
+    """The bytes of the regular file ``path`` (never through a link), None if there is none."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_NONBLOCK", 0))
+    except OSError:
+        return None
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+            return None
+        return f.read(limit)
+
+
+def _sha(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def write_if_changed(path: Path, data: bytes) -> bool:
+    """Write ``data`` to ``path`` whole (:func:`bench.runfolder.write_bytes`) unless the file
+    already holds exactly these bytes (then it is left, modification time and all);
+    whether it was written."""
+    from radarbench.bench import runfolder
+    old = _read_regular(path, len(data) + 1)
+    if old is not None and old == data:
+        return False
+    runfolder.write_bytes(path, data)
+    return True
+
+
+@dataclass
+class FigureReuse:
+    """One build's figures: ``previous`` (figure file name -> [key, SHA-256 of its file])
+    from the store, ``folder`` the user's cache of PNGs (None: not used). Counts the
+    figures drawn (and names their files) and reused."""
+
+    previous: dict = field(default_factory=dict)
+    folder: Path | None = None
+    current: dict = field(default_factory=dict)
+    drawn: int = 0
+    reused: int = 0
+    drawn_files: list = field(default_factory=list)
+
+    @classmethod
+    def of_store(cls, store, use_cache: bool = True) -> "FigureReuse":
+        try:
+            previous = json.loads(store.meta(META) or "{}")
+        except ValueError:
+            previous = {}
+        return cls(previous=previous if isinstance(previous, dict) else {},
+                   folder=_cache_folder() if use_cache else None)
+
+    def save(self, store) -> None:
+        """Record the figures of this build in the store (for the next build); keep the
+        user's cache within :data:`CACHE_BYTES`."""
+        store.set_meta(META, json.dumps(self.current, sort_keys=True))
+        if self.folder is not None and self.drawn:
+            with contextlib.suppress(OSError):
+                _bound(self.folder)
+
+    def drop_unmade(self, out_dir: Path) -> None:
+        """Remove the figures the last build made and this one did not (a config or a
+        scenario config left the sweep), unless their file was changed since: the folder
+        then holds what a fresh build would."""
+        from radarbench.bench import runfolder
+        for name, (_, sha) in self.previous.items():
+            path = out_dir / "figures" / name
+            if name not in self.current and Path(name).name == name and (data := _read_regular(path)) is not None \
+                    and _sha(data) == sha:
+                runfolder.remove_output(out_dir, f"figures/{name}")
+
+    def key(self, fn, arguments: dict) -> str | None:
+        """The key of the figure ``fn(**arguments)`` (its path left out of ``arguments``)."""
+        return key_of(fn.__module__, fn.__qualname__, code_key(fn.__module__), arguments)
+
+    def reuse(self, path: Path, key: str, figure: bool = True) -> bool:
+        """Whether the output ``key`` (a figure, or with ``figure`` False another output made
+        from its key's inputs alone) is already at ``path`` (left alone) or in the user's
+        cache (copied there); a figure either way counted as reused."""
+        entry = self.previous.get(path.name)
+        if entry and entry[0] == key:
+            data = _read_regular(path)
+            if data is not None and _sha(data) == entry[1]:
+                return self._reused(path, key, data, figure)
+        data = self.fetch(key, path.suffix)
+        if data is None:
+            return False
+        write_if_changed(path, data)
+        return self._reused(path, key, data, figure)
+
+    def _reused(self, path: Path, key: str, data: bytes, figure: bool) -> bool:
+        self.current[path.name] = [key, _sha(data)]
+        self.reused += figure
+        return True
+
+    def written(self, path: Path, key: str | None, data: bytes, figure: bool = True) -> None:
+        """The output ``key`` was made as ``data``: written to ``path`` (if its bytes changed);
+        a figure counted as drawn."""
+        write_if_changed(path, data)
+        if figure:
+            self.drawn += 1
+            self.drawn_files.append(path.name)
+        if key is None:
+            return
+        self.current[path.name] = [key, _sha(data)]
+        self.keep(key, path.suffix, data)
+
+    def keep(self, key: str, suffix: str, data: bytes) -> None:
+        """Keep ``data`` as ``KEY+suffix`` in the user's cache folder (if it is used)."""
+        if self.folder is not None:
+            with contextlib.suppress(OSError):
+                _put(self.folder, key + suffix, data)
+
+    def fetch(self, key: str, suffix: str) -> bytes | None:
+        """What :meth:`keep` kept as ``KEY+suffix``, None if nothing."""
+        if self.folder is None:
+            return None
+        path = self.folder / f"{key}{suffix}"
+        data = _read_regular(path)
+        if data is None:
+            return None
+        with contextlib.suppress(OSError):
+            os.utime(path)                  # recently used: kept longest
+        return data
+
+    def summary(self) -> str:
+        return f"figures: {self.drawn} drawn, {self.reused} reused"
+
+
+def _cache_folder() -> Path | None:
+    """The user's cache of figures, if it is a private folder (:func:`bench.listing.private_dir`)."""
+    from radarbench.bench.listing import cache_dir, private_dir
+    folder = cache_dir() / "figures"
+    return folder if private_dir(cache_dir()) and private_dir(folder) else None
+
+
+def _put(folder: Path, name: str, data: bytes) -> None:
+    """Keep ``data`` as ``name`` in ``folder`` (an unpredictable temporary name, renamed)."""
+    import tempfile
+    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, folder / name)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def _bound(folder: Path) -> None:
+    """Drop the least recently used files of ``folder`` beyond :data:`CACHE_BYTES`."""
+    entries = []
+    for entry in os.scandir(folder):
+        with contextlib.suppress(OSError):
+            if not entry.name.startswith(".") and entry.is_file(follow_symlinks=False):
+                st = entry.stat(follow_symlinks=False)
+                entries.append((st.st_mtime, st.st_size, entry.path))
+    total = sum(size for _, size, _ in entries)
+    for _, size, path in sorted(entries):
+        if total <= CACHE_BYTES:
+            break
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+        total -= size
