@@ -16,7 +16,7 @@ from radarbench.bench.batched import inner, matmul, matvec
 from radarbench.bench.core import TRACKING, Batch, Method, TrackingOutput
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_method
-from radarbench.methods.glint.ekf import ekf_filter, kalman_gain, noise_covariance
+from radarbench.methods.glint.ekf import ekf_filter, noise_covariance
 from radarbench.models.glint import glint_model_of
 
 #: the largest contamination Huber's equation is solved for: at eps -> 1 the threshold c -> 0
@@ -115,8 +115,9 @@ class HuberEKF(Method):
         rho_c(r) = r^2/2 (|r| <= c),  c |r| - c^2/2 (|r| > c)
         c: 2 phi(c)/c - 2 Phi(-c) = eps/(1 - eps)                       (Huber 1964)
 
-    solved exactly over the patterns of clipped residuals (:func:`huber_reweigh`). At the minimum, with W = diag(w_i), w_i = psi_c(r_i)/r_i =
-    min(1, c/|r_i|), the estimate is a Kalman update with R W^-1,
+    solved exactly over the patterns of clipped residuals (:func:`huber_reweigh`). At the
+    minimum, with W = diag(w_i), w_i = psi_c(r_i)/r_i = min(1, c/|r_i|), the estimate is a
+    Kalman update with R W^-1,
 
         K = P H' (H P H' + R W^-1)^-1,  d = K nu;
 
