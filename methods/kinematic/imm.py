@@ -50,6 +50,19 @@ def unreachable_mode(transition: np.ndarray, mu0: np.ndarray, names) -> str | No
     return None
 
 
+def transition_param(second: str):
+    """The ``transition`` parameter of a two-mode IMM whose modes are CV and ``second``."""
+    return param((0.95, 0.05, 0.05, 0.95), f"mode transition matrix, row by row: P(CV->CV), P(CV->{second}), "
+                 f"P({second}->CV), P({second}->{second}); each row sums to 1", ge=0.0, le=1.0, min_len=4,
+                 max_len=4, why="probabilities")
+
+
+def initial_probabilities_param(second: str):
+    """The ``initial_probabilities`` parameter of a two-mode IMM whose modes are CV and ``second``."""
+    return param((0.9, 0.1), f"mode probabilities (CV, {second}) before the first step; they sum to 1", ge=0.0,
+                 le=1.0, min_len=2, max_len=2, why="probabilities")
+
+
 def check_markov_chain(transition: tuple[float, ...], initial: tuple[float, ...], names) -> None:
     """ConfigError naming the parameter (``transition``, ``initial_probabilities``) unless the
     r x r transition matrix (row by row) has rows summing to 1, the initial probabilities sum
@@ -259,13 +272,8 @@ class IMMCVCA(KinematicTracker):
     class Params:
         accel_noise_m_s2: float = cv_noise_param(1.0)
         accel_increment_m_s2: float = ca_noise_param(3.0)
-        transition: tuple[float, ...] = param(
-            (0.95, 0.05, 0.05, 0.95), "mode transition matrix, row by row: P(CV->CV), P(CV->CA), "
-            "P(CA->CV), P(CA->CA); each row sums to 1", ge=0.0, le=1.0, min_len=4, max_len=4,
-            why="probabilities")
-        initial_probabilities: tuple[float, ...] = param(
-            (0.9, 0.1), "mode probabilities (CV, CA) before the first step; they sum to 1", ge=0.0, le=1.0,
-            min_len=2, max_len=2, why="probabilities")
+        transition: tuple[float, ...] = transition_param("CA")
+        initial_probabilities: tuple[float, ...] = initial_probabilities_param("CA")
 
         def validate(self) -> None:
             check_markov_chain(self.transition, self.initial_probabilities, ("CV", "CA"))

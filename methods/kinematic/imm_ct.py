@@ -12,7 +12,8 @@ from radarbench.bench.core import Batch, TrackingOutput
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_method
 from radarbench.methods.kinematic.base import SIGMA_WHY, KinematicTracker, cv_noise_param, output
-from radarbench.methods.kinematic.imm import check_markov_chain, filterpy_imm, imm_filter
+from radarbench.methods.kinematic.imm import (check_markov_chain, filterpy_imm, imm_filter, initial_probabilities_param,
+                                              transition_param)
 from radarbench.models.kalman import LinearGaussianModel
 from radarbench.models.kinematics import KinematicModel, cv, per_axis, position_measurement
 from radarbench.models.turn import TURN_RATE_INDEX, ct_noise
@@ -103,13 +104,8 @@ class IMMCVCT(KinematicTracker):
         initial_turn_rate_std_deg_s: float = param(
             3.0, "prior std of the turn rate (deg/s; 3 deg/s is an aircraft's standard rate turn)",
             ge=1e-3, le=360.0, why="a positive std up to a full circle per second")
-        transition: tuple[float, ...] = param(
-            (0.95, 0.05, 0.05, 0.95), "mode transition matrix, row by row: P(CV->CV), P(CV->CT), "
-            "P(CT->CV), P(CT->CT); each row sums to 1", ge=0.0, le=1.0, min_len=4, max_len=4,
-            why="probabilities")
-        initial_probabilities: tuple[float, ...] = param(
-            (0.9, 0.1), "mode probabilities (CV, CT) before the first step; they sum to 1", ge=0.0, le=1.0,
-            min_len=2, max_len=2, why="probabilities")
+        transition: tuple[float, ...] = transition_param("CT")
+        initial_probabilities: tuple[float, ...] = initial_probabilities_param("CT")
 
         def validate(self) -> None:
             check_markov_chain(self.transition, self.initial_probabilities, ("CV", "CT"))
