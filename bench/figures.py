@@ -294,11 +294,15 @@ def trial_timeline(t: np.ndarray, series: dict[str, tuple[np.ndarray, float, np.
 
 @cached
 def rmse_per_step(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, title: str,
-                  xlabel: str = "frame", ylabel: str = "position RMSE (m)") -> Path:
-    """Per-step RMSE curves, one per label."""
+                  xlabel: str = "frame", ylabel: str = "position RMSE (m)",
+                  bound: tuple[np.ndarray, np.ndarray] | None = None) -> Path:
+    """Per-step RMSE curves, one per label; ``bound`` (x, y): a lower bound on them (the
+    posterior Cramér-Rao bound), drawn as a black dashed line."""
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
     for i, (label, (x, y)) in enumerate(curves.items()):
         ax.plot(x, y, STYLES[i % len(STYLES)], color=f"C{i % 10}", ms=3.5, lw=1.4, label=label, mfc="none")
+    if bound is not None:
+        ax.plot(*bound, "--", color="black", lw=1.2, label="PCRB (bound)")
     ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
     ax.grid(alpha=0.3)
     _legend_outside(ax)

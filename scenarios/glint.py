@@ -14,8 +14,10 @@ from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_scenario
 from radarbench.bench.tasks.tracking import TrackingScene
-from radarbench.models.glint import GLINT_MODELS, GlintModel, glint_variance
-from radarbench.models.spherical import MEASURED, MEASUREMENT_LABELS, los_basis, spherical, wrap_angle
+from radarbench.models.glint import GLINT_MODELS, GlintModel, glint_fisher_information, glint_variance
+from radarbench.models.pcrb import linear_dynamics_pcrb, measurement_information, position_mse_bound
+from radarbench.models.spherical import (MEASURED, MEASUREMENT_LABELS, los_basis, measurement_jacobian, spherical,
+                                         wrap_angle)
 
 #: state components, in order (metres, m/s; x east, y north, z up)
 STATE_LABELS = ("x", "y", "z", "vx", "vy", "vz")
@@ -175,7 +177,8 @@ class Glint(Scenario):
     plane (active: the measured range; passive: the *true* range, there being
     no measured one — for plotting only), ``outlier_flags`` (n, K, m) the
     glint outliers, ``divergence_bound_m``, ``snr_definition``,
-    ``realised_snr_db`` (n,).
+    ``realised_snr_db`` (n,), ``position_bound`` (n, K) the posterior Cramér-Rao bound
+    along each trial's truth (:meth:`position_bound`).
     """
 
     name = "glint"
@@ -354,8 +357,22 @@ class Glint(Scenario):
             snr_definition=SNR_DEFINITION, realised_snr_db=np.full(n, snr), position_index=POSITION_INDEX,
             measurements_xy=z_xy, model=model, state_labels=STATE_LABELS,
             measurement_labels=MEASUREMENT_LABELS[p.sensor], divergence_bound_m=p.divergence_bound_m,
-            derived_components=spherical_components, outlier_flags=outlier[..., idx])
+            derived_components=spherical_components, outlier_flags=outlier[..., idx],
+            position_bound=self.position_bound(model, truth))
         return Batch(t=p.dt_s * np.arange(K), truth=truth, z=z, scene=scene, trials=np.asarray(rng.trials))
+
+    @staticmethod
+    def position_bound(model: GlintModel, truth: np.ndarray) -> np.ndarray:
+        """(n, K) the posterior Cramér-Rao bound on the position MSE (m^2) along each trial's
+        truth (:mod:`models.pcrb`): the linear dynamics F, Q and prior P0 the truth is drawn
+        from, and the measurement information H' diag(I) H with H the spherical Jacobian at
+        the true position and I the glint density's Fisher information per component
+        (:func:`models.glint.glint_fisher_information`; 1/sigma^2 at eps = 0)."""
+        H = np.zeros((*truth.shape[:2], model.dim_z, truth.shape[-1]))
+        H[..., :3] = measurement_jacobian(truth[..., :3], model.sensor)
+        fisher = glint_fisher_information(model.sigma, model.eta, model.epsilon, model.glint_model)
+        bound = linear_dynamics_pcrb(model.P0, model.F, model.Q, measurement_information(H, fisher))
+        return position_mse_bound(bound, POSITION_INDEX)
 
     @staticmethod
     def model(p, snr_db: float | None = None) -> GlintModel:

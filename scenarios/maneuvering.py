@@ -15,14 +15,17 @@ from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_scenario
 from radarbench.bench.tasks.tracking import TrackingScene
-from radarbench.models.kinematics import KinematicModel, per_axis, position_index, singer, state_labels
+from radarbench.models.kinematics import (KinematicModel, cv, cv_components, per_axis, position_index,
+                                          position_measurement, singer, state_labels)
+from radarbench.models.pcrb import linear_dynamics_pcrb, position_mse_bound
+from radarbench.models.turn import ct_transition, turn_acceleration
 
 MAX_STEPS = 10_000
 MIN_NOISE_M = 1e-3
 NOISE_WHY = ("a millimetre to 10 km: below it the trackers' covariances lose definiteness in float64 "
              "(the noise scaled to each SNR level is held to the same floor)")
 #: the maneuver profiles
-PROFILES = ("piecewise", "singer")
+PROFILES = ("piecewise", "singer", "turn")
 
 SNR_DEFINITION = (
     "snr_db is a measurement-noise level relative to the scenario's reference noise: the "
@@ -69,6 +72,12 @@ class Maneuvering(Scenario):
     sigma_w w_k (w_k ~ N(0, 1), held over each step; DWNA) on each axis; the
     default 0 keeps the motion deterministic apart from the initial state.
 
+    **Profile** ``"turn"`` (planar, ``dims = 2``): the piecewise profile's segments, the
+    maneuver a coordinated turn at ``turn_rate_deg_s`` (speed held, the velocity rotating;
+    the exact transition of :func:`models.turn.ct_transition`), the acceleration of each
+    maneuvering step the turn's, Omega (-vy, vx); quiet steps are straight lines.
+    ``maneuver_accel_m_s2`` and ``process_noise_m_s2`` are not used.
+
     **Profile** ``"singer"``: the acceleration of each axis is Singer's
     zero-mean first-order Markov process, da/dt = -alpha a + w with
     stationary std ``singer_sigma_m_s2`` and ``singer_alpha_per_s``; the
@@ -100,7 +109,8 @@ class Maneuvering(Scenario):
     ``maneuver_mask`` (n, K) the steps whose true acceleration is the
     maneuver's, ``maneuver_onset_steps`` (n, 1) its first step (0 onsets
     under the null or with a zero maneuver), ``measurements_xy`` (1-D: time
-    (s) against the measured range, for plots), ``divergence_bound_m``.
+    (s) against the measured range, for plots), ``divergence_bound_m``,
+    ``position_bound`` (n, K) the posterior Cramér-Rao bound (:meth:`position_bound`).
     """
 
     name = "maneuvering-1d"
@@ -136,6 +146,9 @@ class Maneuvering(Scenario):
                                           ge=1e-4, le=100.0, why="time constants from 10 ms to about 3 h")
         singer_sigma_m_s2: float = param(10.0, "Singer stationary acceleration std sigma_m (m/s^2)",
                                          ge=0.0, le=1000.0, why="0 is no acceleration; at most 100 g")
+        turn_rate_deg_s: float = param(3.0, "turn rate of the 'turn' profile's maneuver (deg/s; > 0 "
+                                       "counter-clockwise; 3 deg/s is an aircraft's standard rate turn)",
+                                       ge=-360.0, le=360.0, why="up to a full circle per second either way")
         process_noise_m_s2: float = param(0.0, "std of a white acceleration added on each axis, held "
                                           "over each step (m/s^2; piecewise profile)", ge=0.0, le=1000.0,
                                           why="0 is a deterministic profile; at most 100 g")
@@ -159,7 +172,9 @@ class Maneuvering(Scenario):
                                           gt=0.0, le=1e7, why="any positive distance")
 
         def validate(self) -> None:
-            if self.profile == "piecewise" and self.maneuver_start_s >= self.steps * self.dt_s:
+            if self.profile == "turn" and self.dims != 2:
+                raise ConfigError("dims", f"the 'turn' profile is a planar turn: dims must be 2, got {self.dims}")
+            if self.profile != "singer" and self.maneuver_start_s >= self.steps * self.dt_s:
                 raise ConfigError("maneuver_start_s", f"{self.maneuver_start_s} s is not before the end of "
                                   f"the scene ({self.steps} steps of {self.dt_s} s)")
 
@@ -215,6 +230,10 @@ class Maneuvering(Scenario):
         if p.profile == "singer":
             truth = self._singer_truth(p, x0 + std0 * e0[:, :D], w[..., :D, :])
             mask = onsets = None
+        elif p.profile == "turn":
+            init = x0[:, :2] + std0[:, :2] * e0[:, :D, :2]
+            truth = self._turn_truth(p, init, null)
+            mask, onsets = self._maneuver_truth(p, null, n)
         else:
             init = x0[:, :2] + std0[:, :2] * e0[:, :D, :2]        # (n, D, 2) position, velocity
             accel = self.acceleration_profile(p, null) + p.process_noise_m_s2 * w[..., :D, 0]   # (n, K, D)
@@ -227,7 +246,8 @@ class Maneuvering(Scenario):
             snr_definition=SNR_DEFINITION, realised_snr_db=np.full(n, 0.0 if null else float(snr_db)),
             position_index=position_index(D), measurements_xy=xy, model=model, state_labels=state_labels(D),
             measurement_labels=("x", "y")[:D], divergence_bound_m=float(p.divergence_bound_m),
-            maneuver_mask=mask, maneuver_onset_steps=onsets)
+            maneuver_mask=mask, maneuver_onset_steps=onsets,
+            position_bound=np.broadcast_to(self.position_bound(p, model, null), (n, K)).copy())
         return Batch(t=t, truth=truth, z=z, scene=scene, trials=np.asarray(rng.trials))
 
     @staticmethod
@@ -255,10 +275,54 @@ class Maneuvering(Scenario):
             x = matvec(F, x) + matvec(L, w[:, k])
         return truth.reshape(n, K, 3 * D)
 
+    def turn_rates(self, p, null: bool) -> np.ndarray:
+        """(K,) the 'turn' profile's turn rate (rad/s) over each step: the maneuver's inside it."""
+        omega = np.zeros(p.steps)
+        if not null:
+            start, end = self.maneuver_steps(p)
+            omega[start:end] = np.deg2rad(p.turn_rate_deg_s)
+        return omega
+
+    def position_bound(self, p, model: KinematicModel, null: bool) -> np.ndarray:
+        """(K,) the posterior Cramér-Rao bound on the position MSE (m^2) (:mod:`models.pcrb`),
+        the same for every trial (the measurement is linear): the dynamics the truth follows,
+        its known maneuver an input (the bound of an estimator that knows the profile).
+        Piecewise: [p, v] per axis, F and Q of the DWNA model with ``process_noise_m_s2``;
+        turn: [x, vx, y, vy] with the turn's F(Omega_k) per step, Q = 0; Singer: [p, v, a] per
+        axis with Singer's F, Q. Prior: the scene's P0 on those components; J_z = H'H/sigma^2."""
+        if p.profile == "singer":
+            F_axis, Q_axis = singer(p.dt_s, p.singer_alpha_per_s, p.singer_sigma_m_s2)
+            idx, per = list(range(3 * p.dims)), 3
+        else:
+            F_axis, Q_axis = cv(p.dt_s, p.process_noise_m_s2 if p.profile == "piecewise" else 0.0)
+            idx, per = cv_components(p.dims), 2
+        F = per_axis(F_axis, p.dims)
+        if p.profile == "turn":
+            F = np.stack([ct_transition(w, p.dt_s) for w in self.turn_rates(p, null)[:-1]])
+        H = position_measurement(p.dims, per)
+        Jz = np.broadcast_to(H.T @ H / model.noise_std_m ** 2, (1, p.steps, len(idx), len(idx)))
+        bound = linear_dynamics_pcrb(model.P0[np.ix_(idx, idx)], F, per_axis(Q_axis, p.dims), Jz)[0]
+        return position_mse_bound(bound, position_index(p.dims, per))
+
+    def _turn_truth(self, p, init: np.ndarray, null: bool) -> np.ndarray:
+        """(n, K, 6) states of the 'turn' profile from initial (n, 2, 2) [p, v] per axis: each
+        step's transition the turn's F(Omega) inside the maneuver (none under the null), the
+        CV transition (Omega = 0) elsewhere; the acceleration held over a step the turn's."""
+        n, K = init.shape[0], p.steps
+        omega = self.turn_rates(p, null)
+        state = init.reshape(n, 4)                          # [x, vx, y, vy]
+        out = np.empty((n, K, 2, 3))
+        for k in range(K):                                  # over time; trials batched
+            out[:, k, :, :2] = state.reshape(n, 2, 2)
+            out[:, k, :, 2] = turn_acceleration(state[:, [1, 3]], omega[k])
+            state = matvec(ct_transition(omega[k], p.dt_s), state)
+        return out.reshape(n, K, 6)
+
     def _maneuver_truth(self, p, null: bool, n: int) -> tuple[np.ndarray, np.ndarray]:
         """(n, K) mask of the maneuver's steps and (n, O) onset steps (O = 1, or 0 without a maneuver)."""
         start, end = self.maneuver_steps(p)
-        present = not null and end > start and np.any(_axis_values(p.maneuver_accel_m_s2, p.dims) != 0)
+        size = p.turn_rate_deg_s if p.profile == "turn" else _axis_values(p.maneuver_accel_m_s2, p.dims)
+        present = not null and end > start and np.any(np.asarray(size) != 0)
         mask = np.zeros((n, p.steps), bool)
         if not present:
             return mask, np.zeros((n, 0), np.int64)

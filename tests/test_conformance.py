@@ -1,5 +1,5 @@
 """Every registered method on every scenario that provides what it needs (its small
-instance; :mod:`bench.capabilities`): shapes, no NaN, determinism; every scenario's
+instance; :mod:`bench.capabilities`) and whose config it accepts: shapes, no NaN, determinism; every scenario's
 batch carries the scene type of each of its tasks."""
 
 import dataclasses
@@ -16,8 +16,15 @@ from radarbench.bench.registry import get_task
 from tests.test_recorded_tracks import small_params_on_a_csv
 
 
+def _accepts(mcls, scls) -> bool:
+    """The method's default config runs on the scenario's small instance: it fits its
+    capabilities and its ``check_scenario`` refuses nothing (a sweep skips a refused pair)."""
+    params = build_params(scls.Params, scls.small_params)
+    return fits(mcls, scls, params) and mcls().check_scenario(build_params(mcls.Params, {}), params) is None
+
+
 PAIRS = [(s, m) for s, scls in registry.scenarios().items() for m, mcls in registry.methods().items()
-         if fits(mcls, scls, build_params(scls.Params, scls.small_params))]
+         if _accepts(mcls, scls)]
 
 
 def test_every_method_has_a_scenario_and_nothing_is_unavailable():

@@ -4,6 +4,7 @@ import importlib.resources
 import re
 import tomllib
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -126,11 +127,15 @@ def test_glint_tracking_preset_at_reduced_size(bench_cli, tmp_path):
         entry["params"]["steps"] = 40
     out = _run_reduced(bench_cli, tmp_path, sweep)
     summary = pd.read_csv(out / "summary.csv")
-    assert summary.config.nunique() == 8 and summary.scenario.nunique() == 7
-    assert {f"viterbi-paper-1d[n={n}]" for n in (1, 3, 9, 27)} <= set(summary.config)
+    assert summary.config.nunique() == 9 and summary.scenario.nunique() == 7
+    assert {f"viterbi-paper-1d[n={n}]" for n in (1, 3, 9, 27)} | {"huber-ekf"} <= set(summary.config)
     assert summary.rmse_mean.notna().all() and (summary.rmse_low <= summary.rmse_high).all()
+    # the bound is the scene's, the same for every config; efficiency = bound / RMSE (with 4 trials it
+    # may exceed 1 by sampling error)
+    assert (summary.pcrb_rmse > 0).all() and (summary.groupby(["scenario", "snr_db"]).pcrb_rmse.nunique() == 1).all()
+    np.testing.assert_allclose(summary.efficiency, summary.pcrb_rmse / summary.rmse_mean)
     steps = pd.read_csv(out / "steps.csv")
-    assert {"rmse_position", "mean_est_x", "mean_true_x"} <= set(steps.columns)
+    assert {"rmse_position", "mean_est_x", "mean_true_x", "pcrb_position"} <= set(steps.columns)
     report = (out / "report.md").read_text()
     assert "## Tracking: position RMSE" in report and "## Calibration" not in report
 
@@ -198,6 +203,7 @@ def test_ar_tracking_preset_at_reduced_size(bench_cli, tmp_path):
     summary = pd.read_csv(out / "summary.csv")
     configs = tomllib.loads((out / "plan.toml").read_text())["methods"]      # a grid entry is several configs
     assert summary.config.nunique() == len(configs) and {"ar-adaptive", "vd-filter"} <= set(summary.config)
+    assert set(summary[summary.config == "imm-cv-ct"].scenario) == {"planar-turn"}     # a turn needs two axes
     maneuvering = summary[summary.scenario != "no-maneuver"]
     assert maneuvering.rmse_onset.notna().all() and summary[summary.scenario == "no-maneuver"].rmse_onset.isna().all()
     assert (maneuvering.rmse_onset_low <= maneuvering.rmse_onset_high).all()

@@ -81,10 +81,11 @@ COMPANIONS = {
     ("ar-adaptive", "order_high", "1"): {"order_low": 0},
     ("ar-adaptive", "order_high", "6"): {"state_dim": 7},
     ("current-statistical", "accel_std_floor_m_s2", "1000.0"): {"a_max_m_s2": 1000.0},
-    ("imm-cv-ca", "transition", "0.0"): {"transition": (0.0, 1.0, 0.5, 0.5)},
-    ("imm-cv-ca", "transition", "1.0"): {"transition": (0.0, 1.0, 0.5, 0.5)},
-    ("imm-cv-ca", "initial_probabilities", "0.0"): {"initial_probabilities": (0.0, 1.0)},
-    ("imm-cv-ca", "initial_probabilities", "1.0"): {"initial_probabilities": (1.0, 0.0)},
+    **{(m, f, v): c for m in ("imm-cv-ca", "imm-cv-ct") for f, v, c in (
+        ("transition", "0.0", {"transition": (0.0, 1.0, 0.5, 0.5)}),
+        ("transition", "1.0", {"transition": (0.0, 1.0, 0.5, 0.5)}),
+        ("initial_probabilities", "0.0", {"initial_probabilities": (0.0, 1.0)}),
+        ("initial_probabilities", "1.0", {"initial_probabilities": (1.0, 0.0)}))},
     ("innovation", "delta", "0.999"): {"window": 1},
     **{(m, f, v): c for m in ("gnn-ekf", "jpda-ukf", "stonesoup-jpda", "stonesoup-mfa") for f, v, c in (
         ("confirm_m", "20", {"confirm_n": 20}), ("confirm_n", "1", {"confirm_m": 1}),

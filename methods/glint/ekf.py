@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,7 +32,20 @@ class EKFResult:
     nis: np.ndarray
 
 
-def ekf_filter(z: np.ndarray, model: GlintModel, R: np.ndarray) -> EKFResult:
+def kalman_gain(P: np.ndarray, H: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Batched gain K = P H' S^-1 and innovation covariance S = H P H' + R:
+    P (n, d, d), H (n, m, d), R (m, m) or (n, m, m)."""
+    PHt = matmul(P, H.transpose(0, 2, 1))                        # (n, d, m)
+    S = matmul(H, PHt) + R
+    return np.linalg.solve(S, PHt.transpose(0, 2, 1)).transpose(0, 2, 1), S
+
+
+#: ``reweigh(nu, H, P, R) -> R_k``: the measurement covariance an update uses given the
+#: innovation (the EKF: R itself; an M-estimator: R over its residual weights)
+Reweigh = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+def ekf_filter(z: np.ndarray, model: GlintModel, R: np.ndarray, reweigh: Reweigh | None = None) -> EKFResult:
     """Batched EKF over ``n`` trials of ``K`` spherical measurements.
 
     Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking
@@ -48,7 +62,10 @@ def ekf_filter(z: np.ndarray, model: GlintModel, R: np.ndarray) -> EKFResult:
     (F, Bu = G u, Q, x0, P0, sensor); ``x0``, ``P0`` are the prior of step 0 (step 0 updates with
     ``z[:, 0]`` first, as in :func:`models.kalman.kalman_filter`). Covariances
     depend on the data through the Jacobian, so they carry the trial axis;
-    the loop runs over time only.
+    the loop runs over time only. ``reweigh`` (None: R as given) replaces R at
+    each update by the (n, m, m) covariance it returns for the step's innovation
+    (the Huber M-estimator of :mod:`methods.glint.huber`); gain, update and the
+    Joseph form then use it, and ``nis`` stays the innovation's under R.
     """
     z = np.asarray(z, float)
     n, K, m = z.shape
@@ -63,15 +80,17 @@ def ekf_filter(z: np.ndarray, model: GlintModel, R: np.ndarray) -> EKFResult:
         out.x_prior[:, k] = x
         H = np.zeros((n, m, d))
         H[:, :, :3] = measurement_jacobian(x[:, :3], sensor)
-        PHt = matmul(P, H.transpose(0, 2, 1))                        # (n, d, m)
-        S = matmul(H, PHt) + R
-        gain = np.linalg.solve(S, PHt.transpose(0, 2, 1)).transpose(0, 2, 1)   # P H' S^-1
+        gain, S = kalman_gain(P, H, R)
         nu = measurement_residual(z[:, k], measure(x[:, :3], sensor))
         out.nu[:, k] = nu
         out.nis[:, k] = inner(nu, np.linalg.solve(S, nu[..., None])[..., 0])
+        R_k = R
+        if reweigh is not None:
+            R_k = reweigh(nu, H, P, R)
+            gain = kalman_gain(P, H, R_k)[0]
         x = x + matvec(gain, nu)
         I_KH = eye - matmul(gain, H)
-        P = matmul(matmul(I_KH, P), I_KH.transpose(0, 2, 1)) + matmul(matmul(gain, R), gain.transpose(0, 2, 1))
+        P = matmul(matmul(I_KH, P), I_KH.transpose(0, 2, 1)) + matmul(matmul(gain, R_k), gain.transpose(0, 2, 1))
         P = 0.5 * (P + P.transpose(0, 2, 1))
         out.x_post[:, k], out.P_post[:, k] = x, P
         x = matvec(F, x) + Bu

@@ -16,6 +16,7 @@ from radarbench.bench.registry import register_method
 from radarbench.methods.kinematic.base import KinematicTracker, ca_noise_param, cv_ca_modes, cv_noise_param, output
 from radarbench.models.kalman import LinearGaussianModel, kernel_array, predict_one, update_one, update_scratch
 from radarbench.models.kinematics import KinematicModel
+from radarbench.models.turn import ct_jacobian
 
 
 @dataclass(frozen=True)
@@ -49,8 +50,37 @@ def unreachable_mode(transition: np.ndarray, mu0: np.ndarray, names) -> str | No
     return None
 
 
+def transition_param(second: str):
+    """The ``transition`` parameter of a two-mode IMM whose modes are CV and ``second``."""
+    return param((0.95, 0.05, 0.05, 0.95), f"mode transition matrix, row by row: P(CV->CV), P(CV->{second}), "
+                 f"P({second}->CV), P({second}->{second}); each row sums to 1", ge=0.0, le=1.0, min_len=4,
+                 max_len=4, why="probabilities")
+
+
+def initial_probabilities_param(second: str):
+    """The ``initial_probabilities`` parameter of a two-mode IMM whose modes are CV and ``second``."""
+    return param((0.9, 0.1), f"mode probabilities (CV, {second}) before the first step; they sum to 1", ge=0.0,
+                 le=1.0, min_len=2, max_len=2, why="probabilities")
+
+
+def check_markov_chain(transition: tuple[float, ...], initial: tuple[float, ...], names) -> None:
+    """ConfigError naming the parameter (``transition``, ``initial_probabilities``) unless the
+    r x r transition matrix (row by row) has rows summing to 1, the initial probabilities sum
+    to 1 and every mode stays reachable (:func:`unreachable_mode`)."""
+    r = len(names)
+    rows = np.reshape(transition, (r, r)).sum(axis=1)
+    if not np.allclose(rows, 1.0, atol=1e-9):
+        raise ConfigError("transition", f"each row must sum to 1, got row sums {rows.tolist()}")
+    if not np.isclose(sum(initial), 1.0, atol=1e-9):
+        raise ConfigError("initial_probabilities", "must sum to 1")
+    problem = unreachable_mode(np.reshape(transition, (r, r)), np.asarray(initial), names)
+    if problem:
+        raise ConfigError("transition", problem)
+
+
 def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: np.ndarray, z: np.ndarray,
-               x0: np.ndarray, P0: np.ndarray, valid: np.ndarray | None = None) -> IMMResult:
+               x0: np.ndarray, P0: np.ndarray, valid: np.ndarray | None = None,
+               turn: tuple[bool, ...] | None = None, dt: float = 0.0) -> IMMResult:
     """The IMM of Blom & Bar-Shalom (1988), in FilterPy's ``IMMEstimator`` order
     (Bar-Shalom, Li & Kirubarajan 2001, sec. 11.6.6), for all trials and modes at once.
 
@@ -69,6 +99,10 @@ def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: n
     ``IMMEstimator`` does when its ``update`` comes first. ``valid`` (n, K) bool: the
     steps each trial has (a ragged batch; None: all); at a missing step every mode
     predicts only and its likelihood is 1, so mu_j = c_bar_j (:func:`models.kalman.update_where`).
+    ``turn`` (r,) bool (None: none): the modes that are coordinated turns with an unknown
+    turn rate on the state [x, vx, y, vy, Omega] (:mod:`models.turn`): such a mode predicts
+    as an EKF over ``dt`` (s), x_j = f(x0_j), P_j = J P0_j J' + Q_j with J the Jacobian at
+    x0_j (its F is not used); its update is linear like every mode's.
     """
     n, K, _ = z.shape
     r, d = len(models), models[0].dim_x
@@ -82,7 +116,8 @@ def imm_filter(models: list[LinearGaussianModel], transition: np.ndarray, mu0: n
                            kernel_array(np.broadcast_to(np.asarray(x0, float), (n, d))),
                            np.ascontiguousarray(P0, dtype=float), stack("F"), stack("Q"),
                            np.ascontiguousarray(models[0].H, dtype=float), np.ascontiguousarray(models[0].R, dtype=float),
-                           log_cbar0, log_M)
+                           log_cbar0, log_M, np.zeros(r, bool) if turn is None else np.asarray(turn, bool),
+                           float(dt))
     return IMMResult(x=x, P=P, mu=mu)
 
 
@@ -124,12 +159,13 @@ def _mixture_into(weights, X, P, x, P_mix):
 
 
 @numba.njit(cache=True)
-def _imm_kernel(z, valid, x0, P0, F, Q, H, R, log_cbar0, log_M):
+def _imm_kernel(z, valid, x0, P0, F, Q, H, R, log_cbar0, log_M, turn, dt):
     """:func:`imm_filter` trial by trial and step by step, every mode's update and
     prediction by :func:`models.kalman.update_one` / :func:`models.kalman.predict_one`;
     F, Q (r, d, d) per mode. The same operations in the same order as the batched NumPy
     steps it replaced (a per-step loop of a dozen calls was the fixed cost of a small
-    batch), so the same bits. Returns x (n, K, d), P (n, K, d, d), mu (n, K, r)."""
+    batch), so the same bits; a ``turn`` mode predicts by
+    :func:`models.turn.ct_jacobian`. Returns x (n, K, d), P (n, K, d, d), mu (n, K, r)."""
     n, K, m = z.shape
     r, d = F.shape[0], F.shape[1]
     xs, Ps, mus = np.empty((n, K, d)), np.empty((n, K, d, d)), np.empty((n, K, r))
@@ -170,13 +206,30 @@ def _imm_kernel(z, valid, x0, P0, F, Q, H, R, log_cbar0, log_M):
             for j in range(r):                      # mixing, then each mode's prediction
                 column[:] = omega[:, j]
                 _mixture_into(column, X_upd, P_upd, x_mix, P_mix)
-                predict_one(x_mix, P_mix, F[j], Q[j], zero_u, X[j], P[j], FP)
+                if turn[j]:                         # EKF prediction: J at the mixed estimate, then x = f(x)
+                    f, J = ct_jacobian(x_mix, dt)
+                    predict_one(x_mix, P_mix, J, Q[j], zero_u, X[j], P[j], FP)
+                    X[j] = f
+                else:
+                    predict_one(x_mix, P_mix, F[j], Q[j], zero_u, X[j], P[j], FP)
     return xs, Ps, mus
 
 
+def _turn_predict(kf, dt: float):
+    """A FilterPy filter's ``predict`` replaced by the coordinated turn's EKF prediction
+    (:func:`models.turn.ct_jacobian`): x = f(x), P = J P J' + Q."""
+    def predict(u=None, B=None, F=None, Q=None):
+        f, J = ct_jacobian(np.asarray(kf.x, float), dt)
+        kf.P = J @ kf.P @ J.T + kf.Q
+        kf.x = f
+        kf.x_prior, kf.P_prior = kf.x.copy(), kf.P.copy()
+    kf.predict = predict
+
+
 def filterpy_imm(models: list[LinearGaussianModel], transition: np.ndarray, mu0: np.ndarray, z: np.ndarray,
-                 x0: np.ndarray, P0: np.ndarray) -> IMMResult:
-    """The reference: FilterPy's ``IMMEstimator`` per trial (update, then predict)."""
+                 x0: np.ndarray, P0: np.ndarray, turn: tuple[bool, ...] | None = None, dt: float = 0.0) -> IMMResult:
+    """The reference: FilterPy's ``IMMEstimator`` per trial (update, then predict); a
+    ``turn`` mode's filter predicts as the coordinated turn's EKF (:func:`imm_filter`)."""
     from filterpy.kalman import IMMEstimator, KalmanFilter
 
     n, K, m = z.shape
@@ -188,6 +241,8 @@ def filterpy_imm(models: list[LinearGaussianModel], transition: np.ndarray, mu0:
             kf = KalmanFilter(dim_x=d, dim_z=m)
             kf.F, kf.H, kf.Q, kf.R = model.F, model.H, model.Q, model.R
             kf.x, kf.P = np.array(x0, float), np.array(P0, float)
+            if turn is not None and turn[len(filters)]:
+                _turn_predict(kf, dt)
             filters.append(kf)
         imm = IMMEstimator(filters, np.array(mu0, float), np.asarray(transition, float))
         for k in range(K):
@@ -217,24 +272,11 @@ class IMMCVCA(KinematicTracker):
     class Params:
         accel_noise_m_s2: float = cv_noise_param(1.0)
         accel_increment_m_s2: float = ca_noise_param(3.0)
-        transition: tuple[float, ...] = param(
-            (0.95, 0.05, 0.05, 0.95), "mode transition matrix, row by row: P(CV->CV), P(CV->CA), "
-            "P(CA->CV), P(CA->CA); each row sums to 1", ge=0.0, le=1.0, min_len=4, max_len=4,
-            why="probabilities")
-        initial_probabilities: tuple[float, ...] = param(
-            (0.9, 0.1), "mode probabilities (CV, CA) before the first step; they sum to 1", ge=0.0, le=1.0,
-            min_len=2, max_len=2, why="probabilities")
+        transition: tuple[float, ...] = transition_param("CA")
+        initial_probabilities: tuple[float, ...] = initial_probabilities_param("CA")
 
         def validate(self) -> None:
-            rows = np.reshape(self.transition, (2, 2)).sum(axis=1)
-            if not np.allclose(rows, 1.0, atol=1e-9):
-                raise ConfigError("transition", f"each row must sum to 1, got row sums {rows.tolist()}")
-            if not np.isclose(sum(self.initial_probabilities), 1.0, atol=1e-9):
-                raise ConfigError("initial_probabilities", "must sum to 1")
-            problem = unreachable_mode(np.reshape(self.transition, (2, 2)), np.asarray(self.initial_probabilities),
-                                       ("CV", "CA"))
-            if problem:
-                raise ConfigError("transition", problem)
+            check_markov_chain(self.transition, self.initial_probabilities, ("CV", "CA"))
 
     @staticmethod
     def modes(model: KinematicModel, params) -> list[LinearGaussianModel]:

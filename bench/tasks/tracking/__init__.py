@@ -35,7 +35,7 @@ from radarbench.bench.recording.layout import TrialLayout
 from radarbench.bench.recording.record import MethodTrace, TrialRecord, check_shape
 from radarbench.bench.tasks.base import (OutputError, RecordedScene, ReportContext, Task, check_covariance, check_estimate,
                               check_finite, check_range, check_traces, time_series)
-from radarbench.bench.tasks.tracking.metrics import (maneuver_trial_metrics, summarise_tracking,
+from radarbench.bench.tasks.tracking.metrics import (bound_series, maneuver_trial_metrics, summarise_tracking,
                                           tracking_steps, tracking_trial_metrics)
 
 #: this module computes stored numbers: its code belongs to the identity of every config
@@ -88,6 +88,10 @@ class TrackingScene(Scene):
     #: (n, O) int: the step of each true maneuver onset per trial (O may be 0: none), for
     #: switch delays and false switches; None: the scenario defines no maneuvers
     maneuver_onset_steps: np.ndarray | None = None
+    #: (n, K) float: the posterior Cramér-Rao bound on the position's mean square error (m^2)
+    #: per trial and step, computed by the scenario from its truth and its own dynamics and
+    #: noise (drawn under the RMSE curves; the trackers' efficiency is bound / RMSE); None: none
+    position_bound: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -107,6 +111,10 @@ class TrackingScene(Scene):
         require(self, "maneuver_onset_steps", onsets is None or (has_shape(onsets, (None, None), "iu")
                                                                  and bool((onsets >= 0).all())),
                 "None or an (n, O) array of step indices >= 0")
+        bound = self.position_bound
+        require(self, "position_bound", bound is None or (has_shape(bound, (None, None), "f")
+                                                          and bool((np.nan_to_num(bound) >= 0).all())),
+                "None or an (n, K) float array of mean square errors >= 0 (m^2)")
 
     def check(self, batch: Batch) -> None:
         super().check(batch)
@@ -122,6 +130,8 @@ class TrackingScene(Scene):
         onsets = self.maneuver_onset_steps
         require(self, "maneuver_onset_steps", onsets is None or (onsets.shape[0] == n and bool((onsets < K).all())),
                 f"{n} rows of steps < {K}")
+        require(self, "position_bound", self.position_bound is None or self.position_bound.shape == (n, K),
+                f"shape ({n}, {K})")
 
 
 def method_trace(estimate_xy, traces: dict | None = None) -> MethodTrace:
@@ -174,7 +184,10 @@ class TrackingTask(Task):
                        "switch_pd_low", "switch_pd_high", "switch_delay_mean",
                        "switch_delay_low", "switch_delay_high", "false_switch_rate", "false_switch_low",
                        "false_switch_high", "q_quiet_mean", "q_maneuver_mean", "q_maneuver_low",
-                       "q_maneuver_high")
+                       "q_maneuver_high",
+                       # scenes with a position bound (empty otherwise): the posterior Cramér-Rao
+                       # bound, time-averaged like the RMSE, and the tracker's efficiency bound / RMSE
+                       "pcrb_rmse", "efficiency")
     headline_columns = ("rmse_mean", "rmse_low", "rmse_high", "divergence_rate", "nees_mean")
     ranking_metric = "rmse"
     ranking_higher_is_better = False
@@ -217,6 +230,8 @@ class TrackingTask(Task):
         if mask is not None:
             pos_sq = metrics["sq_err_position"]
             metrics |= maneuver_trial_metrics(pos_sq, mask, sc.maneuver_onset_steps, out.traces, sc.valid_steps)
+        if sc.position_bound is not None:
+            metrics["pcrb_position"] = bound_series(sc.position_bound, sc.valid_steps)
         return metrics | time_series(batch)
 
     def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:

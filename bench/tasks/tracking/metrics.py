@@ -69,20 +69,39 @@ def tracking_trial_metrics(estimate: np.ndarray, truth: np.ndarray, *, position_
     return out
 
 
+def bound_series(bound: np.ndarray, valid: np.ndarray | None) -> np.ndarray:
+    """The scene's position bound (n, K) as a series, NaN at the steps a trial does not have."""
+    bound = np.asarray(bound, float)
+    return bound if valid is None else np.where(valid, bound, np.nan)
+
+
+def summarise_bound(rmse: float, cell_series: dict) -> dict:
+    """``pcrb_rmse``: the posterior Cramér-Rao bound time-averaged as the RMSE is (mean over
+    steps of the root of its mean over trials); ``efficiency``: pcrb_rmse / RMSE (1 at the
+    bound); empty without a bound."""
+    if "pcrb_position" not in cell_series:
+        return {}
+    bound = time_averaged_rmse(cell_series["pcrb_position"])
+    return {"pcrb_rmse": bound, "efficiency": bound / rmse if rmse > 0 else np.nan}
+
+
 def summarise_tracking(trials: pd.DataFrame, series: dict) -> pd.DataFrame:
     """One row per cell: time-averaged position RMSE with a bootstrap interval
-    over trials, divergence rate (Wilson), mean NEES."""
+    over trials, divergence rate (Wilson), mean NEES; the bound and the efficiency
+    where the scene has a bound (:func:`summarise_bound`)."""
     rows = []
     for keys, g in by_cell(trials):
         n, div = len(g), int(g["diverged"].sum())
         sq = series[series_key(keys)]["sq_err_position"]
         lo, hi = bootstrap_statistic_interval(sq, time_averaged_rmse, resamples=500)
         d_lo, d_hi = binomial_interval(div, n)
-        rows.append({**keys, "n_trials": n, "rmse_mean": time_averaged_rmse(sq),
+        rmse = time_averaged_rmse(sq)
+        rows.append({**keys, "n_trials": n, "rmse_mean": rmse,
                      "rmse_low": lo, "rmse_high": hi, "divergence_rate": div / n,
                      "divergence_low": d_lo, "divergence_high": d_hi,
                      "nees_mean": float(np.nanmean(g["nees_mean"])) if g["nees_mean"].notna().any() else np.nan,
-                     "realised_snr_db": mean_realised_snr(g)} | summarise_maneuvers(g, series[series_key(keys)]))
+                     "realised_snr_db": mean_realised_snr(g)} | summarise_maneuvers(g, series[series_key(keys)])
+                    | summarise_bound(rmse, series[series_key(keys)]))
     return pd.DataFrame(rows)
 
 
@@ -95,6 +114,8 @@ def tracking_steps(series: dict, labels) -> pd.DataFrame:
         cols[f"mean_true_{label}"] = mean_over_present(series[f"true_{label}"], axis=0)
     if "nees" in series:
         cols["nees"] = mean_over_present(series["nees"], axis=0)
+    if "pcrb_position" in series:                   # the bound per step, on the RMSE's scale
+        cols["pcrb_position"] = per_step_rmse(series["pcrb_position"])
     return pd.DataFrame(cols | maneuver_steps(series))
 
 

@@ -50,14 +50,19 @@ def _overview(summary: pd.DataFrame, fig_dir: Path, title: str) -> list[str]:
         figures.grouped_bars(values, low, high, fig_dir / "tracking_rmse_by_scenario.png",
                              f"{title}: time-averaged position RMSE (95% CI)", "RMSE (m)", log=True)
         parts.append("![RMSE by scenario config](figures/tracking_rmse_by_scenario.png)")
+    bounded = "efficiency" in summary and summary.efficiency.notna().any()
     health = [[code(r.scenario), fmt_db(r.snr_db), code(r.config),
                fmt_interval(r.divergence_rate, r.divergence_low, r.divergence_high), fmt(r.nees_mean)]
-              for r in summary.itertuples()]
-    parts.append("<details><summary>Divergence rate and NEES per cell</summary>\n\n"
+              + ([fmt(r.pcrb_rmse), fmt(r.efficiency)] if bounded else []) for r in summary.itertuples()]
+    parts.append("<details><summary>Divergence rate, NEES and efficiency per cell</summary>\n\n"
                  "*Divergence*: the position error exceeded the scenario's `divergence_bound_m` at some step. "
                  "*NEES*: mean normalised estimation error squared (equals the state dimension for a "
-                 "consistent filter; – without a covariance).\n\n" +
-                 table(["scenario config", "SNR (dB)", "config", "divergence rate [95% CI]", "mean NEES"], health)
+                 "consistent filter; – without a covariance)." +
+                 (" *PCRB*: the posterior Cramér–Rao bound on the position error, time-averaged like the "
+                  "RMSE (m; – where the scene gives none); *efficiency*: PCRB / RMSE, 1 at the bound."
+                  if bounded else "") + "\n\n" +
+                 table(["scenario config", "SNR (dB)", "config", "divergence rate [95% CI]", "mean NEES"]
+                       + (["PCRB (m)", "efficiency"] if bounded else []), health)
                  + "\n\n</details>")
     return parts
 
@@ -81,8 +86,12 @@ def _per_step(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: 
         if at.empty:
             continue
         curves = {c: (s.t.to_numpy(), s.rmse_position.to_numpy()) for c, s in at.groupby("config", sort=False)}
+        first_config = at[at.config == at.config.iloc[0]]      # the bound is the scene's: one per config, equal
+        bound = (first_config.t.to_numpy(), first_config.pcrb_position.to_numpy()) \
+            if "pcrb_position" in at and at.pcrb_position.notna().any() else None
         name = f"tracking_rmse_per_step_{slug(scenario)}.png"
-        figures.rmse_per_step(curves, fig_dir / name, f"{title}: {scenario} at {fmt_db(snr)} dB", xlabel="time (s)")
+        figures.rmse_per_step(curves, fig_dir / name, f"{title}: {scenario} at {fmt_db(snr)} dB", xlabel="time (s)",
+                              bound=bound)
         parts.append(f"![per-step RMSE on {text(scenario)}](figures/{name})")
     first = summary.scenario.iloc[0]
     snr = _reference_snr(summary[summary.scenario == first])
@@ -100,7 +109,8 @@ def _per_step(summary: pd.DataFrame, steps: pd.DataFrame, fig_dir: Path, title: 
                      "bearing and elevation):\n\n![mean estimates](figures/tracking_mean_estimate.png)")
     if parts:
         parts.insert(0, "## Tracking: error over time\n\nPer-step position RMSE across trials at each "
-                        "scenario config's reference SNR (closest to 0 dB); `steps.csv` has every level "
+                        "scenario config's reference SNR (closest to 0 dB), under it (dashed) the posterior "
+                        "Cramér–Rao bound where the scene gives one; `steps.csv` has every level "
                         "and component.")
     return parts
 
