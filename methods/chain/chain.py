@@ -17,9 +17,9 @@ from radarbench.bench.tasks.multitarget import CLUTTER, MULTI_TARGET, PADDING, M
 from radarbench.methods.chain.compose import component
 from radarbench.methods.chain.plots import extract_plots
 
-#: the std of a uniform error over one cell, in cells (sqrt(1/12)): the plots' range and
-#: radial-velocity noise the trackers assume
-CELL_STD = math.sqrt(1.0 / 12.0)
+#: a uniform error over one cell has std cell / sqrt(12): the plots' range and radial-velocity
+#: noise the trackers assume
+SQRT_12 = math.sqrt(12.0)
 
 
 def detector_of(params) -> tuple:
@@ -144,7 +144,7 @@ def plot_batch(batch: Batch, plots: np.ndarray, counts: np.ndarray, params) -> B
     scene = batch.scene
     region = scene.surveillance_region
     R, D = scene.shape
-    std = np.array([scene.range_cell_m * CELL_STD, scene.azimuth_std_rad, scene.velocity_cell_m_s * CELL_STD])
+    std = np.array([scene.range_cell_m / SQRT_12, scene.azimuth_std_rad, scene.velocity_cell_m_s / SQRT_12])
     slots = np.arange(plots.shape[2])
     tracker_scene = MultiTargetScene(
         snr_definition=scene.snr_definition, realised_snr_db=scene.realised_snr_db,

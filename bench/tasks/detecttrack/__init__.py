@@ -177,6 +177,8 @@ class DetectTrackTask(MultiTargetTask):
     summary_columns = (*MultiTargetTask.summary_columns,
                        *(f"{rate}_{s}" for rate in ("cell_pd", "cell_pfa") for s in ("mean", "low", "high")))
     headline_columns = (*MultiTargetTask.headline_columns, "cell_pd_mean", "cell_pfa_mean")
+    scene_entities = ("truths",)                          # the plots are each chain's own
+    method_entities = ("plots", *MultiTargetTask.method_entities)
 
     def check_output(self, out, batch: Batch) -> DetectTrackOutput:
         return check_detect_track_output(out, batch)
