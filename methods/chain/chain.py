@@ -91,6 +91,12 @@ class CfarTrack(Method):
         return (detector.check_scenario(detector_params, scenario_params)
                 or tracker.check_scenario(tracker_params, scenario_params))
 
+    def identity_modules(self, params) -> tuple[str, ...]:
+        """The detector's and the tracker's modules (and what they name in turn): their code
+        computes this config's numbers, reached through the registry."""
+        return tuple(module for part, part_params in (detector_of(params), tracker_of(params))
+                     for module in (type(part).__module__, *part.identity_modules(part_params)))
+
     def unit_memory_bytes(self, params, scenario_params, n: int) -> int | None:
         """The detector's on the unit's n K maps."""
         detector, detector_params = detector_of(params)
