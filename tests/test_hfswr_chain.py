@@ -24,6 +24,7 @@ from radarbench.methods.multitarget.trackers import JpdaUkf
 from radarbench.models.hfswr import measure
 from radarbench.scenarios.hfswr_rd_scans import HfswrRdScans
 from tests.chain_oracle import TruthCells
+from tests.rrd_blueprint import entities
 
 SMALL = HfswrRdScans.small_params
 CLEAN = {"bragg": False, "interference": False, "clutter_edge": False}
@@ -155,5 +156,8 @@ def test_hfswr_chain_preset_smoke(bench_cli, tmp_path):
     assert summary[["gospa_mean", "cell_pd_mean", "cell_pfa_mean"]].notna().all().all()
     assert "## Detect and track: cells and tracks" in report
     assert list((tmp_path / "out" / "figures").glob("chain_gospa_vs_cell_pd_*.png"))
+    recorded = entities(tmp_path / "out" / "recording.rrd")    # maps, detections, plots, tracks: one timeline
+    for entity in ("/maps", "/detections", "/plots", "/tracks"):
+        assert any(e.endswith(entity) for e in recorded), entity
     claims = evaluate_folder(tmp_path / "out")                 # the preset's claims, by plan.toml's name
     assert len(claims) == 8 and not claims.verdict.str.contains("not comparable").any()

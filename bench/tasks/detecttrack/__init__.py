@@ -171,14 +171,15 @@ class DetectTrackTask(MultiTargetTask):
     scene_type = DetectTrackScene
     noun = "detect-and-track chains"
     short_noun = "chains"
-    recording_text = ("the true tracks, every plot the chain made (green near a target's cell, grey elsewhere) and "
-                      "its tentative, confirmed and terminated tracks with their 3-sigma gates, scan by scan, and "
-                      "its GOSPA per scan")
+    recording_text = ("the range-Doppler map of each scan with the cells each chain declared over it, the true "
+                      "tracks, every plot the chain made (green near a target's cell, grey elsewhere) and its "
+                      "tentative, confirmed and terminated tracks with their 3-sigma gates, scan by scan, and its "
+                      "GOSPA per scan")
     summary_columns = (*MultiTargetTask.summary_columns,
                        *(f"{rate}_{s}" for rate in ("cell_pd", "cell_pfa") for s in ("mean", "low", "high")))
     headline_columns = (*MultiTargetTask.headline_columns, "cell_pd_mean", "cell_pfa_mean")
-    scene_entities = ("truths",)                          # the plots are each chain's own
-    method_entities = ("plots", *MultiTargetTask.method_entities)
+    scene_entities = ("truths", "maps")                   # the plots are each chain's own
+    method_entities = ("plots", "detections", *MultiTargetTask.method_entities)
 
     def check_output(self, out, batch: Batch) -> DetectTrackOutput:
         return check_detect_track_output(out, batch)
@@ -199,8 +200,9 @@ class DetectTrackTask(MultiTargetTask):
         return {"gospa_cutoff_m": sc.gospa_cutoff_m, "gospa_order": sc.gospa_order}
 
     def recorded_scene(self, batch: Batch, i: int) -> RecordedScene:
+        from radarbench.bench.tasks.detecttrack.draw import MAPS, map_db
         pos = list(batch.scene.position_index)[:2]
-        return RecordedScene(arrays={"truths_xy": batch.truth[i][..., pos]})
+        return RecordedScene(arrays={"truths_xy": batch.truth[i][..., pos]}, images={MAPS: map_db(batch.z[i])})
 
     def recorded_method(self, batch: Batch, out: DetectTrackOutput, i: int, threshold: float) -> MethodTrace:
         trace = super().recorded_method(batch, out, i, threshold)
@@ -210,17 +212,17 @@ class DetectTrackTask(MultiTargetTask):
         on_target = ((near[..., 0] <= sc.guard_cells[0]) & (near[..., 1] <= sc.guard_cells[1])
                      & (sc.target_cells[i:i + 1, :, None, :, 0] >= 0)).any(axis=3)[0]
         origin = np.where(cells[0, ..., 0] < 0, -2, np.where(on_target, 0, -1)).astype(np.int64)
-        trace.arrays |= {"plots_xy": _plots_xy(np.asarray(out.plots, float)[i], sc.sensor_xy), "plot_origin": origin}
+        trace.arrays |= {"plots_xy": _plots_xy(np.asarray(out.plots, float)[i], sc.sensor_xy), "plot_origin": origin,
+                         "plot_cells": cells[0].astype(np.int32)}
         return trace
 
     def log_trial(self, stream, layout, rec) -> None:
-        from radarbench.bench.tasks.multitarget import draw
-        draw.log_scene(stream, layout, rec)
-        t = np.asarray(rec.t, dtype=np.float64)
-        for m in layout.methods_of(self):
-            tr = rec.methods[m.label]
-            draw.log_plots(stream, m.path("plots"), t, tr.arrays.get("plots_xy"), tr.arrays.get("plot_origin"))
-            draw.log_method(stream, layout, m, tr, t)
+        from radarbench.bench.tasks.detecttrack import draw
+        draw.log_trial(self, stream, layout, rec)
+
+    def views(self, layout, rec):
+        from radarbench.bench.tasks.detecttrack import draw
+        return draw.views(self, layout, rec)
 
     def summarise(self, trials: pd.DataFrame, series: dict) -> pd.DataFrame:
         tracks = super().summarise(trials, series)
