@@ -41,12 +41,13 @@ def _detection_vs_tracking(summary: pd.DataFrame, fig_dir, title: str) -> list[s
     for scenario, g in summary.groupby("scenario", sort=False):
         if g.cell_pd_mean.notna().sum() < 2:
             continue
+        parts.append(f"On {code(scenario)}:")
         for x, words, logx in (("cell_pd_mean", "detector cell Pd", False),
                                ("cell_pfa_mean", "detector cell Pfa", True)):
             name = f"chain_gospa_vs_{x[:-5]}_{slug(scenario)}.png"
             figures.metric_vs(g.sort_values(x), x, fig_dir / name, f"{title}: {scenario}", "gospa_mean",
                               "GOSPA (m)", words, logx=logx and bool((g[x] > 0).all()))
-            parts.append(f"![GOSPA vs {words} on {scenario}](figures/{name})")
+            parts.append(f"![GOSPA vs {words}](figures/{name})")
     if parts:
         parts.insert(0, "## Detect and track: detection quality against tracking quality\n\nEach curve is a "
                         "chain (detector and tracker), its points the SNR levels; the band is GOSPA's 95 % "
