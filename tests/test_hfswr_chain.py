@@ -161,3 +161,13 @@ def test_hfswr_chain_preset_smoke(bench_cli, tmp_path):
         assert any(e.endswith(entity) for e in recorded), entity
     claims = evaluate_folder(tmp_path / "out")                 # the preset's claims, by plan.toml's name
     assert len(claims) == 8 and not claims.verdict.str.contains("not comparable").any()
+
+
+@pytest.mark.parametrize("peer", ["stonesoup-jpda", "stonesoup-gmphd"])
+def test_a_stone_soup_peer_is_a_tracker_of_the_chain(peer):
+    """Any registered multi-target tracker composes: the Stone Soup peers (the [peers] extra)."""
+    pytest.importorskip("stonesoup")
+    _, b = scans(35.0, n=2)
+    out = CfarTrack().run(b, chain(tracker=peer))
+    DetectTrackTask().check_output(out, b)
+    assert (out.status == 2).any()
