@@ -287,6 +287,13 @@ class Component:
         return [Path(getattr(params, f.name)) for f in dataclasses.fields(params)
                 if f.metadata.get("kind") == PATH and getattr(params, f.name)]
 
+    def identity_modules(self, params) -> tuple[str, ...]:
+        """Modules beyond its own whose code computes a config with ``params`` (their code is
+        part of the config's identity, :mod:`bench.identity`): a plugin that runs other
+        registered plugins named by its parameters names their modules, which it reaches
+        through the registry and no import statement. The default: none."""
+        return ()
+
 
 class Scenario(Component):
     """Supplies batches of trials. Subclasses implement :meth:`generate`.

@@ -77,10 +77,11 @@ def expand(name: str, params_cls: type, values: Mapping[str, Any], field: str, *
 
 
 def split_top_level(text: str) -> list[str]:
-    """``text`` split at the commas outside parentheses (tuple values are "(a,b)")."""
+    """``text`` split at the commas outside parentheses and brackets (tuple values are
+    "(a,b)"; a value naming a component with its parameters is "name[k=v,...]")."""
     parts, depth, start = [], 0, 0
     for i, c in enumerate(text):
-        depth += (c == "(") - (c == ")")
+        depth += (c in "([") - (c in ")]")
         if c == "," and depth == 0:
             parts.append(text[start:i])
             start = i + 1

@@ -384,7 +384,7 @@ def config_identity(cls: type, params, code: CodeIdentity | None = None) -> dict
     """The identity of one config of plugin ``cls`` with ``params``: ``identity`` (the
     short hash), ``code``, ``distribution``, ``modules``, ``data`` (file -> hash) and
     ``versions`` (library -> version)."""
-    code = code or code_identity(*identity_roots(cls))
+    code = code or code_identity(*config_roots(cls, params))
     data = {str(p): file_digest(p) for p in cls().data_files(params)}
     versions = dict(code.libraries)
     whole = json.dumps([code.hash, sorted(data.values())]).encode()
@@ -406,13 +406,19 @@ def identity_roots(cls: type) -> tuple[str, ...]:
     return (cls.__module__, *(type(registry.get_task(t)).__module__ for t in tasks), harness.__name__)
 
 
+def config_roots(cls: type, params) -> tuple[str, ...]:
+    """:func:`identity_roots` and the modules a config with ``params`` names besides
+    (``Component.identity_modules``: the plugins it runs by name)."""
+    return (*identity_roots(cls), *cls().identity_modules(params))
+
+
 def plan_identities(plan) -> dict[str, dict[str, dict]]:
     """``{"scenarios": {label: identity}, "methods": {label: identity}}`` of a plan's configs."""
     from radarbench.bench import registry
     codes: dict[tuple[str, ...], CodeIdentity] = {}
 
     def of(cls: type, params) -> dict:
-        roots = identity_roots(cls)
+        roots = config_roots(cls, params)
         if roots not in codes:
             codes[roots] = code_identity(*roots)
         return config_identity(cls, params, codes[roots])

@@ -4,7 +4,8 @@ The backgrounds the HFSWR chapter on target detection and tracking names for
 CFAR detection (first-order sea clutter, ionospheric interference, a clutter
 edge) as mean-power maps over (range, Doppler) cells, the clutter-region
 label of every cell, a fixed target layout, and the square-law power of a
-target cell. Used by the ``rd-map`` scenario (scenarios/rd_map.py); the
+target cell. Used by the ``rd-map`` scenario (scenarios/rd_map.py) and by ``hfswr-rd-scans``
+(scenarios/hfswr_rd_scans.py, a map per scan); the
 shapes are ours, the chapter prints none (bench/presets/cfar.md).
 """
 

@@ -17,15 +17,16 @@ from radarbench.bench.metrics import CELL_KEYS
 from radarbench.bench.tasks.base import OutputError, RecordedScene, ReportContext, Task, Views
 from radarbench.bench.tasks.cells import CellDetectionOutput, CellDetectionTask, MapScene
 from radarbench.bench.tasks.detection import DetectionScene, DetectionTask
+from radarbench.bench.tasks.detecttrack import DetectTrackScene, DetectTrackTask
 from radarbench.bench.tasks.multitarget import MultiTargetScene, MultiTargetTask
 from radarbench.bench.tasks.tbd import TBDScene, TBDTask
 from radarbench.bench.tasks.tracking import TrackingScene, TrackingTask
 
-__all__ = ["BUILTIN_TASKS", "CellDetectionOutput", "DetectionScene", "MapScene", "MultiTargetScene", "OutputError",
+__all__ = ["BUILTIN_TASKS", "CellDetectionOutput", "DetectionScene", "DetectTrackScene", "MapScene", "MultiTargetScene", "OutputError",
            "RecordedScene", "ReportContext", "TBDScene", "Task", "TrackingScene", "Views", "summary_columns"]
 
 #: The built-in tasks, in registry order.
-BUILTIN_TASKS = (DetectionTask, TrackingTask, TBDTask, CellDetectionTask, MultiTargetTask)
+BUILTIN_TASKS = (DetectionTask, TrackingTask, TBDTask, CellDetectionTask, MultiTargetTask, DetectTrackTask)
 
 #: summary.csv's leading columns, in the order its readers have always found
 #: them: a cell's keys and the columns of the file's first version (some

@@ -65,10 +65,14 @@ def log_scene(stream, layout: TrialLayout, rec: TrialRecord) -> None:
         for j in range(truths.shape[1]):
             log_track(stream, layout.path(f"truths/target_{j}"), t, north_up(truths[:, j]), TRUTH_COLOR, radius=4.0,
                       label=f"target {j}")
-    plots, origin = rec.arrays.get("plots_xy"), rec.arrays.get("plot_origin")
+    log_plots(stream, layout.path("plots"), t, rec.arrays.get("plots_xy"), rec.arrays.get("plot_origin"))
+
+
+def log_plots(stream, path: str, t: np.ndarray, plots: np.ndarray | None, origin: np.ndarray | None) -> None:
+    """Plots (K, P, 2) per scan at ``path``, coloured by origin (target green, clutter grey)."""
     if plots is not None and origin is not None:
         colors = np.where((origin >= 0)[..., None], (*TARGET_PLOT_COLOR, 255), (*CLUTTER_COLOR, 200)).astype(np.uint8)
-        _log_point_sets(stream, layout.path("plots"), t, plots, colors, 2.5)
+        _log_point_sets(stream, path, t, plots, colors, 2.5)
 
 
 def _gate(center: np.ndarray, cov: np.ndarray) -> np.ndarray:
