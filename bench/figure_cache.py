@@ -158,6 +158,7 @@ def write_if_changed(path: Path, data: bytes) -> bool:
     from radarbench.bench import runfolder
     old = _read_regular(path, len(data) + 1)
     if old is not None and old == data:
+        runfolder.kept(path)
         return False
     runfolder.write_bytes(path, data)
     return True
@@ -216,6 +217,8 @@ class FigureReuse:
         if entry and entry[0] == key:
             data = _read_regular(path)
             if data is not None and _sha(data) == entry[1]:
+                from radarbench.bench import runfolder
+                runfolder.kept(path)
                 return self._reused(path, key, data, figure)
         data = self.fetch(key, path.suffix)
         if data is None:

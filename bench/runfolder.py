@@ -147,6 +147,15 @@ def claim(root: Path, names: list[str]) -> None:
         _write_manifest(root, entries + new)
 
 
+def kept(path: str | os.PathLike) -> None:
+    """An output left as it was (its bytes already right) is still one bench made: inside
+    :func:`writing`, listed in the manifest like one written, so ``--fresh`` removes it."""
+    root = _active.get()
+    rel = _relative(root, Path(path)) if root is not None else None
+    if rel is not None and rel.parts:
+        claim(root, [str(rel)])
+
+
 def remove_output(root: Path, name: str) -> None:
     """Remove the output ``root/name`` a build no longer makes, and its manifest entry."""
     _remove(root, PurePosixPath(name))
