@@ -60,8 +60,8 @@ OUT = Path("reports/perf/loop.md")
 #: the opening of the JSON block in the Markdown output (read back by ``bench.docs.loop_record``)
 JSON_FENCE = "```json"
 STEPS = ("first", "warm", "noop", "edit", "trials", "overrides")
-#: a step that reads another's run folder runs it too
-NEEDS = {"noop": "warm"}
+#: a step that needs another before it runs it too (the warm run needs the first's caches)
+NEEDS = {"noop": "warm", "warm": "first"}
 #: Linux prctl option: orphaned descendants are re-parented to the caller, which reaps them
 PR_SET_CHILD_SUBREAPER = 36
 #: how long the tree's last processes may take to exit once the command has (a hang detector)
@@ -92,7 +92,7 @@ EDIT = ("glr", "window", 24)
 #: the overrides step's methods and SNR levels
 OVERRIDE_METHODS, OVERRIDE_SNR = ("cv-kf", "imm-cv-ca"), ("0", "10")
 #: what a run says about the units it computes and reuses (the runner's lines; the cache's words)
-COMPUTED = re.compile(r"(\d+) units? to run")
+COMPUTED = re.compile(r"(?<!warm-up): done, (\d+)/\d+ units")
 REUSED = re.compile(r"(\d+) (?:units? )?(?:reused|from the (?:results )?cache)|reused:? (\d+)")
 NOTHING = re.compile(r"Nothing to run")
 
@@ -370,7 +370,8 @@ def parse_args(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", nargs="+", choices=STEPS, default=list(STEPS),
-                        help="the steps to run (default: all; 'first' always runs, it makes the caches)")
+                        help="the steps to run (default: all; warm and noop bring the steps before them; "
+                             "without first, the first step chosen compiles the kernels it uses)")
     parser.add_argument("--out", type=Path, default=REPO / OUT, help=f"the Markdown output (default: {OUT})")
     parser.add_argument("--work", type=Path, help="keep the clone, caches, runs and logs here (default: a "
                                                    "temporary folder, removed)")
@@ -391,7 +392,9 @@ def main(argv=None) -> int:
     loop = Loop(work, sys.executable, args.edit_overrides)
     try:
         loop.prepare()
-        chosen = {"first", *args.steps, *(NEEDS[step] for step in args.steps if step in NEEDS)}
+        chosen = set(args.steps)
+        while any(NEEDS.get(step) not in chosen for step in chosen if step in NEEDS):
+            chosen |= {NEEDS[step] for step in chosen if step in NEEDS}
         for step in STEPS:
             if step in chosen:
                 getattr(loop, step)()

@@ -55,9 +55,11 @@ def test_the_cpu_of_a_grandchild_its_parent_left_running_is_counted(tmp_path):
 
 def test_unit_counts_read_what_a_run_says():
     loop = _loop_module()
-    assert loop.unit_counts("12 units to run: starting 2 workers\n") == (12, None)
+    phases = ("bench: warm-up: done, 3/3 units in 0:36\nbench: calibration: done, 40/40 units in 0:10\n"
+              "bench: evaluation: 0/4 units (0%), 0:00 elapsed\nbench: evaluation: done, 4/4 units in 0:01\n")
+    assert loop.unit_counts(phases) == (44, None)                   # the warm-up's units are not results
     assert loop.unit_counts("Nothing to run: all 40 units stored in runs/quick\n") == (0, None)
-    assert loop.unit_counts("3 units to run: starting 2 workers\n37 units reused\n") == (3, 37)
+    assert loop.unit_counts("bench: evaluation: done, 3/3 units in 0:01\n37 units reused\n") == (3, 37)
     assert loop.unit_counts("no word about units\n") == (None, None)
 
 

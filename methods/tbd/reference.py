@@ -14,8 +14,9 @@ frames' dtype (float32 for ``tbd-grid``), so it agrees with the numba kernel
 bit for bit.
 
 :func:`numpy_dp_tbd`, the peer ``bench perf`` times the kernel against, is the
-kernel's own algorithm as a competent NumPy user would write it: the whole batch
-at once, the forward pass maxima only (the box maximum separable, 2 (2q + 1)
+kernel's own algorithm as a competent NumPy user would write it: the batch it is
+given at once (``bench perf`` also hands it one trial per call and keeps the faster:
+a large batch's merits outgrow the caches), the forward pass maxima only (the box maximum separable, 2 (2q + 1)
 ``np.maximum`` passes over -inf-padded planes), every frame's merit kept, the
 backpointers recomputed along the track only. Same outputs, bit for bit.
 """
