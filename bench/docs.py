@@ -297,6 +297,8 @@ def durations(root: Path, page: str) -> str:
     suite = record.get("test_suite_wall_s")
     if suite is not None:
         rows.append(["the test suite, `python -m pytest -q` (two xdist workers)", f"{suite:.0f} s", "–", "–"])
+    if not rows:
+        return f"{source} holds no first, warm or no-op run: `python benchmarks/loop.py` measures them."
     return "\n\n".join([
         f"Measured by `python benchmarks/loop.py` on {record['created']} ({record['cpu_count']} CPUs, "
         f"{text(record['platform'])}; {source}): wall time as you wait, CPU time of every process of the "
