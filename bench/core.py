@@ -388,8 +388,8 @@ class Method(Component):
     ``bench perf`` checks for exactly those values:
 
     * a *reference implementation* (:meth:`reference_run`, declared by setting
-      :attr:`reference_name`): the straightforward code the method is timed
-      against;
+      :attr:`reference_name`): the best plain code of the same algorithm, which the
+      method is timed against;
     * :meth:`work`: the work a batch is, in the method's own unit (trials by
       default; cells of a map, DP state transitions), for ``<unit>_per_second``;
     * :attr:`perf_targets`: goals the performance report checks;
@@ -447,8 +447,10 @@ class Method(Component):
         return cls.nominal_threshold is not Method.nominal_threshold
 
     def reference_run(self, batch: Batch, params) -> Any:
-        """The same output as :meth:`run` by the straightforward implementation
-        (``bench perf`` times it; the tests may use it as an oracle). Called only
+        """The same output as :meth:`run` by the best plain implementation of the same
+        algorithm a competent user would write (vectorised NumPy/SciPy, or the library
+        users pick for it): ``bench perf`` times it on its whole batch and one trial per
+        call and keeps the faster (docs/architecture.md, 'Performance'). Called only
         when :attr:`reference_name` is set."""
         raise NotImplementedError
 

@@ -32,6 +32,14 @@ from radarbench.bench.markdown import code, frame_table, table, text
 RENAMED = {"README.md": "index.md", "CONTRIBUTING.md": "contributing.md"}
 #: the committed ``bench perf`` tables (:mod:`bench.perf`)
 PERF_DIR = "reports/perf"
+#: what ``benchmarks/loop.py`` writes: the edit-run-read loop's durations, a JSON record in a fenced block
+LOOP_REPORT = f"{PERF_DIR}/loop.md"
+#: where a hand-written page takes the measured durations (:func:`fill_measured`; an HTML comment,
+#: so the page reads the same without them on GitHub)
+MEASURED_MARKER = "<!-- bench: measured durations -->"
+#: the steps of the loop benchmark the durations table shows, and how it names them
+LOOP_STEPS = {"first": "first `bench run --preset quick` on a fresh clone (compiles the kernels)",
+              "warm": "the same again (kernels cached)", "noop": "a re-run with nothing to compute"}
 #: the width the command-line reference is wrapped to, whatever the terminal
 HELP_WIDTH = 100
 #: an inline link or image: (its text and the opening parenthesis, the target, an optional title and ")")
@@ -279,6 +287,53 @@ def wall_time(report: Path) -> str:
     return "–"
 
 
+def loop_record(root: Path) -> dict | None:
+    """The JSON record of the committed :data:`LOOP_REPORT` (``benchmarks/loop.py``), or None."""
+    import json
+
+    path = root / LOOP_REPORT
+    if not path.is_file():
+        return None
+    text = path.read_text(encoding="utf-8")
+    start = text.find("```json")
+    if start < 0:
+        return None
+    body = text[start + len("```json"):]
+    return json.loads(body[:body.index("```")])
+
+
+def durations(root: Path, page: str) -> str:
+    """The measured durations of a first run, a warm run, a no-op re-run and the test suite
+    (from :data:`LOOP_REPORT`, never typed), with the machine and its load, for ``page``."""
+    source = f"[{LOOP_REPORT}]({relative(LOOP_REPORT, page)})"
+    record = loop_record(root)
+    if record is None:
+        return f"Not measured yet: `python benchmarks/loop.py` writes {code(LOOP_REPORT)}."
+    rows = []
+    for step, what in LOOP_STEPS.items():
+        done = [m for m in record["steps"] if m["step"] == step and m["exit_code"] == 0]
+        if done:
+            m = done[0]
+            load = ", ".join(f"{x:g}" for x in m["load_before"])
+            rows.append([what, f"{m['wall_s']:.0f} s", f"{m['cpu_s']:.0f} s", load])
+    suite = record.get("test_suite_wall_s")
+    if suite is not None:
+        rows.append(["the test suite, `python -m pytest -q` (two xdist workers)", f"{suite:.0f} s", "–", "–"])
+    if not rows:
+        return f"{source} holds no first, warm or no-op run: `python benchmarks/loop.py` measures them."
+    return "\n\n".join([
+        f"Measured by `python benchmarks/loop.py` on {record['created']} ({record['cpu_count']} CPUs, "
+        f"{text(record['platform'])}; {source}): wall time as you wait, CPU time of every process of the "
+        "command (its workers included); a busy machine (the load average) lengthens the wall time.",
+        table(["what", "wall time", "CPU time", "load average before (1, 5, 15 min)"], rows)])
+
+
+def fill_measured(markdown: str, root: Path, page: str) -> str:
+    """A hand-written page with :data:`MEASURED_MARKER` gets the measured durations there
+    (``docs/hooks.py``, when the site is built)."""
+    return markdown.replace(MEASURED_MARKER, durations(root, page)) if MEASURED_MARKER in markdown else markdown
+
+
 def presets_page(root: Path, all_presets: list[Preset], reports: list[str]) -> str:
     """Every packaged preset: what it runs, the paper of its claims, its committed report and
     that run's wall time (read from the report, never typed), and the commands that
@@ -301,6 +356,7 @@ def presets_page(root: Path, all_presets: list[Preset], reports: list[str]) -> s
         "(before its report and recording; a run that resumed, or re-ran only what an edit changed, "
         "counts the units it ran), as the report's *Provenance* states it, on the machine it names.",
         table(["preset (its committed report)", "what", "paper", "wall time of the units"], rows),
+        "## A first run, a warm run, the tests", durations(root, page),
         "## Regenerating the committed reports",
         "One command per preset with a committed report (they are regenerated after a change that "
         "alters results), then the speed tables:",
@@ -339,6 +395,8 @@ def pages(root: str | Path) -> tuple[dict[str, str | Path], list]:
         if (root / repo_path).is_file():
             published(root, repo_path, out)
     reports = report_pages(root, out, all_presets)
+    if (root / LOOP_REPORT).is_file():
+        published(root, LOOP_REPORT, out)
     plugin_pages(root, out, all_presets, set(reports))
     out["presets.md"] = presets_page(root, all_presets, reports)
     out["cli.md"] = cli_page()

@@ -9,7 +9,9 @@ a Kalman-innovation detector on innovations from a per-trial ``filterpy`` loop)
 runs on the first ``Method.reference_trials`` trials of the same batch after its
 own warm-up; the two are timed in :data:`ROUNDS` interleaved rounds (method,
 then reference, so a burst of load on the machine hits both) and each keeps its
-minimum. Times are the CPU time of the measuring thread (``time.thread_time``),
+minimum. The reference is timed two ways, the whole batch in one call and one
+trial per call (a vectorised peer's whole batch can outgrow the caches its
+per-trial use fits in), and keeps the faster (``reference_mode``). Times are the CPU time of the measuring thread (``time.thread_time``),
 not wall time, so other processes on a shared machine cost little; the load
 average is recorded with the machine. A reference may time parts of itself
 apart (``Method.reference_parts``, e.g. a peer tracker's initiator): each part
@@ -72,12 +74,14 @@ from radarbench.bench.tables import write_csv
 
 PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "trials_per_second", "chunk",
                 "chunk_seconds_per_trial", "reference",
-                "reference_seconds_per_trial", "speedup", "limit_fraction", "limit", "limit_note", "peak_rss_mb"]
+                "reference_seconds_per_trial", "reference_mode", "speedup", "limit_fraction", "limit", "limit_note", "peak_rss_mb"]
 SCENE_COLUMNS = ["scenario", "size", "trials", "seconds_per_trial", "peak_rss_mb", "skipped"]
 SEED = 20261121
 REPEATS = 3
 #: interleaved rounds of a method and its reference (each keeps its minimum)
 ROUNDS = 5
+#: how a reference is timed (:func:`_reference_timing`): one call on the whole batch, or one per trial
+REFERENCE_MODES = ("whole batch", "per trial")
 #: a row's note when its method declares no least cost (``Method.least_cost`` returned None)
 NO_MODEL = "no model declared (`Method.least_cost`)"
 #: the environment of a measuring process: one thread per library, so a rate is per core
@@ -115,12 +119,14 @@ def _scenario(job: Job | SceneJob, folder: Path):
                                                           **scenario.perf_data(job.size, folder)})
 
 
-def _batch(job: Job | SceneJob, n: int, scenario, params):
-    return scenario.generate(params, float(scenario.perf_snr_db), n, _trial_rng(job, n))
+def _batch(job: Job | SceneJob, n: int, scenario, params, first: int = 0):
+    """Trials ``first .. first + n - 1`` of the job's scenes (a trial is the same in any batch:
+    its own stream)."""
+    return scenario.generate(params, float(scenario.perf_snr_db), n, _trial_rng(job, n, first))
 
 
-def _trial_rng(job: Job | SceneJob, n: int) -> TrialRNG:
-    return TrialRNG(SEED, EVALUATION, stable_key([job.scenario, job.scenario_params]), range(n))
+def _trial_rng(job: Job | SceneJob, n: int, first: int = 0) -> TrialRNG:
+    return TrialRNG(SEED, EVALUATION, stable_key([job.scenario, job.scenario_params]), range(first, first + n))
 
 
 def reference_of(method):
@@ -151,13 +157,16 @@ def _measure(job: Job, scenario, scenario_params) -> dict:
     method = registry.get_method(job.method)()
     params = method.Params()
 
-    def batch_of(n: int):
-        return _batch(job, n, scenario, scenario_params)
+    def batch_of(n: int, first: int = 0):
+        return _batch(job, n, scenario, scenario_params, first)
+
+    def method_round() -> None:
+        best["method"] = min(best["method"], _cpu_seconds(lambda: method.run(batch, params)))
 
     batch = batch_of(job.trials)
     unit, count = method.work(batch, params)
     out = {"name": None, "work_unit": unit, "work_per_trial": float(count) / job.trials,
-           "reference_seconds_per_trial": np.nan, "parts": {}}
+           "reference_seconds_per_trial": np.nan, "reference_mode": "", "parts": {}}
     method.run(batch_of(1), params)
     outputs = []
     best = {"method": _cpu_seconds(lambda: outputs.append(method.run(batch, params)))}
@@ -166,26 +175,52 @@ def _measure(job: Job, scenario, scenario_params) -> dict:
     ref = reference_of(method) if job.reference_trials else None
     if ref is not None:
         out["name"], reference_run = ref
-        ref_batch = batch_of(job.reference_trials)
+        whole, per_trial = REFERENCE_MODES
+        calls = {whole: [batch_of(job.reference_trials)]}
+        if job.reference_trials > 1:
+            calls[per_trial] = [batch_of(1, first=i) for i in range(job.reference_trials)]
         reference_run(batch_of(1), params)
-        parts: dict[str, float] = {}
-        for _ in range(ROUNDS):
-            seconds = _cpu_seconds(lambda: reference_run(ref_batch, params))
-            best["reference"] = min(best.get("reference", np.inf), seconds)
-            for part, spent in (method.reference_part_seconds or {}).items():
-                parts[part] = min(parts.get(part, np.inf), seconds - spent)
-            best["method"] = min(best["method"], _cpu_seconds(lambda: method.run(batch, params)))
-        out["reference_seconds_per_trial"] = best["reference"] / job.reference_trials
-        out["parts"] = {part: seconds / job.reference_trials for part, seconds in parts.items()}
+        out["reference_mode"], seconds, parts = _reference_timing(method, reference_run, params, calls, method_round)
+        out["reference_seconds_per_trial"] = seconds / job.reference_trials
+        out["parts"] = {part: spent / job.reference_trials for part, spent in parts.items()}
     else:
         for _ in range(ROUNDS - 1):
-            best["method"] = min(best["method"], _cpu_seconds(lambda: method.run(batch, params)))
+            method_round()
     out["chunk_seconds_per_trial"] = np.nan
     if job.chunk:      # the same batch cut to a preset's chunk: what a sweep's unit pays per trial
         chunk = batch_of(job.chunk)
         out["chunk_seconds_per_trial"] = min(_cpu_seconds(lambda: method.run(chunk, params))
                                              for _ in range(ROUNDS)) / job.chunk
     return {**out, "seconds_per_trial": best["method"] / job.trials}
+
+
+def _reference_timing(method, reference_run, params, calls: dict[str, list], method_round):
+    """``(mode, seconds, parts)``: the reference's least CPU seconds over :data:`ROUNDS` rounds
+    in the faster of its ways to be called (``calls``: mode -> the batches of one call each,
+    :data:`REFERENCE_MODES`), and of the reference less each of its parts in that mode. Each
+    round times every mode, then the method (``method_round()``): interleaved."""
+    best: dict[str, float] = {}
+    parts: dict[str, dict[str, float]] = {mode: {} for mode in calls}
+    for _ in range(ROUNDS):
+        for mode, batches in calls.items():
+            seconds, spent = _calls_seconds(method, reference_run, params, batches)
+            best[mode] = min(best.get(mode, np.inf), seconds)
+            for part, part_seconds in spent.items():
+                parts[mode][part] = min(parts[mode].get(part, np.inf), seconds - part_seconds)
+        method_round()
+    mode = min(best, key=best.get)
+    return mode, best[mode], parts[mode]
+
+
+def _calls_seconds(method, reference_run, params, batches: list) -> tuple[float, dict[str, float]]:
+    """CPU seconds of one ``reference_run`` per batch, summed, and of each of its parts
+    (:attr:`bench.core.Method.reference_part_seconds`), summed over the calls."""
+    total, parts = 0.0, {}
+    for batch in batches:
+        total += _cpu_seconds(lambda: reference_run(batch, params))
+        for part, spent in (method.reference_part_seconds or {}).items():
+            parts[part] = parts.get(part, 0.0) + spent
+    return total, parts
 
 
 def measure_scene(job: SceneJob) -> dict:
@@ -381,6 +416,7 @@ def run_perf(out_dir: Path, *, methods=None, sizes=None, executors: bool = False
                          "seconds_per_trial": m["seconds_per_trial"], "trials_per_second": 1.0 / m["seconds_per_trial"],
                          "chunk": job.chunk, "chunk_seconds_per_trial": m["chunk_seconds_per_trial"],
                          "reference": name, "reference_seconds_per_trial": seconds,
+                         "reference_mode": m["reference_mode"],
                          "speedup": seconds / m["seconds_per_trial"] if np.isfinite(seconds) else np.nan,
                          **fraction, "peak_rss_mb": m["peak_rss_mb"],
                          f"{m['work_unit']}_per_second": m["work_per_trial"] / m["seconds_per_trial"]})
@@ -507,6 +543,12 @@ def _chunk_text(row: dict) -> str:
     return f"{at_chunk * 1e3:.3g} ({int(row['chunk'])} trials; ×{at_chunk / row['seconds_per_trial']:.2g})"
 
 
+def _reference_calls(row: dict, info: dict) -> str:
+    """How the reference's time was taken: its trials and, when it had two ways, the faster one."""
+    mode = row.get("reference_mode")
+    return f"{info['reference_trials']} trials" + (f", {mode}" if isinstance(mode, str) and mode else "")
+
+
 def _limits_text(machine: dict) -> str:
     """The header's paragraph: the limits measured at the start of the run, and the fraction column."""
     cache = machine.get("last_level_cache_bytes")
@@ -557,14 +599,16 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
                      *("–" if not np.isfinite(row[rate]) else f"{row[rate]:.3g}" for rate in rates),
                      row["reference"] or "–",
                      "–" if not np.isfinite(row["reference_seconds_per_trial"])
-                     else f"{row['reference_seconds_per_trial'] * 1e3:.3g} ({info['reference_trials']} trials)",
+                     else f"{row['reference_seconds_per_trial'] * 1e3:.3g} ({_reference_calls(row, info)})",
                      fmt(row["speedup"]), _fraction_cell(row, notes), f"{row['peak_rss_mb']:.0f}",
                      _target_text(targets, row)])
     parts = ["# Performance", "Written by `bench perf`; `perf.csv` holds the same numbers. One core per "
              "measurement (a fresh process, numba, OpenMP, MKL and OpenBLAS held to one thread); times are "
              f"the CPU time of that thread, the minimum over {ROUNDS} rounds in which the method and its "
              "reference (on the reference's trials, same process) run in turn, each after a one-trial "
-             "warm-up (JIT compilation is not timed); the method also at the smallest chunk of the presets "
+             "warm-up (JIT compilation is not timed); the reference both on its whole batch in one call and "
+             "one trial per call, the faster kept (named in its column: a vectorised peer's whole batch can "
+             "outgrow the caches one trial fits in); the method also at the smallest chunk of the presets "
              "that run it (the batch a sweep's unit hands it; × its per-trial time over the large batch's: "
              "the fixed cost per call). A reference timed with a part apart (a peer tracker's "
              "initiator) has a second row: the reference less that part. Rates are per core: trials per "

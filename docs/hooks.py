@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from radarbench.bench.docs import pages
+from radarbench.bench.docs import fill_measured, pages
 
 _generated: dict = {}
 
@@ -28,3 +28,8 @@ def on_files(files, config):
         else:
             files.append(File.generated(config, path, content=content))
     return files
+
+
+def on_page_markdown(markdown, page, config, files):
+    """A hand-written page's measured durations (:func:`bench.docs.fill_measured`)."""
+    return fill_measured(markdown, Path(config.config_file_path).parent, page.file.src_uri)

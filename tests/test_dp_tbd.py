@@ -306,3 +306,15 @@ def test_along_track_differs_from_per_cell_and_default_is_per_cell():
     along = DpTbdMf().run(batch, build_params(DpTbdMf.Params, {"likelihood": "along-track"}))
     np.testing.assert_array_equal(per_cell.score, explicit.score)
     assert not np.allclose(per_cell.score, along.score)
+
+
+@pytest.mark.parametrize("prewhiten", [False, True])
+@pytest.mark.parametrize("n", [1, 3])
+def test_the_bench_perf_peer_gives_the_methods_output(n, prewhiten):
+    """``dp-tbd``'s ``bench perf`` reference (the vectorised NumPy twin) on one trial and on a
+    batch, on the frames or their pre-whitened innovations: the method's scores and tracks, bit for bit."""
+    method = get_method("dp-tbd")()
+    b, params = scene(6.0, n=n), build_params(method.Params, {"prewhiten": prewhiten})
+    fast, peer = method.run(b, params), method.reference_run(b, params)
+    np.testing.assert_array_equal(fast.score, peer.score)
+    np.testing.assert_array_equal(fast.track, peer.track)

@@ -169,40 +169,68 @@ def _burn(seconds: float) -> float:
     return time.thread_time() - t0
 
 
+def _burning_method(monkeypatch, name: str, reference_name: str, reference_trials: int, reference_run,
+                    **members) -> str:
+    """Register a tracking method ``name`` whose run burns 1 ms of CPU and whose reference is
+    ``reference_run(method, batch)``; returns its name."""
+    from dataclasses import dataclass
+
+    from radarbench.bench.core import TRACKING, Method
+
+    @dataclass(frozen=True)
+    class Params:
+        pass
+
+    cls = type(name, (Method,), {"name": name, "task": TRACKING, "Params": Params, "reference_name": reference_name,
+                                 "reference_trials": reference_trials, "run": lambda self, batch, params: _burn(1e-3),
+                                 "reference_run": lambda self, batch, params: reference_run(self, batch), **members})
+    monkeypatch.setitem(registry._METHODS, name, cls)
+    return name
+
+
 def test_a_reference_part_timed_apart_gets_a_second_row(monkeypatch, tmp_path):
     """A reference declaring ``reference_parts`` gets two rows against the same method time:
     the whole reference, and the reference less the CPU seconds it reported for the part."""
-    from dataclasses import dataclass
-
     from radarbench.bench import perf
-    from radarbench.bench.core import TRACKING, Method
 
     registry.discover()
 
-    class WithAPart(Method):
-        name, task = "with-a-part", TRACKING
-        reference_name = "a loop"
-        reference_parts = {"setup": "set-up"}
+    def reference_run(method, batch):
+        method.reference_part_seconds = {"setup": _burn(6e-3)}
+        _burn(3e-3)
 
-        @dataclass(frozen=True)
-        class Params:
-            pass
-
-        def run(self, batch, params):
-            _burn(1e-3)
-
-        def reference_run(self, batch, params):
-            self.reference_part_seconds = {"setup": _burn(6e-3)}
-            _burn(3e-3)
-
-    monkeypatch.setitem(registry._METHODS, WithAPart.name, WithAPart)
+    name = _burning_method(monkeypatch, "with-a-part", "a loop", 2, reference_run,
+                           reference_parts={"setup": "set-up"})
     _in_this_process(monkeypatch)
-    perf.run_perf(tmp_path, methods=[WithAPart.name], progress=lambda _: None)
+    perf.run_perf(tmp_path, methods=[name], progress=lambda _: None)
     rows = pd.read_csv(tmp_path / "perf.csv")
     assert rows.reference.tolist() == ["a loop", "a loop, without its set-up (timed apart)"]
     assert rows.seconds_per_trial.nunique() == 1                          # one method time, two references
-    whole, less = rows.reference_seconds_per_trial * perf.jobs([WithAPart.name])[0].reference_trials   # per call
+    whole, less = rows.reference_seconds_per_trial * perf.jobs([name])[0].reference_trials   # per call
     assert 6e-3 <= whole - less < whole and less >= 3e-3
+
+
+def test_a_reference_is_timed_on_its_whole_batch_and_per_trial_the_faster_kept(monkeypatch, tmp_path):
+    """A reference whose cost grows faster than its batch (a vectorised peer outgrowing the
+    caches) is timed one trial per call; one with a large cost per call on its whole batch;
+    the row says which, and its time is that way's."""
+    from radarbench.bench import perf
+
+    registry.discover()
+
+    def reference(name: str, seconds_of_call):
+        return _burning_method(monkeypatch, name, "a peer", 4, lambda method, batch: _burn(seconds_of_call(batch.n)))
+
+    quadratic = reference("grows-with-its-batch", lambda n: 1e-3 * n * n)      # 16 ms whole, 4 x 1 ms per trial
+    fixed = reference("costs-per-call", lambda n: 4e-3 + 1e-4 * n)             # 4.4 ms whole, 4 x 4.1 ms per trial
+    _in_this_process(monkeypatch)
+    perf.run_perf(tmp_path, methods=[quadratic, fixed], progress=lambda _: None)
+    rows = pd.read_csv(tmp_path / "perf.csv").set_index("method")
+    assert rows.reference_mode.to_dict() == {quadratic: "per trial", fixed: "whole batch"}
+    assert 1e-3 <= rows.reference_seconds_per_trial[quadratic] < 4e-3
+    assert 1.1e-3 <= rows.reference_seconds_per_trial[fixed] < 4.1e-3
+    text = re.sub(" +", " ", (tmp_path / "report.md").read_text())
+    assert "(4 trials, per trial)" in text and "(4 trials, whole batch)" in text
 
 
 #: limits of a made-up machine (``bench.limits.measure_limits``' keys)

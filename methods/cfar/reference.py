@@ -3,15 +3,20 @@ which ``bench perf`` times them against and the tests use as oracles
 (docs/architecture.md, 'Performance').
 
 Same windows, edges, closed forms and peak detection as :mod:`models.cfar`,
-by SciPy filters over the whole batch: CA by ``scipy.ndimage.correlate1d``
-with the window's footprint (ones on the reference cells, zeros on the
-guard cells and the cell under test; the count of in-map reference cells by
-the same correlation of ones, so edges are one-sided exactly as in the
-kernel), OS by ``scipy.ndimage.rank_filter`` with that footprint where the
-window is whole and ``np.partition`` of the gathered window at the edges
-(where k' = ceil(k N'/N) changes), GO and SO by one correlation per
-half-window and ``scipy.special.betainc`` for their closed forms, the regression by a per-line
-``numpy.linalg.lstsq`` loop with its explicit hat matrix.
+by SciPy filters over the whole batch. CA, GO and SO take their window sums from
+SciPy's running sums (``scipy.ndimage.uniform_filter1d``, O(1) per cell, zeros
+beyond the map, so edges are one-sided exactly as in the kernel): CA's window is
+the block of 2(g + L) + 1 cells centred on the cell less the 2g + 1 guard block,
+a GO/SO half the g + L + 1 cells ending (leading) or starting (lagging) at the
+cell less the g + 1 nearest; the in-map counts are
+:func:`models.cfar.window_counts`; GO and SO's closed forms by
+``scipy.special.betainc``. OS by ``scipy.ndimage.rank_filter`` with the window's
+footprint (ones on the reference cells, zeros on the guard cells and the cell
+under test) where the window is whole and ``np.partition`` of the gathered
+window at the edges (where k' = ceil(k N'/N) changes). The regression by a
+per-line ``numpy.linalg.lstsq`` loop with its explicit hat matrix: the tests'
+oracle only (``regression-cfar``'s fit is itself vectorised NumPy, so ``bench
+perf`` has no plain peer to time it against).
 """
 
 from __future__ import annotations
@@ -48,12 +53,25 @@ def _finish(maps, per_axis, params) -> CellDetectionOutput:
                                           peaks=cfar.local_maxima_scipy))
 
 
+#: where a block of cells lies against the cell it is summed for, and the origin
+#: ``scipy.ndimage.uniform_filter1d`` takes for it (a block of ``size`` cells)
+ALIGNMENTS = {"centre": lambda size: 0, "end": lambda size: (size - 1) // 2, "start": lambda size: -(size // 2)}
+
+
+def block_sums(maps: np.ndarray, axis: str, size: int, align: str) -> np.ndarray:
+    """Per cell, in float64, the sum of the ``size`` cells along ``axis`` centred on it (``size``
+    odd), ending at it or starting at it (:data:`ALIGNMENTS`), zero beyond the map: SciPy's
+    running mean times ``size``."""
+    mean = scipy.ndimage.uniform_filter1d(maps, size, axis=AXIS[axis], output=np.float64, mode="constant",
+                                          cval=0.0, origin=ALIGNMENTS[align](size))
+    return mean * size
+
+
 def ca_axis(maps: np.ndarray, L: int, g: int, axis: str) -> tuple[np.ndarray, np.ndarray]:
-    """(mu, S) of CA-CFAR along ``axis`` by correlation with the footprint."""
-    w = footprint(L, g)
-    sums = scipy.ndimage.correlate1d(maps.astype(np.float64), w, axis=AXIS[axis], mode="constant", cval=0.0)
-    M = maps.shape[AXIS[axis]]
-    counts = _along(scipy.ndimage.correlate1d(np.ones(M), w, mode="constant", cval=0.0), axis)
+    """(mu, S) of CA-CFAR along ``axis``: the window's sum by running sums, the whole block
+    less the guard block (module docstring)."""
+    sums = block_sums(maps, axis, 2 * (g + L) + 1, "centre") - block_sums(maps, axis, 2 * g + 1, "centre")
+    counts = _along(cfar.reference_counts(maps.shape[AXIS[axis]], L, g).astype(np.float64), axis)
     mu = sums / counts
     return mu, cfar.ca_significance(maps / mu, counts)
 
@@ -80,18 +98,15 @@ def os_axis(maps: np.ndarray, L: int, g: int, k: int, axis: str) -> tuple[np.nda
 
 
 def halves_axis(maps: np.ndarray, L: int, g: int, axis: str, detector: str) -> tuple[np.ndarray, np.ndarray]:
-    """(mu, S) of GO- or SO-CFAR along ``axis``: each half's sum and in-map count by
-    correlation with its own footprint, the larger/smaller mean (an empty half:
-    the other's), the closed form by ``scipy.special.betainc`` (:func:`models.cfar.halves.halves_pfa`)."""
+    """(mu, S) of GO- or SO-CFAR along ``axis``: each half's sum by running sums (module
+    docstring) over its in-map count, the larger/smaller mean (an empty half: the
+    other's), the closed form by ``scipy.special.betainc`` (:func:`models.cfar.halves.halves_pfa`)."""
     means, counts = [], []
-    M = maps.shape[AXIS[axis]]
-    for side in (slice(0, L), slice(L + 2 * g + 1, None)):     # leading half, lagging half
-        w = np.zeros(2 * (g + L) + 1)
-        w[side] = 1.0
-        n = scipy.ndimage.correlate1d(np.ones(M), w, mode="constant", cval=0.0)
-        sums = scipy.ndimage.correlate1d(maps.astype(np.float64), w, axis=AXIS[axis], mode="constant", cval=0.0)
-        means.append(np.where(_along(n, axis) > 0, sums / _along(np.maximum(n, 1.0), axis), np.nan))
-        counts.append(_along(n, axis))
+    for side, n in zip(("end", "start"), cfar.window_counts(maps.shape[AXIS[axis]], L, g)):   # leading, lagging
+        sums = block_sums(maps, axis, g + L + 1, side) - block_sums(maps, axis, g + 1, side)
+        n = _along(n.astype(np.float64), axis)
+        means.append(np.where(n > 0, sums / np.maximum(n, 1.0), np.nan))
+        counts.append(n)
     pick = np.fmax if detector == "go" else np.fmin                # NaN (an empty half): the other
     mu = pick(*means)
     pfa = cfar_halves.halves_pfa(maps / mu, *counts, greatest=detector == "go")

@@ -10,9 +10,9 @@ from radarbench.bench.core import Batch, DetectionOutput
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_method
-from radarbench.methods.maneuver.base import InnovationDetector, reference_filter
+from radarbench.methods.maneuver.base import InnovationDetector
 from radarbench.methods.maneuver.glr import JUMPS, MAX_GLR_WINDOW, Glr
-from radarbench.models.kalman import InnovationSequence, reference_innovations
+from radarbench.models.kalman import InnovationSequence
 
 #: the per-step scores the sum accumulates
 SCORES = ("nis", "glr")
@@ -33,7 +33,8 @@ def page_cusum(score: np.ndarray, drift: float) -> np.ndarray:
 
 def reference_cusum(score: np.ndarray, drift: float) -> np.ndarray:
     """The same recursion one trial and one step at a time, in plain Python floats
-    (the reference of ``bench perf`` and the oracle of the tests)."""
+    (the oracle of the tests; ``bench perf``'s reference runs :func:`page_cusum`, the
+    recursion as a NumPy user writes it, on the filterpy loop's score)."""
     g = np.zeros(score.shape)
     for i, row in enumerate(score.tolist()):
         value = 0.0
@@ -70,7 +71,6 @@ class Cusum(InnovationDetector):
     """
 
     name = "cusum"
-    reference_name = "per-trial filterpy KalmanFilter loop, the recursion in Python floats"
 
     @dataclass(frozen=True)
     class Params:
@@ -99,16 +99,6 @@ class Cusum(InnovationDetector):
             score, valid_from = glr.statistic, glr.valid_from
         return DetectionOutput(statistic=page_cusum(score, params.drift), valid_from=valid_from,
                                traces={params.score: score})
-
-    def reference_run(self, batch: Batch, params) -> DetectionOutput:
-        """:func:`reference_cusum` on the score from the per-trial filterpy loop
-        (:func:`models.kalman.reference_innovations`, :meth:`methods.maneuver.glr.Glr.reference_run`)."""
-        if params.score == "nis":
-            score, valid_from = reference_innovations(reference_filter(batch), batch.z).nis, 0
-        else:
-            glr = Glr().reference_run(batch, params)
-            score, valid_from = glr.statistic, glr.valid_from
-        return DetectionOutput(statistic=reference_cusum(score, params.drift), valid_from=valid_from)
 
     def valid_from(self, params, steps: int) -> int:
         """The score's: 0 for the NIS, the GLR's once its window is whole."""

@@ -158,8 +158,10 @@ def reference_glr(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0:
     """The textbook online GLR, one trial and one step at a time: a filterpy
     ``KalmanFilter`` loop that keeps, per trial, a bank of the last ``window`` onsets
     and updates each one's F, d and C by the recursions of :func:`signatures` and
-    :func:`glr_statistic` with the filter's own K_t, S_t and nu_t. The reference of
-    ``bench perf`` and the oracle of the tests."""
+    :func:`glr_statistic` with the filter's own K_t, S_t and nu_t. The oracle of the
+    tests; ``bench perf`` times the method against :func:`glr_statistic` on the
+    filterpy loop's innovations (:class:`methods.maneuver.base.InnovationDetector`),
+    the GLR vectorised as a NumPy user would write it, not this loop over onsets."""
     n, K, m = z.shape
     HF = model.H @ model.F
     out = np.zeros((n, K))
@@ -209,9 +211,6 @@ class Glr(InnovationDetector):
     """
 
     name = "glr"
-    reference_name = "online GLR bank of the last M onsets, per-trial filterpy KalmanFilter loop"
-    #: the bank updates M onsets per step in Python: twenty trials time it well enough
-    reference_trials = 20
 
     @dataclass(frozen=True)
     class Params:
@@ -239,12 +238,6 @@ class Glr(InnovationDetector):
         filt = reference_filter(batch)
         gains = inn.gain if inn.gain is not None else covariance_sequence(filt.model, filt.P0, batch.steps)[3]
         return signatures(filt.model, gains, inn.S, params.window, params.jump)
-
-    def reference_run(self, batch: Batch, params) -> DetectionOutput:
-        """:func:`reference_glr`: the per-trial, per-step filterpy loop."""
-        filt = reference_filter(batch)
-        statistic = reference_glr(filt.model, batch.z, filt.x0, filt.P0, params.window, params.jump)
-        return DetectionOutput(statistic=statistic, valid_from=self.valid_from(params, batch.steps))
 
     def nominal_threshold(self, params, pfa: float, batch: Batch) -> float:
         """chi2(n_z) upper quantile at pfa / M (Bonferroni over the M onsets), by the

@@ -158,9 +158,7 @@ class DpTbd(Method):
                                        "ablation, not Tonissen's method")
 
     def run(self, batch: Batch, params) -> TBDOutput:
-        z = _frames32(batch)
-        if params.prewhiten:
-            z = prewhiten(z, batch)
+        z = self._frames(batch, params)
         q = window_radius(params.max_speed_m_s, batch)
         score, track, value = _outputs(z)
         kernels.dp_tbd(z, q, score, track, value)
@@ -169,8 +167,14 @@ class DpTbd(Method):
     def reference_run(self, batch: Batch, params) -> TBDOutput:
         """The peer ``bench perf`` compares against: the kernel's algorithm in plain vectorised NumPy
         (:func:`methods.tbd.reference.numpy_dp_tbd`); the SciPy stacked-argmax recursion stays the tests' oracle."""
-        score, track = numpy_dp_tbd(_frames32(batch), window_radius(params.max_speed_m_s, batch))
+        score, track = numpy_dp_tbd(self._frames(batch, params), window_radius(params.max_speed_m_s, batch))
         return TBDOutput(score=score, track=track)
+
+    @staticmethod
+    def _frames(batch: Batch, params):
+        """The frames the recursion runs on: the scene's, or their pre-whitened innovations."""
+        z = _frames32(batch)
+        return prewhiten(z, batch) if params.prewhiten else z
 
     def work(self, batch: Batch, params) -> tuple[str, float]:
         """State transitions evaluated: cells x window x (frames - 1) per trial."""

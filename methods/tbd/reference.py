@@ -14,8 +14,9 @@ frames' dtype (float32 for ``tbd-grid``), so it agrees with the numba kernel
 bit for bit.
 
 :func:`numpy_dp_tbd`, the peer ``bench perf`` times the kernel against, is the
-kernel's own algorithm as a competent NumPy user would write it: the whole batch
-at once, the forward pass maxima only (the box maximum separable, 2 (2q + 1)
+kernel's own algorithm as a competent NumPy user would write it: the batch it is
+given at once (``bench perf`` also hands it one trial per call and keeps the faster:
+a large batch's merits outgrow the caches), the forward pass maxima only (the box maximum separable, 2 (2q + 1)
 ``np.maximum`` passes over -inf-padded planes), every frame's merit kept, the
 backpointers recomputed along the track only. Same outputs, bit for bit.
 """
@@ -71,25 +72,27 @@ def reference_dp_tbd(frames: np.ndarray, window_radius: int) -> tuple[np.ndarray
 
 # ------------------------------------------------------------------ pf-tbd
 
-def _residuals(frames: np.ndarray, k: int, cells: np.ndarray, beta: np.ndarray) -> np.ndarray:
-    """r_k(c) = z_k(c) - beta1 z_(k-1)(c) - beta2 z_(k-2)(c) at flat ``cells`` (the lags that exist)."""
-    flat = frames.reshape(frames.shape[0], -1).astype(np.float64)
-    r = flat[k, cells]
+def _residual_map(frames: np.ndarray, k: int, beta: np.ndarray) -> np.ndarray:
+    """r_k(c) = z_k(c) - beta1 z_(k-1)(c) - beta2 z_(k-2)(c) at every flat cell c of frame k
+    (the lags that exist), in float64 from the three frames it reads alone."""
+    flat = frames.reshape(frames.shape[0], -1)
+    r = flat[k].astype(np.float64)
     for lag in range(1, min(k, 2) + 1):
-        r = r - beta[lag - 1] * flat[k - lag, cells]
+        r = r - beta[lag - 1] * flat[k - lag].astype(np.float64)
     return r
 
 
-def _pf_log_likelihood_ratio(frames, k, cells, amps, beta, var) -> np.ndarray:
+def _pf_log_likelihood_ratio(residuals, cells, amps, beta, var) -> np.ndarray:
     """Sum over the distinct cells of each particle's (c0, c1, c2) of (m r - m^2 / 2) / var,
-    m(c) = a0 [c0 = c] - beta1 a1 [c1 = c] - beta2 a2 [c2 = c] (:class:`methods.tbd.pf_tbd.PfTbd`)."""
+    m(c) = a0 [c0 = c] - beta1 a1 [c1 = c] - beta2 a2 [c2 = c] (:class:`methods.tbd.pf_tbd.PfTbd`),
+    r the frame's residual map (:func:`_residual_map`) gathered at the particles' cells."""
     coef = np.array([1.0, -beta[0], -beta[1]])
     total = np.zeros(cells.shape[1])
     for slot in range(3):
         c = cells[slot]
         first = (c >= 0) & ~np.any(cells[:slot] == c, axis=0)     # first occurrence of the cell
         m = sum(coef[s] * amps[s] * (cells[s] == c) for s in range(3))
-        r = _residuals(frames, k, np.where(first, c, 0), beta)
+        r = residuals[np.where(first, c, 0)]
         total += np.where(first, (m * r - 0.5 * m * m) / var, 0.0)
     return total
 
@@ -97,7 +100,8 @@ def _pf_log_likelihood_ratio(frames, k, cells, amps, beta, var) -> np.ndarray:
 def reference_pf_tbd(frames, keys, geometry, model, betas, variances, flags):
     """(score (n,), track (n, K, 2)) of the particle-filter TBD (:class:`methods.tbd.pf_tbd.PfTbd`),
     the arguments of :func:`methods.tbd.pf_kernels.pf_tbd`, written with NumPy arrays over the
-    particles, one trial and one frame at a time, on the same counter-based draws."""
+    particles, one trial and one frame at a time, on the same counter-based draws: each frame's
+    residual map once (the measurement proposal reads it whole), gathered at the particles' cells."""
     from radarbench.methods.tbd.pf_kernels import RESAMPLE_SLOT, draws
 
     frames = np.asarray(frames)
@@ -115,7 +119,7 @@ def reference_pf_tbd(frames, keys, geometry, model, betas, variances, flags):
         for k in range(K):
             beta, var = betas[min(k, 2)], variances[min(k, 2)]
             u = [draws(key, k, births, s, P) for s in range(6)]
-            r_all = _residuals(frames[t], k, np.arange(H * W), beta)
+            r_all = _residual_map(frames[t], k, beta)
             above = np.flatnonzero(r_all >= gate * np.sqrt(var)) if flags[0] == 0 else np.zeros(0, int)
             pool = above if above.size else np.arange(H * W)
             cell_b = pool[np.minimum((u[0] * pool.size).astype(np.int64), pool.size - 1)]
@@ -142,7 +146,7 @@ def reference_pf_tbd(frames, keys, geometry, model, betas, variances, flags):
             state, cells_all = np.concatenate([state_b, state_c], axis=1), np.concatenate([cells_b, cells_c], axis=1)
             logw = np.concatenate([logw_b, logw_c])
             live = np.isfinite(logw)
-            logw[live] += _pf_log_likelihood_ratio(frames[t], k, cells_all[:, live], state[4:7, live], beta, var)
+            logw[live] += _pf_log_likelihood_ratio(r_all, cells_all[:, live], state[4:7, live], beta, var)
             top = logw.max()
             weights = np.exp(logw - top)
             total = np.cumsum(weights)[-1]            # summed in particle order, as the kernel does
