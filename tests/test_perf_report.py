@@ -19,7 +19,7 @@ def test_scene_jobs_cover_every_scenarios_sizes():
     assert every == {(name, size): trials for name, cls in registry.scenarios().items()
                      for size, (_, trials) in cls.perf_sizes.items()}
     reached = {(j.scenario, j.size) for j in jobs()}
-    assert reached < set(every)                           # sizes beyond the method jobs' scenarios
+    assert reached <= set(every)                          # every size a method job times is a scene job
     for method in ("cv-kf", "dp-tbd"):
         cls = registry.get_method(method)
         picked = {(j.scenario, j.size) for j in scene_jobs([method])}

@@ -107,6 +107,12 @@ COMPANIONS = {
     ("rd-map", "interference_range_cells", "4096"): {"range_cells": 4096, "interference_range_start": 0},
     ("rd-map", "edge_range_cell", "4095"): {"range_cells": 4096},
     ("rd-map", "margin_cells", "2047"): {"range_cells": 4096, "doppler_cells": 16384},
+    ("hfswr-rd-scans", "targets", "1"): {"crossing": False},
+    ("hfswr-rd-scans", "range_cells", "16"): {"interference_range_start": 0, "edge_range_cell": 8},
+    ("hfswr-rd-scans", "interference_range_start", "1023"): {"range_cells": 1024, "interference_range_cells": 1},
+    ("hfswr-rd-scans", "interference_range_cells", "1024"): {"range_cells": 1024, "interference_range_start": 0},
+    ("hfswr-rd-scans", "edge_range_cell", "1023"): {"range_cells": 1024},
+    ("hfswr-rd-scans", "crossing_targets", "50"): {"targets": 50},
 }
 
 
