@@ -281,7 +281,7 @@ class Component:
     def data_files(self, params) -> list[Path]:
         """The data files a config with ``params`` reads: their content is part of the
         config's identity, so editing one re-runs the results that read it
-        (:mod:`bench.identity`). The default: the values of the parameters declared
+        (:mod:`bench.run.identity`). The default: the values of the parameters declared
         ``param(..., kind="path")`` (a sweep resolves them from its own folder), "" left
         out. Override it when the files follow from the parameters otherwise."""
         return [Path(getattr(params, f.name)) for f in dataclasses.fields(params)
@@ -289,7 +289,7 @@ class Component:
 
     def identity_modules(self, params) -> tuple[str, ...]:
         """Modules beyond its own whose code computes a config with ``params`` (their code is
-        part of the config's identity, :mod:`bench.identity`): a plugin that runs other
+        part of the config's identity, :mod:`bench.run.identity`): a plugin that runs other
         registered plugins named by its parameters names their modules, which it reaches
         through the registry and no import statement. The default: none."""
         return ()
@@ -319,13 +319,13 @@ class Scenario(Component):
     #: ``bench perf`` goals for :meth:`generate` alone: size -> {"seconds_per_trial": goal}
     perf_targets: ClassVar[dict] = {}
     #: the capabilities its scenes provide beyond its tasks' scene types (names of
-    #: :data:`bench.capabilities.CAPABILITIES`); the methods that need them run on it
+    #: :data:`bench.sweep.capabilities.CAPABILITIES`); the methods that need them run on it
     provides: ClassVar[frozenset[str]] = frozenset()
 
     def generate(self, params, snr_db: float | None, n: int, rng) -> Batch:
         """``n`` trials at ``snr_db`` (``None``: the null hypothesis).
 
-        ``rng`` is a :class:`bench.rng.TrialRNG`: one independent stream per
+        ``rng`` is a :class:`bench.sweep.rng.TrialRNG`: one independent stream per
         trial, so a trial's draws do not depend on how trials are chunked. The
         batch's scene is of the scene type of every task in :attr:`tasks`
         (``Task.scene_type``).
@@ -400,7 +400,7 @@ class Method(Component):
     #: the task this method performs (one of :data:`TASKS`)
     task: ClassVar[str] = ""
     #: the capabilities it reads from a scene beyond its task's scene type (names of
-    #: :data:`bench.capabilities.CAPABILITIES`, e.g. a kinematic model): it runs on the
+    #: :data:`bench.sweep.capabilities.CAPABILITIES`, e.g. a kinematic model): it runs on the
     #: scenarios that provide them all; empty: every scenario of its task
     needs: ClassVar[frozenset[str]] = frozenset()
     #: the capabilities a scenario config may require that it handles (e.g. ragged batches,
@@ -467,7 +467,7 @@ class Method(Component):
         read and written at least once), ``{"float32_operations": n}`` or
         ``"float64_operations"`` (the adds and maxima its algorithm cannot avoid), or
         several; ``bench perf`` shows the time these take at the machine's measured limits
-        over the time measured (:mod:`bench.limits`). A string: why no honest model exists
+        over the time measured (:mod:`bench.run.limits`). A string: why no honest model exists
         (one phrase). None (the default): no model declared."""
         return None
 

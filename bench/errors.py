@@ -12,7 +12,7 @@ Each kind has its exit code (docs/running.md, 'Exit codes'; ``bench --help``):
 
 Not an error kind: ``bench run`` exits 6 (:data:`EXIT_FAILED_UNITS`) when the run
 folder holds failed (unit, method config) runs, after writing the report and one line
-per failing config on stderr (:mod:`bench.failures`).
+per failing config on stderr (:mod:`bench.results.failures`).
 
 Out of memory (:func:`is_out_of_memory`: a MemoryError, or an import that could not map
 its library) is exit 3 too, wherever it strikes.
@@ -34,7 +34,7 @@ EXIT_ENVIRONMENT = 3
 EXIT_IN_USE = 4
 EXIT_INTERRUPTED = 130
 EXIT_REGRESSION = 5     # bench compare --fail-on-regression: a metric got significantly worse
-EXIT_FAILED_UNITS = 6   # bench run: some (unit, method config) runs failed (bench.failures)
+EXIT_FAILED_UNITS = 6   # bench run: some (unit, method config) runs failed (bench.results.failures)
 
 
 class ConfigError(ValueError):

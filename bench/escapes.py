@@ -4,7 +4,7 @@ A sweep's description, a plugin's docstring or error text, a cached listing: any
 may hold terminal escape sequences (ESC, the C1 CSI), NULs, or bidirectional formatting
 characters that reorder what a reader sees ("Trojan Source"). Written as Python-style
 escapes (``\\x1b``, ``\\u202e``) they are shown, never obeyed. This module imports nothing
-heavy: ``bench list`` prints its cached listing through it (:mod:`bench.listing`);
+heavy: ``bench list`` prints its cached listing through it (:mod:`bench.sweep.listing`);
 :mod:`bench.markdown` builds its Markdown escaping on it.
 """
 

@@ -5,7 +5,7 @@ Each figure function builds its figure and hands it to :func:`_save`. Inside
 milliseconds and renders in a few hundred: the drawing is the cost) while the report
 goes on; the PNGs are written, each whole, when the block ends. Inside
 :func:`reusing`, a figure function marked :func:`cached` is not even built when the
-same figure was drawn before from the same inputs and code (:mod:`bench.figure_cache`).
+same figure was drawn before from the same inputs and code (:mod:`bench.results.figure_cache`).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from radarbench.bench.tables import identical_curves  # noqa: E402
+from radarbench.bench.results.tables import identical_curves  # noqa: E402
 
 DPI = 110
 #: zlib level of the PNGs: 1 encodes several times faster than Pillow's default 6, for files a little larger
@@ -35,7 +35,7 @@ PNG_COMPRESS_LEVEL = 1
 #: the figures of the :func:`rendering_in` block in progress: [(path, pickled figure, future of its PNG or None)]
 _pending: contextvars.ContextVar[list | None] = contextvars.ContextVar("pending_figures", default=None)
 _pool: contextvars.ContextVar = contextvars.ContextVar("figure_pool", default=None)
-#: the figures a build reuses (bench.figure_cache.FigureReuse) inside :func:`reusing`, else None
+#: the figures a build reuses (bench.results.figure_cache.FigureReuse) inside :func:`reusing`, else None
 _reuse: contextvars.ContextVar = contextvars.ContextVar("figure_reuse", default=None)
 #: the key of the figure a :func:`cached` function is drawing (None: not known)
 _key: contextvars.ContextVar = contextvars.ContextVar("figure_key", default=None)
@@ -44,7 +44,7 @@ _key: contextvars.ContextVar = contextvars.ContextVar("figure_key", default=None
 @contextlib.contextmanager
 def reusing(reuse):
     """Within the block, the figures of :func:`cached` functions are reused and counted
-    by ``reuse`` (a :class:`bench.figure_cache.FigureReuse`)."""
+    by ``reuse`` (a :class:`bench.results.figure_cache.FigureReuse`)."""
     token = _reuse.set(reuse)
     try:
         yield reuse
@@ -53,14 +53,14 @@ def reusing(reuse):
 
 
 def reuse_in_effect():
-    """The :class:`bench.figure_cache.FigureReuse` of the :func:`reusing` block in progress, else None."""
+    """The :class:`bench.results.figure_cache.FigureReuse` of the :func:`reusing` block in progress, else None."""
     return _reuse.get()
 
 
 def cached(fn):
     """Mark the figure function ``fn`` (whose argument ``path`` names its PNG) as drawn
     from its arguments alone: inside :func:`reusing`, a figure drawn before from equal
-    arguments by the same code is reused, not built (:mod:`bench.figure_cache`)."""
+    arguments by the same code is reused, not built (:mod:`bench.results.figure_cache`)."""
     signature = inspect.signature(fn)
 
     @functools.wraps(fn)
@@ -86,7 +86,7 @@ def cached(fn):
 def _write(path: Path, data: bytes, key: str | None) -> None:
     """The PNG ``data`` of the figure ``key`` to ``path`` (inside :func:`reusing`: only if
     its bytes changed, counted as drawn)."""
-    from radarbench.bench import runfolder
+    from radarbench.bench.results import runfolder
     reuse = _reuse.get()
     if reuse is None:
         runfolder.write_bytes(path, data)
@@ -109,9 +109,9 @@ def _png_of_pickled(data: bytes) -> bytes:
 
 
 def _save(fig, path: Path) -> Path:
-    """Write ``fig`` to ``path`` whole (:func:`bench.runfolder.atomic_output`), now or,
+    """Write ``fig`` to ``path`` whole (:func:`bench.results.runfolder.atomic_output`), now or,
     inside :func:`rendering_in`, once the block ends."""
-    from radarbench.bench import runfolder
+    from radarbench.bench.results import runfolder
     pending = _pending.get()
     try:
         runfolder.folder_for(path.parent)
@@ -155,7 +155,7 @@ def _say_broken(exc: BaseException) -> None:
     global _broken_said
     if not _broken_said:
         _broken_said = True
-        from radarbench.bench.progress import say
+        from radarbench.bench.run.progress import say
         say(f"the figure processes stopped ({exc}); drawing the rest here")
 
 
@@ -195,7 +195,7 @@ STYLES = ("o-", "s--", "^-.", "D:", "v-", "P--", "X-.", "*:")
 def _curves(summary: pd.DataFrame, x: str = "snr_db", column: str | None = None):
     """(colour, marker/line style, label, rows sorted by ``x``) per config; styles differ so
     equal curves stay visible, and a config whose ``column`` equals an earlier one's at
-    every level says so in its label (:func:`bench.tables.identical_curves`)."""
+    every level says so in its label (:func:`bench.results.tables.identical_curves`)."""
     same = identical_curves(summary, column) if column and x == "snr_db" else {}
     for i, (config, g) in enumerate(summary.groupby("config", sort=False)):
         label = config if config not in same else f"{config} (identical to {same[config]})"

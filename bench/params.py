@@ -39,7 +39,7 @@ from radarbench.bench.errors import ConfigError
 
 #: the ``kind`` of a parameter that names a data file
 PATH = "path"
-#: a declared choice: a word of a config label's alphabet (:data:`bench.grid.LABEL_PATTERN`)
+#: a declared choice: a word of a config label's alphabet (:data:`bench.sweep.grid.LABEL_PATTERN`)
 #: without the label's own punctuation (``,=[]()``) or blanks at its ends, so a config that
 #: sets it has a label that reads back as its own (``name[key=choice]``)
 CHOICE_PATTERN = re.compile(r"[A-Za-z0-9_.+\-]([A-Za-z0-9_.+\- ]{0,62}[A-Za-z0-9_.+\-])?\Z")
@@ -56,7 +56,7 @@ def param(default: Any, doc: str, *, ge=None, gt=None, le=None, lt=None,
     ``bench list -v``). ``kind="path"`` (a ``str`` field): a data file the
     component reads; a sweep's relative path is read from the sweep file's folder
     (:func:`resolve_path`), "" means none, and the file's content is part of the
-    config's identity (:mod:`bench.identity`).
+    config's identity (:mod:`bench.run.identity`).
     """
     if kind not in (None, PATH):
         raise TypeError(f"param kind {kind!r}: expected None or {PATH!r}")
@@ -320,7 +320,7 @@ def bounds_of(cls: type, name: str) -> dict[str, Any]:
 
 def describe_params(cls: type) -> list[tuple[str, str, Any, str]]:
     """(name, type, default, doc) of each field, for ``bench list`` and the documentation
-    site (:mod:`bench.docs`); the doc ends with the bounds and their reason, or a string's
+    site (:mod:`bench.cli.docs`); the doc ends with the bounds and their reason, or a string's
     choices, when declared."""
     types = field_types(cls)
     out = []

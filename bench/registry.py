@@ -289,13 +289,13 @@ def discovered() -> bool:
 
 def discover() -> None:
     """Import all plugins once per process: the built-ins, then the entry points; their
-    numba kernels keep a cache whose failures never fail them (:mod:`bench.numba_cache`)."""
+    numba kernels keep a cache whose failures never fail them (:mod:`bench.run.numba_cache`)."""
     global _DISCOVERED
     if _DISCOVERED:
         return
     _DISCOVERED = True
-    from radarbench.bench import numba_cache
-    numba_cache.install()           # before any plugin's kernel is decorated (bench/numba_cache.py)
+    from radarbench.bench.run import numba_cache
+    numba_cache.install()           # before any plugin's kernel is decorated (bench/run/numba_cache.py)
     _builtin_tasks()
     _import_package_modules("radarbench.scenarios")
     _import_package_modules("radarbench.methods")
@@ -399,8 +399,8 @@ def qualifier(cls: type) -> str:
 def origin(cls: type) -> dict[str, str]:
     """``{"module": ..., "distribution": ...}`` of a registered class: the distribution whose
     entry point registered it, else the one installing its package
-    (:func:`bench.provenance.distribution_of`)."""
-    from radarbench.bench.provenance import distribution_of
+    (:func:`bench.results.provenance.distribution_of`)."""
+    from radarbench.bench.results.provenance import distribution_of
 
     return {"module": cls.__module__, "distribution": distribution_of(cls.__module__, _DISTRIBUTIONS.get(cls))}
 
@@ -429,7 +429,7 @@ def collisions() -> dict[str, dict[str, str]]:
 
 def _collision(kind: str, name: str, claims: list[type]) -> str:
     """``method 'glr' is registered twice (a.glr (dist-a 1.0), b.glr (dist-b 0.1)): name 'a:glr' or 'b:glr'``."""
-    from radarbench.bench.provenance import origin_text
+    from radarbench.bench.results.provenance import origin_text
 
     times = "twice" if len(claims) == 2 else f"{len(claims)} times"
     where = ", ".join(origin_text(origin(c)) for c in claims)

@@ -57,7 +57,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 #: where the results go, relative to the repository
 OUT = Path("reports/perf/loop.md")
-#: the opening of the JSON block in the Markdown output (read back by ``bench.docs.loop_record``)
+#: the opening of the JSON block in the Markdown output (read back by ``bench.cli.docs.loop_record``)
 JSON_FENCE = "```json"
 STEPS = ("first", "warm", "noop", "edit", "trials", "overrides")
 #: a step that needs another before it runs it too (the warm run needs the first's caches)

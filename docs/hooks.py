@@ -1,4 +1,4 @@
-"""mkdocs hooks (mkdocs.yml, ``hooks``): the pages :mod:`bench.docs` generates from the code,
+"""mkdocs hooks (mkdocs.yml, ``hooks``): the pages :mod:`bench.cli.docs` generates from the code,
 added to the site and to its navigation after the hand-written pages, nothing written
 into the clone (docs/architecture.md, 'Documentation')."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from radarbench.bench.docs import fill_measured, pages
+from radarbench.bench.cli.docs import fill_measured, pages
 
 _generated: dict = {}
 
@@ -31,5 +31,5 @@ def on_files(files, config):
 
 
 def on_page_markdown(markdown, page, config, files):
-    """A hand-written page's measured durations (:func:`bench.docs.fill_measured`)."""
+    """A hand-written page's measured durations (:func:`bench.cli.docs.fill_measured`)."""
     return fill_measured(markdown, Path(config.config_file_path).parent, page.file.src_uri)

@@ -12,7 +12,7 @@ Importing this package installs the compatibility path of the old names
 in an outside plugin still works, with a deprecation warning naming the new import.
 
 :func:`load_run` (a run's results as tidy pandas frames, :class:`Run`) comes from
-:mod:`radarbench.bench.tidy`, imported on first use: every plugin imports this package,
+:mod:`radarbench.bench.results.tidy`, imported on first use: every plugin imports this package,
 and pandas is not imported for it.
 """
 
@@ -31,7 +31,7 @@ _compat.install()
 
 
 #: the names this package lends from its subpackages, imported when first used
-_LAZY = {"load_run": "radarbench.bench.tidy", "Run": "radarbench.bench.tidy"}
+_LAZY = {"load_run": "radarbench.bench.results.tidy", "Run": "radarbench.bench.results.tidy"}
 
 
 def __getattr__(name: str):

@@ -85,10 +85,10 @@ def pytest_xdist_make_scheduler(config, log):
 
 
 def parse_sweep_or_skip(sweep: dict, source: str):
-    """``bench.config.parse_sweep``, or skip the test when the sweep reads data of an optional
+    """``bench.sweep.config.parse_sweep``, or skip the test when the sweep reads data of an optional
     extra not installed here (its one line says what to install, e.g. the [data] extra's
     traffic samples for the real-trajectories preset)."""
-    from radarbench.bench.config import parse_sweep
+    from radarbench.bench.sweep.config import parse_sweep
     from radarbench.bench.errors import ConfigError
     try:
         return parse_sweep(sweep, source)

@@ -5,7 +5,7 @@ import pytest
 
 from radarbench.bench import registry
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 
 
 def _batch(n=6, snr=0.0, **params):

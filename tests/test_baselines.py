@@ -1,4 +1,4 @@
-"""The strongest baseline of a claim, chosen by the run (bench/baselines.py; docs/architecture.md,
+"""The strongest baseline of a claim, chosen by the run (bench/report/baselines.py; docs/architecture.md,
 'Report').
 
 (a) the chosen config is the candidate ranked first by the task's ranking metric, averaged over the
@@ -24,9 +24,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from radarbench.bench import baselines, claims
+from radarbench.bench.report import baselines, claims
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.listing import presets
+from radarbench.bench.sweep.listing import presets
 
 DETECTION, TRACKING = "maneuver-detection", "multi-target"     # Pd (higher is better), GOSPA (lower)
 

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from radarbench.bench.calibration import EXACT_CELL_RANKS, cell_calibration, cell_exceedances, cell_order_statistics, cell_ranks
-from radarbench.bench.config import parse_sweep_text
+from radarbench.bench.sweep.config import parse_sweep_text
 from radarbench.bench.errors import ConfigError
 
 

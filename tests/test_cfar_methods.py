@@ -11,7 +11,7 @@ import pytest
 from radarbench.bench import registry
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.tasks.cells.metrics import REGION_NAMES
 from radarbench.methods.cfar import reference
 from radarbench.methods.cfar.detectors import maps_of

@@ -1,4 +1,4 @@
-"""Claims as code (bench/claims.py; docs/architecture.md, 'Report').
+"""Claims as code (bench/report/claims.py; docs/architecture.md, 'Report').
 
 (a) a claims file is validated at load: one line naming the file and the field;
 (b) each quantity kind and verdict rule on small hand-built tables (the rule's every branch
@@ -21,9 +21,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from radarbench.bench import claims
+from radarbench.bench.report import claims
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.listing import CLAIMS_SUFFIX, presets
+from radarbench.bench.sweep.listing import CLAIMS_SUFFIX, presets
 from radarbench.bench.markdown import fmt, fmt_db
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -344,7 +344,8 @@ def test_claims_csv_has_the_schemas_columns():
 def test_bench_report_writes_claims_csv_and_the_table(small_run_copy, monkeypatch):
     """A preset run with a claims file: claims.csv (listed in the manifest) and the table
     where the notes were, the notes rendered after it."""
-    from radarbench.bench import report, runfolder
+    from radarbench.bench import report
+    from radarbench.bench.results import runfolder
     text = GOOD.replace("A paper", "Small 2026").replace("a-beats-b", "single-step-leads").replace(
         'a = "b", b = "a"', 'a = "innovation[window=1]", b = "innovation[window=5]"')
     monkeypatch.setattr(report, "_preset_name", lambda source: "small")
@@ -375,7 +376,7 @@ def _report_folders() -> list[tuple[str, Path]]:
 
 @pytest.mark.parametrize("name, folder", _report_folders(), ids=lambda x: getattr(x, "name", x))
 def test_committed_claims_csv_is_regenerated_identical_from_the_committed_csvs(name, folder):
-    from radarbench.bench.tables import csv_text
+    from radarbench.bench.results.tables import csv_text
     committed = folder / "claims.csv"
     assert committed.exists(), (f"{folder.relative_to(ROOT)} has no committed claims.csv (written when the "
                                 f"report is regenerated: bench run --preset {name} --out {folder.relative_to(ROOT)})")

@@ -1,4 +1,4 @@
-"""The claims' verdict rule on synthetic intervals (bench/claims.py; docs/architecture.md, 'Report').
+"""The claims' verdict rule on synthetic intervals (bench/report/claims.py; docs/architecture.md, 'Report').
 
 A claim reproduces when our 95% interval lies within the claimed range (beyond 0 or the
 minimal effect on the claimed side; within value ± tolerance; within [min, max]), does not
@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from radarbench.bench import claims
-from radarbench.bench.quantities import Value
+from radarbench.bench.report import claims
+from radarbench.bench.report.quantities import Value
 
 R, D, U = claims.REPRODUCES, claims.DOES_NOT, claims.NOT_RESOLVED
 INF = math.inf

@@ -2,7 +2,7 @@
 
 import pytest
 
-from radarbench.bench.config import parse_sweep, parse_sweep_text
+from radarbench.bench.sweep.config import parse_sweep, parse_sweep_text
 from radarbench.bench.errors import ConfigError
 
 
@@ -37,7 +37,7 @@ def test_snr_range_is_inclusive_and_sorted():
 def test_defaults_are_filled_and_plan_round_trips_as_a_sweep():
     import tomllib
 
-    from radarbench.bench import tomlw
+    from radarbench.bench.sweep import tomlw
     plan = parse_sweep(sweep())
     again = parse_sweep(tomllib.loads(tomlw.dumps(plan.to_dict())))
     assert again.fingerprint() == plan.fingerprint()

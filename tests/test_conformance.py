@@ -1,5 +1,5 @@
 """Every registered method on every scenario that provides what it needs (its small
-instance; :mod:`bench.capabilities`) and whose config it accepts: shapes, no NaN, determinism; every scenario's
+instance; :mod:`bench.sweep.capabilities`) and whose config it accepts: shapes, no NaN, determinism; every scenario's
 batch carries the scene type of each of its tasks."""
 
 import dataclasses
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from radarbench.bench import registry
-from radarbench.bench.capabilities import CAPABILITIES, fits, missing
+from radarbench.bench.sweep.capabilities import CAPABILITIES, fits, missing
 from radarbench.bench.core import DetectionOutput, Scene
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.registry import get_task
 from tests.test_recorded_tracks import small_params_on_a_csv
 
@@ -38,7 +38,7 @@ def test_every_method_has_a_scenario_and_nothing_is_unavailable():
 
 def test_built_in_capabilities_are_named_in_the_vocabulary():
     """Every capability a built-in plugin needs, handles or provides is one of
-    :data:`bench.capabilities.CAPABILITIES` (a misspelt name would pair nothing)."""
+    :data:`bench.sweep.capabilities.CAPABILITIES` (a misspelt name would pair nothing)."""
     used = set()
     for cls in registry.methods().values():
         used |= set(cls.needs) | set(cls.handles)

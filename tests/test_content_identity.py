@@ -21,10 +21,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from radarbench.bench import identity, registry
+from radarbench.bench.run import identity
+from radarbench.bench import registry
 from radarbench.bench.params import param, params_as_dict
-from radarbench.bench.plan import ComponentConfig
-from radarbench.bench.rng import stable_key
+from radarbench.bench.sweep.plan import ComponentConfig
+from radarbench.bench.sweep.rng import stable_key
 from tests.test_identity import _bench, loop  # noqa: F401 - the outside plugin's fixture
 
 
@@ -146,7 +147,7 @@ def test_the_harness_numerics_are_in_the_identities_that_use_them():
             "radarbench.bench.metrics", "radarbench.bench.calibration", "radarbench.models.kalman"} <= set(tracker)
     assert not {"radarbench.bench.cli", "radarbench.bench.core", "radarbench.bench.report", "radarbench"} & set(tracker)
     scenario = dict(identity.code_identity(*identity.identity_roots(registry.get_scenario("cv-turn-cv"))).modules)
-    assert "radarbench.bench.rng" in scenario and "radarbench.bench.calibration" not in scenario
+    assert "radarbench.bench.sweep.rng" in scenario and "radarbench.bench.calibration" not in scenario
 
 
 def test_a_harness_module_counts_only_when_it_computes_results(tmp_path, monkeypatch):
@@ -197,7 +198,7 @@ def test_a_data_file_counts_by_content_not_by_where_it_lies(tmp_path):
 
 def test_identities_of_a_preset_are_computed_from_a_cold_start(tmp_path, monkeypatch):
     """The user's cache of parsed modules only saves time: the same identities without it."""
-    from radarbench.bench.config import load_sweep
+    from radarbench.bench.sweep.config import load_sweep
     plan = load_sweep(Path(registry.__file__).parent / "presets" / "quick.toml")
     warm = identity.plan_identities(plan)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "empty"))
@@ -250,7 +251,7 @@ def test_a_built_in_scenario_keeps_the_streams_it_was_first_keyed_by():
 def test_a_scenario_given_a_new_parameter_draws_the_same_bytes(tmp_path, monkeypatch):
     """End to end: a registered scenario whose class gains a parameter at its default makes
     the same batches, bit for bit."""
-    from radarbench.bench.rng import EVALUATION, TrialRNG
+    from radarbench.bench.sweep.rng import EVALUATION, TrialRNG
     from radarbench.scenarios.cv_turn_cv import CvTurnCv
 
     @dataclass(frozen=True)
@@ -354,8 +355,8 @@ def test_a_comment_edit_or_a_move_reruns_nothing(loop):  # noqa: F811
 
 
 def test_a_store_of_the_earlier_scheme_is_rerun_once_and_said(tmp_path):
-    from radarbench.bench.config import parse_sweep
-    from radarbench.bench.runner import plan_record, run_sweep
+    from radarbench.bench.sweep.config import parse_sweep
+    from radarbench.bench.run.runner import plan_record, run_sweep
     from tests.test_identity import SMALL
     plan = parse_sweep(SMALL)
     store = run_sweep(plan, tmp_path, plan_record=plan_record(plan, "t"), executor="serial", quiet=True)

@@ -10,7 +10,7 @@ from radarbench.bench.core import SceneError
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import get_scenario
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.tasks.detection import DetectionScene
 from radarbench.models.kalman import LinearGaussianFilter, innovations, steady_state
 from radarbench.scenarios.cv_turn_cv import (CvTurnCv, cv_model, deterministic_track,

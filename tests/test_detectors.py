@@ -8,8 +8,8 @@ from radarbench.bench.core import DetectionOutput
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import get_method
-from radarbench.bench.rng import TrialRNG
-from radarbench.bench.windows import sliding_sum
+from radarbench.bench.sweep.rng import TrialRNG
+from radarbench.models.windows import sliding_sum
 from radarbench.methods.maneuver.cumulant import Cumulant, window_third_moment
 from radarbench.methods.maneuver.innovation import Innovation, fading_sum, fading_valid_from
 from radarbench.models.kalman import innovations

@@ -1,4 +1,4 @@
-"""The documentation site (bench/docs.py, mkdocs.yml): a page for every registered task,
+"""The documentation site (bench/cli/docs.py, mkdocs.yml): a page for every registered task,
 method and scenario with every parameter, for every committed report with the figures it
 shows, and the command line; every link of a generated page reaches a page or a file; the
 strict mkdocs build where the ``[docs]`` extra is installed."""
@@ -17,9 +17,9 @@ import pytest
 
 from radarbench.bench import registry
 from radarbench.bench.cli import build_parser
-from radarbench.bench.docs import base_docstrings, docstring_markdown, main, pages, published, presets, subcommands
+from radarbench.bench.cli.docs import base_docstrings, docstring_markdown, main, pages, published, presets, subcommands
 from radarbench.bench.markdown import code, text
-from radarbench.bench.provenance import WALL_TIME_ROW
+from radarbench.bench.results.provenance import WALL_TIME_ROW
 from conftest import scaled
 
 REPO = Path(__file__).resolve().parents[1]

@@ -10,7 +10,7 @@ from radarbench.bench.core import TBD, Batch, TBDOutput
 from radarbench.bench.tasks.tbd import Grid, TBDScene
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import get_method
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.methods.tbd.reference import numpy_dp_tbd, reference_dp_tbd
 from radarbench.methods.tbd.dp_tbd import (
     LOG_UNIFORM_ANGLE,

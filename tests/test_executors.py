@@ -6,7 +6,7 @@ import sys
 import pytest
 
 from radarbench.bench.cli import main
-from radarbench.bench.store import MethodRun, Store, UnitResult
+from radarbench.bench.results.store import MethodRun, Store, UnitResult
 from conftest import scaled
 
 # (run name, bench run options, chunk): every one must give the trials.csv of the first
@@ -42,7 +42,7 @@ def test_a_lost_worker_s_unit_is_run_again_and_yielded_once(tmp_path):
     """A worker dies while it holds a unit: dask runs the unit on another worker (the
     nanny restarts the dead one); every unit comes back exactly once."""
     pytest.importorskip("distributed")
-    from radarbench.bench.executors import DaskExecutor
+    from radarbench.bench.run.executors import DaskExecutor
     marker = str(tmp_path / "died")
 
     def unit(i):                      # a closure: dask ships it by value to the workers
@@ -68,7 +68,7 @@ def test_under_dask_only_the_unit_that_kills_its_worker_fails(tmp_path):
     """Dask fails every unit of a worker that dies (``KilledWorker``): the units beside the
     culprit are run again alone and come back; the culprit alone yields a failure."""
     pytest.importorskip("distributed")
-    from radarbench.bench.executors import DaskExecutor, UnitFailure
+    from radarbench.bench.run.executors import DaskExecutor, UnitFailure
 
     def unit(i):
         import os as _os
@@ -93,7 +93,7 @@ def test_workers_that_differ_from_the_driver_are_refused(monkeypatch):
     pytest.importorskip("distributed")
     from radarbench import bench
     from radarbench.bench.errors import ConfigError
-    from radarbench.bench.executors import DaskExecutor
+    from radarbench.bench.run.executors import DaskExecutor
     monkeypatch.setattr(bench, "__version__", "0.0.0-driver")          # the workers keep the real one
     with pytest.raises(ConfigError, match="differs from this machine: bench '.*' \\(here '0.0.0-driver'\\)"):
         DaskExecutor(1)
@@ -150,7 +150,7 @@ def test_scheduler_needs_the_dask_executor(write_sweep, tmp_path, capsys):
 
 def test_an_unreachable_scheduler_is_one_line(write_sweep, tmp_path, monkeypatch, capsys):
     pytest.importorskip("distributed")
-    from radarbench.bench import executors
+    from radarbench.bench.run import executors
     monkeypatch.setattr(executors.DaskExecutor, "connect_timeout", "1s")
     code, err = _run_main(["run", str(write_sweep()), "--out", str(tmp_path / "out"), "--executor", "dask",
                            "--scheduler", "tcp://127.0.0.1:9", "--quiet", "--no-record"], capsys)
@@ -172,7 +172,7 @@ def _still_running_after(pids: list[int], seconds: float) -> list[int]:
 
 POOL_THEN_KILL = """
 import os, time
-from radarbench.bench.processes import process_pool
+from radarbench.bench.run.processes import process_pool
 if __name__ == "__main__":
     pool = process_pool(2)
     for job in [pool.submit(time.sleep, 0.05) for _ in range(4)]:
@@ -184,7 +184,7 @@ if __name__ == "__main__":
 
 
 def test_the_report_pools_processes_end_with_a_killed_driver(tmp_path):
-    """bench.processes.process_pool (the report's figures): a driver killed with SIGKILL
+    """bench.run.processes.process_pool (the report's figures): a driver killed with SIGKILL
     leaves none of its processes behind (they were orphans before)."""
     import subprocess
 
@@ -200,7 +200,7 @@ def test_the_report_pools_processes_end_with_a_killed_driver(tmp_path):
 
 FRESH_THEN_STOP = """
 import os, sys, time
-from radarbench.bench.processes import call_in_fresh_process
+from radarbench.bench.run.processes import call_in_fresh_process
 
 def sleep_forever(pids_file):
     with open(pids_file, "w") as f:
@@ -222,7 +222,7 @@ if __name__ == "__main__":
 
 @pytest.mark.parametrize("stop, returncode", [("kill", -9), ("interrupt", -2)])   # -2: an uncaught Ctrl-C
 def test_a_fresh_process_call_ends_with_its_interrupted_or_killed_driver(tmp_path, stop, returncode):
-    """bench.processes.call_in_fresh_process (bench perf's measurements): Ctrl-C ends the
+    """bench.run.processes.call_in_fresh_process (bench perf's measurements): Ctrl-C ends the
     call at once and a driver killed with SIGKILL leaves no process behind (with the pool
     it replaced, the interrupt waited for the call to end and SIGKILL left it running)."""
     import subprocess
@@ -242,7 +242,7 @@ def _exit_at_once():
 
 
 def test_a_fresh_process_call_returns_raises_or_says_it_died():
-    from radarbench.bench.processes import call_in_fresh_process
+    from radarbench.bench.run.processes import call_in_fresh_process
     assert call_in_fresh_process(max, 3, 11) == 11
     with pytest.raises(ValueError, match="invalid literal"):
         call_in_fresh_process(int, "eleven")

@@ -5,7 +5,7 @@ block ends, none when it ends in an error."""
 import pytest
 
 from radarbench.bench import figures
-from radarbench.bench.processes import process_pool
+from radarbench.bench.run.processes import process_pool
 from radarbench.bench.figures import plt
 
 

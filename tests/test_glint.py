@@ -11,7 +11,7 @@ from radarbench.bench.core import SceneError
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import get_scenario
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.tasks.tracking import TrackingScene
 from radarbench.models.glint import GlintModel
 from radarbench.models.spherical import los_basis, measure, measurement_residual, spherical

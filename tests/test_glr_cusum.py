@@ -10,7 +10,7 @@ from radarbench.bench.core import DetectionOutput
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import get_method, get_task
-from radarbench.bench.rng import CALIBRATION, TrialRNG
+from radarbench.bench.sweep.rng import CALIBRATION, TrialRNG
 from radarbench.methods.maneuver.cusum import Cusum, page_cusum, reference_cusum
 from radarbench.methods.maneuver import glr as glr_module
 from radarbench.methods.maneuver.glr import JUMPS, Glr, glr_statistic, jump_response, reference_glr, signatures

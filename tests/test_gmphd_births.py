@@ -18,7 +18,7 @@ import pytest
 
 from radarbench.bench import registry
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 
 pytest.importorskip("stonesoup")
 

@@ -10,13 +10,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from radarbench.bench import registry, tomlw
-from radarbench.bench.claims import evaluate_folder
-from radarbench.bench.config import parse_sweep
+from radarbench.bench import registry
+from radarbench.bench.sweep import tomlw
+from radarbench.bench.report.claims import evaluate_folder
+from radarbench.bench.sweep.config import parse_sweep
 from radarbench.bench.core import Batch
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.tasks.detecttrack import DetectTrackTask
 from radarbench.bench.tasks.multitarget import CLUTTER, PADDING, MultiTargetScene
 from radarbench.methods.chain.chain import CfarTrack

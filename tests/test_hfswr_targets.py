@@ -11,7 +11,7 @@ from radarbench.bench.core import SceneError
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import get_scenario
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.tasks.multitarget import CLUTTER, PADDING, MultiTargetScene
 from radarbench.models.hfswr import (cv_process_noise, cv_transition, measure, measure_jacobian, measurement_residual,
                           plot_to_cartesian)

@@ -5,7 +5,7 @@ import pytest
 import scipy.stats
 
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.methods.glint.ekf import EKF, ekf_filter, kalman_gain, noise_covariance
 from radarbench.methods.glint.huber import HuberEKF, huber_reweigh, huber_weights, minimax_threshold
 from radarbench.scenarios.glint import Glint

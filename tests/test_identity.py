@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from radarbench.bench import registry
-from radarbench.bench.config import parse_sweep
+from radarbench.bench.sweep.config import parse_sweep
 from radarbench.bench.core import Method
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params, declaration_problem, param
@@ -336,7 +336,7 @@ def test_a_data_path_is_read_from_the_sweep_folder_and_labelled_by_its_name(tmp_
     resolved = build_params(_PathParams, {"data": "d/x.csv"}, tmp_path)
     assert resolved.data == str(tmp_path / "d" / "x.csv")
     assert build_params(_PathParams, {"data": resolved.data}).data == resolved.data    # a resolved plan
-    from radarbench.bench.plan import ComponentConfig, label_value
+    from radarbench.bench.sweep.plan import ComponentConfig, label_value
     assert label_value(resolved, "data") == "x.csv"
     moved = build_params(_PathParams, {"data": "/somewhere/else/x.csv"})
     assert ComponentConfig("s", resolved, "s", "").key == ComponentConfig("s", moved, "s", "").key
@@ -350,8 +350,8 @@ SMALL = {"name": "id", "scenario": "cv-turn-cv", "trials": 4, "seed": 1, "snr_db
 def test_a_store_without_identities_is_rerun_and_its_results_kept_aside(tmp_path):
     """An earlier bench's store (no identity columns): every unit is unknown, re-run once,
     with one line saying so; the old results go to previous/ and equal the new ones."""
-    from radarbench.bench.runner import plan_record, run_sweep
-    from radarbench.bench.store import SCHEMA, Store
+    from radarbench.bench.run.runner import plan_record, run_sweep
+    from radarbench.bench.results.store import SCHEMA, Store
     plan = parse_sweep(SMALL)
     out = tmp_path / "run"
     run_sweep(plan, out, plan_record=plan_record(plan, "t"), executor="serial", quiet=True).close()
@@ -385,7 +385,7 @@ def test_a_store_without_identities_is_rerun_and_its_results_kept_aside(tmp_path
 
 
 def test_identities_follow_the_plugins_own_modules_only():
-    from radarbench.bench.identity import code_identity, identity_roots
+    from radarbench.bench.run.identity import code_identity, identity_roots
     cumulant = dict(code_identity(*identity_roots(registry.get_method("cumulant"))).modules)
     assert {"radarbench.methods.maneuver.cumulant", "radarbench.methods.maneuver.base", "radarbench.models.kalman"} <= set(cumulant)
     assert not any(m.split(".")[0] in ("numpy", "scipy") for m in cumulant)
@@ -395,7 +395,7 @@ def test_identities_follow_the_plugins_own_modules_only():
 
 def test_plan_toml_lists_the_identities(tmp_path):
     import tomllib
-    from radarbench.bench.runner import plan_record, run_sweep, write_plan_toml
+    from radarbench.bench.run.runner import plan_record, run_sweep, write_plan_toml
     plan = parse_sweep(SMALL)
     store = run_sweep(plan, tmp_path, plan_record=plan_record(plan, "t"), executor="serial", quiet=True)
     write_plan_toml(tmp_path / "plan.toml", plan, "t", store.stamps)
@@ -411,7 +411,7 @@ def test_a_code_identity_follows_edits_of_the_plugin_and_of_what_it_imports_only
     does not (a module no class imports may be loaded by a computed name: it counts)."""
     import importlib
 
-    from radarbench.bench.identity import code_identity
+    from radarbench.bench.run.identity import code_identity
     pkg = tmp_path / "idpkg"
     pkg.mkdir()
     (pkg / "__init__.py").write_text("")
@@ -436,7 +436,7 @@ def test_a_code_identity_follows_edits_of_the_plugin_and_of_what_it_imports_only
 def test_a_name_in_a_module_that_fails_to_import_is_not_a_module(tmp_path, monkeypatch):
     """``from methods.multitarget.stonesoup_peer import X`` scanned in a module whose peer lacks its extra:
     locating ``methods.multitarget.stonesoup_peer.X`` imports the peer, which raises; the scan must go on."""
-    from radarbench.bench import identity
+    from radarbench.bench.run import identity
     (tmp_path / "brokenpkg").mkdir()
     (tmp_path / "brokenpkg" / "__init__.py").write_text("")
     (tmp_path / "brokenpkg" / "peer.py").write_text("raise RuntimeError('needs an extra')\n")

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.methods.kinematic.imm import IMMCVCA
 from radarbench.methods.kinematic.imm_ct import IMMCVCT
 from radarbench.models.turn import ct_jacobian, ct_transition

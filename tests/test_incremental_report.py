@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from radarbench.bench import figure_cache as reuse
-from radarbench.bench.progress import Progress
+from radarbench.bench.results import figure_cache as reuse
+from radarbench.bench.run.progress import Progress
 from radarbench.bench.report import build_outputs
-from radarbench.bench.store import Store
+from radarbench.bench.results.store import Store
 
 TWO_TASKS = """
 name = "two-tasks"

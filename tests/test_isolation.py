@@ -9,13 +9,13 @@ import pytest
 
 from radarbench.bench import registry
 from radarbench.bench.cli import main
-from radarbench.bench.config import parse_sweep
+from radarbench.bench.sweep.config import parse_sweep
 from radarbench.bench.core import MANEUVER_DETECTION, Method
 from radarbench.bench.params import param
 from radarbench.bench.recording import TrialRecord
 from radarbench.bench.report import build_outputs
-from radarbench.bench.runner import plan_record, run_sweep
-from radarbench.bench.store import Store
+from radarbench.bench.run.runner import plan_record, run_sweep
+from radarbench.bench.results.store import Store
 from radarbench.methods.maneuver.innovation import Innovation
 
 
@@ -132,8 +132,8 @@ trials = 1
 def flaky(monkeypatch):
     registry.register_method(Flaky)
     # registered in this process only: `bench run` runs its units here (no worker process knows it)
-    from radarbench.bench import runner
-    from radarbench.bench.executors import SerialExecutor
+    from radarbench.bench.run import runner
+    from radarbench.bench.run.executors import SerialExecutor
     monkeypatch.setattr(runner, "make_executor", lambda name, workers, scheduler=None: SerialExecutor())
     yield
     registry._METHODS.pop("flaky", None)

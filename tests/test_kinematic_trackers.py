@@ -13,7 +13,7 @@ from scipy import stats
 from radarbench.bench import registry
 from radarbench.bench.core import Batch
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.tasks.tracking import TrackingScene
 from radarbench.methods.kinematic.base import ca_model, cv_model, cv_prior, linear_model
 from radarbench.methods.kinematic.imm import IMMCVCA, filterpy_imm, imm_filter

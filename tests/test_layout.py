@@ -8,11 +8,13 @@
 Imports inside functions count too.
 """
 
+import ast
+import re
 from pathlib import Path
 
 import pytest
 
-from radarbench.bench.identity import imported_names
+from radarbench.bench.run.identity import imported_names
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("bench", "methods", "models", "scenarios")
@@ -156,3 +158,84 @@ def test_comments_explain_the_code_not_the_ticket():
              if p.suffix in (".py", ".toml", ".j2") and p.is_file()
              for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if cited.search(line)]
     assert not found
+
+
+# ------------------------------------------------------------------ the harness's stages
+
+#: stage of bench/ -> the stages it may import (besides the top modules, the shared packages and itself);
+#: the order is the pipeline's, with results/ before run/ (the driver writes the results)
+STAGES = {
+    'sweep': set(),
+    'results': {'sweep'},
+    'run': {'results', 'sweep'},
+    'report': {'results', 'run', 'sweep'},
+    'cli': {'report', 'results', 'run', 'sweep'},
+}
+#: the modules at bench/'s top: the plugin protocol and what every stage and plugin shares
+TOP_MODULES = {'__init__', '__main__', 'batched', 'calibration', 'core', 'errors', 'escapes', 'figures', 'markdown', 'metrics', 'params', 'registry'}
+#: subpackages of no stage (the tasks and the recording format, used by run/ and report/) and what they may import
+SHARED = ('tasks', 'recording')
+SHARED_MAY_IMPORT = {'results'}
+#: (top module, stage.module) imports allowed: the registry sets up the numba cache and names distributions, the
+#: figures are written into the run folder
+TOP_EXCEPTIONS = {('figures', 'results.figure_cache'),
+                  ('figures', 'results.runfolder'),
+                  ('figures', 'results.tables'),
+                  ('figures', 'run.progress'),
+                  ('registry', 'results.provenance'),
+                  ('registry', 'run.numba_cache')}
+#: the module ``python -m radarbench.bench`` runs: the command line's
+ENTRY = {"bench.__main__": "cli"}
+
+
+def stage_of(module: str) -> str:
+    """``bench.run.units`` -> ``run``; ``bench.core`` -> ``top``; ``bench.tasks.tbd`` -> ``tasks``."""
+    parts = module.split(".")
+    if module in ENTRY:
+        return ENTRY[module]
+    return parts[1] if len(parts) > 2 or parts[1:] and parts[1] in (*STAGES, *SHARED) else "top"
+
+
+def back_imports(graph: dict[str, set[str]]) -> list[str]:
+    """The imports of bench/'s modules that reach a stage they may not import."""
+    bad = []
+    for module, imported in sorted(graph.items()):
+        here = stage_of(module)
+        for name in sorted(m for m in imported if m.startswith("bench.") and m != "bench"):
+            there = stage_of(name)
+            if there in (here, "top") or there in SHARED and here != "top":
+                continue
+            allowed = (STAGES[here] if here in STAGES else SHARED_MAY_IMPORT if here in SHARED
+                       else {e[1] for e in TOP_EXCEPTIONS if module == f"bench.{e[0]}"} | set(SHARED))
+            inner = name.removeprefix("bench.")
+            if there not in allowed and not any(a == inner or a.startswith(inner + ".") for a in allowed):
+                bad.append(f"{module} ({here}) imports {name} ({there})")
+    return bad
+
+
+def test_each_stage_imports_only_the_stages_before_it():
+    graph = import_graph(modules("bench"))
+    assert {stage_of(m) for m in graph} == {"top", *STAGES, *SHARED}
+    bad = back_imports(graph)
+    assert not bad, "imports back into an earlier stage (move what both need below them):\n" + "\n".join(bad)
+
+
+def test_the_checker_finds_an_import_back_into_an_earlier_stage():
+    graph = {"bench.sweep.plan": {"bench.run.units"}, "bench.run.units": {"bench.sweep.plan", "bench.core"},
+             "bench.core": {"bench.report.figures"}, "bench.tasks.tbd": {"bench.sweep.rng"}}
+    assert back_imports(graph) == ["bench.core (top) imports bench.report.figures (report)",
+                                   "bench.sweep.plan (sweep) imports bench.run.units (run)",
+                                   "bench.tasks.tbd (tasks) imports bench.sweep.rng (sweep)"]
+
+
+def test_bench_shows_its_stages_with_few_modules_at_the_top():
+    top = sorted(p.stem for p in (ROOT / "bench").glob("*.py"))
+    assert top == sorted(TOP_MODULES) and len(set(top) - {"__init__", "__main__"}) <= 10, top
+    for stage, may in STAGES.items():
+        doc = ast.get_docstring(ast.parse((ROOT / "bench" / stage / "__init__.py").read_text(encoding="utf-8")))
+        assert doc and doc.startswith(f"Stage ``{stage}/``"), stage
+        rule = next(p for p in doc.split("\n\n") if p.startswith("It may import"))
+        named = set(re.findall(r"``(\w+)/``", rule.split("never")[0])) - {stage, "bench", *SHARED}
+        assert named == set(may), (stage, named)
+
+# ------------------------------------------------------------------ (end of the harness's stages)

@@ -1,6 +1,6 @@
 """benchmarks/loop.py, the edit-run-read loop's measurement: the CPU time of a command's whole
 process tree (an orphaned grandchild included), what a run says about its units, and the
-documentation pages that show its record (bench/docs.py). Nothing here times a run."""
+documentation pages that show its record (bench/cli/docs.py). Nothing here times a run."""
 
 import importlib.util
 import json
@@ -8,7 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from radarbench.bench.docs import LOOP_REPORT, MEASURED_MARKER, durations, fill_measured, loop_record
+from radarbench.bench.cli.docs import LOOP_REPORT, MEASURED_MARKER, durations, fill_measured, loop_record
 
 from conftest import scaled
 

@@ -7,7 +7,7 @@ from scipy import stats
 from radarbench.bench.core import SceneError
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.tasks.tracking import TrackingScene
 from radarbench.models.kinematics import KinematicModel, singer
 from radarbench.scenarios.maneuvering import Maneuvering

@@ -311,7 +311,7 @@ def test_a_runs_memory_does_not_grow_with_the_table_capacity_per_trial(method):
 
     from radarbench.bench import registry
     from radarbench.bench.params import build_params
-    from radarbench.bench.rng import TrialRNG
+    from radarbench.bench.sweep.rng import TrialRNG
 
     scenario = registry.get_scenario("hfswr-targets")
     batch = scenario().generate(build_params(scenario.Params, scenario.small_params), 10.0, 12,

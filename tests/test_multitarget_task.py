@@ -8,13 +8,13 @@ import pandas as pd
 import pytest
 
 from radarbench.bench import registry
-from radarbench.bench.config import parse_sweep
+from radarbench.bench.sweep.config import parse_sweep
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
 from radarbench.bench.recording import TrialRecord
 from radarbench.bench.report import build_outputs
-from radarbench.bench.rng import TrialRNG
-from radarbench.bench.runner import plan_record, run_sweep
+from radarbench.bench.sweep.rng import TrialRNG
+from radarbench.bench.run.runner import plan_record, run_sweep
 from radarbench.bench.tasks.base import OutputError
 from radarbench.bench.tasks.multitarget import MultiTargetOutput, MultiTargetTask
 from radarbench.scenarios.hfswr_targets import HFSWRTargets
@@ -139,7 +139,7 @@ def _check_recording(folder):
     from rerun.chunk import RrdReader
 
     from radarbench.bench.recording.paths import entity_root, rerun_path
-    from radarbench.bench.store import Store
+    from radarbench.bench.results.store import Store
 
     store = Store(folder / "results.sqlite")
     rec = next(r for r in map(TrialRecord.from_bytes, store.records()) if "pd=0.9" in r.scenario)

@@ -130,7 +130,7 @@ def _rows(markdown: str) -> dict[str, list[str]]:
 
 
 def test_a_qualified_name_draws_the_streams_of_its_bare_name_and_names_no_path():
-    from radarbench.bench.config import parse_sweep
+    from radarbench.bench.sweep.config import parse_sweep
     from radarbench.bench.recording.paths import entity_name
 
     bare, qualified = (parse_sweep({"name": "q", "scenario": scenario, "snr_db": [0],
@@ -142,7 +142,7 @@ def test_a_qualified_name_draws_the_streams_of_its_bare_name_and_names_no_path()
 
 
 def test_an_optional_entry_whose_distribution_is_not_installed_is_skipped_with_the_reason():
-    from radarbench.bench.config import parse_sweep
+    from radarbench.bench.sweep.config import parse_sweep
 
     plan = parse_sweep({"name": "q", "scenario": "cv-turn-cv", "snr_db": [0],
                         "methods": [{"name": "cusum"}, {"name": "mylab:glr", "optional": True}]})

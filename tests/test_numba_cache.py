@@ -1,4 +1,4 @@
-"""numba's on-disk cache (bench/numba_cache.py): a damaged, truncated, full or read-only
+"""numba's on-disk cache (bench/run/numba_cache.py): a damaged, truncated, full or read-only
 cache never fails a kernel, a unit or a run; stderr says once per command which folder was
 skipped and why; nothing is ever written into the package's folders."""
 
@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from radarbench.bench import numba_cache, progress
+from radarbench.bench.run import numba_cache, progress
 from tests.test_reliability_io import _mount_namespace, _read_only
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,7 +40,7 @@ def square(x):
 SCRIPT = '''
 import sys
 import numpy as np
-from radarbench.bench import numba_cache
+from radarbench.bench.run import numba_cache
 numba_cache.install()
 sys.path.insert(0, sys.argv[1])
 import kernels

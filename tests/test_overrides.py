@@ -12,7 +12,7 @@ import tomllib
 import pytest
 
 from radarbench.bench.cli import main
-from radarbench.bench.config import Overrides, apply_overrides, parse_sweep
+from radarbench.bench.sweep.config import Overrides, apply_overrides, parse_sweep
 from radarbench.bench.errors import ConfigError
 
 SWEEP = {"name": "o", "scenario": "maneuvering-1d", "scenario_params": {"steps": 60}, "trials": 20, "seed": 1,

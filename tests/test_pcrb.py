@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.models.glint import glint_fisher_information, glint_variance
 from radarbench.models.kalman import LinearGaussianModel, steady_state
 from radarbench.models.kinematics import cv, per_axis, position_measurement

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 from radarbench.bench import registry
-from radarbench.bench.capabilities import fits
-from radarbench.bench.perf import PERF_COLUMNS, SCENE_COLUMNS, accepted_sizes, jobs, scene_jobs, write_report
+from radarbench.bench.sweep.capabilities import fits
+from radarbench.bench.cli.perf import PERF_COLUMNS, SCENE_COLUMNS, accepted_sizes, jobs, scene_jobs, write_report
 
 
 def test_scene_jobs_cover_every_scenarios_sizes():
@@ -37,7 +37,7 @@ def test_a_size_reading_a_file_is_timed_on_one_its_scenario_writes(monkeypatch):
     from dataclasses import dataclass
     from pathlib import Path
 
-    from radarbench.bench import perf
+    from radarbench.bench.cli import perf
     from radarbench.bench.core import Scenario
     from radarbench.bench.errors import ConfigError
 
@@ -95,7 +95,7 @@ def test_each_method_is_timed_on_a_scenario_it_accepts(monkeypatch):
 
     from radarbench.bench.core import TRACKING, Method
     from radarbench.bench.params import build_params
-    from radarbench.bench.perf import jobs
+    from radarbench.bench.cli.perf import jobs
 
     registry.discover()
     tracking = [s for s in registry.scenarios().values() if TRACKING in s.tasks]
@@ -136,7 +136,7 @@ def _perf_rows():
 def test_perf_csv_has_a_rate_column_per_work_unit(tmp_path):
     """Every row has trials_per_second; each other work unit (``Method.work``) gets its
     ``<unit>_per_second`` column, empty for methods counting another unit."""
-    from radarbench.bench.perf import perf_table, rate_columns
+    from radarbench.bench.cli.perf import perf_table, rate_columns
 
     registry.discover()
     perf = perf_table(_perf_rows())
@@ -191,7 +191,7 @@ def _burning_method(monkeypatch, name: str, reference_name: str, reference_trial
 def test_a_reference_part_timed_apart_gets_a_second_row(monkeypatch, tmp_path):
     """A reference declaring ``reference_parts`` gets two rows against the same method time:
     the whole reference, and the reference less the CPU seconds it reported for the part."""
-    from radarbench.bench import perf
+    from radarbench.bench.cli import perf
 
     registry.discover()
 
@@ -214,7 +214,7 @@ def test_a_reference_is_timed_on_its_whole_batch_and_per_trial_the_faster_kept(m
     """A reference whose cost grows faster than its batch (a vectorised peer outgrowing the
     caches) is timed one trial per call; one with a large cost per call on its whole batch;
     the row says which, and its time is that way's."""
-    from radarbench.bench import perf
+    from radarbench.bench.cli import perf
 
     registry.discover()
 
@@ -233,14 +233,14 @@ def test_a_reference_is_timed_on_its_whole_batch_and_per_trial_the_faster_kept(m
     assert "(4 trials, per trial)" in text and "(4 trials, whole batch)" in text
 
 
-#: limits of a made-up machine (``bench.limits.measure_limits``' keys)
+#: limits of a made-up machine (``bench.run.limits.measure_limits``' keys)
 MACHINE = {"bytes_per_second": 1e10, "float32_operations_per_second": 4e10, "float64_operations_per_second": 2e10,
            "stream_bytes": 1 << 28, "last_level_cache_bytes": 1 << 27}
 
 
 def _in_this_process(monkeypatch):
     """``run_perf`` measuring in this process (no spawn), on :data:`MACHINE`'s limits, without scenes."""
-    from radarbench.bench import perf
+    from radarbench.bench.cli import perf
 
     monkeypatch.setattr(perf, "_in_fresh_process", perf.measure)
     monkeypatch.setattr(perf, "machine_limits", lambda: MACHINE)
@@ -249,7 +249,7 @@ def _in_this_process(monkeypatch):
 
 def test_the_least_time_at_the_limits_is_the_larger_of_bytes_and_operations():
     """A roofline: a cost's least time is its slowest kind of work at the machine's limits."""
-    from radarbench.bench.limits import limit_fraction
+    from radarbench.bench.run.limits import limit_fraction
 
     assert limit_fraction({"bytes": 2e9}, 1.0, MACHINE) == (0.2, "bytes_per_second")
     assert limit_fraction({"bytes": 2e9, "float32_operations": 2e10}, 1.0, MACHINE) == \
@@ -259,7 +259,7 @@ def test_the_least_time_at_the_limits_is_the_larger_of_bytes_and_operations():
 
 def test_the_add_max_loop_computes_what_it_counts():
     """The compute ceiling's loop does one add and one max per element and pass (so its count is honest)."""
-    from radarbench.bench.limits import _add_max_kernel
+    from radarbench.bench.run.limits import _add_max_kernel
 
     x = np.linspace(-3.0, 1.0, 40, dtype=np.float32)
     acc = np.zeros_like(x)
@@ -268,7 +268,7 @@ def test_the_add_max_loop_computes_what_it_counts():
 
 
 def test_the_last_level_cache_is_the_largest_one_listed(tmp_path):
-    from radarbench.bench.limits import last_level_cache_bytes
+    from radarbench.bench.run.limits import last_level_cache_bytes
 
     for index, size in enumerate(["48K", "2048K", "300M", "garbage"]):
         (tmp_path / f"index{index}").mkdir()
@@ -282,7 +282,7 @@ def test_a_rows_fraction_of_the_machine_limit_is_its_least_cost_over_its_time(mo
     cost gets its fraction with the binding limit, one giving a reason a dash and that reason as a note."""
     from dataclasses import dataclass
 
-    from radarbench.bench import perf
+    from radarbench.bench.cli import perf
     from radarbench.bench.core import TRACKING, Method
 
     registry.discover()

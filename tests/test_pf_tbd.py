@@ -10,7 +10,7 @@ from radarbench.bench.core import TBD
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import get_method
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.methods.tbd import pf_kernels
 from radarbench.methods.tbd.dp_tbd import DpTbd
 from radarbench.methods.tbd.pf_tbd import PfTbd, particle_split, residual_predictors

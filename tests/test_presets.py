@@ -8,9 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from radarbench.bench import registry, tomlw
-from radarbench.bench.config import parse_sweep
-from radarbench.bench.listing import presets
+from radarbench.bench import registry
+from radarbench.bench.sweep import tomlw
+from radarbench.bench.sweep.config import parse_sweep
+from radarbench.bench.sweep.listing import presets
 from tests.conftest import parse_sweep_or_skip
 
 PRESETS = sorted(presets())

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from radarbench.bench import registry
-from radarbench.bench.capabilities import fits
+from radarbench.bench.sweep.capabilities import fits
 from radarbench.bench.core import Method, Scenario
 from radarbench.bench.params import build_params
-from radarbench.bench.perf import reference_of, scaling_plan
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.cli.perf import reference_of, scaling_plan
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.methods.maneuver import base as innovation_base
 from radarbench.methods.maneuver.base import InnovationDetector
 
@@ -91,7 +91,7 @@ def test_work_is_a_unit_and_a_positive_count(name, cls):
 def test_least_cost_is_work_of_known_kinds_or_a_reason(name, cls):
     """``Method.least_cost`` on the small instance of the first scenario the method serves: positive
     amounts of the kinds ``bench perf`` has a limit for, or a reason (a phrase), or None."""
-    from radarbench.bench.limits import RESOURCES
+    from radarbench.bench.run.limits import RESOURCES
 
     for scenario in registry.scenarios().values():
         params = build_params(scenario.Params, scenario.small_params)

@@ -17,9 +17,9 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from radarbench.bench import registry
-from radarbench.bench.capabilities import VALID_STEP_MASKS, fits
+from radarbench.bench.sweep.capabilities import VALID_STEP_MASKS, fits
 from radarbench.bench.cli import main
-from radarbench.bench.config import parse_sweep
+from radarbench.bench.sweep.config import parse_sweep
 from radarbench.bench.core import Batch
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.metrics import per_step_rmse, time_averaged_rmse
@@ -221,7 +221,7 @@ def test_an_outside_ragged_scenario_runs_end_to_end(tmp_path):
 def test_a_ragged_batch_from_an_undeclared_config_fails_the_methods_that_do_not_handle_it():
     """The run-time guard behind ``requires``: a method that does not handle masks never
     runs on NaN padding, whatever the scenario declared."""
-    from radarbench.bench.capabilities import check_batch
+    from radarbench.bench.sweep.capabilities import check_batch
 
     z = np.zeros((2, 5, 1))
     valid = np.ones((2, 5), bool)

@@ -7,7 +7,7 @@ import pytest
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import get_scenario
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.tasks.cells import CELL_DETECTION, REGION_NAMES, MapScene
 from radarbench.models.rd_map import REGION_LEVEL_DB, background_power
 from radarbench.scenarios.rd_map import RdMap
@@ -180,8 +180,8 @@ def test_the_cfar_presets_unchanged_configs_draw_the_same_bytes():
     import importlib.resources
     import tomllib
 
-    from radarbench.bench.config import parse_sweep
-    from radarbench.bench.rng import EVALUATION
+    from radarbench.bench.sweep.config import parse_sweep
+    from radarbench.bench.sweep.rng import EVALUATION
 
     preset = importlib.resources.files("radarbench.bench") / "presets" / "cfar.toml"
     plan = parse_sweep(tomllib.loads(preset.read_text(encoding="utf-8")))

@@ -17,12 +17,12 @@ import pandas as pd
 import pytest
 
 from radarbench.bench import registry
-from radarbench.bench.capabilities import VALID_STEP_MASKS, fits
+from radarbench.bench.sweep.capabilities import VALID_STEP_MASKS, fits
 from radarbench.bench.core import Batch
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.identity import config_identity
+from radarbench.bench.run.identity import config_identity
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.tasks.tracking import TrackingScene
 from radarbench.scenarios.recorded_tracks import RecordedTracks, files
 from tests.conftest import run_bench

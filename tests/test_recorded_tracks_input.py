@@ -17,7 +17,7 @@ import pandas as pd
 import pytest
 
 from radarbench.bench.cli import main
-from radarbench.bench.config import load_sweep
+from radarbench.bench.sweep.config import load_sweep
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import resolve_path
 from radarbench.scenarios.recorded_tracks import RecordedTracks
@@ -210,7 +210,7 @@ def test_the_report_and_plan_toml_name_the_data_file_relative_to_the_sweep(tmp_p
     absolute path; plan.toml names the file relative to its own folder, so running it
     finds the same file under the same fingerprint."""
     from radarbench.bench.report import _resolved_scenario_params
-    from radarbench.bench.runner import plan_record, write_plan_toml
+    from radarbench.bench.run.runner import plan_record, write_plan_toml
     sweep, plan = _relative_run(tmp_path)
     assert plan.scenarios[0].params.path == str(tmp_path / "data" / "tracks.csv")   # what is read
     record = plan_record(plan, "bench run")

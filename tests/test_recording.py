@@ -368,7 +368,7 @@ def test_live_viewer_logs_tasks_like_the_file_writer(tmp_path, task_records, tas
 
 def test_workers_import_neither_rerun_nor_matplotlib():
     """What a worker imports (the runner, every task, the record) stays light."""
-    code = ("import sys, radarbench.bench.runner, radarbench.bench.tasks, radarbench.bench.recording; from radarbench.bench import registry; "
+    code = ("import sys, radarbench.bench.run.runner, radarbench.bench.tasks, radarbench.bench.recording; from radarbench.bench import registry; "
             "registry.discover(); print(sorted(m for m in ('rerun', 'matplotlib') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=scaled())
     assert out.stdout.strip() == "[]", out.stdout + out.stderr

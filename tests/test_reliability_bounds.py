@@ -17,7 +17,7 @@ import pytest
 
 from radarbench.bench import registry
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.listing import plugin_listing
+from radarbench.bench.sweep.listing import plugin_listing
 from radarbench.bench.params import build_params
 
 registry.discover()

@@ -24,9 +24,10 @@ from pathlib import Path
 
 import pytest
 
-from radarbench.bench import runfolder, tomlw
+from radarbench.bench.results import runfolder
+from radarbench.bench.sweep import tomlw
 from radarbench.bench.cli import main
-from radarbench.bench.store import MethodRun, Store, UnitResult
+from radarbench.bench.results.store import MethodRun, Store, UnitResult
 from conftest import scaled
 
 TINY = """
@@ -140,7 +141,7 @@ def test_out_under_a_regular_file_or_with_a_too_long_name_is_one_line(clean, tmp
 
 
 def test_perf_out_on_a_file_is_refused_before_measuring(tmp_path, monkeypatch):
-    from radarbench.bench import perf
+    from radarbench.bench.cli import perf
 
     def measured(*_, **__):
         raise AssertionError("bench perf measured before it checked --out")
@@ -512,7 +513,7 @@ def test_report_on_a_foreign_sqlite_file_refuses_before_modifying_it(tmp_path, j
 
 def test_a_refused_run_leaves_no_folder_behind(tmp_path, monkeypatch):
     """A run that fails before storing anything in a folder it created removes that folder."""
-    from radarbench.bench import runner
+    from radarbench.bench.run import runner
     monkeypatch.setattr(runner, "make_executor", lambda *a, **k: (_ for _ in ()).throw(
         OSError(28, "No space left on device", str(tmp_path / "x"))))
     out = tmp_path / "new"

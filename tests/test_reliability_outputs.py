@@ -22,9 +22,9 @@ from radarbench.bench import registry
 from radarbench.bench.cli import main
 from radarbench.bench.core import TrackingOutput
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.listing import plugin_listing
+from radarbench.bench.sweep.listing import plugin_listing
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.tasks.base import COVARIANCE_TOLERANCE, OutputError, check_covariance
 from conftest import scaled
 
@@ -477,7 +477,7 @@ def _every_task_sweep(folder) -> str:
     """Every scenario at its small size, with every method that serves it: all the tasks'
     summary columns at once (the frame pandas warned about), a recorded trial; recorded-tracks
     on a CSV written into ``folder`` (its small instance reads an optional extra's sample)."""
-    from radarbench.bench import tomlw
+    from radarbench.bench.sweep import tomlw
     from tests.test_recorded_tracks import small_params_on_a_csv
     local = {"recorded-tracks": small_params_on_a_csv(folder)}
     scenarios = [{"name": name, "params": local.get(name, dict(cls.small_params))}

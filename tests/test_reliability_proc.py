@@ -374,7 +374,7 @@ def test_a_bad_or_unreachable_scheduler_is_one_line_at_once_and_writes_nothing(w
     """At once: refused before dask's client is made (its 15 s of retries and 30 s of clean-up
     never start), checked by making the client a failure rather than by timing the run."""
     pytest.importorskip("distributed")
-    from radarbench.bench import executors
+    from radarbench.bench.run import executors
     from radarbench.bench.cli import main
 
     def no_client(*_):

@@ -24,13 +24,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from radarbench.bench import registry, tomlw
+from radarbench.bench import registry
+from radarbench.bench.sweep import tomlw
 from radarbench.bench.cli import main
-from radarbench.bench.config import MIN_PFA, SNR_KEY_DIGITS, parse_sweep, parse_sweep_text, snr_key
+from radarbench.bench.sweep.config import MIN_PFA, SNR_KEY_DIGITS, parse_sweep, parse_sweep_text, snr_key
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.feasibility import default_unit_memory_gb, unit_memory_bytes
+from radarbench.bench.sweep.feasibility import default_unit_memory_gb, unit_memory_bytes
 from radarbench.bench.params import build_params, field_types
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 
 registry.discover()
 
@@ -418,7 +419,7 @@ def test_snr_levels_equal_at_the_key_precision_are_refused():
 
 
 def test_accepted_snr_levels_have_distinct_unit_keys():
-    from radarbench.bench.runner import plan_units
+    from radarbench.bench.run.runner import plan_units
     rng = np.random.default_rng(5)
     for _ in range(200):
         levels = [float(x) for x in np.round(rng.uniform(-200, 200, 5), rng.integers(0, 12))]
@@ -461,7 +462,7 @@ def test_a_scenario_grid_in_any_key_order_round_trips_through_plan_toml():
     again = parse_sweep(tomllib.loads(tomlw.dumps(plan.to_dict())))
     assert [s.label for s in again.scenarios] == labels
     assert again.fingerprint() == plan.fingerprint()
-    from radarbench.bench.runner import plan_units
+    from radarbench.bench.run.runner import plan_units
     assert [u.key for part in plan_units(again) for u in part] == [u.key for part in plan_units(plan) for u in part]
 
 

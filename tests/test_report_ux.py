@@ -378,7 +378,7 @@ def test_vectorised_bootstrap_equals_the_resample_loop():
 def test_single_scenario_grids_list_each_configs_own_parameters():
     """``scenario = ...`` with a grid axis in [scenario_params]: plan.toml merges the axis
     back into one list, and each scenario config must still show its own value."""
-    from radarbench.bench.config import parse_sweep
+    from radarbench.bench.sweep.config import parse_sweep
     from radarbench.bench.report import _params_text, _resolved_scenario_params
     sweep = tomllib.loads(textwrap.dedent("""
         name = "grid"

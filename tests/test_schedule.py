@@ -1,12 +1,12 @@
 """Units handed out longest first, from the seconds per trial earlier runs kept
-(bench.runner.longest_first): the order changes when a phase ends, never a number."""
+(bench.run.runner.longest_first): the order changes when a phase ends, never a number."""
 
 from __future__ import annotations
 
-from radarbench.bench import runner
-from radarbench.bench.config import parse_sweep
-from radarbench.bench.identity import content_keys
-from radarbench.bench.units import UnitTask, plan_units
+from radarbench.bench.run import runner
+from radarbench.bench.sweep.config import parse_sweep
+from radarbench.bench.run.identity import content_keys
+from radarbench.bench.run.units import UnitTask, plan_units
 
 SWEEP = {"name": "order", "trials": 20, "chunk": 10, "seed": 1, "snr_db": [0, 10],
          "scenarios": [{"name": "cv-turn-cv", "params": {"steps": 120, "onset_step": 60}},

@@ -41,7 +41,7 @@ def test_a_statistic_formed_only_after_the_onset_is_refused_at_plan_time(method)
 
 
 def test_a_statistic_formed_before_the_onset_is_accepted():
-    from radarbench.bench.config import parse_sweep_text
+    from radarbench.bench.sweep.config import parse_sweep_text
     plan = parse_sweep_text((SHORT_SCENE + 'name = "glr"\nparams = {window = 16}').encode(), "s.toml")
     assert [m.label for m in plan.methods] == ["glr[window=16]"] and not plan.skipped
 

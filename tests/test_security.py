@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import html5lib
 import pytest
 
-from radarbench.bench import listing, registry
+from radarbench.bench.sweep import listing
+from radarbench.bench import registry
 from radarbench.bench.core import MANEUVER_DETECTION, Method
 
 ESCAPES = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")

@@ -11,7 +11,7 @@ import pytest
 from radarbench.bench import registry
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import PluginError
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 
 PEERS = {"radarbench.methods.multitarget.stonesoup_peer": "stonesoup-jpda", "radarbench.methods.multitarget.stonesoup_gmphd": "stonesoup-gmphd",
          "radarbench.methods.multitarget.stonesoup_mht": "stonesoup-mfa"}

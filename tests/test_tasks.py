@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from radarbench.bench.config import parse_sweep
+from radarbench.bench.sweep.config import parse_sweep
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.metrics import per_step_rmse, time_averaged_rmse
 from radarbench.bench.tasks.tbd.metrics import cell_centres_m, summarise_tbd, tbd_trial_metrics, unit_innovation_snr_offset_db
@@ -170,7 +170,7 @@ def test_the_harness_never_names_a_task():
 def _tracking_batch(scenario: str):
     from radarbench.bench import registry
     from radarbench.bench.params import build_params
-    from radarbench.bench.rng import TrialRNG
+    from radarbench.bench.sweep.rng import TrialRNG
     cls = registry.get_scenario(scenario)
     return cls().generate(build_params(cls.Params, cls.small_params), 10.0, 3, TrialRNG(1, 0, 1, range(3)))
 

@@ -9,7 +9,7 @@ from radarbench.bench.core import TBD, SceneError
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import get_scenario
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.tasks.tbd import Grid, TBDScene
 from radarbench.models.ar_noise import ar_autocovariance, ar_innovation_std, ar_roots, stationary_predictors
 from radarbench.scenarios.tbd_grid import EDGE_MARGIN_CELLS, TbdGrid, generate_noise, scene_geometry, true_track

@@ -21,7 +21,7 @@ import radarbench.methods.tbd.mf_kernels as mf_kernels
 import tbd_kernels_oracle as oracle   # beside this file: the previous kernels, frozen
 from radarbench.bench.core import Batch
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.bench.tasks.tbd import Grid, TBDScene
 from radarbench.methods.tbd import dp_tbd
 from radarbench.methods.tbd.dp_tbd import LOG_UNIFORM_ANGLE, DpTbd, DpTbdMf

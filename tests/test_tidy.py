@@ -15,12 +15,13 @@ import pandas as pd
 import pytest
 
 import radarbench
-from radarbench.bench import cli, registry, tidy
-from radarbench.bench.config import parse_sweep_text
+from radarbench.bench import cli, registry
+from radarbench.bench.results import tidy
+from radarbench.bench.sweep.config import parse_sweep_text
 from radarbench.bench.params import params_as_dict
-from radarbench.bench.runner import write_plan_toml
+from radarbench.bench.run.runner import write_plan_toml
 from radarbench.bench.tasks import summary_columns
-from radarbench.bench.tables import read_csv
+from radarbench.bench.results.tables import read_csv
 from conftest import run_bench
 
 ROOT = Path(__file__).resolve().parents[1]

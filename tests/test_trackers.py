@@ -15,7 +15,7 @@ import radarbench.methods.glint.viterbi as vit
 from radarbench.bench.core import TrackingOutput
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import get_method
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.methods.glint.ekf import EKF, ekf_filter, filterpy_ekf, noise_covariance
 from radarbench.methods.glint.trellis import expand, max_plus_step, trellis_step
 from radarbench.methods.glint.viterbi import Viterbi

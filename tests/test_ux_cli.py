@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from radarbench.bench import __version__
-from radarbench.bench.listing import preset_descriptions, presets
-from radarbench.bench.progress import Progress
+from radarbench.bench.sweep.listing import preset_descriptions, presets
+from radarbench.bench.run.progress import Progress
 from conftest import scaled
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -71,7 +71,7 @@ def test_list_from_the_cache_imports_no_plugin(tmp_path):
 
 
 def test_listing_fingerprint_follows_the_sources(tmp_path, monkeypatch):
-    from radarbench.bench import listing
+    from radarbench.bench.sweep import listing
 
     pkg = tmp_path / "fakeplugins"
     pkg.mkdir()

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 import radarbench.methods.glint.viterbi_paper1d as vit
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.methods.glint.viterbi_paper1d import Component, paper_1d_component
 from radarbench.methods.glint.viterbi import Viterbi
 from radarbench.models.spherical import measurement_jacobian, spherical

@@ -1,4 +1,4 @@
-"""The warm-up (bench.warmup): a cold numba cache compiled once, in one worker, before any
+"""The warm-up (bench.run.warmup): a cold numba cache compiled once, in one worker, before any
 unit is timed, and said so on stderr; a warm cache costs nothing."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from radarbench.bench import warmup
-from radarbench.bench.config import load_sweep
+from radarbench.bench.run import warmup
+from radarbench.bench.sweep.config import load_sweep
 from conftest import scaled
 
 
@@ -74,7 +74,7 @@ def test_a_kernel_a_plans_warm_up_left_stale_does_not_warm_it_up_again(monkeypat
 def test_a_warm_up_says_whether_its_pair_ran_whole(monkeypatch, error, whole):
     """A pair that failed may have stopped before a kernel it calls: that kernel stays stale
     without being unused, so such a warm-up must not be remembered (:func:`warmup.remember_unused`)."""
-    from radarbench.bench.store import MethodRun, UnitResult
+    from radarbench.bench.results.store import MethodRun, UnitResult
 
     def execute(work):
         return UnitResult(work, "evaluation", "s", 0.0, 0, 1, 0.0, runs=[MethodRun("a", 0.0), MethodRun("b", 0.0, error)])
@@ -86,7 +86,7 @@ def test_a_warm_up_says_whether_its_pair_ran_whole(monkeypatch, error, whole):
 
 @pytest.mark.parametrize("whole", [False, True])
 def test_a_run_remembers_its_stale_kernels_only_after_a_whole_warm_up(monkeypatch, tmp_path, write_sweep, whole):
-    from radarbench.bench import runner
+    from radarbench.bench.run import runner
     monkeypatch.setattr(warmup, "cache_is_cold", lambda key=None: True)
     monkeypatch.setattr(runner, "_warm_up", lambda *args: whole)
     remembered = []

@@ -1,7 +1,7 @@
 """The warm-up compiles every kernel with the types and layouts the units pass it
 (docs/architecture.md, 'Warm-up'): after it, no dispatcher gains a specialisation while a
 preset's units run, so no unit's time holds a compilation; and a unit's time leaves out
-what compiling costs (:mod:`bench.worktime`)."""
+what compiling costs (:mod:`bench.run.worktime`)."""
 
 from __future__ import annotations
 
@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from radarbench.bench import registry
-from radarbench.bench.config import load_sweep, parse_sweep
-from radarbench.bench.numba_cache import kernels
-from radarbench.bench.units import UnitTask, execute_unit, plan_units, Unit
-from radarbench.bench.warmup import warm_up_tasks
-from radarbench.bench.worktime import compiling_seconds, work_seconds
+from radarbench.bench.sweep.config import load_sweep, parse_sweep
+from radarbench.bench.run.numba_cache import kernels
+from radarbench.bench.run.units import UnitTask, execute_unit, plan_units, Unit
+from radarbench.bench.run.warmup import warm_up_tasks
+from radarbench.bench.run.worktime import compiling_seconds, work_seconds
 
 
 def _signatures() -> dict[str, int]:

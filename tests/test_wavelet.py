@@ -9,8 +9,8 @@ from radarbench.bench import registry
 from radarbench.bench.core import DetectionOutput
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
-from radarbench.bench.windows import sliding_sum
+from radarbench.bench.sweep.rng import TrialRNG
+from radarbench.models.windows import sliding_sum
 from radarbench.methods.maneuver.wavelet import (Wavelet, causal_coefficients, first_step, null_threshold, support,
                              valid_from, wavelet_statistic)
 from radarbench.models.kalman import innovations

@@ -46,7 +46,7 @@ def write_recording(
     """Write ``records`` (and the ``summary`` curves) to an ``.rrd`` file.
 
     Atomic: rerun encodes the recording into memory; bench writes the bytes to a
-    temporary file of a unique name beside ``path`` (:func:`bench.runfolder.atomic_output`),
+    temporary file of a unique name beside ``path`` (:func:`bench.results.runfolder.atomic_output`),
     checks the footer, and renames it. A full disk or a file-size limit is then an
     OSError of that write (one line, exit 3), never a truncated ``recording.rrd`` or a
     wait on rerun's writer thread. The whole recording is held in memory once (tens of
@@ -58,7 +58,7 @@ def write_recording(
     """
     import rerun as rr
 
-    from radarbench.bench import runfolder
+    from radarbench.bench.results import runfolder
 
     path = Path(path)
     records = list(records)  # iterated twice: blueprint, then logging

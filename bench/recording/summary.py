@@ -35,7 +35,7 @@ from radarbench.bench.markdown import code, frame_table
 from radarbench.bench.recording.layout import PALETTE, method_colors
 from radarbench.bench.recording.paths import entity_name, method_entity_names
 from radarbench.bench.recording.plot import Plot, log_plot
-from radarbench.bench.tables import identical_curves
+from radarbench.bench.results.tables import identical_curves
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd

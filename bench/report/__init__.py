@@ -1,4 +1,12 @@
-"""Outputs of a run, all rebuilt from ``results.sqlite`` (``bench report DIR``).
+"""Stage ``report/`` of the harness. A run's outputs rebuilt from its store: report.md and
+report.html, the figures, the claims of a paper preset and their baselines, the quantities
+they measure, `bench compare`.
+
+It may import the top modules of ``bench/``, ``tasks/`` and ``recording/``, and the stages
+``sweep/``, ``results/``, ``run/``; never ``cli/`` (docs/architecture.md, 'Layout';
+tests/test_layout.py holds it).
+
+Outputs of a run, all rebuilt from ``results.sqlite`` (``bench report DIR``).
 
 Writes ``trials.csv``, ``summary.csv``, ``calibration.csv``, ``steps.csv``
 (per-step tables of the tasks that have them), ``comparisons.csv`` (paired
@@ -23,26 +31,28 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from radarbench.bench import claims, figures, registry, runfolder
+from radarbench.bench.report import claims
+from radarbench.bench import figures, registry
+from radarbench.bench.results import runfolder
 from radarbench.bench.calibration import EQUAL_CHANCE_PD
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.escapes import escape_controls
-from radarbench.bench.progress import Progress
+from radarbench.bench.run.progress import Progress
 from radarbench.bench.report.building import (Sections, each_done, figure_pool, interactive_html, interactive_job,
                                               reused_output)
 from radarbench.bench.markdown import code, fmt_db, text
 from radarbench.bench.markdown import fmt as _fmt
 from radarbench.bench.markdown import table as _table
-from radarbench.bench.provenance import WALL_TIME_ROW, origin_text, provenance
-from radarbench.bench.quantities import plan_calibration
+from radarbench.bench.results.provenance import WALL_TIME_ROW, origin_text, provenance
+from radarbench.bench.report.quantities import plan_calibration
 from radarbench.bench.report.glance import comparisons_frame, draw_glance_figures, glance
 from radarbench.bench.report.html import interactive_specs, markdown_to_html
 from radarbench.bench.report.render import comparisons_markdown, glance_markdown, render, section_macro
 from radarbench.bench.recording import TrialRecord, write_recording
-from radarbench.bench.runner import calibrations
-from radarbench.bench.store import Store
-from radarbench.bench.figure_cache import FigureReuse, write_if_changed
-from radarbench.bench.tables import csv_text
+from radarbench.bench.run.runner import calibrations
+from radarbench.bench.results.store import Store
+from radarbench.bench.results.figure_cache import FigureReuse, write_if_changed
+from radarbench.bench.results.tables import csv_text
 from radarbench.bench.tasks import ReportContext, summary_columns
 
 TRIAL_KEYS = ["scenario", "method", "config", "params", "snr_db", "trial", "seed", "realised_snr_db",
@@ -241,7 +251,7 @@ def _resolved_scenario_params(record: dict) -> dict[str, dict]:
     """Scenario config label -> its resolved parameters, from the stored sweep resolved
     again (a single-scenario sweep keeps its grid axes merged in ``scenario_params``), its
     data files named as a report shows them (:func:`_shown_params`)."""
-    from radarbench.bench.config import parse_sweep
+    from radarbench.bench.sweep.config import parse_sweep
     from radarbench.bench.params import params_as_dict
     plan = parse_sweep(record["sweep"], allow_large=True)
     return {sc.label: _shown_params(type(sc.params), params_as_dict(sc.params), record) for sc in plan.scenarios}
@@ -420,7 +430,7 @@ def _paper_vs_ours(source: str, tables: dict[str, pd.DataFrame], calibration: di
     """A preset's *Paper vs ours*: (its claims, ``NAME.claims.toml``, evaluated on the
     tables as written to CSV; the section: the table, then the rendered notes), or
     (None, the notes as they are) for a preset without a claims file; ``calibration``: the
-    plan's ``[calibration]`` (:func:`bench.quantities.plan_calibration`). Called before
+    plan's ``[calibration]`` (:func:`bench.report.quantities.plan_calibration`). Called before
     anything is written: a claim the tables cannot answer stops the report with one
     line, nothing written."""
     file = claims.preset_claims(_preset_name(source)) if _preset_name(source) else None
@@ -436,13 +446,13 @@ def build_outputs(out_dir: Path, *, recording: bool = True, progress: Progress |
     """(Re)build every output of a run folder from its store; returns report.md's path.
 
     Every file is written whole (a temporary file renamed into place) and listed in the
-    folder's manifest (:mod:`bench.runfolder`), and only when its bytes changed; a figure
-    drawn before from the same inputs and code is not drawn again (:mod:`bench.figure_cache`).
+    folder's manifest (:mod:`bench.results.runfolder`), and only when its bytes changed; a figure
+    drawn before from the same inputs and code is not drawn again (:mod:`bench.results.figure_cache`).
     The caller holds the folder's lock. ``progress`` shows the phases: ``report`` (CSVs,
     figures, report.md, counted in sections, with the figures drawn and reused) and
     ``recording`` (recording.rrd). ``workers``: the most processes that draw the figures
     (None: one per CPU, :func:`bench.report.building.figure_pool`). ``digest``: what the outputs are built from
-    (:func:`bench.runfolder.outputs_digest`), recorded once they are all written, so an
+    (:func:`bench.results.runfolder.outputs_digest`), recorded once they are all written, so an
     unchanged folder is not rebuilt."""
     progress = progress or Progress(quiet=True)
     out_dir = Path(out_dir)
@@ -472,7 +482,7 @@ def _task_contexts(present: list, task_of: dict, summary, trials, steps, series,
         configs = frozenset(label for label, t in task_of.items() if t is task)
         out.append((task, ReportContext(
             # without the runtime (the runtime section's): a task's figures are drawn from its
-            # results alone, so equal results reuse them (bench.figure_cache)
+            # results alone, so equal results reuse them (bench.results.figure_cache)
             summary=summary.loc[summary.config.isin(configs), summary.columns != "seconds_per_trial"], trials=trials[trials.config.isin(configs)],
             steps=steps[steps.config.isin(configs)] if not steps.empty else steps,
             series={k: v for k, v in series.items() if k[1] in configs},

@@ -1,7 +1,7 @@
 """How a report is built incrementally (docs/architecture.md, 'Report'): the processes that
 draw the figures, started only when a figure must be drawn; the report phase's progress,
 a step per section with the figures drawn and reused; report.html's interactive figures,
-reused from the user's cache (:mod:`bench.figure_cache`)."""
+reused from the user's cache (:mod:`bench.results.figure_cache`)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import contextlib
 import importlib
 
 from radarbench.bench import figures
-from radarbench.bench.processes import default_workers, process_pool
-from radarbench.bench.progress import Progress
+from radarbench.bench.run.processes import default_workers, process_pool
+from radarbench.bench.run.progress import Progress
 from radarbench.bench.report.html import interactive_figures
-from radarbench.bench.figure_cache import code_key, harness_key, key_of
+from radarbench.bench.results.figure_cache import code_key, harness_key, key_of
 
 
 #: the most processes that render a report's figures (:func:`figure_pool`)
@@ -20,7 +20,7 @@ FIGURE_WORKERS = 4
 
 
 class LazyPool:
-    """A pool of ``workers`` processes (:func:`bench.processes.process_pool`) started by its
+    """A pool of ``workers`` processes (:func:`bench.run.processes.process_pool`) started by its
     second :meth:`submit`: the first job is declined (None: :func:`bench.figures.result_of`
     runs it here, cheaper than starting processes that import matplotlib), so a report
     whose figures are reused but one (the runtime's) starts none."""
@@ -109,7 +109,7 @@ def each_done(parts, sections: Sections, what: str) -> list:
 def reused_output(path, inputs, write) -> None:
     """``write(path)`` (an output drawn by the harness from ``inputs`` alone, the
     recording), unless the run folder or the user's cache holds it for the same inputs and
-    harness code (:mod:`bench.figure_cache`)."""
+    harness code (:mod:`bench.results.figure_cache`)."""
     reuse = figures.reuse_in_effect()
     key = key_of(inputs, harness_key()) if reuse is not None else None
     if key is not None and reuse.reuse(path, key, figure=False):

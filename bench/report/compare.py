@@ -35,7 +35,7 @@ gate over many configs does not fail by chance; it exits with
 :data:`EXIT_REGRESSION` on a significant change for the worse, on a config
 that ran in A and failed in B, and on a comparison that is not comparable.
 
-Stores are opened read-only (:meth:`bench.store.Store` ``read_only``): compare
+Stores are opened read-only (:meth:`bench.results.store.Store` ``read_only``): compare
 creates and changes no file in the run folders, which may be on read-only media.
 """
 
@@ -130,9 +130,9 @@ def load_run(path: str | Path) -> Run:
     read-only): any run folder the harness wrote compares, whether or not its report was
     built (``previous/``, an interrupted run); ConfigError (exit 2) unless it is a bench
     run folder."""
-    from radarbench.bench import runfolder
+    from radarbench.bench.results import runfolder
     from radarbench.bench.report import store_tables
-    from radarbench.bench.store import Store, store_fault
+    from radarbench.bench.results.store import Store, store_fault
     root = Path(path)
     if not root.is_dir():
         raise ConfigError("", f"{root} is not a folder (expected a bench run folder)")
@@ -493,7 +493,7 @@ def run_compare(path_a: str, path_b: str, out: str | None, fail_on_regression: b
     shown = escape_controls(compare_text(a, b, diffs))     # a terminal obeys no escape from a store
     print(shown, end="")
     if out:
-        from radarbench.bench import runfolder
+        from radarbench.bench.results import runfolder
         folder = Path(out)
         folder.mkdir(parents=True, exist_ok=True)
         runfolder.write_text(folder / "compare.csv", diffs.to_csv(index=False, lineterminator="\n"))

@@ -32,7 +32,7 @@ from pathlib import Path
 import pandas as pd
 
 from radarbench.bench.report.render import environment, sentence_case
-from radarbench.bench.tables import identical_curves
+from radarbench.bench.results.tables import identical_curves
 
 PLACEHOLDER = '<div id="bench-interactive"></div>'
 _IMG = re.compile(r'(<img[^>]*?src=")(figures/[^"]+\.png)(")')

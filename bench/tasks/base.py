@@ -94,7 +94,7 @@ class ReportContext:
     series: dict                     # (scenario, config, snr_db) -> {name: (n, K)}
     calibrations: list               # bench.calibration.CalibrationResult
     records: list[TrialRecord]       # every recorded trial of the run (pick the task's own)
-    store: Any                       # bench.store.Store (null values for ROC, Gumbel fits, ...)
+    store: Any                       # bench.results.store.Store (null values for ROC, Gumbel fits, ...)
     fig_dir: Path
     title: str                       # the sweep's name
     pfa: float                       # requested Pfa
@@ -299,7 +299,7 @@ class Task:
         config (``scenario`` a Scenario instance), in one phrase, from what both declare
         (e.g. a statistic formed only after the scenario's onset leaves no false-alarm
         step); None (the default): it can. Checked with ``Method.check_scenario`` for every
-        pair of a sweep before anything runs (:func:`bench.feasibility.check_pairs`)."""
+        pair of a sweep before anything runs (:func:`bench.sweep.feasibility.check_pairs`)."""
         return None
 
     # -------------------------------------------------------------- worker side

@@ -12,7 +12,7 @@ import tomllib
 from typing import Any
 
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.grid import split_top_level
+from radarbench.bench.sweep.grid import split_top_level
 from radarbench.bench.params import build_params
 from radarbench.bench.registry import get_method
 

@@ -34,7 +34,7 @@ SIGMA_WHY = "from a millimetre per second squared to 100 g"
 
 class KinematicTracker(Method):
     """Base of the trackers of kinematic scenes (those providing ``kinematic-model``,
-    :mod:`bench.capabilities`); every one skips the steps a ragged batch does not have."""
+    :mod:`bench.sweep.capabilities`); every one skips the steps a ragged batch does not have."""
 
     task = TRACKING
     needs = frozenset({"kinematic-model"})

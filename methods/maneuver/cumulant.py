@@ -12,7 +12,7 @@ from radarbench.bench.core import Batch, DetectionOutput
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_method
-from radarbench.bench.windows import sliding_sum
+from radarbench.models.windows import sliding_sum
 from radarbench.methods.maneuver.base import MAX_WINDOW_STEPS, InnovationDetector, sidak_level, steps_problem
 from radarbench.models.kalman import InnovationSequence
 
@@ -71,7 +71,7 @@ def window_power_sums(x: np.ndarray, M: int, centre: np.ndarray | None,
     samples, for each p in ``powers``; ``centre`` a_k (n, K) or None (a = 0).
 
     Binomial expansion on the raw power sums S_q = Σ x^q (one
-    :func:`bench.windows.sliding_sum` each):
+    :func:`models.windows.sliding_sum` each):
     Σ (x − a)^p = Σ_q C(p, q) (−a)^(p−q) S_q, with S_0 = L.
     """
     x = np.asarray(x, dtype=np.float64)

@@ -12,7 +12,7 @@ from radarbench.bench.core import Batch, DetectionOutput
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param
 from radarbench.bench.registry import register_method
-from radarbench.bench.windows import sliding_sum
+from radarbench.models.windows import sliding_sum
 from radarbench.methods.maneuver.base import MAX_WINDOW_STEPS, InnovationDetector, steps_problem
 from radarbench.models.kalman import InnovationSequence
 

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from radarbench.bench.batched import matvec
-from radarbench.bench.capabilities import VALID_STEP_MASKS
+from radarbench.bench.sweep.capabilities import VALID_STEP_MASKS
 from radarbench.bench.core import MANEUVER_DETECTION, TRACKING, Batch, Scenario, Timeline
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import param

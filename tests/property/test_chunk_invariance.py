@@ -16,8 +16,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from radarbench.bench import registry, tomlw
-from radarbench.bench.capabilities import fits
+from radarbench.bench import registry
+from radarbench.bench.sweep import tomlw
+from radarbench.bench.sweep.capabilities import fits
 from tests.conftest import run_bench
 from tests.test_recorded_tracks import small_params_on_a_csv
 

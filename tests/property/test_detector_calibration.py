@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from radarbench.bench import registry
 from radarbench.bench.calibration import empirical_threshold
-from radarbench.bench.rng import CALIBRATION, EVALUATION, TrialRNG
+from radarbench.bench.sweep.rng import CALIBRATION, EVALUATION, TrialRNG
 from radarbench.bench.registry import get_task
 
 DETECTORS = [

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from radarbench.bench.core import Batch
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.methods.maneuver.cumulant import Cumulant, third_moment_null_variance, window_third_moment
 from radarbench.methods.maneuver.innovation import Innovation
 from radarbench.models.kalman import LinearGaussianFilter, LinearGaussianModel, innovations

@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.methods.glint.ekf import EKF
 from radarbench.methods.glint.trellis import expand, trellis_step, viterbi_path
 from radarbench.methods.glint.viterbi import Viterbi

@@ -36,7 +36,7 @@ from hypothesis import strategies as st
 
 from radarbench.bench import registry
 from radarbench.bench.cli import main
-from radarbench.bench.config import (
+from radarbench.bench.sweep.config import (
     LARGE_SWEEP_TRIAL_RUNS,
     MAX_CONFIGS,
     MAX_SNR_LEVELS,

@@ -33,14 +33,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from radarbench.bench import registry
-from radarbench.bench.config import parse_sweep
+from radarbench.bench.sweep.config import parse_sweep
 from radarbench.bench.core import MANEUVER_DETECTION, Method
 from radarbench.bench.escapes import escape_controls
 from radarbench.bench.markdown import code, table, text
 from radarbench.bench.params import param
 from radarbench.bench.report import build_outputs
 from radarbench.bench.report.html import _body, safe_url
-from radarbench.bench.runner import plan_record, run_sweep
+from radarbench.bench.run.runner import plan_record, run_sweep
 from radarbench.methods.maneuver.innovation import Innovation
 from radarbench.scenarios.cv_turn_cv import CvTurnCv
 

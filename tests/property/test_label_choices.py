@@ -15,12 +15,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from radarbench.bench import registry
-from radarbench.bench.config import parse_sweep
+from radarbench.bench.sweep.config import parse_sweep
 from radarbench.bench.core import MANEUVER_DETECTION, Method
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import declaration_problem, param
 from radarbench.bench.report import build_outputs
-from radarbench.bench.runner import plan_record, run_sweep
+from radarbench.bench.run.runner import plan_record, run_sweep
 from radarbench.methods.maneuver.innovation import Innovation
 from tests.property.test_hostile_markup import FRAGMENTS, SMALL
 

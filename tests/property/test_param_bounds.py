@@ -20,8 +20,8 @@ from hypothesis import strategies as st
 from conftest import scaled
 
 from radarbench.bench import registry
-from radarbench.bench.capabilities import fits
-from radarbench.bench.config import parse_sweep
+from radarbench.bench.sweep.capabilities import fits
+from radarbench.bench.sweep.config import parse_sweep
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import field_types
 from tests.property.test_hostile_input import assert_rejected, run_in_process, toml_text
@@ -115,7 +115,7 @@ class _Hung(Exception):
 def run_to_completion(data) -> str:
     """Validate ``data``; if accepted, run it (one worker, in-process) and check no unit
     failed. Returns "refused" or "ran"."""
-    from radarbench.bench.runner import plan_record, run_sweep
+    from radarbench.bench.run.runner import plan_record, run_sweep
     try:
         plan = parse_sweep(data, "bounds.toml")
     except ConfigError as err:

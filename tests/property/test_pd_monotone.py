@@ -12,9 +12,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from radarbench.bench.config import parse_sweep
+from radarbench.bench.sweep.config import parse_sweep
 from radarbench.bench.report import build_outputs
-from radarbench.bench.runner import plan_record, run_sweep
+from radarbench.bench.run.runner import plan_record, run_sweep
 
 TRIALS = 150
 

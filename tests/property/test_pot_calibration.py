@@ -16,7 +16,7 @@ import pytest
 from scipy import stats
 
 from radarbench.bench.calibration import POT_MIN_TAIL, calibrate, fitted_survival, pot_fit
-from radarbench.bench.config import _check_pot
+from radarbench.bench.sweep.config import _check_pot
 from radarbench.bench.errors import ConfigError
 
 PFA = 1e-3

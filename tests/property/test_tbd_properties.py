@@ -21,7 +21,7 @@ from radarbench.bench.core import Batch
 from radarbench.bench.tasks.tbd import Grid, TBDScene
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params
-from radarbench.bench.rng import TrialRNG
+from radarbench.bench.sweep.rng import TrialRNG
 from radarbench.methods.tbd.reference import reference_dp_tbd
 from radarbench.methods.tbd.dp_tbd import DpTbd, DpTbdMf, turn_log_density
 from radarbench.models.ar_noise import ar_autocovariance
@@ -253,7 +253,7 @@ def test_empirical_scene_threshold_holds_its_pfa_on_fresh_null_scenes(pfa, seed,
     error plus the measurement's). 4.5 standard errors (a two-sided 7e-6 level
     per example), and the test can see a threshold whose Pfa is off by half."""
     from radarbench.bench.calibration import calibrate
-    from radarbench.bench.rng import CALIBRATION, EVALUATION
+    from radarbench.bench.sweep.rng import CALIBRATION, EVALUATION
 
     params = build_params(TbdGrid.Params, {"cells": 16, "frames": 6})
     n0 = n1 = 1500

@@ -17,7 +17,7 @@ import pandas as pd
 
 from radarbench.bench import figures
 from radarbench.bench.markdown import code, crossing_difference, crossing_floors, crossing_text, fmt, fmt_db, snr50, table
-from radarbench.bench.store import Store
+from radarbench.bench.results.store import Store
 from radarbench.bench.tasks.base import ReportContext
 from radarbench.bench.tasks.detection.metrics import roc_curve
 

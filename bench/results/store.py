@@ -16,7 +16,7 @@ units       one row per finished unit (phase, scenario, SNR, trial range, timing
 runs        one row per (unit, method config): seconds, error and traceback (NULL if
             fine), the identity of the method config
 identities  each identity a run of this folder recorded, described (JSON: code, modules,
-            data files, library versions; :mod:`bench.identity`)
+            data files, library versions; :mod:`bench.run.identity`)
 metrics     per (unit, method config): the per-trial metric columns (npz)
 null_stats  per (calibration unit, method config): null-hypothesis statistic
             values used for calibration (npy) and the nominal threshold
@@ -208,7 +208,7 @@ class Store:
     # ---------------------------------------------------------------- plan
     def bind_plan(self, fingerprint: str, plan: dict) -> None:
         """Tie the store to a plan (the sweep as run now: the results it no longer asks for
-        were set aside first, :func:`bench.identity.set_aside_changed`)."""
+        were set aside first, :func:`bench.run.identity.set_aside_changed`)."""
         with self._write():
             self.db.execute("INSERT OR REPLACE INTO meta VALUES ('fingerprint', ?)", (fingerprint,))
             self.db.execute("INSERT OR REPLACE INTO meta VALUES ('plan', ?)", (json.dumps(plan),))
@@ -240,7 +240,7 @@ class Store:
 
     # ---------------------------------------------------------------- identities
     def use_identities(self, described: dict[str, dict[str, dict]]) -> None:
-        """Stamp what is saved from now on with ``described`` (:func:`bench.identity.plan_identities`),
+        """Stamp what is saved from now on with ``described`` (:func:`bench.run.identity.plan_identities`),
         and keep each identity's description."""
         self.stamps = {kind: {label: d["identity"] for label, d in table.items()} for kind, table in described.items()}
         with self._write():

@@ -3,7 +3,7 @@
 A **unit** is (scenario config, SNR, chunk of trials). Its batch is generated
 once and every method config runs on it (common random numbers: differences
 between methods are not noise differences). Each trial's random stream is
-derived from the sweep seed and the trial's identity only (:mod:`bench.rng`),
+derived from the sweep seed and the trial's identity only (:mod:`bench.sweep.rng`),
 so results do not depend on chunk size, workers or executor.
 
 A run has two phases:
@@ -30,18 +30,20 @@ from pathlib import Path
 
 import numpy as np
 
-from radarbench.bench import registry, tomlw, warmup
+from radarbench.bench import registry
+from radarbench.bench.sweep import tomlw
+from radarbench.bench.run import warmup
 from radarbench.bench.calibration import EQUAL_CHANCE_PD, CalibrationResult, calibrate
-from radarbench.bench.plan import Plan
-from radarbench.bench.executors import SerialExecutor, UnitFailure, make_executor
-from radarbench.bench.processes import STOP_SIGNALS, restore_handler
-from radarbench.bench.identity import PREVIOUS, content_keys, set_aside_changed
-from radarbench.bench.progress import Progress
-from radarbench.bench.provenance import origin_text, provenance
-from radarbench.bench.results_cache import ResultsCache
-from radarbench.bench.reuse import Reuse, merge_records
-from radarbench.bench.store import Store, UnitResult
-from radarbench.bench.units import Unit, UnitTask, execute_unit, failed_result, plan_units, unit_methods
+from radarbench.bench.sweep.plan import Plan
+from radarbench.bench.run.executors import SerialExecutor, UnitFailure, make_executor
+from radarbench.bench.run.processes import STOP_SIGNALS, restore_handler
+from radarbench.bench.run.identity import PREVIOUS, content_keys, set_aside_changed
+from radarbench.bench.run.progress import Progress
+from radarbench.bench.results.provenance import origin_text, provenance
+from radarbench.bench.results.results_cache import ResultsCache
+from radarbench.bench.run.reuse import Reuse, merge_records
+from radarbench.bench.results.store import Store, UnitResult
+from radarbench.bench.run.units import Unit, UnitTask, execute_unit, failed_result, plan_units, unit_methods
 
 RUN_FILES = ("results.sqlite", "results.sqlite-wal", "results.sqlite-shm", "plan.toml", "trials.csv",
              "summary.csv", "calibration.csv", "steps.csv", "report.md", "recording.rrd")
@@ -142,7 +144,7 @@ KNOWN_SECONDS = 10_000
 def _known_seconds() -> dict[str, float]:
     """Seconds per trial kept from earlier runs: ``SCENARIO_KEY`` (generating the scenes)
     and ``SCENARIO_KEY/METHOD_KEY`` (a method config on them)."""
-    from radarbench.bench.listing import read_table
+    from radarbench.bench.sweep.listing import read_table
     return {k: v for k, v in read_table(UNIT_SECONDS_FILE).items() if isinstance(v, float)}
 
 
@@ -166,7 +168,7 @@ def longest_first(plan: Plan, tasks: list[UnitTask]) -> list[UnitTask]:
 def remember_seconds(plan: Plan, store: Store) -> None:
     """Keep the seconds per trial of this run's units and runs in the user's cache folder
     (for :func:`longest_first`); a cache that cannot be written costs only the ordering."""
-    from radarbench.bench.listing import write_table
+    from radarbench.bench.sweep.listing import write_table
     keys, known = content_keys(plan), _known_seconds()
     for _key, scenario, n, seconds in store.db.execute("SELECT key, scenario, n, generate_seconds FROM units"):
         if scenario in keys["scenarios"] and n:
@@ -218,7 +220,7 @@ def _run_phase(executor, tasks, store: Store, progress: Progress, stop=None, tim
 def _served(reuse: Reuse | None, store: Store, tasks: list[UnitTask], on_result=None) -> list[UnitTask]:
     """The tasks left to compute once the results cache served what it holds: a unit it
     holds whole is stored now; one it holds in part runs only its other method configs
-    (:class:`bench.reuse.Reuse`)."""
+    (:class:`bench.run.reuse.Reuse`)."""
     if reuse is None:
         return tasks
     left = []
@@ -293,9 +295,9 @@ def _capped_workers(workers: int, to_run: int, quiet: bool) -> int:
 
 
 def _warm_up(executor, plan: Plan, store: Store, progress: Progress, timeout: float | None) -> bool:
-    """Compile the sweep's kernels in one worker before any unit is timed (:mod:`bench.warmup`);
+    """Compile the sweep's kernels in one worker before any unit is timed (:mod:`bench.run.warmup`);
     its seconds are stored apart (meta ``warm_up_seconds``), never in a unit's runtime.
-    Returns whether every pair's warm-up ran whole (:func:`bench.warmup.run_warm_up`)."""
+    Returns whether every pair's warm-up ran whole (:func:`bench.run.warmup.run_warm_up`)."""
     import tempfile
 
     tasks = warmup.warm_up_tasks(plan)
@@ -363,12 +365,12 @@ def run_sweep(plan: Plan, out_dir: Path, *, plan_record: dict, workers: int = 1,
 
     ``retry_failed``: also re-run the (unit, method config) pairs whose run failed,
     the calibration ones before the thresholds are computed. ``progress`` (default: a
-    new :class:`~bench.progress.Progress`, silent when ``quiet``) shows the phases
+    new :class:`~bench.run.progress.Progress`, silent when ``quiet``) shows the phases
     ``calibration`` and ``evaluation``; the caller closes it. A run with nothing left
     to compute says so in one line (unless ``quiet``); otherwise one line says how many
     units it reused from the folder, took from the results cache and computed.
     ``cache``: take results from the user's results cache and keep the computed ones
-    there (:mod:`bench.reuse`; ``bench run --no-cache``: neither).
+    there (:mod:`bench.run.reuse`; ``bench run --no-cache``: neither).
 
     A unit whose worker dies or overruns the plan's ``unit_timeout_s`` is run again one
     method config at a time; the configs that fail alone are stored as failed with the
@@ -484,5 +486,5 @@ def write_plan_toml(path: Path, plan: Plan, command: str, identities: dict | Non
             "provenance": {"command": command, "fingerprint": plan.fingerprint(), **provenance(),
                            "identities": identities, "plugins": plugins}}
     text = "# Resolved plan written by bench; `bench run plan.toml` reproduces the results.\n" + tomlw.dumps(body)
-    from radarbench.bench.runfolder import write_text      # whole, a unique temporary name, listed in the manifest
+    from radarbench.bench.results.runfolder import write_text      # whole, a unique temporary name, listed in the manifest
     write_text(path, text)

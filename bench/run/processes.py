@@ -1,10 +1,10 @@
 """The processes the harness starts and the driver's signals (docs/architecture.md,
-'Runner'): the forkserver that forks every local worker, warm (:mod:`bench._forkserver`
+'Runner'): the forkserver that forks every local worker, warm (:mod:`bench.run._forkserver`
 preloaded), with SIGINT ignored, and that ends with the driver; the watch by which a
 worker exits when its driver dies; the pool of processes for the harness's own work
 (the report's figures) and the fresh process of one call (``bench perf``'s measurements);
 SIGINT and SIGTERM held back, restored or read as Ctrl-C.
-:mod:`bench.executors` runs units on these processes.
+:mod:`bench.run.executors` runs units on these processes.
 """
 
 from __future__ import annotations
@@ -69,9 +69,9 @@ def sigterm_as_interrupt() -> Callable[[], None]:
     return lambda: restore_handler(signal.SIGTERM, previous)
 
 
-#: what the forkserver of the local workers imports once for all of them (bench._forkserver)
-LOCAL_PRELOAD = ["radarbench.bench._forkserver"]
-#: environment variable naming the driver to the forkserver it starts (bench._forkserver)
+#: what the forkserver of the local workers imports once for all of them (bench.run._forkserver)
+LOCAL_PRELOAD = ["radarbench.bench.run._forkserver"]
+#: environment variable naming the driver to the forkserver it starts (bench.run._forkserver)
 DRIVER_ENV = "BENCH_FORKSERVER_DRIVER"
 
 
@@ -80,7 +80,7 @@ def _start_forkserver(preload: list[str]) -> None:
     that survives exec: the server ignores Ctrl-C (a terminal sends it to the
     whole process group) and the driver alone handles it. The server is told
     the driver's pid (:data:`DRIVER_ENV`) so that it exits when the driver dies
-    (:mod:`bench._forkserver`)."""
+    (:mod:`bench.run._forkserver`)."""
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(preload)
     main = threading.current_thread() is threading.main_thread()

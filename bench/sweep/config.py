@@ -5,8 +5,8 @@ A sweep file (TOML; its fields are described in docs/architecture.md,
 Every problem raises :class:`~bench.errors.ConfigError` naming the field,
 e.g. ``methods[1].params.window: expected int >= 3, got -2``.
 
-The result is a :class:`~bench.plan.Plan` (:mod:`bench.plan`: the plan's dataclasses,
-importable from here too); grid axes and config labels expand in :mod:`bench.grid`.
+The result is a :class:`~bench.sweep.plan.Plan` (:mod:`bench.sweep.plan`: the plan's dataclasses,
+importable from here too); grid axes and config labels expand in :mod:`bench.sweep.grid`.
 ``plan.toml`` keeps each method's label, so re-running it gives the same identities and
 the same results.
 
@@ -32,11 +32,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
-from radarbench.bench import capabilities, feasibility, registry
+from radarbench.bench.sweep import capabilities, feasibility
+from radarbench.bench import registry
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.grid import MAX_CONFIGS, expand, named
+from radarbench.bench.sweep.grid import MAX_CONFIGS, expand, named
 from radarbench.bench.params import as_float, show
-from radarbench.bench.plan import (SNR_KEY_DIGITS, CalibrationConfig, ComponentConfig, Plan,  # noqa: F401 - importable from here
+from radarbench.bench.sweep.plan import (SNR_KEY_DIGITS, CalibrationConfig, ComponentConfig, Plan,  # noqa: F401 - importable from here
                         ScenarioConfig, snr_key)
 
 #: trials per unit when a sweep sets no ``chunk``
@@ -187,7 +188,7 @@ def _parse_methods(value: Any, scenarios: tuple[ScenarioConfig, ...], base: str 
 
 def _check_runs_somewhere(cls, scenarios: tuple[ScenarioConfig, ...], field: str) -> None:
     """ConfigError naming what is missing unless method ``cls`` runs on some scenario
-    config of the sweep (:func:`bench.capabilities.missing`): the first config of its
+    config of the sweep (:func:`bench.sweep.capabilities.missing`): the first config of its
     task that lacks a capability, or the tasks the sweep's scenarios serve."""
     if any(capabilities.fits(cls, registry.get_scenario(s.name), s.params) for s in scenarios):
         return

@@ -27,7 +27,7 @@ CFAR map, DP state transitions), reported as ``<unit>_per_second`` beside
 ``trials_per_second``, and methods may declare ``Method.perf_targets``
 (``speedup``, ``<unit>_per_second``, ``seconds_per_trial``), which the report
 shows against the measurements. Before any method, the machine's limits are
-measured the same way (:mod:`bench.limits`: memory bandwidth of a streaming
+measured the same way (:mod:`bench.run.limits`: memory bandwidth of a streaming
 copy, the SIMD add/max rate of a tight loop), and each row shows its fraction
 of them: the least time of what its run must at least move and compute
 (``Method.least_cost``) at those limits over the time measured, or why no
@@ -64,13 +64,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from radarbench.bench import capabilities, limits, registry
+from radarbench.bench.sweep import capabilities
+from radarbench.bench.run import limits
+from radarbench.bench import registry
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.markdown import code, fmt, table
 from radarbench.bench.params import build_params
-from radarbench.bench.processes import call_in_fresh_process
-from radarbench.bench.rng import EVALUATION, TrialRNG, stable_key
-from radarbench.bench.tables import write_csv
+from radarbench.bench.run.processes import call_in_fresh_process
+from radarbench.bench.sweep.rng import EVALUATION, TrialRNG, stable_key
+from radarbench.bench.results.tables import write_csv
 
 PERF_COLUMNS = ["method", "size", "trials", "seconds_per_trial", "trials_per_second", "chunk",
                 "chunk_seconds_per_trial", "reference",
@@ -266,13 +268,13 @@ def _in_fresh_process(job: Job | SceneJob) -> dict:
 
 def _spawned(fn, *args) -> dict:
     """``fn(*args)`` in a fresh spawned process held to one core (:data:`ONE_CORE`;
-    :func:`bench.processes.call_in_fresh_process`)."""
+    :func:`bench.run.processes.call_in_fresh_process`)."""
     with _environment(ONE_CORE):
         return call_in_fresh_process(fn, *args)
 
 
 def machine_limits() -> dict:
-    """The machine's limits (:func:`bench.limits.measure_limits`), in a fresh process held to one core."""
+    """The machine's limits (:func:`bench.run.limits.measure_limits`), in a fresh process held to one core."""
     return _spawned(limits.measure_limits)
 
 
@@ -288,7 +290,7 @@ def limit_columns(cost, seconds: float, machine: dict) -> dict:
 
 def accepted_sizes(method_cls, scenario) -> dict:
     """The perf sizes of ``scenario`` a method runs on: those whose resolved params fit its
-    capabilities (:func:`bench.capabilities.fits`) and its default config's
+    capabilities (:func:`bench.sweep.capabilities.fits`) and its default config's
     ``check_scenario`` accepts (none for a scenario of another task)."""
     if method_cls.task not in scenario.tasks:
         return {}
@@ -344,8 +346,8 @@ def preset_chunks() -> dict[str, int]:
     Read from the presets' TOML as written (resolving a plan would read their data files)."""
     import tomllib
 
-    from radarbench.bench.config import DEFAULT_CHUNK
-    from radarbench.bench.listing import presets
+    from radarbench.bench.sweep.config import DEFAULT_CHUNK
+    from radarbench.bench.sweep.listing import presets
 
     out: dict[str, int] = {}
     for path in presets().values():
@@ -453,7 +455,7 @@ def scaling_plan():
     (the harness names no plugin itself)."""
     import importlib.resources
 
-    from radarbench.bench.config import parse_sweep_text
+    from radarbench.bench.sweep.config import parse_sweep_text
     path = importlib.resources.files("radarbench.bench") / "presets" / f"{SCALING_PRESET}.toml"
     return parse_sweep_text(path.read_bytes(), f"preset {SCALING_PRESET}")
 
@@ -463,7 +465,7 @@ def executor_scaling(workers: int, progress=print, plan=None) -> pd.DataFrame:
     :func:`scaling_plan`) per executor (units only, no report)."""
     import tempfile
 
-    from radarbench.bench.runner import plan_record, run_sweep
+    from radarbench.bench.run.runner import plan_record, run_sweep
     plan = scaling_plan() if plan is None else plan
     rows = []
     for executor, n in (("local", 1), ("local", workers), ("dask", workers)):
@@ -507,7 +509,7 @@ def prepare_out(out_dir: Path) -> Path:
     """Check and create the output folder before anything is measured: one line (exit 2)
     when it is a file or lies under one, exit 3 when the machine refuses."""
     from radarbench.bench.errors import ConfigError
-    from radarbench.bench.runfolder import folder_for, probe
+    from radarbench.bench.results.runfolder import folder_for, probe
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError("--out", f"{out_dir} exists and is not a folder")
@@ -584,7 +586,7 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
                  scaling_sweep: str = "", scenes: pd.DataFrame | None = None, machine: dict | None = None) -> Path:
     """``perf.csv``, ``scene.csv``, ``limits.csv`` and ``report.md``; ``scaling_sweep`` describes the
     sweep ``scaling`` timed, ``machine`` holds the limits measured (:func:`machine_limits`)."""
-    from radarbench.bench.provenance import provenance
+    from radarbench.bench.results.provenance import provenance
     prepare_out(out_dir)
     write_csv(perf, out_dir / "perf.csv")
     if scenes is not None:
@@ -638,5 +640,5 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
                                                     ["python", platform.python_version()],
                                                     ["load average (1, 5, 15 min) at the end", load]] +
                                           [[k, v] for k, v in prov.items()]))
-    from radarbench.bench.runfolder import write_text
+    from radarbench.bench.results.runfolder import write_text
     return write_text(out_dir / "report.md", "\n\n".join(part for part in parts if part) + "\n")

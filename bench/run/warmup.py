@@ -20,9 +20,9 @@ import os
 import sys
 
 from radarbench.bench import registry
-from radarbench.bench.plan import Plan
-from radarbench.bench.progress import say
-from radarbench.bench.units import Unit, UnitTask, calibrated_configs, execute_unit
+from radarbench.bench.sweep.plan import Plan
+from radarbench.bench.run.progress import say
+from radarbench.bench.run.units import Unit, UnitTask, calibrated_configs, execute_unit
 
 __all__ = ["cache_is_cold", "plan_key", "remember_unused", "warm_up_tasks", "run_warm_up", "COMPILING"]
 
@@ -39,7 +39,7 @@ def _cached_dispatchers():
     """Every numba dispatcher with ``cache=True`` among the imported modules (none without numba)."""
     if "numba" not in sys.modules:
         return iter(())
-    from radarbench.bench.numba_cache import kernels
+    from radarbench.bench.run.numba_cache import kernels
     return kernels()
 
 
@@ -56,7 +56,7 @@ def _stale_kernels() -> dict[str, list]:
 
 def _entries(index) -> dict:
     """The entries of a kernel's cache index; none when it is damaged (its kernel compiles,
-    :mod:`bench.numba_cache`)."""
+    :mod:`bench.run.numba_cache`)."""
     try:
         return index._load_index()
     except Exception:  # noqa: BLE001 - any damage: the entry is stale
@@ -85,14 +85,14 @@ UNUSED_PLANS = 32
 
 
 def plan_key(plan: Plan) -> str:
-    """A plan's code and parameters (:func:`bench.identity.plan_identities`) as one digest:
+    """A plan's code and parameters (:func:`bench.run.identity.plan_identities`) as one digest:
     a changed method or scenario is a new plan to warm up."""
-    from radarbench.bench.identity import digest, plan_identities
+    from radarbench.bench.run.identity import digest, plan_identities
     return digest(json.dumps(plan_identities(plan), sort_keys=True, default=str).encode())
 
 
 def _read_unused() -> dict:
-    from radarbench.bench.listing import read_table
+    from radarbench.bench.sweep.listing import read_table
     return read_table(UNUSED_FILE)           # damaged or absent: every stale kernel counts
 
 
@@ -101,9 +101,9 @@ def remember_unused(key: str) -> None:
     the kernels still stale are ones its units do not call, so its next runs need no warm-up for them
     (:func:`cache_is_cold`). Without this, every run after an update of a kernel module
     would warm up again until some sweep called every kernel of it. Kept in the user's
-    cache folder (:func:`bench.listing.cache_dir`); where it cannot be written, the
+    cache folder (:func:`bench.sweep.listing.cache_dir`); where it cannot be written, the
     warm-up simply runs again."""
-    from radarbench.bench.listing import write_table
+    from radarbench.bench.sweep.listing import write_table
     data = {k: v for k, v in _read_unused().items() if k != key}
     data[key] = _stale_kernels()
     write_table(UNUSED_FILE, data, UNUSED_PLANS)

@@ -19,7 +19,7 @@ before it imports a plugin) gives every kernel compiled with ``cache=True`` a
 - a failure to load or save (a damaged entry, a folder not writable or full) never fails
   the kernel: it compiles without the cache; a damaged entry is written anew; a folder that
   could not be written is not tried again by this process. stderr says, once per command
-  (:func:`bench.progress.say_once`: the first of its processes to say it), which folder
+  (:func:`bench.run.progress.say_once`: the first of its processes to say it), which folder
   was skipped and why.
 """
 
@@ -36,7 +36,7 @@ from numba.core import caching, config
 from numba.core.dispatcher import Dispatcher
 from numba.misc.appdirs import AppDirs
 
-from radarbench.bench.progress import say_once
+from radarbench.bench.run.progress import say_once
 
 #: what opens each file of the cache, before the SHA-256 of the rest
 MAGIC = b"radarbench numba cache 1\n"

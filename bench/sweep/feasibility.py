@@ -1,6 +1,6 @@
 """Whether a valid sweep can run: the checks that need the plugins and the machine.
 
-After a sweep is parsed and its grids expanded (:mod:`bench.config`), every
+After a sweep is parsed and its grids expanded (:mod:`bench.sweep.config`), every
 scenario config's SNR levels are checked by the scenario
 (:meth:`~bench.core.Scenario.check_snr`), every (method config, scenario
 config) pair by the method (:meth:`~bench.core.Method.check_scenario`) and by
@@ -22,7 +22,7 @@ from pathlib import Path
 
 from radarbench.bench import registry
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.plan import Plan, ScenarioConfig
+from radarbench.bench.sweep.plan import Plan, ScenarioConfig
 
 #: the default ``max_unit_memory_gb`` is this fraction of the machine's memory
 #: (:func:`machine_memory_bytes`); N workers hold up to N units at once

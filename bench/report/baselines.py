@@ -33,7 +33,7 @@ import pandas as pd
 
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.metrics import RELATIVE_RESOLUTION
-from radarbench.bench.quantities import INLINE, Missing, Tables
+from radarbench.bench.report.quantities import INLINE, Missing, Tables
 
 #: ``by`` -> whether the outcome at equal chance Pd ranks where the run has it (as the glance)
 BY = {"ranking": True, "ranking_metric": False}

@@ -1,4 +1,4 @@
-"""Preloaded by the forkserver of :class:`bench.executors.LocalExecutor`:
+"""Preloaded by the forkserver of :class:`bench.run.executors.LocalExecutor`:
 the runner, numpy, scipy and the plugins are imported once in the server, so
 every worker it forks starts warm.
 
@@ -6,14 +6,14 @@ Imported in the forkserver, it also makes the server exit with the driver that
 started it (named by ``BENCH_FORKSERVER_DRIVER``): on Linux the kernel kills it
 when the driver dies (``prctl(PR_SET_PDEATHSIG)``); everywhere, the server
 exits once the driver and every worker have closed its "alive" pipe, and the
-workers exit with the driver (:func:`bench.processes._exit_with_driver`).
+workers exit with the driver (:func:`bench.run.processes._exit_with_driver`).
 """
 
 import os
 import signal
 import sys
 
-import radarbench.bench.runner  # noqa: F401
+import radarbench.bench.run.runner  # noqa: F401
 from radarbench.bench import registry
 
 PR_SET_PDEATHSIG = 1

@@ -14,7 +14,7 @@ the "Paper vs ours" table from the results and renders the preset's notes
 (``NAME.md``) and each claim's ``reason`` as Jinja2 templates filled from them:
 no number the run produces is ever typed.
 
-Quantities (:mod:`bench.quantities`) give (value, low, high): a 95% interval where the
+Quantities (:mod:`bench.report.quantities`) give (value, low, high): a 95% interval where the
 table has one.
 Crossings are the SNR at which a Pd column reaches a level, computed as the
 report's SNR-at-Pd tables compute them (:func:`bench.markdown.snr50`); a
@@ -36,14 +36,14 @@ from typing import Any, Mapping
 
 import pandas as pd
 
-from radarbench.bench.baselines import Chosen, Selection, check_reference, is_reference, parse_selections, resolve
-from radarbench.bench.baselines import template_values as baseline_values
+from radarbench.bench.report.baselines import Chosen, Selection, check_reference, is_reference, parse_selections, resolve
+from radarbench.bench.report.baselines import template_values as baseline_values
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.listing import CLAIMS_SUFFIX
+from radarbench.bench.sweep.listing import CLAIMS_SUFFIX
 from radarbench.bench.markdown import fmt, fmt_db, table
-from radarbench.bench.quantities import (ALL_LEVELS, INLINE, Missing, Tables, Value, csv_frame,  # noqa: F401 - importable from here
+from radarbench.bench.report.quantities import (ALL_LEVELS, INLINE, Missing, Tables, Value, csv_frame,  # noqa: F401 - importable from here
                               describe, quantity, read_tables)
-from radarbench.bench.tables import write_csv
+from radarbench.bench.results.tables import write_csv
 
 #: the columns of claims.csv, in order
 CLAIMS_COLUMNS = ["id", "claim", "where", "original", "english", "quantity", "value", "low", "high", "unit",
@@ -103,7 +103,7 @@ class ClaimsFile:
     name: str          # the file's name, for error messages
     paper: str
     claims: tuple[Claim, ...]
-    baselines: dict[str, Selection] = field(default_factory=dict)   # [baseline.NAME]: bench.baselines
+    baselines: dict[str, Selection] = field(default_factory=dict)   # [baseline.NAME]: bench.report.baselines
 
 
 def _text(value: Any, field: str, *, empty: bool = False) -> str:
@@ -463,7 +463,7 @@ class Evaluation:
     file: ClaimsFile
     claims: dict[str, Result]
     q: dict[str, Result]
-    baselines: dict[str, Chosen] = field(default_factory=dict)    # baselines.NAME: bench.baselines
+    baselines: dict[str, Chosen] = field(default_factory=dict)    # baselines.NAME: bench.report.baselines
 
     def frame(self) -> pd.DataFrame:
         """claims.csv: one row per claim (:data:`CLAIMS_COLUMNS`)."""
@@ -547,8 +547,8 @@ def claims_markdown(evaluation: Evaluation, notes: str = "") -> str:
 
 def write_folder(folder: str | Path) -> Path:
     """Write claims.csv of a report folder from its committed tables (listed in its
-    manifest, as ``bench report`` writes it): ``python -m radarbench.bench.claims FOLDER...``."""
-    from radarbench.bench import runfolder
+    manifest, as ``bench report`` writes it): ``python -m radarbench.bench.report.claims FOLDER...``."""
+    from radarbench.bench.results import runfolder
     folder = Path(folder)
     frame = evaluate_folder(folder)
     with runfolder.writing(folder):
@@ -569,7 +569,7 @@ def evaluate_folder(folder: str | Path, file: ClaimsFile | None = None) -> pd.Da
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m radarbench.bench.claims FOLDER...``: claims.csv of each report folder from its CSVs."""
+    """``python -m radarbench.bench.report.claims FOLDER...``: claims.csv of each report folder from its CSVs."""
     import sys
     for folder in (sys.argv[1:] if argv is None else argv):
         try:

@@ -1,7 +1,7 @@
 """How a run's tables are written, and read back: every CSV of a run folder, its report's
 and its claims' (docs/architecture.md, 'Outputs of a run'), so that they read back bit-exact.
 
-Apart from :mod:`bench.report` so that :mod:`bench.claims`, which the report imports,
+Apart from :mod:`bench.report` so that :mod:`bench.report.claims`, which the report imports,
 writes its claims.csv the same way without importing the report.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from radarbench.bench import runfolder
+from radarbench.bench.results import runfolder
 
 
 def csv_text(df) -> str:
@@ -19,7 +19,7 @@ def csv_text(df) -> str:
 
 
 def write_csv(df, path: Path) -> None:
-    """Write ``df`` to ``path`` inside a run folder (:func:`bench.runfolder.write_text`)."""
+    """Write ``df`` to ``path`` inside a run folder (:func:`bench.results.runfolder.write_text`)."""
     runfolder.write_text(path, csv_text(df))
 
 

@@ -124,10 +124,10 @@ _harness_key: list[str] = []
 
 
 def harness_key() -> str:
-    """The harness's code (:func:`bench.runfolder.harness_files`), for an output drawn by
+    """The harness's code (:func:`bench.results.runfolder.harness_files`), for an output drawn by
     more of it than one module (the recording)."""
     if not _harness_key:
-        from radarbench.bench import runfolder
+        from radarbench.bench.results import runfolder
         h = hashlib.sha256()
         for path in sorted(runfolder.harness_files()):
             h.update(str(path.name).encode() + b"\0" + path.read_bytes())
@@ -152,10 +152,10 @@ def _sha(data: bytes) -> str:
 
 
 def write_if_changed(path: Path, data: bytes) -> bool:
-    """Write ``data`` to ``path`` whole (:func:`bench.runfolder.write_bytes`) unless the file
+    """Write ``data`` to ``path`` whole (:func:`bench.results.runfolder.write_bytes`) unless the file
     already holds exactly these bytes (then it is left, modification time and all);
     whether it was written."""
-    from radarbench.bench import runfolder
+    from radarbench.bench.results import runfolder
     old = _read_regular(path, len(data) + 1)
     if old is not None and old == data:
         runfolder.kept(path)
@@ -198,7 +198,7 @@ class FigureReuse:
         """Remove the figures the last build made and this one did not (a config or a
         scenario config left the sweep), unless their file was changed since: the folder
         then holds what a fresh build would."""
-        from radarbench.bench import runfolder
+        from radarbench.bench.results import runfolder
         for name, (_, sha) in self.previous.items():
             path = out_dir / "figures" / name
             if name not in self.current and Path(name).name == name and (data := _read_regular(path)) is not None \
@@ -217,7 +217,7 @@ class FigureReuse:
         if entry and entry[0] == key:
             data = _read_regular(path)
             if data is not None and _sha(data) == entry[1]:
-                from radarbench.bench import runfolder
+                from radarbench.bench.results import runfolder
                 runfolder.kept(path)
                 return self._reused(path, key, data, figure)
         data = self.fetch(key, path.suffix)
@@ -266,8 +266,8 @@ class FigureReuse:
 
 
 def _cache_folder() -> Path | None:
-    """The user's cache of figures, if it is a private folder (:func:`bench.listing.private_dir`)."""
-    from radarbench.bench.listing import cache_dir, private_dir
+    """The user's cache of figures, if it is a private folder (:func:`bench.sweep.listing.private_dir`)."""
+    from radarbench.bench.sweep.listing import cache_dir, private_dir
     folder = cache_dir() / "figures"
     return folder if private_dir(cache_dir()) and private_dir(folder) else None
 

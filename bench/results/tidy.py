@@ -31,10 +31,10 @@ import numpy as np
 import pandas as pd
 
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.grid import params_text_of_label, split_top_level
+from radarbench.bench.sweep.grid import params_text_of_label, split_top_level
 from radarbench.bench.metrics import CELL_KEYS
-from radarbench.bench.plan import format_value
-from radarbench.bench.tables import csv_text, read_csv
+from radarbench.bench.sweep.plan import format_value
+from radarbench.bench.results.tables import csv_text, read_csv
 
 #: the long summary's key columns, then what it says of each metric
 SUMMARY_KEYS = ["scenario", "method", "config", "snr_db", "metric"]
@@ -111,7 +111,7 @@ def _frozen(v):
 def _typed(values: pd.Series) -> pd.Series:
     """One parameter column in one type: bool, int and str as pandas' nullable types, int
     and float together as float, lists as tuples; a parameter name whose types differ
-    between configs as text (the label's spelling, :func:`bench.plan.format_value`)."""
+    between configs as text (the label's spelling, :func:`bench.sweep.plan.format_value`)."""
     kinds = {type(v) for v in values if not _missing(v)}
     if kinds == {list}:
         return values.map(lambda v: None if _missing(v) else _frozen(v))
@@ -131,7 +131,7 @@ def _params_frame(key: str, prefix: str, params: dict[str, dict]) -> pd.DataFram
 
 def _grid_value(values, text: str):
     """The value of grid axis ``values`` that a scenario label writes as ``text``
-    (:func:`bench.grid.expand`: a data file by its name alone)."""
+    (:func:`bench.sweep.grid.expand`: a data file by its name alone)."""
     if not isinstance(values, list):
         return values
     return next((v for v in values if text in (format_value(v), os.path.basename(str(v)))), text)
@@ -203,8 +203,8 @@ def check_format(fmt: str) -> None:
 
 def export(run: Run, out: Path, fmt: str) -> list[Path]:
     """Write ``run``'s frames into folder ``out`` as ``NAME.csv`` or ``NAME.parquet``, each
-    whole (:func:`bench.runfolder.atomic_output`); the paths written."""
-    from radarbench.bench import runfolder
+    whole (:func:`bench.results.runfolder.atomic_output`); the paths written."""
+    from radarbench.bench.results import runfolder
     check_format(fmt)
     runfolder.folder_for(out)
     written = []

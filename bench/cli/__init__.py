@@ -1,8 +1,15 @@
-"""The ``bench`` command: ``list``, ``run``, ``report``, ``view``, ``compare``, ``export``, ``perf``.
+"""Stage ``cli/`` of the harness. The `bench` command and its commands that are no stage of
+their own: `bench list`, `bench perf`, the documentation site's generated pages.
+
+It may import the top modules of ``bench/``, ``tasks/`` and ``recording/``, and the stages
+``sweep/``, ``results/``, ``run/``, ``report/``; no stage imports it (docs/architecture.md,
+'Layout'; tests/test_layout.py holds it).
+
+The ``bench`` command: ``list``, ``run``, ``report``, ``view``, ``compare``, ``export``, ``perf``.
 
 Arguments are checked before anything heavy is imported: the parser, ``--version``,
 the preset names and ``bench list``'s presets need no plugin, NumPy or pandas, and
-``bench list`` reads its plugin listing from a cache (:mod:`bench.listing`), so they
+``bench list`` reads its plugin listing from a cache (:mod:`bench.sweep.listing`), so they
 answer in a fraction of a second. Run outputs go to ``runs/<name>/`` unless ``--out``
 says otherwise (git ignores ``runs/``; committed reports are written with ``--out
 reports/NAME``).
@@ -30,9 +37,9 @@ from pathlib import Path
 from radarbench.bench import __version__
 from radarbench.bench.errors import (EXIT_BAD_INPUT, EXIT_BUG, EXIT_ENVIRONMENT, EXIT_FAILED_UNITS, EXIT_IN_USE, EXIT_INTERRUPTED,
                           EXIT_REGRESSION, ConfigError, Fault, is_out_of_memory, os_fault, unknown_name)
-from radarbench.bench import runfolder
-from radarbench.bench.listing import plugin_listing, preset_descriptions, presets
-from radarbench.bench.progress import notices_of_one_command
+from radarbench.bench.results import runfolder
+from radarbench.bench.sweep.listing import plugin_listing, preset_descriptions, presets
+from radarbench.bench.run.progress import notices_of_one_command
 
 EXIT_CODES = f"""exit codes:
   0    done
@@ -181,15 +188,15 @@ def cmd_list(args) -> int:
 
 
 def _overrides(args):
-    from radarbench.bench.config import Overrides
+    from radarbench.bench.sweep.config import Overrides
     return Overrides(tuple(args.methods or ()), tuple(args.scenarios or ()), tuple(args.snr or ()), args.trials,
                      args.seed, tuple(args.sets))
 
 
 def _sweep_data(args) -> tuple[dict, str, Path]:
     """(the sweep as data with the command line's changes, where it came from, its folder),
-    its own fields checked (:func:`bench.config.check_sweep_fields`): no plugin, no NumPy yet."""
-    from radarbench.bench.config import apply_overrides, check_sweep_fields, read_sweep_file, sweep_data
+    its own fields checked (:func:`bench.sweep.config.check_sweep_fields`): no plugin, no NumPy yet."""
+    from radarbench.bench.sweep.config import apply_overrides, check_sweep_fields, read_sweep_file, sweep_data
     if args.preset:
         source, preset = f"preset {args.preset}", presets()[args.preset]
         folder = Path(str(preset)).parent
@@ -223,7 +230,7 @@ def _named(source: str, overrides):
 
 
 def _load_plan(args, data: dict, source: str, folder: Path):
-    from radarbench.bench.config import parse_sweep
+    from radarbench.bench.sweep.config import parse_sweep
     overrides = _overrides(args)
     with _named(source, overrides):
         return parse_sweep(data, source, allow_large=args.yes, base=folder,
@@ -258,26 +265,26 @@ def _check_arguments(args) -> None:
     if args.scheduler is not None and args.executor != "dask":
         raise ConfigError("--scheduler", "only with --executor dask")
     if not args.no_cache:
-        from radarbench.bench.results_cache import bound_bytes
+        from radarbench.bench.results.results_cache import bound_bytes
         bound_bytes()          # a bad size bound in the environment: one line, before anything runs
 
 
 def _workers(args) -> int:
-    from radarbench.bench.processes import default_workers
+    from radarbench.bench.run.processes import default_workers
     return args.workers or default_workers()
 
 
 def _check_executor(args) -> None:
     """Executor options, checked before anything is written."""
     if args.executor == "dask":
-        from radarbench.bench.executors import require_dask
+        from radarbench.bench.run.executors import require_dask
         require_dask()
 
 
 def _stored_units(plan, out_dir: Path) -> tuple[int, int]:
     """(units stored in ``out_dir``, units of the plan)."""
-    from radarbench.bench.runner import plan_units
-    from radarbench.bench.store import Store
+    from radarbench.bench.run.runner import plan_units
+    from radarbench.bench.results.store import Store
     total = sum(map(len, plan_units(plan)))
     if not (out_dir / "results.sqlite").exists():
         return 0, total
@@ -298,21 +305,21 @@ def _interrupted(out_dir: Path, command: str, stored: int, total: int) -> int:
 
 @contextlib.contextmanager
 def _store_errors(out_dir: Path):
-    """SQLite failures as one line naming the store (bench.store.store_fault)."""
+    """SQLite failures as one line naming the store (bench.results.store.store_fault)."""
     try:
         yield
     except sqlite3.Error as exc:
-        from radarbench.bench.store import store_fault
+        from radarbench.bench.results.store import store_fault
         raise store_fault(out_dir / "results.sqlite", exc) from None
 
 
 def cmd_run(args) -> int:
     _check_arguments(args)
     data, source, folder = _sweep_data(args)
-    from radarbench.bench import runfolder
+    from radarbench.bench.results import runfolder
     _check_executor(args)
     if args.executor == "local":
-        from radarbench.bench.processes import prestart_forkserver
+        from radarbench.bench.run.processes import prestart_forkserver
         prestart_forkserver()
     plan = _load_plan(args, data, source, folder)
     if plan.skipped and not args.quiet:
@@ -347,8 +354,8 @@ def _import_early(module: str) -> None:
 def _run_locked(args, plan, out_dir: Path, command: str) -> int:
     """The run, in the locked folder."""
     from radarbench.bench import registry
-    from radarbench.bench.progress import Progress
-    from radarbench.bench.runner import Interrupted, plan_record, run_sweep, write_plan_toml
+    from radarbench.bench.run.progress import Progress
+    from radarbench.bench.run.runner import Interrupted, plan_record, run_sweep, write_plan_toml
     threading.Thread(target=_import_early, args=("radarbench.bench.report",), daemon=True,
                      name="bench-import-report").start()
     viewer = None
@@ -411,8 +418,8 @@ def _report_code(plan) -> list[Path]:
 
 def _failures_exit(out_dir: Path, command: str) -> int:
     """0, or after a summary of the stored failures on stderr, :data:`EXIT_FAILED_UNITS`."""
-    from radarbench.bench.failures import failed, summary_lines
-    from radarbench.bench.store import Store
+    from radarbench.bench.results.failures import failed, summary_lines
+    from radarbench.bench.results.store import Store
     store = Store(out_dir / "results.sqlite")
     try:
         runs = store.runs()
@@ -432,8 +439,8 @@ def _failures_exit(out_dir: Path, command: str) -> int:
 
 
 def cmd_report(args) -> int:
-    from radarbench.bench import runfolder
-    from radarbench.bench.progress import Progress
+    from radarbench.bench.results import runfolder
+    from radarbench.bench.run.progress import Progress
     from radarbench.bench.report import build_outputs
     out_dir = Path(args.dir)
     if args.tracebacks:
@@ -450,10 +457,10 @@ def cmd_report(args) -> int:
 
 def _print_tracebacks(out_dir: Path) -> int:
     """``bench report DIR --tracebacks``: the stored tracebacks, read-only."""
-    from radarbench.bench import runfolder
+    from radarbench.bench.results import runfolder
     from radarbench.bench.escapes import escape_controls
-    from radarbench.bench.failures import traceback_text
-    from radarbench.bench.store import Store
+    from radarbench.bench.results.failures import traceback_text
+    from radarbench.bench.results.store import Store
     if not (out_dir / runfolder.STORE).is_file():
         raise ConfigError("", f"{out_dir} has no {runfolder.STORE} (not a bench run folder)")
     runfolder.check_store(out_dir / runfolder.STORE, need_plan=True)
@@ -476,8 +483,8 @@ def cmd_compare(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from radarbench.bench import runfolder
-    from radarbench.bench.tidy import check_format, export, load_run
+    from radarbench.bench.results import runfolder
+    from radarbench.bench.results.tidy import check_format, export, load_run
     check_format(args.format)
     run = load_run(args.run)                 # read whole before anything is written
     out = Path(args.out) if args.out else run.path / EXPORT_DIR
@@ -507,7 +514,7 @@ def cmd_data(args) -> int:
 
 def cmd_perf(args) -> int:
     from radarbench.bench import registry
-    from radarbench.bench.perf import check_sizes, prepare_out, run_perf
+    from radarbench.bench.cli.perf import check_sizes, prepare_out, run_perf
     listed = {cls: name for name, cls in registry.methods().items()}     # a qualified name as bench list names it
     args.methods = args.methods and [listed[registry.get_method(name, "--methods")] for name in args.methods]
     check_sizes(args.methods, args.sizes)  # every bad argument is refused before the folder is touched
@@ -543,7 +550,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)   # before any heavy import: argument errors answer at once
         if args.command != "list":
-            from radarbench.bench.processes import sigterm_as_interrupt
+            from radarbench.bench.run.processes import sigterm_as_interrupt
             restore_sigterm = sigterm_as_interrupt()   # SIGTERM ends a command as Ctrl-C does (exit 130)
         with notices_of_one_command():          # a notice any of its processes meets, said once
             return COMMANDS[args.command](args)

@@ -52,7 +52,7 @@ def describe(exc: BaseException, cls: type | None = None) -> tuple[str, str]:
 
 
 def failed(runs) -> "object":
-    """The failed rows of :meth:`bench.store.Store.runs`."""
+    """The failed rows of :meth:`bench.results.store.Store.runs`."""
     return runs[runs.error.notna()]
 
 

@@ -42,7 +42,7 @@ __all__ = ["plugin_listing", "preset_descriptions", "presets"]
 #: The packages whose sources the plugin listing depends on.
 PACKAGES = ("radarbench.bench", "radarbench.methods", "radarbench.scenarios", "radarbench.models")
 ENTRY_POINT_GROUPS = ("bench.tasks", "bench.scenarios", "bench.methods")
-#: a paper's claims beside its preset: ``bench/presets/NAME`` + this (:mod:`bench.claims`)
+#: a paper's claims beside its preset: ``bench/presets/NAME`` + this (:mod:`bench.report.claims`)
 CLAIMS_SUFFIX = ".claims.toml"
 
 
@@ -117,7 +117,7 @@ def fingerprint() -> str:
 
 def cache_dir() -> Path:
     """The user's cache folder of bench (the plugin listing here; the warm-up's memory,
-    :mod:`bench.warmup`); use it only where :func:`private_dir` holds."""
+    :mod:`bench.run.warmup`); use it only where :func:`private_dir` holds."""
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "radar-maneuver-bench"
 
@@ -210,7 +210,7 @@ def write_table(name: str, table: dict, keep: int) -> bool:
 def _render(verbose: bool) -> str:
     """The plugin listing from the registry (imports every plugin)."""
     from radarbench.bench import registry
-    from radarbench.bench.capabilities import CAPABILITIES
+    from radarbench.bench.sweep.capabilities import CAPABILITIES
     from radarbench.bench.params import describe_params
 
     lines = ["tasks:"]

@@ -4,12 +4,12 @@ SNR at which a Pd column crosses a level, and differences and ratios of those.
 
 Each gives (value, low, high): a 95% interval where the table has one, and the trials
 behind it (``n``: per SNR level, or the calibration's null trials) from which a verdict
-estimates how many trials would resolve a claim (:func:`bench.claims.trials_needed`). Crossings are
+estimates how many trials would resolve a claim (:func:`bench.report.claims.trials_needed`). Crossings are
 computed as the report's SNR-at-Pd tables compute them (:func:`bench.markdown.snr50`); a
 difference of two quantities has the conservative interval [a.low − b.high, a.high − b.low]
 (the Minkowski difference of the two 95% intervals). A quantity whose config or scenario
 config did not run raises :class:`Missing`. The claims file that names them, and the
-verdicts: :mod:`bench.claims`.
+verdicts: :mod:`bench.report.claims`.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import pandas as pd
 
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.markdown import crossing_floors, fmt_db, snr50
-from radarbench.bench.tables import csv_text, read_csv
+from radarbench.bench.results.tables import csv_text, read_csv
 
 #: ``snr_db`` of a paired quantity over every level (comparisons.csv's blank ``snr_db``)
 ALL_LEVELS = "all"
@@ -250,7 +250,7 @@ def describe(q: dict | None) -> str:
     """A quantity as one line: ``crossing(config=..., column=pd_step)``."""
     if q is None:
         return ""
-    if "baseline" in q:                  # a config chosen by the run (bench.baselines)
+    if "baseline" in q:                  # a config chosen by the run (bench.report.baselines)
         return f"baseline:{q['baseline']}"
     show = (lambda v: describe(v) if isinstance(v, dict) else f"{v:g}" if isinstance(v, float) else str(v))
     return f"{q['kind']}({', '.join(f'{k}={show(v)}' for k, v in q.items() if k != 'kind')})"

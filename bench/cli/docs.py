@@ -12,7 +12,7 @@ discovered when the site is built, so a new plugin or report has its page withou
 here.
 
 ``mkdocs build`` adds the pages to the site through ``docs/hooks.py`` (named by mkdocs.yml),
-writing nothing into the clone; ``python -m radarbench.bench.docs OUT_DIR`` writes them into a folder.
+writing nothing into the clone; ``python -m radarbench.bench.cli.docs OUT_DIR`` writes them into a folder.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from radarbench.bench.markdown import code, frame_table, table, text
 
 #: repository files published under another site path (the rest keep theirs; docs/ is the site's root)
 RENAMED = {"README.md": "index.md", "CONTRIBUTING.md": "contributing.md"}
-#: the committed ``bench perf`` tables (:mod:`bench.perf`)
+#: the committed ``bench perf`` tables (:mod:`bench.cli.perf`)
 PERF_DIR = "reports/perf"
 #: what ``benchmarks/loop.py`` writes: the edit-run-read loop's durations, a JSON record in a fenced block
 LOOP_REPORT = f"{PERF_DIR}/loop.md"
@@ -100,8 +100,8 @@ def presets() -> list[Preset]:
     real-trajectories' samples of an optional extra, which building the docs must not need)."""
     import tomllib
 
-    from radarbench.bench.claims import preset_claims
-    from radarbench.bench.listing import presets as preset_files
+    from radarbench.bench.report.claims import preset_claims
+    from radarbench.bench.sweep.listing import presets as preset_files
 
     out = []
     for name, path in preset_files().items():
@@ -192,7 +192,7 @@ def perf_rows(root: Path, csv_name: str, column: str, name: str, page: str) -> s
 
 
 def _harness_or_builtin(module: str) -> bool:
-    harness = __name__.rpartition(".")[0]            # this package, whatever name it is imported by
+    harness = __name__.rsplit(".", 2)[0]            # this package, whatever name it is imported by
     return module == "builtins" or module == harness or module.startswith(harness + ".")
 
 
@@ -223,7 +223,7 @@ def component_page(kind: str, cls: type, page: str, facts: list[tuple[str, str]]
 def plugin_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Preset], reports: set[str]) -> None:
     """The task, method and scenario pages, and an index of each kind."""
     from radarbench.bench import registry
-    from radarbench.bench.capabilities import fits
+    from radarbench.bench.sweep.capabilities import fits
 
     methods, scenarios, tasks = registry.methods(), registry.scenarios(), registry.tasks()
     for name, cls in methods.items():
@@ -278,7 +278,7 @@ def report_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Pre
 def wall_time(report: Path) -> str:
     """The wall time of the units of the run that made the committed ``report`` (report.md),
     as its Provenance table states it; "–" when it states none."""
-    from radarbench.bench.provenance import WALL_TIME_ROW
+    from radarbench.bench.results.provenance import WALL_TIME_ROW
 
     for line in report.read_text(encoding="utf-8").splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
@@ -433,8 +433,8 @@ def folder_problem(out_dir: Path, root: Path) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m radarbench.bench.docs OUT_DIR [--root REPO]``: the generated pages into OUT_DIR."""
-    parser = argparse.ArgumentParser(prog="python -m radarbench.bench.docs", description=__doc__.splitlines()[0])
+    """``python -m radarbench.bench.cli.docs OUT_DIR [--root REPO]``: the generated pages into OUT_DIR."""
+    parser = argparse.ArgumentParser(prog="python -m radarbench.bench.cli.docs", description=__doc__.splitlines()[0])
     parser.add_argument("out_dir", help="folder to write the pages into (created if absent)")
     parser.add_argument("--root", default=".", help="the repository's root (default: the current folder)")
     args = parser.parse_args(argv)

@@ -25,7 +25,7 @@ from typing import Any, Mapping
 from radarbench.bench import registry
 from radarbench.bench.errors import ConfigError
 from radarbench.bench.params import build_params, field_types, is_tuple_field, params_as_dict
-from radarbench.bench.plan import ComponentConfig, label_value
+from radarbench.bench.sweep.plan import ComponentConfig, label_value
 
 #: the most configs one grid (or one sweep's list of methods or scenarios) may expand to
 MAX_CONFIGS = 1000

@@ -3,7 +3,7 @@
 A **unit** is (phase, scenario config, SNR, chunk of trials): :func:`plan_units` lists a
 plan's, and :func:`execute_unit`, in a worker, generates its batch once and runs every
 method config on it (common random numbers). The driver that hands units to workers and
-stores their results is :mod:`bench.runner`; the warm-up runs units too (:mod:`bench.warmup`).
+stores their results is :mod:`bench.run.runner`; the warm-up runs units too (:mod:`bench.run.warmup`).
 """
 
 from __future__ import annotations
@@ -12,13 +12,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from radarbench.bench import capabilities, failures, registry
-from radarbench.bench.plan import Plan, snr_key
-from radarbench.bench.executors import in_worker
+from radarbench.bench.sweep import capabilities
+from radarbench.bench.results import failures
+from radarbench.bench import registry
+from radarbench.bench.sweep.plan import Plan, snr_key
+from radarbench.bench.run.executors import in_worker
 from radarbench.bench.recording.record import TrialRecord
-from radarbench.bench.rng import CALIBRATION, EVALUATION, TrialRNG
-from radarbench.bench.store import MethodRun, UnitResult
-from radarbench.bench.worktime import work_seconds
+from radarbench.bench.sweep.rng import CALIBRATION, EVALUATION, TrialRNG
+from radarbench.bench.results.store import MethodRun, UnitResult
+from radarbench.bench.run.worktime import work_seconds
 from radarbench.bench.tasks.base import RecordedScene
 
 

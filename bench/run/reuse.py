@@ -1,5 +1,5 @@
 """A unit's results taken from the user's results cache instead of computed
-(docs/architecture.md, 'Results cache'; the cache itself: :mod:`bench.results_cache`).
+(docs/architecture.md, 'Results cache'; the cache itself: :mod:`bench.results.results_cache`).
 
 A unit's results are cached in parts, each keyed by everything that computes it and by
 nothing that merely names it (no label, no sweep, no run folder):
@@ -7,9 +7,9 @@ nothing that merely names it (no label, no sweep, no run folder):
 - its **scene part**: the columns every method config shares (trial, seed, realised SNR),
   the scene's seconds and SNR definition, and what its tasks record of each recorded
   trial's scene; keyed by the scenario config's content key and identity
-  (:func:`bench.identity.content_keys`, :func:`bench.identity.plan_identities`: every
+  (:func:`bench.run.identity.content_keys`, :func:`bench.run.identity.plan_identities`: every
   parameter, the seed, the code, data files and library versions), the phase, the SNR
-  level, the trials (first and count: each trial's stream is its own, :mod:`bench.rng`),
+  level, the trials (first and count: each trial's stream is its own, :mod:`bench.sweep.rng`),
   how many of them are recorded and, then, the tasks that record them;
 - one **run part** per method config: its per-trial metrics or null statistics (with
   the nominal threshold), its seconds and its trace on each recorded trial; keyed by the
@@ -29,12 +29,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from radarbench.bench.identity import content_keys
-from radarbench.bench.plan import Plan, snr_key
+from radarbench.bench.run.identity import content_keys
+from radarbench.bench.sweep.plan import Plan, snr_key
 from radarbench.bench.recording.record import TrialRecord
-from radarbench.bench.results_cache import ResultsCache, key_digest
-from radarbench.bench.store import MethodRun, UnitResult
-from radarbench.bench.units import Unit, UnitTask, plan_units, task_of, unit_methods
+from radarbench.bench.results.results_cache import ResultsCache, key_digest
+from radarbench.bench.results.store import MethodRun, UnitResult
+from radarbench.bench.run.units import Unit, UnitTask, plan_units, task_of, unit_methods
 
 #: how a unit's parts are keyed and laid out; changing either changes this
 SCHEME = 1

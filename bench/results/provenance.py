@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 #: the label of the report's Provenance row that holds the wall time of the last run's units
-#: (written by bench.report, read back from a committed report by bench.docs)
+#: (written by bench.report, read back from a committed report by bench.cli.docs)
 WALL_TIME_ROW = "wall time of the units in the last `bench run` (before report and recording)"
 
 
@@ -36,7 +36,7 @@ def _git(folder: Path, *args: str) -> subprocess.CompletedProcess | None:
 
 
 def git_commit() -> str:
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[1].parent
     out = _git(root, "rev-parse", "--short=12", "HEAD")
     # the committed reports are outputs, not code: their changes do not make the code dirty
     dirty = _git(root, "status", "--porcelain", "--untracked-files=no", "--", ".", ":!reports")

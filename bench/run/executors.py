@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.processes import LOCAL_PRELOAD, STOP_SIGNALS, _exit_with_driver, _signals_deferred, _start_forkserver
+from radarbench.bench.run.processes import LOCAL_PRELOAD, STOP_SIGNALS, _exit_with_driver, _signals_deferred, _start_forkserver
 
 
 class UnitFailure:
@@ -74,7 +74,7 @@ def in_worker() -> bool:
 
 class SerialExecutor:
     workers = 1
-    local = True        # its processes share this machine's numba cache (bench.warmup)
+    local = True        # its processes share this machine's numba cache (bench.run.warmup)
 
     def imap_unordered(self, fn: Callable, tasks: Iterable, *, stop: Callable[[], bool] | None = None,
                        timeout: float | None = None) -> Iterator:
@@ -328,7 +328,7 @@ class DaskExecutor:
     innocent ones beside the culprit too, so a unit whose worker died is run again
     *alone* on the cluster once the units in flight are done: only a unit that kills
     its worker while alone yields a :class:`UnitFailure`, and the runner then runs it
-    config by config as it does for the local pool (``bench.runner._run_phase``), so no
+    config by config as it does for the local pool (``bench.run.runner._run_phase``), so no
     innocent config is recorded as failed. A unit that raises is
     retried ``retries`` times. Each submitted unit yields exactly one result, and
     the store ignores a second result of a unit it already holds, so a unit is
@@ -336,7 +336,7 @@ class DaskExecutor:
     streams come from the sweep seed and the unit's trials only.
     """
 
-    local = False       # its workers, on other machines too, keep their own numba caches (bench.warmup)
+    local = False       # its workers, on other machines too, keep their own numba caches (bench.run.warmup)
     retries = 2
     connect_timeout = "15s"     # to reach an existing scheduler
     worker_timeout = 60         # seconds to wait for its first worker
@@ -359,7 +359,7 @@ class DaskExecutor:
             # and when the nanny restarts one; the driver alone handles it.
             import dask
 
-            _start_forkserver(["radarbench.bench._forkserver", "distributed"])
+            _start_forkserver(["radarbench.bench.run._forkserver", "distributed"])
             # allowed-failures 0: a unit whose worker dies comes back at once (imap_unordered
             # runs it again, alone), rather than after killing three more workers.
             self._config = dask.config.set({"distributed.worker.multiprocessing-method": "forkserver",

@@ -6,8 +6,8 @@ and trials), the method configs (:class:`ComponentConfig`) and the calibration
 (:class:`CalibrationConfig`); :meth:`Plan.to_dict` writes it back as the sweep file that
 reproduces it (plan.toml) and :meth:`Plan.fingerprint` is the identity of its results.
 How a config is labelled (:func:`label_value`) and keyed lives here too: both are part of
-its identity. A sweep file becomes a plan in :mod:`bench.config` (reading and checking the
-TOML), its grids expand in :mod:`bench.grid`.
+its identity. A sweep file becomes a plan in :mod:`bench.sweep.config` (reading and checking the
+TOML), its grids expand in :mod:`bench.sweep.grid`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,8 @@ from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
-from radarbench.bench import capabilities, registry
+from radarbench.bench.sweep import capabilities
+from radarbench.bench import registry
 from radarbench.bench.params import params_as_dict, path_fields
 
 #: significant digits of an SNR level in a unit's key (:func:`snr_key`): levels that
@@ -28,8 +29,8 @@ SNR_KEY_DIGITS = 9
 def snr_key(snr_db: float | None) -> str:
     """The canonical text of an SNR level, as in a unit's key (``"null"`` for the
     null hypothesis): two levels are the same level exactly when their keys are
-    equal, which the sweep's duplicate check uses (:func:`bench.config._parse_snr`) and
-    :attr:`bench.units.Unit.key` must use too."""
+    equal, which the sweep's duplicate check uses (:func:`bench.sweep.config._parse_snr`) and
+    :attr:`bench.run.units.Unit.key` must use too."""
     return "null" if snr_db is None else f"{snr_db:+.{SNR_KEY_DIGITS}g}"
 
 
@@ -49,7 +50,7 @@ class ComponentConfig:
         value (:attr:`bench.core.Scenario.stream_params`); a data file by its name, so the
         streams do not depend on the folder the data lives in (docs/architecture.md,
         'Random streams')."""
-        from radarbench.bench.rng import stable_key   # NumPy: not before a sweep's own fields are checked
+        from radarbench.bench.sweep.rng import stable_key   # NumPy: not before a sweep's own fields are checked
         cls = registry.find_scenario(self.name)
         always = set(getattr(cls, "stream_params", None) or ())
         defaults = params_as_dict(type(self.params)())
@@ -107,7 +108,7 @@ class Plan:
     skipped_methods: tuple[tuple[dict, str], ...] = ()
     #: (scenario config label, method config label, the method's reason) of the pairs its
     #: ``check_scenario`` refuses while the method config runs on another scenario config
-    #: of the sweep: skipped, no units, no rows (:func:`bench.feasibility.check_pairs`)
+    #: of the sweep: skipped, no units, no rows (:func:`bench.sweep.feasibility.check_pairs`)
     skipped: tuple[tuple[str, str, str], ...] = ()
     #: the absolute folder of the sweep file its data files (``kind="path"`` parameters) were
     #: read from, which a report names them relative to; None: a plan parsed without one
@@ -115,7 +116,7 @@ class Plan:
 
     def pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
         """The method configs that run on ``scenario``: those whose task it serves and whose
-        capabilities fit (:mod:`bench.capabilities`), less the skipped pairs."""
+        capabilities fit (:mod:`bench.sweep.capabilities`), less the skipped pairs."""
         return [m for m in self.candidate_pairs(scenario) if (scenario.label, m.label) not in self._skipped_keys]
 
     def candidate_pairs(self, scenario: ScenarioConfig) -> list[ComponentConfig]:
@@ -126,7 +127,7 @@ class Plan:
     @cached_property
     def _fitting(self) -> frozenset[tuple[str, str]]:
         """(scenario config label, method config label) of the pairs whose task and
-        capabilities fit (:func:`bench.capabilities.fits`)."""
+        capabilities fit (:func:`bench.sweep.capabilities.fits`)."""
         return frozenset((s.label, m.label) for s in self.scenarios for m in self.methods
                          if capabilities.fits(registry.get_method(m.name), registry.get_scenario(s.name), s.params))
 
@@ -174,7 +175,7 @@ class Plan:
         d.pop("description")
         d.pop("unit_timeout_s", None)     # a time limit changes no result: a run may resume under another
         d.pop("max_unit_memory_gb", None)
-        from radarbench.bench.rng import stable_key
+        from radarbench.bench.sweep.rng import stable_key
         return f"{stable_key(d):016x}"
 
 

@@ -7,7 +7,7 @@ A config's **identity** is a short hash of
   module and, transitively, every module it loads (``import`` and ``from`` statements
   anywhere in a module, and ``importlib.import_module``/``__import__`` of a literal name),
   plus, for a method config, its task's module and the calibration; for a scenario
-  config, its tasks' modules and the random streams (:mod:`bench.rng`). A plugin outside
+  config, its tasks' modules and the random streams (:mod:`bench.sweep.rng`). A plugin outside
   this package brings its whole top-level package (a registry that loads modules by a
   computed name is covered too). A module's content is its code with comments,
   docstrings, formatting and the module paths of its imports left out (an
@@ -27,7 +27,7 @@ A config's **identity** is a short hash of
 The driver computes the identities once per run from the modules' files (parsed, never
 executed again; each file parsed once per process while unchanged); the store stamps
 each unit with its scenario config's identity and each (unit, method config) run with its
-method config's (:mod:`bench.store`), and a run re-computes exactly the results whose
+method config's (:mod:`bench.results.store`), and a run re-computes exactly the results whose
 identity changed.
 """
 
@@ -56,7 +56,7 @@ MARKER = "COMPUTES_RESULTS"
 
 _PACKAGE = __name__.split(".")[0]
 _PACKAGE_DIR = Path(sys.modules[_PACKAGE].__file__).resolve().parent
-_HARNESS = Path(__file__).resolve().parent
+_HARNESS = Path(__file__).resolve().parents[1]
 _INSTALLED = {"site-packages", "dist-packages"}
 _MODULE_SUFFIXES = (".py", ".pyc", *importlib.machinery.EXTENSION_SUFFIXES)
 
@@ -210,7 +210,7 @@ def _content_of(name: str, file: Path, data: bytes) -> tuple[str, list[str], boo
 CACHED_MODULES = 4096
 
 
-#: the user's cache of parsed modules (bench.listing.read_table)
+#: the user's cache of parsed modules (bench.sweep.listing.read_table)
 PARSED_FILE = f"identity-modules-{SCHEME}.json"
 
 
@@ -218,7 +218,7 @@ PARSED_FILE = f"identity-modules-{SCHEME}.json"
 def _parsed() -> dict[str, tuple[str, list[str], bool]]:
     """Parsed modules by the hash of their name and bytes: the user's cache, read once
     (parsing is most of an identity's cost)."""
-    from radarbench.bench.listing import read_table
+    from radarbench.bench.sweep.listing import read_table
     return read_table(PARSED_FILE)
 
 
@@ -228,7 +228,7 @@ _parsed.new = False
 def save_parsed() -> None:
     """Keep this process's parsed modules in the user's cache (the newest
     :data:`CACHED_MODULES`); a cache that cannot be written costs only speed."""
-    from radarbench.bench.listing import write_table
+    from radarbench.bench.sweep.listing import write_table
     if _parsed.new and write_table(PARSED_FILE, _parsed(), CACHED_MODULES):
         _parsed.new = False
 
@@ -396,7 +396,8 @@ def identity_roots(cls: type) -> tuple[str, ...]:
     """The modules whose code computes a config of ``cls``'s stored numbers: its own, and
     for a method its task's and the calibration's; for a scenario its tasks' and the
     random streams'."""
-    from radarbench.bench import calibration, registry, rng
+    from radarbench.bench import calibration, registry
+    from radarbench.bench.sweep import rng
     from radarbench.bench.core import Method
 
     if isinstance(cls, type) and issubclass(cls, Method):
@@ -454,7 +455,7 @@ def content_keys(plan) -> dict:
     calibration, and the recorded trials (kept in the store's plan record, so an edited
     sweep can be matched against the results a folder holds: :func:`sweep_changes`)."""
     from radarbench.bench.params import params_as_dict
-    from radarbench.bench.rng import stable_key
+    from radarbench.bench.sweep.rng import stable_key
 
     def key(*parts) -> str:
         return f"{stable_key(list(parts)):016x}"
@@ -488,7 +489,7 @@ def sweep_changes(store, plan) -> SweepChange:
     a run of a calibrated task, the calibration unchanged too). Nothing when the sweep did
     not change."""
     from radarbench.bench import registry
-    from radarbench.bench.units import calibrated_configs, plan_units
+    from radarbench.bench.run.units import calibrated_configs, plan_units
 
     old = json.loads(store.meta("plan") or "null")
     if old is None or store.meta("fingerprint") == plan.fingerprint():
@@ -522,11 +523,11 @@ def set_aside_changed(store, plan, out_dir: Path, quiet: bool = False) -> dict[s
     """Match ``store`` with ``plan``: bind it to the identities of ``plan``'s configs now,
     and move the stored results that no longer match them, or that the sweep (if it was
     edited since) no longer asks for (:func:`sweep_changes`), into ``out_dir/previous/``
-    (:meth:`bench.store.Store.set_aside`), saying so in one line each; returns the (unit ->
+    (:meth:`bench.results.store.Store.set_aside`), saying so in one line each; returns the (unit ->
     method configs) runs to compute on the units kept (the units set aside whole are
     simply no longer stored)."""
-    from radarbench.bench import runfolder
-    from radarbench.bench.store import Store
+    from radarbench.bench.results import runfolder
+    from radarbench.bench.results.store import Store
 
     change = sweep_changes(store, plan)
     earlier_scheme = store.meta("identity_scheme") != str(SCHEME)
