@@ -120,7 +120,7 @@ MOVED = {
     "bench.progress": "bench.run.progress",
     "bench.provenance": "bench.results.provenance",
     "bench.quantities": "bench.report.quantities",
-    "bench.results_cache": "bench.results.results_cache",
+    "bench.results_cache": "bench.run.results_cache",
     "bench.reuse": "bench.run.reuse",
     "bench.rng": "bench.sweep.rng",
     "bench.runfolder": "bench.results.runfolder",

@@ -17,9 +17,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from radarbench.bench.results import results_cache
+from radarbench.bench.run import results_cache
 from radarbench.bench.cli import main
-from radarbench.bench.results.results_cache import ResultsCache
+from radarbench.bench.run.results_cache import ResultsCache
 from conftest import small_sweep_text
 
 def _sweep(windows: str = "[1, 5]", trials: int = 12) -> str:

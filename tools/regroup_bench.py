@@ -64,10 +64,10 @@ MOVES = {
     "config": "sweep", "plan": "sweep", "grid": "sweep", "feasibility": "sweep", "rng": "sweep",
     "tomlw": "sweep", "listing": "sweep", "capabilities": "sweep",
     "store": "results", "runfolder": "results", "tables": "results", "provenance": "results",
-    "failures": "results", "tidy": "results", "results_cache": "results", "figure_cache": "results",
+    "failures": "results", "tidy": "results", "figure_cache": "results",
     "runner": "run", "units": "run", "executors": "run", "processes": "run", "warmup": "run",
     "numba_cache": "run", "_forkserver": "run", "limits": "run", "identity": "run", "progress": "run",
-    "reuse": "run", "worktime": "run",
+    "reuse": "run", "worktime": "run", "results_cache": "run",
     "claims": "report", "baselines": "report",
     "quantities": "report",
     "cli": "cli", "perf": "cli", "docs": "cli",
@@ -106,6 +106,8 @@ DESCRIPTIONS = {
     "report/glance.py": "results at a glance, the paired comparisons",
     "report/render.py": "the Jinja2 environment of the templates",
     "report/html.py": "report.html",
+    "figure_cache.py": "what a report build reuses: figures and pages keyed by their inputs and code",
+    "report/building.py": "the build's steps: figures drawn or reused, the interactive figures, progress",
 }
 
 #: where mentions of the modules are rewritten (the old-name table is edited apart)

@@ -265,7 +265,7 @@ def _check_arguments(args) -> None:
     if args.scheduler is not None and args.executor != "dask":
         raise ConfigError("--scheduler", "only with --executor dask")
     if not args.no_cache:
-        from radarbench.bench.results.results_cache import bound_bytes
+        from radarbench.bench.run.results_cache import bound_bytes
         bound_bytes()          # a bad size bound in the environment: one line, before anything runs
 
 

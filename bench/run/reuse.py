@@ -1,5 +1,5 @@
 """A unit's results taken from the user's results cache instead of computed
-(docs/architecture.md, 'Results cache'; the cache itself: :mod:`bench.results.results_cache`).
+(docs/architecture.md, 'Results cache'; the cache itself: :mod:`bench.run.results_cache`).
 
 A unit's results are cached in parts, each keyed by everything that computes it and by
 nothing that merely names it (no label, no sweep, no run folder):
@@ -32,7 +32,7 @@ import numpy as np
 from radarbench.bench.run.identity import content_keys
 from radarbench.bench.sweep.plan import Plan, snr_key
 from radarbench.bench.recording.record import TrialRecord
-from radarbench.bench.results.results_cache import ResultsCache, key_digest
+from radarbench.bench.run.results_cache import ResultsCache, key_digest
 from radarbench.bench.results.store import MethodRun, UnitResult
 from radarbench.bench.run.units import Unit, UnitTask, plan_units, task_of, unit_methods
 

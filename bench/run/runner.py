@@ -40,7 +40,7 @@ from radarbench.bench.run.processes import STOP_SIGNALS, restore_handler
 from radarbench.bench.run.identity import PREVIOUS, content_keys, set_aside_changed
 from radarbench.bench.run.progress import Progress
 from radarbench.bench.results.provenance import origin_text, provenance
-from radarbench.bench.results.results_cache import ResultsCache
+from radarbench.bench.run.results_cache import ResultsCache
 from radarbench.bench.run.reuse import Reuse, merge_records
 from radarbench.bench.results.store import Store, UnitResult
 from radarbench.bench.run.units import Unit, UnitTask, execute_unit, failed_result, plan_units, unit_methods
