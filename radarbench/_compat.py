@@ -120,6 +120,7 @@ MOVED = {
     "bench.progress": "bench.run.progress",
     "bench.provenance": "bench.results.provenance",
     "bench.quantities": "bench.report.quantities",
+    "bench.results.results_cache": "bench.run.results_cache",
     "bench.results_cache": "bench.run.results_cache",
     "bench.reuse": "bench.run.reuse",
     "bench.rng": "bench.sweep.rng",

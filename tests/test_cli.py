@@ -27,6 +27,8 @@ SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials
                    "switch_pd_low", "switch_pd_high", "switch_delay_mean", "switch_delay_low", "switch_delay_high",
                    "false_switch_rate", "false_switch_low", "false_switch_high", "q_quiet_mean", "q_maneuver_mean",
                    "q_maneuver_low", "q_maneuver_high",
+                   # tracking scenes with a position bound: the posterior Cramér–Rao bound and efficiency
+                   "pcrb_rmse", "efficiency",
                    "rmse_all_mean", "rmse_all_low", "rmse_all_high", "snr_offset_unit_innovation_db",
                    # cell detection (bench/tasks/cells/metrics.py), appended after the earlier tasks'
                    "false_alarms_per_map", "false_alarms_per_map_low", "false_alarms_per_map_high",
@@ -39,7 +41,9 @@ SUMMARY_COLUMNS = ["scenario", "method", "config", "params", "snr_db", "n_trials
                    *(f"{m}_{end}" for m in ("gospa", "gospa_loc", "gospa_missed", "gospa_false", "ospa",
                                             "false_track_rate", "track_breaks", "id_switches", "purity", "init_delay")
                      for end in ("mean", "low", "high")),
-                   "initiated_fraction"]
+                   "initiated_fraction",
+                   # detect and track (bench/tasks/detecttrack): the detector's cells
+                   *(f"{m}_{end}" for m in ("cell_pd", "cell_pfa") for end in ("mean", "low", "high"))]
 
 TRIAL_COLUMNS = ["scenario", "method", "params", "snr_db", "trial", "seed", "detected", "delay",
                  "false_alarms", "null_steps"]
