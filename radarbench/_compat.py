@@ -142,7 +142,7 @@ MOVED_SINCE_PACKAGE = ("models.cfar_halves", "models.cfar_peaks", "models.cfar_r
                        "bench.failures", "bench.feasibility", "bench.figure_cache", "bench.grid",
                        "bench.identity", "bench.limits", "bench.listing", "bench.numba_cache", "bench.perf",
                        "bench.plan", "bench.processes", "bench.progress", "bench.provenance",
-                       "bench.quantities", "bench.results_cache", "bench.reuse", "bench.rng",
+                       "bench.quantities", "bench.results.results_cache", "bench.results_cache", "bench.reuse", "bench.rng",
                        "bench.runfolder", "bench.runner", "bench.store", "bench.tables", "bench.tidy",
                        "bench.tomlw", "bench.units", "bench.warmup", "bench.windows", "bench.worktime")
 
