@@ -214,6 +214,7 @@ def stop_driver_when_started(signum):
 
 if __name__ == "__main__":
     import signal, threading
+    signal.signal(signal.SIGINT, signal.default_int_handler)   # Ctrl-C as on a terminal, whatever the parent ignored
     signum = signal.SIGKILL if sys.argv[1] == "kill" else signal.SIGINT     # killed, or Ctrl-C
     threading.Thread(target=stop_driver_when_started, args=(signum,), daemon=True).start()
     call_in_fresh_process(sleep_forever, os.environ["PIDS_FILE"])

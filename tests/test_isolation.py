@@ -157,7 +157,8 @@ def _stored(out):
 def test_retry_failed_reruns_only_the_failed_pairs(flaky, tmp_path, monkeypatch):
     sweep = tmp_path / "flaky.toml"
     sweep.write_text(FLAKY_SWEEP)
-    assert _bench_run(sweep, tmp_path / "clean") == 0                         # no fault: the reference
+    # --no-cache: the clean results (FLAKY_FAIL unset, which no identity sees) must not serve the faulty runs
+    assert _bench_run(sweep, tmp_path / "clean", "--no-cache") == 0           # no fault: the reference
 
     monkeypatch.setenv("FLAKY_FAIL", "1")
     run = tmp_path / "run"

@@ -483,7 +483,7 @@ def _every_task_sweep(folder) -> str:
     scenarios = [{"name": name, "params": local.get(name, dict(cls.small_params))}
                  for name, cls in registry.scenarios().items()]
     methods = [{"name": name} for name, cls in registry.methods().items()
-               if name in ("innovation", "ekf", "cv-kf", "dp-tbd", "ca-cfar", "os-cfar", "gnn-ekf")]
+               if name in ("innovation", "ekf", "cv-kf", "dp-tbd", "ca-cfar", "os-cfar", "gnn-ekf", "cfar-track")]
     return tomlw.dumps({"name": "every-task", "trials": 2, "seed": 3, "snr_db": [10.0], "chunk": 2,
                         "scenarios": scenarios, "methods": methods,
                         "calibration": {"pfa": 0.05, "mode": "empirical", "h0_trials": 10}, "record": {"trials": 1}})

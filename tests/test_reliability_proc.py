@@ -85,14 +85,21 @@ def hostile(tmp_path_factory):
     return env
 
 
+def _own_cache(env: dict) -> dict:
+    """``env`` (set up once for the module) with this test's own results cache (conftest's
+    ``private_results_cache``): a hostile run never takes results an earlier test's run kept."""
+    return {**env, "BENCH_RESULTS_CACHE_DIR": os.environ["BENCH_RESULTS_CACHE_DIR"]}
+
+
 def _bench(env, *args, **extra):
-    return subprocess.run([sys.executable, "-m", "radarbench.bench", *map(str, args)], env={**env, **extra},
-                          capture_output=True, text=True, timeout=scaled())
+    return subprocess.run([sys.executable, "-m", "radarbench.bench", *map(str, args)],
+                          env={**_own_cache(env), **extra}, capture_output=True, text=True, timeout=scaled())
 
 
 def _start(env, *args, stderr, **extra):
     """A run in a session of its own (its signals reach the driver alone), Ctrl-C as at a terminal."""
-    return subprocess.Popen([sys.executable, "-m", "radarbench.bench", *map(str, args)], env={**env, **extra},
+    return subprocess.Popen([sys.executable, "-m", "radarbench.bench", *map(str, args)],
+                            env={**_own_cache(env), **extra},
                             stdout=subprocess.DEVNULL, stderr=stderr, start_new_session=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
