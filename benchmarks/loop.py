@@ -93,7 +93,8 @@ EDIT = ("glr", "window", 24)
 OVERRIDE_METHODS, OVERRIDE_SNR = ("cv-kf", "imm-cv-ca"), ("0", "10")
 #: what a run says about the units it computes and reuses (the runner's lines; the cache's words)
 COMPUTED = re.compile(r"(?<!warm-up): done, (\d+)/\d+ units")
-REUSED = re.compile(r"(\d+) (?:units? )?(?:reused|from the (?:results )?cache)|reused:? (\d+)")
+#: the run's own count: "units: A reused from FOLDER, B from the results cache, C computed"
+REUSED = re.compile(r"units: (\d+) reused from .*?, (\d+) from the results cache")
 NOTHING = re.compile(r"Nothing to run")
 
 
@@ -181,7 +182,7 @@ def unit_counts(text: str) -> tuple[int | None, int | None]:
     computed = sum(int(m) for m in COMPUTED.findall(text)) if COMPUTED.search(text) else None
     if computed is None and NOTHING.search(text):
         computed = 0
-    found = [int(a or b) for a, b in REUSED.findall(text)]
+    found = [int(a) + int(b) for a, b in REUSED.findall(text)]
     return computed, (sum(found) if found else None)
 
 

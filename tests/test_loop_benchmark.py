@@ -59,7 +59,10 @@ def test_unit_counts_read_what_a_run_says():
               "bench: evaluation: 0/4 units (0%), 0:00 elapsed\nbench: evaluation: done, 4/4 units in 0:01\n")
     assert loop.unit_counts(phases) == (44, None)                   # the warm-up's units are not results
     assert loop.unit_counts("Nothing to run: all 40 units stored in runs/quick\n") == (0, None)
-    assert loop.unit_counts("bench: evaluation: done, 3/3 units in 0:01\n37 units reused\n") == (3, 37)
+    said = ("bench: evaluation: done, 3/3 units in 0:01\n"
+            "units: 30 reused from runs/quick, 7 from the results cache, 3 computed\n"
+            "bench: report: done, 16/16 sections (figures: 6 drawn, 26 reused) in 0:09\n")
+    assert loop.unit_counts(said) == (3, 37)                        # the figures' reuse is not the units'
     assert loop.unit_counts("no word about units\n") == (None, None)
 
 
