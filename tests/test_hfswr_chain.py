@@ -161,7 +161,7 @@ def test_hfswr_chain_preset_smoke(bench_cli, tmp_path):
     for entity in ("/maps", "/detections", "/plots", "/tracks"):
         assert any(e.endswith(entity) for e in recorded), entity
     claims = evaluate_folder(tmp_path / "out")                 # the preset's claims, by plan.toml's name
-    assert len(claims) == 8 and not claims.verdict.str.contains("not comparable").any()
+    assert len(claims) == 12 and not claims.verdict.str.contains("not comparable").any()
 
 
 @pytest.mark.parametrize("peer", ["stonesoup-jpda", "stonesoup-gmphd"])

@@ -569,6 +569,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_ENVIRONMENT
     except MemoryError as err:
         _error(f"out of memory{f': {err}' if str(err) else ''}")
+        _quiet_exit_cleanup()
         return EXIT_ENVIRONMENT
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
@@ -576,6 +577,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:               # a bug: one line still, the traceback on request
         if is_out_of_memory(exc):          # e.g. an import whose library could not be mapped
             _error(f"out of memory: {type(exc).__name__}: {exc}"[:400])
+            _quiet_exit_cleanup()
             return EXIT_ENVIRONMENT
         if os.environ.get("BENCH_TRACEBACK"):
             raise
@@ -586,6 +588,20 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_BUG
     finally:
         restore_sigterm()
+
+
+def _quiet_exit_cleanup() -> None:
+    """Out of memory, multiprocessing's removal of its temporary folder at exit fails too and
+    prints a traceback after the one line: remove the folder now, failures ignored, and drop
+    that exit-time step."""
+    import multiprocessing.util as mp_util
+    import shutil
+    for finalizer in list(getattr(mp_util, "_finalizer_registry", {}).values()):
+        if getattr(finalizer, "_callback", None) is getattr(mp_util, "_remove_temp_dir", None):
+            folder = (getattr(finalizer, "_args", None) or (None, None))[-1]
+            finalizer.cancel()
+            if folder:
+                shutil.rmtree(folder, ignore_errors=True)
 
 
 if __name__ == "__main__":
