@@ -28,15 +28,13 @@ def test_a_tasks_first_figure_is_its_glance_metric(task):
 
 def test_the_first_interactive_figure_plots_the_glance_metric_of_the_run(small_run):
     summary = pd.read_csv(small_run / "summary.csv")
-    trials = pd.read_csv(small_run / "trials.csv") if (small_run / "trials.csv").exists() else None
+    trials = pd.read_csv(small_run / "trials.csv")
     task = registry.tasks()["maneuver-detection"]
     task_of = {config: task for config in summary.config.unique()}
     specs = interactive_specs(summary, task_of)
     first = specs[0]
     assert first["column"] == "pd_equal_chance" and "equal chance" in first["title"]
     assert [s["column"] for s in specs] == ["pd_equal_chance", "pd"]    # any-alarm Pd second
-    if trials is None:
-        pytest.skip("the run keeps no trials.csv")
     evaluated = trials[trials.config.isin(summary.config)]
     for trace in first["traces"]:
         config = trace["label"].split(" (identical to ")[0]
