@@ -189,6 +189,29 @@ def test_out_of_memory_after_the_folder_is_made_removes_it(tmp_path, write_sweep
     assert not (tmp_path / "out").exists()
 
 
+
+def test_a_run_after_an_out_of_memory_in_the_same_process_works(tmp_path, write_sweep, monkeypatch):
+    """Was exit 3, "No such file or directory": the out-of-memory path removed
+    multiprocessing's temporary folder at once, where this process's forkserver listens."""
+    import multiprocessing.util as mp_util
+
+    from radarbench.bench import cli as bench_cli
+    mp_util.get_temp_dir()                  # the folder the exit-time finalizer removes
+    real_run = bench_cli._run_locked
+
+    def fails(*args, **kwargs):
+        raise MemoryError
+    monkeypatch.setattr(bench_cli, "_run_locked", fails)
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["run", str(write_sweep()), "--out", str(tmp_path / "oom"), "--quiet", "--workers", "1"]) == 3
+    monkeypatch.setattr(bench_cli, "_run_locked", real_run)
+    assert Path(mp_util.get_temp_dir()).is_dir()
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        code = main(["run", str(write_sweep()), "--out", str(tmp_path / "out"), "--quiet", "--workers", "2",
+                     "--no-record"])
+    assert code == 0, err.getvalue()
+
 def test_out_of_memory_is_recognised_through_its_causes():
     import errno
 

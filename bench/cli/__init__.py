@@ -592,17 +592,23 @@ def main(argv: list[str] | None = None) -> int:
 
 def _quiet_exit_cleanup() -> None:
     """Out of memory, multiprocessing's removal of its temporary folder at exit fails too and
-    prints a traceback after the one line: remove the folder now, failures ignored, and drop
-    that exit-time step."""
+    prints a traceback after the one line: make that exit-time step quiet. The folder stays
+    until exit, because this process (a test's, or a library caller's) may run again and its
+    forkserver listens inside it."""
     import multiprocessing.util as mp_util
-    import shutil
+    remove = getattr(mp_util, "_remove_temp_dir", None)
     for finalizer in list(getattr(mp_util, "_finalizer_registry", {}).values()):
-        if getattr(finalizer, "_callback", None) is getattr(mp_util, "_remove_temp_dir", None):
-            folder = (getattr(finalizer, "_args", None) or (None, None))[-1]
-            finalizer.cancel()
-            if folder:
-                shutil.rmtree(folder, ignore_errors=True)
+        if remove is not None and getattr(finalizer, "_callback", None) is remove:
+            finalizer._callback = _ignoring_failures(remove)
 
+
+def _ignoring_failures(step):
+    def quiet(*args, **kwargs):
+        try:
+            step(*args, **kwargs)
+        except BaseException:        # noqa: BLE001 - at exit, out of memory: nothing to tell
+            pass
+    return quiet
 
 if __name__ == "__main__":
     sys.exit(main())
