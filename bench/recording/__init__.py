@@ -18,9 +18,16 @@ What a task keeps of a trial and how it draws it live with the task
 """
 
 import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:   # the public names as static tools read them (jedi, pyright); at run time, _EXPORTS
+    from radarbench.bench.recording.paths import entity_name, entity_root, method_entity_names, rerun_path, snr_part
+    from radarbench.bench.recording.record import MethodTrace, Quantised, TrialRecord
+    from radarbench.bench.recording.sinks import LiveViewer, write_recording
 
 #: Public names -> the module that defines them, imported on first use (PEP 562), so that
-#: ``bench view`` (:mod:`~bench.recording.serve`) does not pay for pandas and SciPy.
+#: ``bench view`` (:mod:`~bench.recording.serve`) does not pay for pandas and SciPy; the
+#: same names as the TYPE_CHECKING imports above (tests/test_static_imports.py compares them).
 _EXPORTS = {
     "entity_name": "paths", "entity_root": "paths", "method_entity_names": "paths", "rerun_path": "paths",
     "snr_part": "paths", "MethodTrace": "record", "Quantised": "record", "TrialRecord": "record",

@@ -18,8 +18,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Self
 
+import radarbench.bench.recording.blueprint as bp
 from radarbench.bench.errors import space_hint
-from radarbench.bench.recording import blueprint as bp
 from radarbench.bench.recording.draw import log_records
 from radarbench.bench.recording.layout import trial_layout
 from radarbench.bench.recording.record import TrialRecord

@@ -122,7 +122,7 @@ def bytes_to_columns(b: bytes) -> dict[str, np.ndarray]:
 def _merge_record(old: bytes, new: bytes, labels: set[str], order: list[str]) -> bytes:
     """A stored trial record with the traces of method configs ``labels`` taken from ``new``
     (kept in plan order, as an uninterrupted run writes them)."""
-    from radarbench.bench.recording import TrialRecord
+    from radarbench.bench.recording.record import TrialRecord
 
     rec, fresh = TrialRecord.from_bytes(old), TrialRecord.from_bytes(new)
     traces = {**rec.methods, **{k: v for k, v in fresh.methods.items() if k in labels}}
