@@ -47,14 +47,20 @@ class _LinearTracker(KinematicTracker):
 
 @register_method
 class ConstantVelocityKF(_LinearTracker):
-    """Constant-velocity Kalman filter (white-noise acceleration), batched over trials.
+    r"""Constant-velocity Kalman filter (white-noise acceleration), batched over trials.
 
-    Per axis, state [p, v]: F = [[1, T], [0, 1]], Q = sigma_a^2 g g',
-    g = [T^2/2, T]' (discrete white-noise acceleration; Bar-Shalom, Li &
+    Per axis, state $[p, v]'$ (discrete white-noise acceleration; Bar-Shalom, Li &
     Kirubarajan, *Estimation with Applications to Tracking and Navigation*,
-    sec. 6.3.2), H = [1, 0]; started from the scene's prior. Reported in the
-    scenario's [p, v, a] state with a = 0 of variance sigma_a^2
-    (:mod:`methods.kinematic.base`). Traces: ``mode`` 0, ``switch`` 0.
+    sec. 6.3.2):
+
+    $$
+    F = \begin{bmatrix} 1 & T \\ 0 & 1 \end{bmatrix}, \quad
+    Q = \sigma_a^2\, g g', \quad g = [T^2/2,\ T]', \quad H = [1,\ 0],
+    $$
+
+    started from the scene's prior. Reported in the scenario's $[p, v, a]'$ state
+    with $a = 0$ of variance $\sigma_a^2$ (:mod:`methods.kinematic.base`).
+    Traces: ``mode`` 0, ``switch`` 0.
     """
 
     name = "cv-kf"
