@@ -143,7 +143,7 @@ class EKF(Method):
     measurement noise with the Gaussian core's variance $\sigma^2$ (``noise_variance =
     "core"``: ignores the glint, so outliers pass into the estimate with the
     full gain) or with the glint noise's total variance,
-    $(1 - \varepsilon) \sigma^2 + 2 \varepsilon \eta^2$ for the mixture model (``"mixture"``: the
+    $(1 - \epsilon) \sigma^2 + 2 \epsilon \eta^2$ for the mixture model (``"mixture"``: the
     best linear filter's choice, consistent on average but slower for the Gaussian
     bulk). Returns the updated estimate $x_{k|k}$ and its covariance $P_{k|k}$ (for
     NEES); traces: ``nis``, the normalised innovation squared.

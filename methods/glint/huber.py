@@ -101,8 +101,8 @@ class HuberEKF(Method):
     glint density; for the spherical measurement $H P H'$ is not diagonal, so that density
     is a multivariate integral per step and trial with no closed form. Huber's estimator
     needs only $\psi$ of each whitened residual, and its threshold follows from the same
-    $\varepsilon$ the scene's glint density has (Huber's minimax $c$ for
-    $(1 - \varepsilon) \mathcal{N} + \varepsilon H$), so at $\varepsilon = 0$ it is the EKF exactly.
+    $\epsilon$ the scene's glint density has (Huber's minimax $c$ for
+    $(1 - \epsilon) \mathcal{N} + \epsilon H$), so at $\epsilon = 0$ it is the EKF exactly.
 
     Prediction, linearisation and the covariance recursion are :func:`ekf_filter`'s
     (the exact linear dynamics with the known control; $H = \partial h / \partial x$ at
@@ -116,7 +116,7 @@ class HuberEKF(Method):
     \begin{aligned}
     d &= \arg\min_d \sum_i \rho_c(r_i) + \tfrac12 d' P^{-1} d, \qquad r_i = (\nu - H d)_i / \sigma_i, \\
     \rho_c(r) &= \begin{cases} r^2/2 & |r| \le c \\ c |r| - c^2/2 & |r| > c \end{cases}, \qquad
-    \frac{2 \phi(c)}{c} - 2 \Phi(-c) = \frac{\varepsilon}{1 - \varepsilon}
+    \frac{2 \phi(c)}{c} - 2 \Phi(-c) = \frac{\epsilon}{1 - \epsilon}
     \end{aligned}
     $$
 

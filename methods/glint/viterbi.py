@@ -114,7 +114,7 @@ class Viterbi(Method):
     Viterbi recursion keeps the best score), those outside the gate are
     dropped. The branch metric is $\log \pi_m + \log p(z_k \mid \text{state})$, the second
     the *true* glint log density (:func:`models.glint.glint_logpdf`:
-    the scenario's mixture or additive model with its $\sigma$, $\eta$ and $\varepsilon$) of
+    the scenario's mixture or additive model with its $\sigma$, $\eta$ and $\epsilon$) of
     the measurement residuals, evaluated on the position levels and
     interpolated linearly at the successor's position.
 
@@ -124,10 +124,10 @@ class Viterbi(Method):
       it by the node's grid value, the textbook quantised trellis.
     * ``gate_noise = "glint"`` (default) sizes the gate as if every
       measurement had the glint part's variance $2 \eta^2$ (at least the total
-      variance; the total variance when $\varepsilon = 0$). A gate from the total
+      variance; the total variance when $\epsilon = 0$). A gate from the total
       variance (``"total"``) is ~3x narrower here and, when a glint spike
       falls on the first measurements, can settle on a wrong track that
-      never re-enters the gate (about 1 trial in 30 at $\varepsilon = 0.05$).
+      never re-enters the gate (about 1 trial in 30 at $\epsilon = 0.05$).
     * Step 0 is built in stages: the prior's gate on a coarse grid (metric
       $\log \mathcal{N}(\text{node}; x_0, P_0) + \log p(z_0 \mid \text{node})$) locates the best position
       level, then grids each spanning at least $\pm 2$ steps of the previous one
