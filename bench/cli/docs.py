@@ -1,7 +1,7 @@
 """The documentation site's pages generated from the code (docs/architecture.md, 'Documentation').
 
-From the registry: one page per task, method and scenario — its docstring as written
-(equations included), its parameters as ``bench list -v`` describes them (type, default,
+From the registry: one page per task, method and scenario — its docstring rendered
+(:func:`docstring_markdown`; its LaTeX typeset by MathJax, :data:`MATHJAX`), its parameters as ``bench list -v`` describes them (type, default,
 meaning, bounds and their reason: :func:`bench.params.describe_params`), its task, the
 presets that run it and the papers they reproduce, its row of the committed ``bench perf``
 tables. From the repository: every committed report (``reports/NAME/report.md`` and the
