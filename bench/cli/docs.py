@@ -214,6 +214,7 @@ def perf_rows(root: Path, csv_name: str, column: str, name: str, page: str) -> s
     seconds = [c for c in rows.columns if c.endswith("seconds_per_trial")]
     rows[seconds] = rows[seconds] * 1e3
     rows = rows.rename(columns={c: c.replace("seconds_", "ms_") for c in seconds})
+    rows = rows.rename(columns=lambda c: c.replace("_", " "))      # a header wraps at its spaces: no sideways scroll
     return f"From {source} (one core; how it is measured: that page).\n\n{frame_table(rows)}"
 
 
