@@ -189,8 +189,8 @@ def test_an_output_that_is_a_file_is_refused_in_one_line(tmp_path, capsys):
 
 
 DOCS_EXTRA = ("mkdocs", "material", "mathjax")
-#: a page's text outside its code and its maths: what the reader sees as typed
-VERBATIM_OR_MATHS = re.compile(r'<(pre|code)\b.*?</\1>|<(span|div) class="arithmatex">.*?</\2>', re.S)
+#: a page's code, maths and scripts: the rest is what the reader sees as typed
+VERBATIM_OR_MATHS = re.compile(r'<(pre|code|script)\b.*?</\1>|<(span|div) class="arithmatex">.*?</\2>', re.S)
 #: an equation as pymdownx.arithmatex leaves it for MathJax (generic mode): \( \) inline, \[ \] display
 ARITHMATEX = re.compile(r'<(span|div) class="arithmatex">(.*?)</\1>', re.S)
 #: MathJax's checker of TeX (node): the site's equations that MathJax cannot typeset
@@ -223,11 +223,13 @@ def _html_pages(site: Path) -> dict[str, str]:
 
 
 def test_the_built_site_shows_no_cross_reference_role_and_no_unrendered_maths(built_site):
-    """Outside code, no page shows a Sphinx role or a ``$``-delimited equation as typed."""
+    """Outside code and maths, no page shows a Sphinx role or a dollar sign: a ``$`` left
+    there is an equation arithmatex did not take (``$x $``, ``$ x$``, an unclosed one); a
+    price in prose would be written ``&#36;``."""
     role = re.compile(r":(?:func|class|meth|mod|data|attr|obj|exc|const):`")
     shown = {page: VERBATIM_OR_MATHS.sub("", body) for page, body in _html_pages(built_site).items()}
     assert not [page for page, body in shown.items() if role.search(body)]
-    assert not {page: MATHS.findall(body)[:3] for page, body in shown.items() if "$$" in body or MATHS.search(body)}
+    assert not {page: re.findall(r".{0,30}\$.{0,30}", body)[:3] for page, body in shown.items() if "$" in body}
 
 
 def test_every_docstring_equation_is_maths_on_its_page_with_the_renderer(built_site):

@@ -91,7 +91,7 @@ def huber_reweigh(c: float):
 
 @register_method
 class HuberEKF(Method):
-    r"""Huber M-estimator EKF on the glint noise's eps-contaminated density (batched over trials).
+    r"""Huber M-estimator EKF on the glint noise's ε-contaminated density (batched over trials).
 
     The classical robust filter of glint tracking (Song & Sun cite Masreliez's
     score-function filter, ref. [7], and the robust preprocessing of Hewer, Martin & Zeh,

@@ -70,7 +70,7 @@ class PfTbd(Method):
     $$
 
     and a log-amplitude random walk $\log A_k = \log A_{k-1} + \sigma_l w_A$,
-    $\sigma_l = $ ``amplitude_walk_db`` $\cdot \ln(10) / 20$ ($w$, $w_A$ standard normal). A target
+    $\sigma_l = D \ln(10) / 20$, $D$ = ``amplitude_walk_db`` ($w$, $w_A$ standard normal). A target
     whose cell leaves the grid is not in the scene: its particles get weight 0. Birth
     prior: position uniform over the grid, velocity uniform in the box
     $|v_x|, |v_y| \le$ ``max_speed_m_s``, SNR $20 \log_{10}(A / \sigma)$ uniform on
