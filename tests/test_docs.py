@@ -19,8 +19,8 @@ import pytest
 
 from radarbench.bench import registry
 from radarbench.bench.cli import build_parser
-from radarbench.bench.cli.docs import (MATHJAX, MATHS, base_docstrings, docstring_markdown, main, mathjax_script, pages,
-                                       published, presets, subcommands, summary_markdown)
+from radarbench.bench.cli.docs import (MATHJAX, MATHS, base_docstrings, docstring_markdown, main, mathjax_script,
+                                       model_docstrings, pages, published, presets, subcommands, summary_markdown)
 from radarbench.bench.markdown import code, text
 from radarbench.bench.results.provenance import WALL_TIME_ROW
 from conftest import scaled
@@ -52,6 +52,16 @@ def test_every_plugin_has_a_page_with_every_parameter(site, kind):
             assert (field.metadata.get("why") or "") in plain
         index = (site / kind / "index.md").read_text(encoding="utf-8")
         assert f"[{code(name)}]({name}.md)" in index
+
+
+def test_every_model_module_has_a_page_with_its_docstring(site):
+    """The maths methods and scenarios share (``models/``) is on the site, a page per module."""
+    index = (site / "models" / "index.md").read_text(encoding="utf-8")
+    for name, doc in model_docstrings().items():
+        page = (site / "models" / f"{name}.md").read_text(encoding="utf-8")
+        assert page.startswith(f"# {text('models.' + name)}\n") and docstring_markdown(doc) in page
+        assert f"({name}.md)" in index
+    assert {"kalman", "pcrb", "cfar", "cfar.halves"} <= set(model_docstrings())
 
 
 def test_a_plugin_registered_later_has_its_page(monkeypatch):
@@ -234,17 +244,19 @@ def test_the_built_site_shows_no_cross_reference_role_and_no_unrendered_maths(bu
 
 def test_every_docstring_equation_is_maths_on_its_page_with_the_renderer(built_site):
     """Each ``$...$``/``$$...$$`` of a plugin's docstrings (its own and its family's bases')
-    is an arithmatex element of its page, and every page with one loads the MathJax
-    configuration, then MathJax, copied into the site."""
-    plugins = {f"{kind}/{name}": cls for kind in ("methods", "scenarios") for name, cls in getattr(registry, kind)().items()}
-    plugins.update({f"tasks/{name}": type(task) for name, task in registry.tasks().items()})
+    and of a ``models`` module's is an arithmatex element of its page, and every page with
+    one loads the MathJax configuration, then MathJax, copied into the site."""
+    classes = {f"{kind}/{name}": cls for kind in ("methods", "scenarios") for name, cls in getattr(registry, kind)().items()}
+    classes.update({f"tasks/{name}": type(task) for name, task in registry.tasks().items()})
+    docs = {page: "\n\n".join([inspect.getdoc(cls) or "", *base_docstrings(cls)]) for page, cls in classes.items()}
+    docs.update({f"models/{name}": doc for name, doc in model_docstrings().items()})
     with_maths = 0
-    for page, cls in plugins.items():
+    for page, doc in docs.items():
         body = (built_site / page / "index.html").read_text(encoding="utf-8")
-        written = len(MATHS.findall("\n\n".join([inspect.getdoc(cls) or "", *base_docstrings(cls)])))
+        written = len(MATHS.findall(doc))
         assert len(ARITHMATEX.findall(body)) >= written, page
         with_maths += written > 0
-    assert with_maths >= 10
+    assert with_maths >= 40
     for page, body in _html_pages(built_site).items():
         if ARITHMATEX.search(body):
             scripts = re.findall(r'<script src="([^"]+)"', body)

@@ -1,11 +1,12 @@
 """The documentation site's pages generated from the code (docs/architecture.md, 'Documentation').
 
 From the registry: one page per task, method and scenario — its docstring rendered
-(:func:`docstring_markdown`; its LaTeX typeset by MathJax, :data:`MATHJAX`), its parameters as ``bench list -v`` describes them (type, default,
-meaning, bounds and their reason: :func:`bench.params.describe_params`), its task, the
-presets that run it and the papers they reproduce, its row of the committed ``bench perf``
-tables. From the repository: every committed report (``reports/NAME/report.md`` and the
-files it links), README.md as the home page and CONTRIBUTING.md, their links rewritten to
+(:func:`docstring_markdown`; its LaTeX typeset by MathJax, :data:`MATHJAX`), its
+parameters as ``bench list -v`` describes them (type, default, meaning, bounds and their
+reason: :func:`bench.params.describe_params`), its task, the presets that run it and the
+papers they reproduce, its row of the committed ``bench perf`` tables; and a page per
+module of ``models`` (its docstring: the maths they share). From the repository: every
+committed report (``reports/NAME/report.md`` and the files it links), README.md as the home page and CONTRIBUTING.md, their links rewritten to
 the site's; a page of the presets with the wall time each committed report records. From
 :func:`bench.cli.build_parser`: the command-line reference. Everything is
 discovered when the site is built, so a new plugin or report has its page without an edit
@@ -140,9 +141,14 @@ def role_name(role: re.Match) -> str:
 
 
 def summary_markdown(component) -> str:
-    """A plugin's one-line summary (its docstring's first line) as Markdown on one line: its
-    roles as code, the rest as written (:func:`bench.markdown.text`)."""
-    line, parts, last = component.summary(), [], 0
+    """A plugin's one-line summary (its docstring's first line) as Markdown on one line."""
+    return line_markdown(component.summary())
+
+
+def line_markdown(line: str) -> str:
+    """Plain text (a summary) as Markdown on one line: its roles as code, the rest as
+    written (:func:`bench.markdown.text`)."""
+    parts, last = [], 0
     for m in _ROLE.finditer(line):
         parts += [text(line[last:m.start()]), code(role_name(m))]
         last = m.end()
@@ -283,6 +289,38 @@ def plugin_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Pre
             index += ["Plugins that could not be registered in the environment that built this site:",
                       table(["plugin", "why"], [[code(u.name or u.source), text(u.error)] for u in missing])]
         pages[f"{folder}/index.md"] = "\n\n".join(index) + "\n"
+
+
+def model_docstrings() -> dict[str, str]:
+    """The docstring of every module of ``models`` (the maths methods and scenarios share,
+    docs/architecture.md, 'Models'), by its name under ``models``, read from its source
+    (nothing imported but the packages)."""
+    import ast
+    import importlib.util
+    import pkgutil
+
+    from radarbench import models
+
+    docs = {}
+    for module in pkgutil.walk_packages(models.__path__, models.__name__ + "."):
+        origin = importlib.util.find_spec(module.name).origin
+        doc = ast.get_docstring(ast.parse(Path(origin).read_text(encoding="utf-8")))
+        docs[module.name.removeprefix(models.__name__ + ".")] = doc or ""
+    return docs
+
+
+def model_pages(pages: dict[str, str | Path]) -> list[str]:
+    """A page per module of ``models`` (its docstring, rendered as a plugin's is) and an
+    index of them. Returns the modules' names."""
+    docs = model_docstrings()
+    for name, doc in docs.items():
+        pages[f"models/{name}.md"] = f"# {text('models.' + name)}\n\n{docstring_markdown(doc)}\n"
+    rows = [[f"[{code('models.' + n)}]({n}.md)", line_markdown(" ".join(d.split("\n\n")[0].split()))]
+            for n, d in docs.items()]
+    pages["models/index.md"] = "\n\n".join([
+        "# Models", "The maths the methods and scenarios share (`models/`): each module's docstring, "
+        "with the equations of the papers it implements.", table(["module", "what"], rows)]) + "\n"
+    return list(docs)
 
 
 def report_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Preset]) -> list[str]:
@@ -436,6 +474,7 @@ def pages(root: str | Path) -> tuple[dict[str, str | Path], list]:
     if (root / LOOP_REPORT).is_file():
         published(root, LOOP_REPORT, out)
     plugin_pages(root, out, all_presets, set(reports))
+    models = model_pages(out)
     out["presets.md"] = presets_page(root, all_presets, reports)
     out["cli.md"] = cli_page()
 
@@ -444,7 +483,7 @@ def pages(root: str | Path) -> tuple[dict[str, str | Path], list]:
 
     from radarbench.bench import registry
     nav = [{"Tasks": section("tasks", registry.tasks())}, {"Methods": section("methods", registry.methods())},
-           {"Scenarios": section("scenarios", registry.scenarios())},
+           {"Scenarios": section("scenarios", registry.scenarios())}, {"Models": section("models", models)},
            {"Presets": "presets.md"}, {"Reports": ["reports/index.md"] + [{n: f"reports/{n}/index.md"} for n in reports]},
            {"Command line": "cli.md"}]
     return out, nav
