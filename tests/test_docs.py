@@ -57,11 +57,13 @@ def test_every_plugin_has_a_page_with_every_parameter(site, kind):
 def test_every_model_module_has_a_page_with_its_docstring(site):
     """The maths methods and scenarios share (``models/``) is on the site, a page per module."""
     index = (site / "models" / "index.md").read_text(encoding="utf-8")
-    for name, doc in model_docstrings().items():
+    docs = model_docstrings(REPO)
+    assert docstring_markdown(docs.pop("")) in index
+    for name, doc in docs.items():
         page = (site / "models" / f"{name}.md").read_text(encoding="utf-8")
         assert page.startswith(f"# {text('models.' + name)}\n") and docstring_markdown(doc) in page
         assert f"({name}.md)" in index
-    assert {"kalman", "pcrb", "cfar", "cfar.halves"} <= set(model_docstrings())
+    assert {"kalman", "pcrb", "cfar", "cfar.halves"} <= set(model_docstrings(REPO))
 
 
 def test_a_plugin_registered_later_has_its_page(monkeypatch):
@@ -249,7 +251,7 @@ def test_every_docstring_equation_is_maths_on_its_page_with_the_renderer(built_s
     classes = {f"{kind}/{name}": cls for kind in ("methods", "scenarios") for name, cls in getattr(registry, kind)().items()}
     classes.update({f"tasks/{name}": type(task) for name, task in registry.tasks().items()})
     docs = {page: "\n\n".join([inspect.getdoc(cls) or "", *base_docstrings(cls)]) for page, cls in classes.items()}
-    docs.update({f"models/{name}": doc for name, doc in model_docstrings().items()})
+    docs.update({f"models/{name}" if name else "models": doc for name, doc in model_docstrings(REPO).items()})
     with_maths = 0
     for page, doc in docs.items():
         body = (built_site / page / "index.html").read_text(encoding="utf-8")

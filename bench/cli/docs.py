@@ -291,35 +291,31 @@ def plugin_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Pre
         pages[f"{folder}/index.md"] = "\n\n".join(index) + "\n"
 
 
-def model_docstrings() -> dict[str, str]:
-    """The docstring of every module of ``models`` (the maths methods and scenarios share,
-    docs/architecture.md, 'Models'), by its name under ``models``, read from its source
-    (nothing imported but the packages)."""
+def model_docstrings(root: Path) -> dict[str, str]:
+    """The docstring of every module of the repository's ``models/`` (the maths methods and
+    scenarios share, docs/architecture.md, 'Models'), by its dotted name under ``models``
+    (``cfar`` for ``models/cfar/__init__.py``, "" for the package), read from its source:
+    nothing imported (the harness never imports ``models``)."""
     import ast
-    import importlib.util
-    import pkgutil
-
-    from radarbench import models
 
     docs = {}
-    for module in pkgutil.walk_packages(models.__path__, models.__name__ + "."):
-        origin = importlib.util.find_spec(module.name).origin
-        doc = ast.get_docstring(ast.parse(Path(origin).read_text(encoding="utf-8")))
-        docs[module.name.removeprefix(models.__name__ + ".")] = doc or ""
-    return docs
+    for path in sorted((root / "models").rglob("*.py")):
+        parts = path.relative_to(root / "models").with_suffix("").parts
+        name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)     # "" for models/__init__.py
+        docs[name] = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+    return dict(sorted(docs.items()))
 
 
-def model_pages(pages: dict[str, str | Path]) -> list[str]:
+def model_pages(root: Path, pages: dict[str, str | Path]) -> list[str]:
     """A page per module of ``models`` (its docstring, rendered as a plugin's is) and an
     index of them. Returns the modules' names."""
-    docs = model_docstrings()
+    docs = model_docstrings(root)
+    about = docs.pop("", "")                      # the package's own docstring opens the index
     for name, doc in docs.items():
         pages[f"models/{name}.md"] = f"# {text('models.' + name)}\n\n{docstring_markdown(doc)}\n"
     rows = [[f"[{code('models.' + n)}]({n}.md)", line_markdown(" ".join(d.split("\n\n")[0].split()))]
             for n, d in docs.items()]
-    pages["models/index.md"] = "\n\n".join([
-        "# Models", "The maths the methods and scenarios share (`models/`): each module's docstring, "
-        "with the equations of the papers it implements.", table(["module", "what"], rows)]) + "\n"
+    pages["models/index.md"] = "\n\n".join(["# Models", docstring_markdown(about), table(["module", "what"], rows)]) + "\n"
     return list(docs)
 
 
@@ -474,7 +470,7 @@ def pages(root: str | Path) -> tuple[dict[str, str | Path], list]:
     if (root / LOOP_REPORT).is_file():
         published(root, LOOP_REPORT, out)
     plugin_pages(root, out, all_presets, set(reports))
-    models = model_pages(out)
+    models = model_pages(root, out)
     out["presets.md"] = presets_page(root, all_presets, reports)
     out["cli.md"] = cli_page()
 
