@@ -1,20 +1,28 @@
 """mkdocs hooks (mkdocs.yml, ``hooks``): the pages :mod:`bench.cli.docs` generates from the code,
-added to the site and to its navigation after the hand-written pages, nothing written
-into the clone (docs/architecture.md, 'Documentation')."""
+added to the site and to its navigation after the hand-written pages, and the maths
+renderer (:data:`bench.cli.docs.MATHJAX`), nothing written into the clone
+(docs/architecture.md, 'Documentation')."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from radarbench.bench.cli.docs import fill_measured, pages
+from radarbench.bench.cli.docs import MATHJAX, fill_measured, mathjax_script, pages
 
 _generated: dict = {}
 
 
 def on_config(config):
+    from mkdocs.exceptions import ConfigurationError
+
+    script = mathjax_script()
+    if script is None:
+        raise ConfigurationError("MathJax (the [docs] extra's django-static-mathjax) is not installed: "
+                                 "pip install -e '.[docs]'")
     generated, nav = pages(Path(config.config_file_path).parent)
     _generated.clear()
     _generated.update(generated)
+    _generated[MATHJAX] = script
     config.nav = list(config.nav or []) + nav
     return config
 

@@ -1,16 +1,18 @@
-"""Autoregressive (AR) noise: stationarity, autocovariance, exact predictors.
+r"""Autoregressive (AR) noise: stationarity, autocovariance, exact predictors.
 
-Convention (the multi-frame DP-TBD paper's, and the ``tbd-grid`` scene's)::
+Convention (the multi-frame DP-TBD paper's, and the ``tbd-grid`` scene's):
 
-    v_k + a_1 v_(k-1) + ... + a_P v_(k-P) = w_k,   w_k ~ N(0, sigma_w^2) white
+$$
+v_k + a_1 v_{k-1} + \dots + a_P v_{k-P} = w_k, \qquad w_k \sim \mathcal{N}(0, \sigma_w^2) \text{ white}.
+$$
 
 The process is stationary when every root of the characteristic polynomial
-z^P + a_1 z^(P-1) + ... + a_P lies strictly inside the unit circle
+$z^P + a_1 z^{P-1} + \dots + a_P$ lies strictly inside the unit circle
 (:func:`ar_stationarity_problem`). Its stationary autocovariance
-gamma(h) = E[v_k v_(k-h)] follows from the Yule-Walker equations
-(:func:`ar_autocovariance`); the innovation scale sigma_w that gives a wanted
-stationary variance gamma(0) is :func:`ar_innovation_std`. The first P values
-of a stationary path are jointly N(0, Gamma_P) (Toeplitz of gamma(0..P-1)):
+$\gamma(h) = E[v_k v_{k-h}]$ follows from the Yule-Walker equations
+(:func:`ar_autocovariance`); the innovation scale $\sigma_w$ that gives a wanted
+stationary variance $\gamma(0)$ is :func:`ar_innovation_std`. The first $P$ values
+of a stationary path are jointly $\mathcal{N}(0, \Gamma_P)$ (Toeplitz of $\gamma(0), \dots, \gamma(P-1)$):
 :func:`stationary_predictors` gives their prediction-error decomposition, used
 both to draw a path that is stationary from its first value and to whiten one
 exactly (Brockwell & Davis, *Time Series: Theory and Methods*, 2nd ed. 1991,

@@ -1,4 +1,4 @@
-"""WGS-84 geodetic coordinates to a local east-north-up (ENU) frame, for recorded
+r"""WGS-84 geodetic coordinates to a local east-north-up (ENU) frame, for recorded
 tracks given in latitude / longitude / altitude (scenario ``recorded-tracks``;
 docs/architecture.md, 'Models').
 
@@ -7,14 +7,21 @@ System and Inertial Navigation*, 1999, sec. 2.3; Bar-Shalom, Li & Kirubarajan,
 *Estimation with Applications to Tracking and Navigation*, 2001, use the same
 local-tangent-plane frame):
 
-* geodetic (phi, lambda, h) to Earth-centred Earth-fixed (ECEF):
-  N = a / sqrt(1 - e^2 sin^2 phi) (prime-vertical radius),
-  X = (N + h) cos phi cos lambda, Y = (N + h) cos phi sin lambda,
-  Z = (N (1 - e^2) + h) sin phi;
-* ECEF offset from a reference point to ENU at that point's (phi0, lambda0):
-  e = -sin l0 dX + cos l0 dY,
-  n = -sin p0 cos l0 dX - sin p0 sin l0 dY + cos p0 dZ,
-  u = cos p0 cos l0 dX + cos p0 sin l0 dY + sin p0 dZ.
+* geodetic $(\phi, \lambda, h)$ to Earth-centred Earth-fixed (ECEF), with the
+  prime-vertical radius $N = a / \sqrt{1 - e^2 \sin^2 \phi}$:
+  $X = (N + h) \cos\phi \cos\lambda$, $Y = (N + h) \cos\phi \sin\lambda$,
+  $Z = (N (1 - e^2) + h) \sin\phi$;
+* ECEF offset from a reference point to ENU at that point's $(\phi_0, \lambda_0)$:
+
+$$
+\begin{bmatrix} e \\ n \\ u \end{bmatrix} =
+\begin{bmatrix}
+  -\sin\lambda_0 & \cos\lambda_0 & 0 \\
+  -\sin\phi_0 \cos\lambda_0 & -\sin\phi_0 \sin\lambda_0 & \cos\phi_0 \\
+  \cos\phi_0 \cos\lambda_0 & \cos\phi_0 \sin\lambda_0 & \sin\phi_0
+\end{bmatrix}
+\begin{bmatrix} \Delta X \\ \Delta Y \\ \Delta Z \end{bmatrix}.
+$$
 
 Exact (no flat-earth approximation): a track hundreds of kilometres from its
 reference point keeps its true distances in 3-D; its east/north plane is the

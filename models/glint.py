@@ -1,4 +1,4 @@
-"""Densities of glint measurement noise, in log space, vectorised; and
+r"""Densities of glint measurement noise, in log space, vectorised; and
 :class:`GlintModel`, the tracking model under that noise.
 
 Radar glint is modelled per measurement component as a Gaussian receiver
@@ -6,37 +6,44 @@ noise with occasional heavy-tailed (Laplacian) glint spikes (Hewer, Martin &
 Zeh, "Robust preprocessing for Kalman filtering of glint noise", IEEE TAES
 23(1), 1987; Wu, "Maximum likelihood identification of glint noise", IEEE TAES
 32(1), 1996). Two ways to combine the parts are in use, and this module gives
-both, with the Laplace law parametrised by its *scale* ``eta`` (density
-exp(-|x|/eta) / (2 eta), variance 2 eta^2):
+both, with the Laplace law parametrised by its *scale* $\eta$ (``eta``; density
+$e^{-|x|/\eta} / (2 \eta)$, variance $2 \eta^2$):
 
 ``"mixture"`` (default of the ``glint`` scenario, Song & Sun's eq. (5),
-    f = (1 - eps) f_g + eps f_l): with probability 1 - eps the noise is N(0, sigma^2), with
-    probability eps it is Laplace(0, eta)::
+$f = (1 - \epsilon) f_g + \epsilon f_l$): with probability $1 - \epsilon$ the noise is
+$\mathcal{N}(0, \sigma^2)$, with probability $\epsilon$ it is $\operatorname{Laplace}(0, \eta)$:
 
-        p(x) = (1 - eps) N(x; 0, sigma^2) + eps Laplace(x; 0, eta)
-        var  = (1 - eps) sigma^2 + 2 eps eta^2
+$$
+p(x) = (1 - \epsilon)\, \mathcal{N}(x; 0, \sigma^2) + \epsilon\, \operatorname{Laplace}(x; 0, \eta),
+\qquad \operatorname{var} = (1 - \epsilon) \sigma^2 + 2 \epsilon \eta^2
+$$
 
 ``"additive"``: the Gaussian receiver noise is always there and a glint spike
-    is *added* with probability eps, so the outlier part is the convolution
-    N(0, sigma^2) * Laplace(0, eta)::
+is *added* with probability $\epsilon$, so the outlier part is the convolution
+$\mathcal{N}(0, \sigma^2) * \operatorname{Laplace}(0, \eta)$:
 
-        p(x) = (1 - eps) N(x; 0, sigma^2) + eps (N * Laplace)(x)
-        var  = sigma^2 + 2 eps eta^2
+$$
+p(x) = (1 - \epsilon)\, \mathcal{N}(x; 0, \sigma^2) + \epsilon\, (\mathcal{N} * L)(x),
+\qquad \operatorname{var} = \sigma^2 + 2 \epsilon \eta^2
+$$
 
 The Gaussian-Laplace convolution (the "normal-Laplace" law of Reed &
 Jorgensen, "The double Pareto-lognormal distribution", Commun. Stat. Theory
-Methods 33(8), 2004, with equal tail rates) has the closed form, r = sigma/eta::
+Methods 33(8), 2004, with equal tail rates) has the closed form, $r = \sigma/\eta$:
 
-    (N * L)(x) = 1/(4 eta) exp(r^2/2) [ exp(-x/eta) erfc((r - x/sigma)/sqrt 2)
-                                      + exp( x/eta) erfc((r + x/sigma)/sqrt 2) ]
+$$
+(\mathcal{N} * L)(x) = \frac{e^{r^2/2}}{4 \eta} \left[
+  e^{-x/\eta} \operatorname{erfc}\!\Big(\frac{r - x/\sigma}{\sqrt{2}}\Big)
+  + e^{x/\eta} \operatorname{erfc}\!\Big(\frac{r + x/\sigma}{\sqrt{2}}\Big) \right]
+$$
 
 Each term overflows (exp) or underflows (erfc) on its own far in the tails. With
-erfc(a) = erfcx(a) exp(-a^2) a term with a >= 0 equals
-exp(-x^2/(2 sigma^2)) erfcx(a) (no large exponent left), and a term with a < 0
-has erfc(a) in (1, 2], so its logarithm is -+x/eta + r^2/2 + log erfc(a) with
+$\operatorname{erfc}(a) = \operatorname{erfcx}(a)\, e^{-a^2}$ a term with $a \ge 0$ equals
+$e^{-x^2/(2 \sigma^2)} \operatorname{erfcx}(a)$ (no large exponent left), and a term with $a < 0$
+has $\operatorname{erfc}(a) \in (1, 2]$, so its logarithm is $\mp x/\eta + r^2/2 + \log \operatorname{erfc}(a)$ with
 moderate parts. :func:`gauss_laplace_logpdf` evaluates each term in the form
-that is exact for its sign of ``a`` and combines them with ``logaddexp``: it is
-finite (and asymptotically the Laplace tail -|x|/eta + const) for any finite x.
+that is exact for its sign of $a$ and combines them with ``logaddexp``: it is
+finite (and asymptotically the Laplace tail $-|x|/\eta + \text{const}$) for any finite $x$.
 """
 
 from __future__ import annotations

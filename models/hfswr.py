@@ -1,29 +1,28 @@
-"""HF surface-wave radar geometry: a constant-velocity ship seen in range,
+r"""HF surface-wave radar geometry: a constant-velocity ship seen in range,
 azimuth and radial velocity (the multi-target task's shared maths;
 docs/architecture.md, 'Models').
 
 After "目标检测与跟踪方法 (Target detection and tracking methods), 海洋遥感技术应用"
 (the HFSWR CFAR / M-N / JPDA-UKF chapter), section 2(1).
 
-State and frame::
+State and frame: $x = [x, v_x, y, v_y]'$ (metres, m/s; $x$ east, $y$ north: Cartesian, the
+paper's CV state), the sensor at ``sensor_xy`` $= (s_x, s_y)$, $d_x = x - s_x$, $d_y = y - s_y$.
+Measurement (the paper's eq. 6.71, noise-free part): range (m), azimuth clockwise from
+north ($+y$) in $(-\pi, \pi]$, radial velocity (m/s) positive receding,
 
-    x = [x, vx, y, vy]        metres, m/s; x east, y north (Cartesian, the paper's CV state)
-    sensor at sensor_xy = (sx, sy); dx = x - sx, dy = y - sy
-
-Measurement (the paper's eq. 6.71, noise-free part)::
-
-    range             r  = sqrt(dx^2 + dy^2)                         (m)
-    azimuth           az = atan2(dx, dy)   clockwise from north (+y), in (-pi, pi]
-    radial velocity   vr = (dx vx + dy vy) / r   positive receding   (m/s)
+$$
+r = \sqrt{d_x^2 + d_y^2}, \qquad \mathit{az} = \operatorname{atan2}(d_x, d_y), \qquad
+v_r = (d_x v_x + d_y v_y) / r. \qquad (6.71)
+$$
 
 The noise is independent per component; the paper notes that range and radial
-velocity may be correlated with a coefficient rho that an HFSWR cannot measure,
-and takes rho = 0 — so do we.
+velocity may be correlated with a coefficient $\rho$ that an HFSWR cannot measure,
+and takes $\rho = 0$ — so do we.
 
-Motion (the paper's eq. 6.69): x_{k+1} = F x_k + G v_k with the CV transition F
-(:func:`cv_transition`) and v_k ~ N(0, sigma_v^2 I) a white acceleration held
+Motion (the paper's eq. 6.69): $x_{k+1} = F x_k + G v_k$ with the CV transition $F$
+(:func:`cv_transition`) and $v_k \sim \mathcal{N}(0, \sigma_v^2 I)$ a white acceleration held
 over each scan: the *discrete* white-noise acceleration model,
-Q = sigma_v^2 G G' with G = [T^2/2, T] per axis (:func:`cv_process_noise`).
+$Q = \sigma_v^2 G G'$ with $G = [T^2/2, T]'$ per axis (:func:`cv_process_noise`).
 """
 
 from __future__ import annotations

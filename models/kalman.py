@@ -1,4 +1,4 @@
-"""The one batched linear Kalman filter of the project.
+r"""The one batched linear Kalman filter of the project.
 
 Every maneuver detector looks at the innovation of a reference linear filter
 that the scenario supplies (a :class:`LinearGaussianFilter`, the detection
@@ -8,17 +8,20 @@ innovations; :func:`reference_innovations` is the same by a per-trial
 filterpy loop (the oracle of the tests, the baseline of ``bench perf``).
 
 Notation after Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to
-Tracking and Navigation* (2001), sec. 5.2 (and the FilterPy names)::
+Tracking and Navigation* (2001), sec. 5.2 (and the FilterPy names):
 
-    x_k = F x_{k-1} + w,   w ~ N(0, Q)
-    z_k = H x_k + v,       v ~ N(0, R)
-
-    nu_k = z_k - H x_k|k-1                 innovation
-    S_k  = H P_k|k-1 H' + R                its covariance
-    K_k  = P_k|k-1 H' S_k^-1               gain
-    x_k|k = x_k|k-1 + K_k nu_k
-    P_k|k = (I - K_k H) P_k|k-1 (I - K_k H)' + K_k R K_k'   (Joseph form)
-    x_k+1|k = F x_k|k,   P_k+1|k = F P_k|k F' + Q
+$$
+\begin{aligned}
+x_k &= F x_{k-1} + w, & w &\sim \mathcal{N}(0, Q), \\
+z_k &= H x_k + v, & v &\sim \mathcal{N}(0, R), \\
+\nu_k &= z_k - H x_{k|k-1} & &\text{innovation}, \\
+S_k &= H P_{k|k-1} H' + R & &\text{its covariance}, \\
+K_k &= P_{k|k-1} H' S_k^{-1} & &\text{gain}, \\
+x_{k|k} &= x_{k|k-1} + K_k \nu_k, \\
+P_{k|k} &= (I - K_k H) P_{k|k-1} (I - K_k H)' + K_k R K_k' & &\text{Joseph form}, \\
+x_{k+1|k} &= F x_{k|k}, \quad P_{k+1|k} = F P_{k|k} F' + Q.
+\end{aligned}
+$$
 
 The covariance recursion of a linear filter does not depend on the data, so
 ``P``, ``S`` and ``K`` are computed once per step and shared by all trials;

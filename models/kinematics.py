@@ -1,11 +1,11 @@
-"""Kinematic state models of a point target, per Cartesian axis: the
-transition F and process-noise covariance Q of the constant-velocity (CV),
+r"""Kinematic state models of a point target, per Cartesian axis: the
+transition $F$ and process-noise covariance $Q$ of the constant-velocity (CV),
 constant-acceleration (CA), Singer and "current statistical" models, the
-position measurement matrix H, and :class:`KinematicModel`, what the
+position measurement matrix $H$, and :class:`KinematicModel`, what the
 ``maneuvering-1d`` scenario hands to its trackers (docs/architecture.md,
 'Models' and 'Scenes').
 
-State per axis: ``[p, v, a]`` (m, m/s, m/s^2); in ``dims`` dimensions the
+State per axis: ``[p, v, a]`` (m, m/s, m/s²); in ``dims`` dimensions the
 axes are stacked block by block, ``[x, vx, ax, y, vy, ay]``
 (:func:`per_axis`). The CV model runs on ``[p, v]`` per axis; :func:`embed_cv`
 writes it in the three-component form (acceleration row zero) so that CV and CA
@@ -16,22 +16,23 @@ Tracking and Navigation* (2001), sec. 6.3 and 8.2 (Singer), and Li & Jilkov,
 "Survey of maneuvering target tracking, part I: dynamic models" (the survey
 the AR-model patent cites), sec. 4 (Singer, current statistical model):
 
-* CV, discrete white-noise acceleration (DWNA): F = [[1, T], [0, 1]],
-  Q = sigma_a^2 g g', g = [T^2/2, T]'  (sigma_a in m/s^2);
-* CA, discrete Wiener-process acceleration (DWPA): F = [[1, T, T^2/2],
-  [0, 1, T], [0, 0, 1]], Q = sigma_j^2 g g', g = [T^2/2, T, 1]'  (sigma_j,
-  m/s^2, the std of the acceleration increment over one step);
-* Singer: da/dt = -alpha a + w, E[w(t) w(s)] = 2 alpha sigma_m^2 delta(t - s);
-  F = expm(A T), Q = int_0^T expm(A s) L q L' expm(A s)' ds, computed
-  exactly by Van Loan's matrix-exponential method (:func:`singer`), with
-  F = [[1, T, (alpha T - 1 + e^{-alpha T})/alpha^2], [0, 1, (1 - e^{-alpha T})/alpha],
-  [0, 0, e^{-alpha T}]];
-* current statistical (Zhou & Kumar): the Singer F and Q around a non-zero
-  "current" mean acceleration a_bar, with the input U a_bar
+* CV, discrete white-noise acceleration (DWNA), $\sigma_a$ in m/s²:
+  $F = \begin{bmatrix} 1 & T \\ 0 & 1 \end{bmatrix}$, $Q = \sigma_a^2 g g'$, $g = [T^2/2, T]'$;
+* CA, discrete Wiener-process acceleration (DWPA), $\sigma_j$ (m/s²) the std of the
+  acceleration increment over one step:
+  $F = \begin{bmatrix} 1 & T & T^2/2 \\ 0 & 1 & T \\ 0 & 0 & 1 \end{bmatrix}$,
+  $Q = \sigma_j^2 g g'$, $g = [T^2/2, T, 1]'$;
+* Singer: $\dot{a} = -\alpha a + w$, $E[w(t) w(s)] = 2 \alpha \sigma_m^2 \delta(t - s)$;
+  $F = e^{A T}$, $Q = \int_0^T e^{A s} L q L' e^{A' s}\, ds$, computed exactly by Van
+  Loan's matrix-exponential method (:func:`singer`), with
+  $F = \begin{bmatrix} 1 & T & (\alpha T - 1 + e^{-\alpha T})/\alpha^2 \\
+  0 & 1 & (1 - e^{-\alpha T})/\alpha \\ 0 & 0 & e^{-\alpha T} \end{bmatrix}$;
+* current statistical (Zhou & Kumar): the Singer $F$ and $Q$ around a non-zero
+  "current" mean acceleration $\bar{a}$, with the input $U \bar{a}$
   (:func:`current_statistical_input`) and the acceleration variance
-  sigma_a^2 = (4 - pi)/pi (a_max - a_bar)^2 (a_bar >= 0) or
-  (4 - pi)/pi (a_max_neg + a_bar)^2 (a_bar < 0)
-  (:func:`current_statistical_variance`).
+  $\sigma_a^2 = \frac{4 - \pi}{\pi} (a_{\max} - \bar{a})^2$ ($\bar{a} \ge 0$) or
+  $\frac{4 - \pi}{\pi} (a_{-\max} + \bar{a})^2$ ($\bar{a} < 0$; $a_{-\max}$ the
+  ``a_max_neg`` bound) (:func:`current_statistical_variance`).
 """
 
 from __future__ import annotations

@@ -1,30 +1,40 @@
-"""The posterior Cramér-Rao bound (PCRB) of filtering: the bound on the mean square error
+r"""The posterior Cramér-Rao bound (PCRB) of filtering: the bound on the mean square error
 of any estimator of the state from the measurements up to each step
 (docs/architecture.md, 'Models'; the tracking task draws it under the RMSE curves).
 
 Tichavský, Muravchik & Nehorai, "Posterior Cramér-Rao bounds for discrete-time
 nonlinear filtering", IEEE Trans. Signal Processing 46(5), 1998:
-the information matrix J_k (E[(x_hat - x)(x_hat - x)'] >= J_k^-1) follows
+the information matrix $J_k$ ($E[(\hat{x} - x)(\hat{x} - x)'] \ge J_k^{-1}$) follows
+(:func:`pcrb_recursion`)
 
-    J_{k+1} = D22_k - D21_k (J_k + D11_k)^-1 D12_k,
-    D11 = E[-Delta_x_k^x_k log p(x_{k+1} | x_k)],   D12 = E[-Delta_x_k^x_{k+1} log p(x_{k+1} | x_k)] = D21',
-    D22 = E[-Delta_x_{k+1}^x_{k+1} log p(x_{k+1} | x_k)] + E[-Delta_x_{k+1}^x_{k+1} log p(z_{k+1} | x_{k+1})]
+$$
+\begin{aligned}
+J_{k+1} &= D^{22}_k - D^{21}_k (J_k + D^{11}_k)^{-1} D^{12}_k, \\
+D^{11}_k &= E[-\Delta_{x_k}^{x_k} \log p(x_{k+1} \mid x_k)], \quad
+D^{12}_k = E[-\Delta_{x_k}^{x_{k+1}} \log p(x_{k+1} \mid x_k)] = (D^{21}_k)', \\
+D^{22}_k &= E[-\Delta_{x_{k+1}}^{x_{k+1}} \log p(x_{k+1} \mid x_k)]
+  + E[-\Delta_{x_{k+1}}^{x_{k+1}} \log p(z_{k+1} \mid x_{k+1})].
+\end{aligned}
+$$
 
-(:func:`pcrb_recursion`). For linear dynamics with additive Gaussian noise,
-x_{k+1} = F_k x_k + u_k + w_k, w_k ~ N(0, Q_k): D11 = F' Q^-1 F, D12 = -F' Q^-1,
-D22 = Q^-1 + J_z, and by the matrix inversion lemma
+For linear dynamics with additive Gaussian noise,
+$x_{k+1} = F_k x_k + u_k + w_k$, $w_k \sim \mathcal{N}(0, Q_k)$: $D^{11} = F' Q^{-1} F$,
+$D^{12} = -F' Q^{-1}$, $D^{22} = Q^{-1} + J_z$, and by the matrix inversion lemma
+(:func:`linear_dynamics_pcrb`)
 
-    J_{k+1} = (Q_k + F_k J_k^-1 F_k')^-1 + J_z(k+1),   J_z = E[H' R_F^-1 H]
+$$
+J_{k+1} = (Q_k + F_k J_k^{-1} F_k')^{-1} + J_z(k+1), \qquad J_z = E[H' R_F^{-1} H],
+$$
 
-(:func:`linear_dynamics_pcrb`), which needs no inverse of Q, so a singular Q (a
-deterministic maneuver, noise entering through a gain G) is allowed. H is the
-measurement's Jacobian at the true state; R_F^-1 the Fisher information of the
-measurement noise density (1/sigma^2 for Gaussian noise; more for glint noise of the same
-variance: :func:`models.glint.glint_fisher_information`). Step 0 is measured:
-J_0 = P0^-1 + J_z(0), as the trackers update with z_0 first.
+which needs no inverse of $Q$, so a singular $Q$ (a deterministic maneuver, noise
+entering through a gain $G$) is allowed. $H$ is the measurement's Jacobian at the true
+state; $R_F^{-1}$ the Fisher information of the measurement noise density ($1/\sigma^2$
+for Gaussian noise; more for glint noise of the same variance:
+:func:`models.glint.glint_fisher_information`). Step 0 is measured:
+$J_0 = P_0^{-1} + J_z(0)$, as the trackers update with $z_0$ first.
 
 Expectations over the true trajectory are taken along each trial's own truth (the
-Jacobian at its states): exact where H is constant (linear measurements), and for the
+Jacobian at its states): exact where $H$ is constant (linear measurements), and for the
 spherical measurement a bound per trajectory whose mean over trials the summary reports.
 """
 

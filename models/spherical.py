@@ -1,20 +1,21 @@
-"""Spherical radar measurements of a Cartesian position: geometry and the
-measurement model h(p), its Jacobian and the angle-aware residual.
+r"""Spherical radar measurements of a Cartesian position: geometry and the
+measurement model $h(p)$, its Jacobian and the angle-aware residual.
 
-Frame and angles (the ``glint`` scenario's, and the trackers')::
+Frame and angles (the ``glint`` scenario's, and the trackers'): ENU, the sensor at the
+origin, $x$ east, $y$ north, $z$ up (metres); bearing clockwise from north, in $(-\pi, \pi]$:
 
-    ENU, sensor at the origin: x east, y north, z up (metres)
-    range      r = sqrt(x^2 + y^2 + z^2)
-    bearing    b = atan2(x, y)             clockwise from north, in (-pi, pi]
-    elevation  e = atan2(z, sqrt(x^2 + y^2))
+$$
+r = \sqrt{x^2 + y^2 + z^2}, \qquad b = \operatorname{atan2}(x, y), \qquad
+e = \operatorname{atan2}\big(z, \sqrt{x^2 + y^2}\big).
+$$
 
-A sensor measures some of (r, b, e) (:data:`MEASURED`): an *active* radar all
+A sensor measures some of $(r, b, e)$ (:data:`MEASURED`): an *active* radar all
 three, a *passive* one the two angles. The measurement equation is
-z = h(p) + v with h the selected components; an extended Kalman filter
-linearises it with H = dh/dp (:func:`measurement_jacobian`), and every
-residual z - h must wrap the bearing difference to (-pi, pi]
-(:func:`measurement_residual`), otherwise a target near south (b ~ +-pi)
-produces 2 pi innovations.
+$z = h(p) + v$ with $h$ the selected components; an extended Kalman filter
+linearises it with $H = \partial h / \partial p$ (:func:`measurement_jacobian`), and every
+residual $z - h$ must wrap the bearing difference to $(-\pi, \pi]$
+(:func:`measurement_residual`), otherwise a target near south ($b \approx \pm\pi$)
+produces $2\pi$ innovations.
 """
 
 from __future__ import annotations

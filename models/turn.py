@@ -1,23 +1,27 @@
-"""The coordinated-turn (CT) model with an unknown turn rate: its transition, the
+r"""The coordinated-turn (CT) model with an unknown turn rate: its transition, the
 Jacobian an extended Kalman filter predicts with, and the turn a scenario flies
 (docs/architecture.md, 'Models').
 
 Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking and
-Navigation* (2001), sec. 11.7.1-11.7.2: state [x, vx, y, vy, Omega] (m, m/s,
-rad/s; Omega > 0 counter-clockwise), over one step T with Omega held:
+Navigation* (2001), sec. 11.7.1-11.7.2: state $[x, v_x, y, v_y, \Omega]'$ (m, m/s,
+rad/s; $\Omega > 0$ counter-clockwise), over one step $T$ with $\Omega$ held:
 
-    x'  = x + a vx - b vy           a = sin(Omega T)/Omega
-    vx' = c vx - s vy               b = (1 - cos(Omega T))/Omega
-    y'  = y + b vx + a vy           s = sin(Omega T),  c = cos(Omega T)
-    vy' = s vx + c vy
-    Omega' = Omega
+$$
+\begin{aligned}
+x' &= x + a v_x - b v_y, & a &= \sin(\Omega T)/\Omega, \\
+v_x' &= c v_x - s v_y, & b &= (1 - \cos(\Omega T))/\Omega, \\
+y' &= y + b v_x + a v_y, & s &= \sin(\Omega T), \quad c = \cos(\Omega T), \\
+v_y' &= s v_x + c v_y, \quad \Omega' = \Omega,
+\end{aligned}
+$$
 
-so [x, vx, y, vy]' = F(Omega) [x, vx, y, vy] (:func:`ct_transition`), and the
-Jacobian's last column is dF/dOmega [x, vx, y, vy] with a' = (Omega T c - s)/Omega^2,
-b' = (Omega T s - (1 - c))/Omega^2, s' = T c, c' = -T s (:func:`ct_jacobian`). At
-|Omega T| < 1e-4 a, b, a', b' are their series (a = T (1 - (Omega T)^2/6),
-b = Omega T^2/2 (1 - (Omega T)^2/12), a' = -Omega T^3/3, b' = T^2/2 (1 - (Omega T)^2/4)):
-the closed forms cancel to 0/0 there; Omega = 0 is the CV transition exactly.
+so $[x, v_x, y, v_y]'$ becomes $F(\Omega) [x, v_x, y, v_y]'$ (:func:`ct_transition`), and the
+Jacobian's last column is $\partial F / \partial \Omega\, [x, v_x, y, v_y]'$ with
+$a' = (\Omega T c - s)/\Omega^2$, $b' = (\Omega T s - (1 - c))/\Omega^2$, $s' = T c$, $c' = -T s$
+(:func:`ct_jacobian`). At $|\Omega T| < 10^{-4}$ $a$, $b$, $a'$, $b'$ are their series
+($a = T (1 - (\Omega T)^2/6)$, $b = \Omega T^2/2\, (1 - (\Omega T)^2/12)$, $a' = -\Omega T^3/3$,
+$b' = T^2/2\, (1 - (\Omega T)^2/4)$): the closed forms cancel to 0/0 there; $\Omega = 0$ is
+the CV transition exactly.
 """
 
 from __future__ import annotations

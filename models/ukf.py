@@ -1,4 +1,4 @@
-"""The unscented transform and Kalman update of the project's UKF (compiled, one track at a time).
+r"""The unscented transform and Kalman update of the project's UKF (compiled, one track at a time).
 
 After the HFSWR tracking chapter ("目标检测与跟踪方法 (Target detection and
 tracking methods), 海洋遥感技术应用"), section 2(2), "UKF 预测" / "UKF 更新"
@@ -6,28 +6,45 @@ tracking methods), 海洋遥感技术应用"), section 2(2), "UKF 预测" / "UKF
 of Wan & van der Merwe (FilterPy's ``MerweScaledSigmaPoints``, the oracle of
 the tests). The chapter's text describes each step; its equation images did
 not survive in our copy, so the formulas below are the standard ones those
-sentences name, in the chapter's symbols where it gives them:
+sentences name, in the chapter's symbols where it gives them. Sigma points
+(eq. 6.75, scale $\zeta$; $\sqrt{P}$ the lower Cholesky factor, $[\cdot]_i$ its $i$-th column)
+and unscented weights $\omega$:
 
-    sigma points (eq. 6.75, scale ζ):
-        χ_0 = x,  χ_i = x + ζ [√P]_i,  χ_{n+i} = x − ζ [√P]_i     (i = 1..n)
-        √P the lower Cholesky factor, [·]_i its i-th column,
-        λ = α² (n + κ) − n,  ζ = √(n + λ)
-    unscented weights ω:
-        ω_0^m = λ / (n + λ),  ω_0^c = ω_0^m + 1 − α² + β,  ω_i^m = ω_i^c = 1 / (2 (n + λ))
-    prediction ("通过状态转移方程传递 sigma 点 ... 引入状态噪声的协方差矩阵"):
-        χ_i⁻ = f(χ_i),  x⁻ = Σ ω_i^m χ_i⁻,  P⁻ = Σ ω_i^c (χ_i⁻ − x⁻)(χ_i⁻ − x⁻)' + Q_k
-    sigma points redrawn from (x⁻, P⁻) ("考虑到状态噪声的影响, 利用传递状态及
-    状态协方差估计对 sigma 点重新估计"), then through the measurement equation:
-        Z_i = h(χ_i),  ẑ = Σ ω_i^m Z_i,  S = Σ ω_i^c (Z_i − ẑ)(Z_i − ẑ)' + R,
-        P_xz = Σ ω_i^c (χ_i − x⁻)(Z_i − ẑ)'
-    update with the i-th validated plot z(i) ("利用经典卡尔曼滤波的更新过程"):
-        K = P_xz S⁻¹,  x(i) = x⁻ + K (z(i) − ẑ),  P(i) = P⁻ − K S K'
+$$
+\begin{aligned}
+\chi_0 &= x, \quad \chi_i = x + \zeta [\sqrt{P}]_i, \quad \chi_{n+i} = x - \zeta [\sqrt{P}]_i
+  \quad (i = 1, \dots, n), \\
+\lambda &= \alpha^2 (n + \kappa) - n, \quad \zeta = \sqrt{n + \lambda}, \\
+\omega_0^m &= \frac{\lambda}{n + \lambda}, \quad \omega_0^c = \omega_0^m + 1 - \alpha^2 + \beta,
+  \quad \omega_i^m = \omega_i^c = \frac{1}{2 (n + \lambda)}.
+\end{aligned}
+$$
+
+Prediction ("通过状态转移方程传递 sigma 点 ... 引入状态噪声的协方差矩阵"):
+
+$$
+\chi_i^- = f(\chi_i), \quad x^- = \sum_i \omega_i^m \chi_i^-, \quad
+P^- = \sum_i \omega_i^c (\chi_i^- - x^-)(\chi_i^- - x^-)' + Q_k.
+$$
+
+The sigma points are redrawn from $(x^-, P^-)$ ("考虑到状态噪声的影响, 利用传递状态及
+状态协方差估计对 sigma 点重新估计"), then go through the measurement equation, and the
+update with the $i$-th validated plot $z(i)$ is Kalman's ("利用经典卡尔曼滤波的更新过程"):
+
+$$
+\begin{aligned}
+Z_i &= h(\chi_i), \quad \hat{z} = \sum_i \omega_i^m Z_i, \quad
+S = \sum_i \omega_i^c (Z_i - \hat{z})(Z_i - \hat{z})' + R, \\
+P_{xz} &= \sum_i \omega_i^c (\chi_i - x^-)(Z_i - \hat{z})', \\
+K &= P_{xz} S^{-1}, \quad x(i) = x^- + K (z(i) - \hat{z}), \quad P(i) = P^- - K S K'.
+\end{aligned}
+$$
 
 FilterPy's ``UnscentedKalmanFilter.update`` reuses the propagated points
-χ_i⁻ instead of redrawing them; the tests set its ``sigmas_f`` to the redrawn
-points to follow the chapter. An angle component of Z (the azimuth) is averaged
-through its differences from Z_0 (:func:`unscented_mean`), so a plot near the
-±π cut is handled.
+$\chi_i^-$ instead of redrawing them; the tests set its ``sigmas_f`` to the redrawn
+points to follow the chapter. An angle component of $Z$ (the azimuth) is averaged
+through its differences from $Z_0$ (:func:`unscented_mean`), so a plot near the
+$\pm\pi$ cut is handled.
 
 Everything here is a numba function on one track's arrays, called from the
 trackers' compiled scan loop (``methods/multitarget/kernels.py``); :func:`merwe_weights`

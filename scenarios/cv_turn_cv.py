@@ -126,25 +126,28 @@ def noise_std_for_snr(p, snr_db: float) -> float:
 
 @register_scenario
 class CvTurnCv(Scenario):
-    """Constant velocity, coordinated turn, constant velocity; 2D position measurements.
+    r"""Constant velocity, coordinated turn, constant velocity; 2D position measurements.
 
     The truth is a deterministic track (CV along +x from the origin, a
     coordinated turn of ``turn_steps`` steps from ``onset_step``, CV again),
     plus, with ``process_noise``, the reference filter's own discrete
     white-noise acceleration, so the filter is matched apart from the turn.
-    The process-noise part is superposed linearly: n_k = F n_{k-1} + G w_k,
-    n_{-1} = 0, with the CV ``F``.
+    The process-noise part is superposed linearly, with the CV $F$:
+
+    $$
+    n_k = F n_{k-1} + G w_k, \qquad n_{-1} = 0.
+    $$
 
     The reference filter (the scene's ``reference_filter``, a
     :class:`models.kalman.LinearGaussianFilter`) is the per-axis DWNA CV
     filter (:func:`cv_model`). It starts in steady state: its ``P0`` is the
-    steady-state prior covariance and its ``x0`` = truth at step 0 +
-    chol(P0) e, so under the matched model its innovations are white and
+    steady-state prior covariance and its ``x0`` $= x^{\text{true}}_0 + \operatorname{chol}(P_0)\, e$, so under the
+    matched model its innovations are white and
     stationary from step 0.
 
     SNR: see :data:`SNR_DEFINITION`. Under the null
     (``snr_db=None``) the track is the same CV line without the turn and the
-    noise level is that of 0 dB: every shipped detector normalises by S, so
+    noise level is that of 0 dB: every shipped detector normalises by $S$, so
     the scale of the null is immaterial to them. Random draws, in this order
     whatever the SNR or hypothesis: initial estimate error (4,), process noise
     (K, 2), measurement noise (K, 2); trial i sees the same standard normals

@@ -79,32 +79,42 @@ def spherical_components(states) -> dict[str, np.ndarray]:
 
 @register_scenario
 class Glint(Scenario):
-    """Damped target with known control, spherical measurements under Gaussian + Laplace glint noise.
+    r"""Damped target with known control, spherical measurements under Gaussian + Laplace glint noise.
 
     After Song & Sun, "Filtering method with non-Gaussian noise" (the estimator after Demirbas, "Manoeuvring-target tracking with the
     Viterbi algorithm in the presence of interference", IEE Proc. F 136(6),
     1989). A sensor at the origin (ENU frame: x east, y north, z up, metres)
     tracks one target.
 
-    **State** [x, y, z, vx, vy, vz] (:data:`STATE_LABELS`), positions
+    **State** $[x, y, z, v_x, v_y, v_z]'$ (:data:`STATE_LABELS`), positions
     ``POSITION_INDEX = (0, 1, 2)``.
 
-    **Motion** per Cartesian axis: dv/dt = -mu v + u + w, dp/dt = v (the
-    paper's dx/dt = -mu x + u + w acts on the velocity; its P1, P2 are the
-    zero-order-hold gains of this second-order model), with u + w held over
-    each interval T: x_{k+1} = F x_k + G (u + w_k), F = [[I, P1 I], [0, a I]],
-    G = [P2 I; P1 I], a = exp(-mu T), P1 = (1 - a)/mu, P2 = (mu T - 1 + a)/mu^2,
-    w_k ~ N(0, ``process_noise_m_s2``^2 I) white (so Q = sigma_w^2 G G').
-    Defaults T = 0.1 s, mu = 0.4 /s (the paper's).
+    **Motion** per Cartesian axis: $\dot{v} = -\mu v + u + w$, $\dot{p} = v$ (the
+    paper's eq. (1) $\dot{x} = -\mu x + u + w$ acts on the velocity; its $P_1$, $P_2$ of
+    eq. (2) are the zero-order-hold gains of this second-order model), with $u + w$ held
+    over each interval $T$:
+
+    $$
+    \begin{aligned}
+    x_{k+1} &= F x_k + G (u + w_k), &
+    F &= \begin{bmatrix} I & P_1 I \\ 0 & a I \end{bmatrix}, \quad
+    G = \begin{bmatrix} P_2 I \\ P_1 I \end{bmatrix}, \\
+    a &= e^{-\mu T}, &
+    P_1 &= \frac{1 - a}{\mu}, \quad P_2 = \frac{\mu T - 1 + a}{\mu^2} \qquad (2)
+    \end{aligned}
+    $$
+
+    $w_k \sim \mathcal{N}(0, \sigma_w^2 I)$ white, $\sigma_w$ = ``process_noise_m_s2`` (so
+    $Q = \sigma_w^2 G G'$). Defaults $T = 0.1$ s, $\mu = 0.4$ /s (the paper's).
 
     **Control.** The paper's state is spherical (Demirbas estimates range,
     bearing and elevation component by component) and its control is given in
-    the radial, bearing and elevation directions: u_r = 1.5, u_b = 0.07,
-    u_e = 0.06. With a Cartesian state we read them as accelerations in m/s^2
+    the radial, bearing and elevation directions: $u_r = 1.5$, $u_b = 0.07$,
+    $u_e = 0.06$. With a Cartesian state we read them as accelerations in m/s^2
     along the unit vectors of increasing range, bearing and elevation at the
     *prior mean* initial position (:func:`models.spherical.los_basis`), a constant Cartesian
     vector ``u`` (so the model stays linear and the control is exactly
-    known). Reading u_b, u_e as angular accelerations (rad/s^2) times range
+    known). Reading $u_b$, $u_e$ as angular accelerations (rad/s^2) times range
     would mean 350 m/s^2 at 5 km, not a plausible target. The model's
     ``los_rotation`` (:class:`models.glint.GlintModel`) is that basis; with the default geometry (bearing 0,
     elevation 0) it is the world frame up to axis order: y is the radial
@@ -114,27 +124,32 @@ class Glint(Scenario):
     **Initial state**: the prior mean (the model's ``x0``) is at
     ``initial_range_m``, ``initial_bearing_deg``, ``initial_elevation_deg``
     with velocity ``initial_velocity_m_s`` in line-of-sight coordinates; the
-    prior covariance P0 is diagonal in line-of-sight coordinates (range,
+    prior covariance $P_0$ is diagonal in line-of-sight coordinates (range,
     cross-range, velocity stds). Each trial's true initial state is drawn from
-    N(x0, P0); trackers start from (x0, P0).
+    $\mathcal{N}(x_0, P_0)$; trackers start from $(x_0, P_0)$.
 
     **Measurements** (``sensor``): ``"passive"`` (the paper's case) measures
     [bearing, elevation], ``"active"`` [range, bearing, elevation]; bearing
-    = atan2(x, y) (clockwise from north) wrapped to (-pi, pi], elevation =
-    atan2(z, hypot(x, y)), range in m (:mod:`models.spherical`). Noise per
+    $b = \operatorname{atan2}(x, y)$ (clockwise from north) wrapped to $(-\pi, \pi]$, elevation
+    $e = \operatorname{atan2}(z, \sqrt{x^2 + y^2})$, range in m (:mod:`models.spherical`). Noise per
     component, independent:
-    ``glint_model = "mixture"`` (Song & Sun, eq. 5): (1 - eps) N(0, sigma^2)
-    + eps Laplace(0, eta), eta the Laplace *scale* (variance 2 eta^2);
-    ``"additive"``: N(0, sigma^2) always plus, with probability eps, a
-    Laplace(0, eta) spike (the outlier part is the Gaussian-Laplace
-    convolution). See :mod:`models.glint`. eps = 0 is the Gaussian case.
+    ``glint_model = "mixture"`` (Song & Sun, eq. 5, $f = (1 - \epsilon) f_g + \epsilon f_l$):
 
-    **Noise defaults** (ours, not the paper's): sigma = 1 mrad for the angles
+    $$
+    (1 - \epsilon)\, \mathcal{N}(0, \sigma^2) + \epsilon\, \operatorname{Laplace}(0, \eta) \qquad (5)
+    $$
+
+    $\eta$ the Laplace *scale* (variance $2 \eta^2$);
+    ``"additive"``: $\mathcal{N}(0, \sigma^2)$ always plus, with probability $\epsilon$, a
+    $\operatorname{Laplace}(0, \eta)$ spike (the outlier part is the Gaussian-Laplace
+    convolution). See :mod:`models.glint`. $\epsilon = 0$ is the Gaussian case.
+
+    **Noise defaults** (ours, not the paper's): $\sigma$ = 1 mrad for the angles
     and 5 m for range (about 5 m cross-range at the default 5 km), glint
-    scale eta = 5 sigma, a typical glint setting giving with eps = 0.05 a
-    total variance of 3.45 sigma^2 of which 72 % comes from the glint. Song &
-    Sun's section 3 prints eps = 0.05, eta = (0.5, 0.03, 0.03) and sigma^2 =
-    (5e-3, 4e-4, 4e-4) (range, bearing, elevation) for the simulated noise,
+    scale $\eta = 5 \sigma$, a typical glint setting giving with $\epsilon = 0.05$ a
+    total variance of $3.45 \sigma^2$ of which 72 % comes from the glint. Song &
+    Sun's section 3 prints $\epsilon = 0.05$, $\eta = (0.5, 0.03, 0.03)$ and
+    $\sigma^2 = (5 \times 10^{-3}, 4 \times 10^{-4}, 4 \times 10^{-4})$ (range, bearing, elevation) for the simulated noise,
     and, in its first paragraph, a different set of "observation-noise
     variances (5.0, 0.03, 0.03)"; the ``glint-tracking`` preset's
     ``paper-passive`` config sets the former (with the paper's initial
@@ -142,8 +157,8 @@ class Glint(Scenario):
     stay as they were.
 
     **Disturbance.** ``process_noise_los_m_s2`` (3 stds) makes w diagonal in
-    the line-of-sight frame of the prior mean, w = R' diag(sigma_los) g, Q =
-    G R' diag(sigma_los^2) R G' (the paper's disturbance variances (7.0,
+    the line-of-sight frame of the prior mean, $w = R' \operatorname{diag}(\sigma_{los})\, g$,
+    $Q = G R' \operatorname{diag}(\sigma_{los}^2) R G'$ (the paper's disturbance variances (7.0,
     0.07, 0.07) along range, bearing and elevation); empty (default): the
     isotropic ``process_noise_m_s2``. The model's ``process_noise_los`` is
     the per-direction std either way. The paper's spherical control and
@@ -152,11 +167,11 @@ class Glint(Scenario):
     it at the paper's rates).
 
     **Initial angles** (the paper's state is spherical): ``initial_angle_rate_rad_s``
-    adds r0 cos(e0) db/dt and r0 de/dt to the prior mean velocity along the
+    adds $r_0 \cos(e_0)\, \dot{b}$ and $r_0 \dot{e}$ to the prior mean velocity along the
     bearing and elevation directions, and ``initial_angle_std_rad`` replaces
-    the cross-range stds by r0 cos(e0) std_b and r0 std_e.
+    the cross-range stds by $r_0 \cos(e_0)\, \sigma_b$ and $r_0 \sigma_e$.
 
-    **SNR axis**: :data:`SNR_DEFINITION`; all sigma and eta scale together, so
+    **SNR axis**: :data:`SNR_DEFINITION`; all $\sigma$ and $\eta$ scale together, so
     the axis is a pure noise-level axis and the realised SNR of each trial is
     ``snr_db`` itself. ``snr_db = None`` is the 0 dB reference.
 
@@ -165,9 +180,9 @@ class Glint(Scenario):
     process noise (K, 3) standard normals, and for all three spherical
     components whatever the sensor: Gaussian core (K, 3) standard normals,
     glint (K, 3) standard Laplace, outlier selectors (K, 3) uniforms. A
-    component is a glint outlier when its uniform is < eps, so raising eps
-    only adds outliers; noise = sigma g (core) or eta l (outlier) for the
-    mixture, sigma g + [outlier] eta l for the additive model.
+    component is a glint outlier when its uniform is $< \epsilon$, so raising $\epsilon$
+    only adds outliers; noise $= \sigma g$ (core) or $\eta l$ (outlier) for the
+    mixture, $\sigma g + [\text{outlier}]\, \eta l$ for the additive model.
 
     **Scene** (a :class:`~bench.tasks.tracking.TrackingScene`; docs/architecture.md,
     'Scenes'): ``model`` the :class:`models.glint.GlintModel` at the SNR

@@ -49,7 +49,7 @@ def bragg_velocity_m_s(frequency_mhz: float) -> float:
 
 @register_scenario
 class HfswrRdScans(Scenario):
-    """Range-Doppler maps scan by scan: moving ships' spread echoes over Bragg lines, an ionospheric band and a clutter edge, with a direction of arrival per cell.
+    r"""Range-Doppler maps scan by scan: moving ships' spread echoes over Bragg lines, an ionospheric band and a clutter edge, with a direction of arrival per cell.
 
     **Targets** are those of ``hfswr-targets`` (the multi-target suite's HFSWR
     scene; its ``_draw_targets`` and ``_trajectories`` are called with this
@@ -59,12 +59,13 @@ class HfswrRdScans(Scenario):
     which here is the maps' extent in range and radial velocity and
     ``azimuth_bounds_deg`` in azimuth.
 
-    **Maps** (R = ``range_cells`` x D = ``doppler_cells``; cell (r, d) covers
-    range ``range_start_m + [r, r + 1) range_cell_m`` and is centred on radial
-    velocity (d - D // 2) ``velocity_cell_m_s``): square-law power, every cell
-    exponential about its mean noise-plus-clutter power N (thermal noise 1,
+    **Maps** ($R$ = ``range_cells`` x $D$ = ``doppler_cells``; cell $(r, d)$ covers
+    range $\rho_0 + [r, r + 1)\, \Delta\rho$ and is centred on radial velocity
+    $(d - \lfloor D/2 \rfloor)\, \Delta v$; $\rho_0$, $\Delta\rho$, $\Delta v$: ``range_start_m``,
+    ``range_cell_m``, ``velocity_cell_m_s``): square-law power, every cell
+    exponential about its mean noise-plus-clutter power $N$ (thermal noise 1,
     :func:`models.rd_map.background_power`, the ``rd-map`` scene's components):
-    first-order Bragg lines at ± v_B = sqrt(g lambda / 4 pi) (``radar_frequency_mhz``:
+    first-order Bragg lines at $\pm v_B = \pm\sqrt{g \lambda / 4\pi}$ (``radar_frequency_mhz``:
     7.1 m/s at 4.7 MHz, where ships sail), their CNR falling linearly in dB
     with range; an ionospheric band of ``interference_range_cells`` range
     cells spread over Doppler; the noise raised by ``edge_step_db`` beyond
@@ -72,27 +73,32 @@ class HfswrRdScans(Scenario):
     (:func:`models.rd_map.label_regions`). The clutter is independent from
     scan to scan (a new dwell), its mean the same.
 
-    **Echoes** (ours: the chapter prints no waveform): a target at range rho
-    and radial velocity nu puts power S w in each cell of the 3 x 3 box about
-    its nearest cell, w = exp(-((r - rho)^2 / 2 s_r^2 + (d - nu)^2 / 2 s_d^2))
-    in cell units (``echo_spread_cells`` = (s_r, s_d), the range and Doppler
-    windows' main lobes), so w = 1 at a cell centre and the straddle loss is
-    real; S = 10^(snr/10) X, X ~ Exp(1) per target and scan (Swerling 1).
-    A cell's power is |sqrt(S w) e^(j theta) + noise|^2
-    (:func:`models.rd_map.target_cell_power`, theta uniform); where echoes
+    **Echoes** (ours: the chapter prints no waveform): a target at range $\rho$
+    and radial velocity $\nu$ (in cell units) puts power $S w$ in each cell of the
+    3 x 3 box about its nearest cell,
+
+    $$
+    w = \exp\left(-\frac{(r - \rho)^2}{2 s_r^2} - \frac{(d - \nu)^2}{2 s_d^2}\right),
+    $$
+
+    (``echo_spread_cells`` $= (s_r, s_d)$, the range and Doppler windows' main lobes),
+    so $w = 1$ at a cell centre and the straddle loss is real;
+    $S = 10^{\text{SNR}/10} X$, $X \sim \operatorname{Exp}(1)$ per target and scan (Swerling 1).
+    A cell's power is $|\sqrt{S w}\, e^{j\theta} + \text{noise}|^2$
+    (:func:`models.rd_map.target_cell_power`, $\theta$ uniform); where echoes
     overlap their powers add and the first target's phase is used.
 
     **Direction of arrival** (the chapter's plots carry an azimuth, it says not
     how: our modelling choice, stated here): ``scene.azimuth_rad`` gives the
-    DOA a detection in a cell would report. Where a target's echo power S w
+    DOA a detection in a cell would report. Where a target's echo power $S w$
     exceeds the cell's mean noise-plus-clutter power, the target's azimuth
-    plus N(0, sigma_az^2) (``sigma_azimuth_deg``, one draw per target and scan,
+    plus $\mathcal{N}(0, \sigma_{az}^2)$ (``sigma_azimuth_deg``, one draw per target and scan,
     shared by its cells); elsewhere (noise, Bragg, ionospheric cells) a
     uniform draw over ``azimuth_bounds_deg``, independent per cell and scan:
     clutter arrives from everywhere the array looks.
 
     **Scene** (:class:`~bench.tasks.detecttrack.DetectTrackScene`): the axes,
-    the DOA map, sigma_az, the region labels, the mean power N, each target's
+    the DOA map, $\sigma_{az}$, the region labels, the mean power $N$, each target's
     nearest cell per scan (-1 absent) for the cell Pd/Pfa, ``guard_cells``,
     the sensor at the origin, the speed bounds and process noise the trackers
     may assume, the GOSPA settings. ``snr_db = None``: the same maps without

@@ -44,16 +44,16 @@ def _pair(lo_hi: tuple, name: str) -> None:
 
 @register_scenario
 class HFSWRTargets(Scenario):
-    """Several ships (CV, small random accelerations, appearing, disappearing, crossing) in range/azimuth/radial velocity with Pd < 1 and Poisson clutter.
+    r"""Several ships (CV, small random accelerations, appearing, disappearing, crossing) in range/azimuth/radial velocity with Pd < 1 and Poisson clutter.
 
     After the HFSWR tracking chapter, "目标检测与跟踪方法 (Target detection and
     tracking methods), 海洋遥感技术应用", section 2: a constant-velocity ship model
     in Cartesian coordinates (its eq. 6.69) measured in range, azimuth and
-    radial velocity with independent Gaussian noise, rho = 0 (eq. 6.71;
-    :mod:`models.hfswr`), detections with probability Pd and clutter Poisson
-    with density lambda, uniform over the surveillance region (ours: the
+    radial velocity with independent Gaussian noise, $\rho = 0$ (eq. 6.71;
+    :mod:`models.hfswr`), detections with probability $P_D$ and clutter Poisson
+    with density $\lambda$, uniform over the surveillance region (ours: the
     chapter's JPDA step 4 takes the clutter in the gate as non-uniform,
-    "非均匀分布"; the JPDA's clutter term here is the uniform density lambda).
+    "非均匀分布"; the JPDA's clutter term here is the uniform density $\lambda$).
     The chapter prints no numbers for the scan period, the noise, Pd, lambda or the targets: every default
     below is ours, chosen like an HFSWR — a plot per minute, range sigma
     300 m (a 50 kHz sweep has 3 km range cells), azimuth sigma 1 deg (a
@@ -69,8 +69,8 @@ class HFSWRTargets(Scenario):
     the middle of its life, at a position uniform in the middle half of the
     range and azimuth spans, with a uniform heading and a speed uniform in
     ``speed_bounds_m_s``; from there the CV model with a white acceleration
-    N(0, accel_std^2) per axis held over each scan (:func:`models.hfswr.cv_gain`)
-    runs forward, and backward (x_k = F^-1 (x_{k+1} - G w_k)), to the run's
+    $\mathcal{N}(0, \sigma_a^2)$ ($\sigma_a$ = ``accel_std_m_s2``) per axis held over each scan (:func:`models.hfswr.cv_gain`)
+    runs forward, and backward ($x_k = F^{-1} (x_{k+1} - G w_k)$), to the run's
     ends; the speed is clipped into ``speed_bounds_m_s`` after each scan (the
     trackers' initiation gates rely on it).
     **Crossing** (``crossing = true``): targets 0 .. ``crossing_targets`` - 1
@@ -80,10 +80,10 @@ class HFSWRTargets(Scenario):
     opposite): two crossing ships have the same range, azimuth *and* radial
     velocity at the crossing, the hard case for association.
     **Plots.** A present target gives a plot with probability Pd per scan:
-    h(x) + (sigma_r, sigma_az, sigma_vr) * N(0, I), azimuth wrapped, dropped
+    $h(x) + (\sigma_r, \sigma_{az}, \sigma_{v_r}) \odot \mathcal{N}(0, I)$, azimuth wrapped, dropped
     if it falls outside the region. Clutter: Poisson(``clutter_per_scan``)
     plots per scan, uniform over the region [range, azimuth, radial velocity]
-    (density lambda = clutter_per_scan / region volume). The plots of a scan
+    (density $\lambda$ = ``clutter_per_scan`` / region volume). The plots of a scan
     are in random order (targets are not first); ``scene.plot_origin`` says
     which is which.
     **SNR axis**: :data:`SNR_DEFINITION`. Pd from the SNR (``detection =

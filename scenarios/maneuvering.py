@@ -45,7 +45,7 @@ def _axis_values(values: tuple[float, ...], dims: int) -> np.ndarray:
 
 @register_scenario
 class Maneuvering(Scenario):
-    """Target with a quiet / maneuver / quiet acceleration profile (or a Singer process); position measurements in Gaussian noise.
+    r"""Target with a quiet / maneuver / quiet acceleration profile (or a Singer process); position measurements in Gaussian noise.
 
     The test target of the AR-model patent ("基于最优AR模型的自适应机动目标跟踪方法",
     adaptive maneuvering-target tracking based on an optimal AR model), whose
@@ -55,47 +55,55 @@ class Maneuvering(Scenario):
     figure's shape, no embodiment, no number. The profile and every default
     below are ours.
 
-    **State** per axis [p, v, a] (m, m/s, m/s^2), axes stacked:
+    **State** per axis $[p, v, a]'$ (m, m/s, m/s²), axes stacked:
     ``("x", "vx", "ax")`` in 1-D (``dims = 1``: the range), ``("x", "vx",
-    "ax", "y", "vy", "ay")`` in 2-D; ``a_k`` is the acceleration held over
-    [t_k, t_k+1), and the motion is integrated exactly for it:
-    p_{k+1} = p_k + v_k T + a_k T^2/2, v_{k+1} = v_k + a_k T.
+    "ax", "y", "vy", "ay")`` in 2-D; $a_k$ is the acceleration held over
+    $[t_k, t_{k+1})$, and the motion is integrated exactly for it:
 
-    **Profile** ``"piecewise"`` (default, ours): quiet (a = 0) from 0 to ``maneuver_start_s`` = 40 s, a maneuver
+    $$
+    p_{k+1} = p_k + v_k T + a_k T^2/2, \qquad v_{k+1} = v_k + a_k T.
+    $$
+
+    **Profile** ``"piecewise"`` (default, ours): quiet ($a = 0$) from 0 to ``maneuver_start_s`` = 40 s, a maneuver
     of ``maneuver_accel_m_s2`` = 20 m/s^2 (about 2 g; in 2-D the second
     value, default -10 m/s^2, on y) for ``maneuver_duration_s`` = 20 s, i.e.
     from 40 s to 60 s, quiet again to the end (``steps`` = 100 at ``dt_s`` =
     1 s). Segment boundaries are rounded to whole steps. The default 1-D
     target starts at 20 km closing at 200 m/s; the maneuver turns it round
-    (v = +200 m/s at 60 s), so the range is 12 km at 40 s and 60 s and 19.8 km
+    ($v = +200$ m/s at 60 s), so the range is 12 km at 40 s and 60 s and 19.8 km
     at the last step (99 s). ``process_noise_m_s2`` adds a white acceleration
-    sigma_w w_k (w_k ~ N(0, 1), held over each step; DWNA) on each axis; the
+    $\sigma_w w_k$ ($w_k \sim \mathcal{N}(0, 1)$, held over each step; DWNA) on each axis; the
     default 0 keeps the motion deterministic apart from the initial state.
 
     **Profile** ``"turn"`` (planar, ``dims = 2``): the piecewise profile's segments, the
     maneuver a coordinated turn at ``turn_rate_deg_s`` (speed held, the velocity rotating;
     the exact transition of :func:`models.turn.ct_transition`), the acceleration of each
-    maneuvering step the turn's, Omega (-vy, vx); quiet steps are straight lines.
+    maneuvering step the turn's, $\Omega\, (-v_y, v_x)$; quiet steps are straight lines.
     ``maneuver_accel_m_s2`` and ``process_noise_m_s2`` are not used.
 
     **Profile** ``"singer"``: the acceleration of each axis is Singer's
-    zero-mean first-order Markov process, da/dt = -alpha a + w with
+    zero-mean first-order Markov process, $\dot{a} = -\alpha a + w$ with
     stationary std ``singer_sigma_m_s2`` and ``singer_alpha_per_s``; the
-    state follows the exact discretisation x_{k+1} = F x_k + w_k, w_k ~
-    N(0, Q) (:func:`models.kinematics.singer`), a_0 drawn from the stationary
+    state follows the exact discretisation $x_{k+1} = F x_k + w_k$,
+    $w_k \sim \mathcal{N}(0, Q)$ (:func:`models.kinematics.singer`), $a_0$ drawn from the stationary
     law. No maneuver onsets are defined (``maneuver_mask`` and
     ``maneuver_onset_steps`` are None).
 
     **Initial state**: position and velocity of each trial drawn from
-    N(x0, P0) of the model's prior (``initial_*``; stds
+    $\mathcal{N}(x_0, P_0)$ of the model's prior (``initial_*``; stds
     ``initial_position_std_m``, ``initial_velocity_std_m_s``); the initial
     acceleration is the profile's (0) for ``"piecewise"``. Trackers start
-    from (x0, P0), the acceleration prior std being
-    ``initial_accel_std_m_s2`` (the Singer sigma for ``"singer"``).
+    from $(x_0, P_0)$, the acceleration prior std being
+    ``initial_accel_std_m_s2`` (the Singer $\sigma$ for ``"singer"``).
 
-    **Measurements**: z_k = position_k + v_k, v_k ~ N(0, sigma^2 I_dims),
-    sigma = ``noise_std_m`` x 10^(-snr_db/20) (:data:`SNR_DEFINITION`); the
-    realised SNR of a trial is ``snr_db`` itself. Under the null
+    **Measurements** (:data:`SNR_DEFINITION`; $\sigma_0$ = ``noise_std_m``):
+
+    $$
+    z_k = p_k + v_k, \qquad v_k \sim \mathcal{N}(0, \sigma^2 I), \qquad
+    \sigma = \sigma_0\, 10^{-\text{SNR}/20};
+    $$
+
+    the realised SNR of a trial is ``snr_db`` itself. Under the null
     (``snr_db = None``) the noise is that of 0 dB and the profile is zero
     (no maneuver), the Singer process unchanged.
 

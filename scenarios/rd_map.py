@@ -36,11 +36,11 @@ SNR_DEFINITION = (
 
 @register_scenario
 class RdMap(Scenario):
-    """HFSWR range-Doppler power maps: exponential noise, Bragg lines, ionospheric band, clutter edge, point targets.
+    r"""HFSWR range-Doppler power maps: exponential noise, Bragg lines, ionospheric band, clutter edge, point targets.
 
-    **Map** (``range_cells`` R x ``doppler_cells`` D; zero Doppler at column
-    D // 2): square-law detected power, one dwell, ``z`` (n, 1, R, D)
-    float32. Every cell is exponential with mean N(r, d), independent across
+    **Map** (``range_cells`` $R$ x ``doppler_cells`` $D$; zero Doppler at column
+    $\lfloor D/2 \rfloor$): square-law detected power, one dwell, ``z`` (n, 1, R, D)
+    float32. Every cell is exponential with mean $N(r, d)$, independent across
     cells: thermal noise of power 1 plus, each a parameter
     (:func:`models.rd_map.background_power`):
 
@@ -85,19 +85,24 @@ class RdMap(Scenario):
     pairs in the homogeneous region,
     the second target ``pair_offset_cells`` = (range, Doppler) from the first
     (``target_paired``). Each target puts its power in one cell (no straddle):
-    z = |√(S X) e^(jθ) + √(N E)|² = S X + N E + 2√(S X N E) cos θ, with E the
-    cell's Exp(1) noise draw, θ uniform and X = 1 (Swerling 0) or Exp(1)
-    (Swerling 1; one dwell, so Swerling 1 and 2 agree); this is the
-    square-law output of a complex target plus complex Gaussian noise of power
-    N. S = N · 10^(SNR/10) (:data:`SNR_DEFINITION`).
 
-    **Null** (``snr_db = None``): the same maps without targets (T = 0).
+    $$
+    z = \left|\sqrt{S X}\, e^{j\theta} + \sqrt{N E}\right|^2
+      = S X + N E + 2 \sqrt{S X N E} \cos\theta,
+    $$
+
+    with $E$ the cell's $\operatorname{Exp}(1)$ noise draw, $\theta$ uniform and $X = 1$
+    (Swerling 0) or $\operatorname{Exp}(1)$ (Swerling 1; one dwell, so Swerling 1 and 2
+    agree); this is the square-law output of a complex target plus complex Gaussian
+    noise of power $N$. $S = N \cdot 10^{\text{SNR}/10}$ (:data:`SNR_DEFINITION`).
+
+    **Null** (``snr_db = None``): the same maps without targets ($T = 0$).
     **Randomness**, per map, whatever the SNR: the R x D Exp(1) draws, then
-    the phases θ and the Swerling draws X of every target slot (drawn under
+    the phases $\theta$ and the Swerling draws $X$ of every target slot (drawn under
     the null too), so map i sees the same noise at every SNR level.
 
     **Scene** (:class:`~bench.tasks.cells.MapScene`): ``region_labels``,
-    ``region_names``, ``noise_power`` (the same N in every map), ``target_cells``,
+    ``region_names``, ``noise_power`` (the same $N$ in every map), ``target_cells``,
     ``target_snr_db``, ``target_paired``, ``swerling``, ``guard_cells`` =
     (``fa_guard_cells``, ``fa_guard_cells``). ``truth`` (n, 1, 2) holds the
     first target's (range, Doppler) cell (zeros when there is none).

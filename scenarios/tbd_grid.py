@@ -240,7 +240,7 @@ def scene_geometry(p) -> tuple[np.ndarray, dict, np.ndarray]:
 
 @register_scenario
 class TbdGrid(Scenario):
-    """DP track-before-detect surveillance scene: one target on a grid of AR-correlated noise frames.
+    r"""DP track-before-detect surveillance scene: one target on a grid of AR-correlated noise frames.
 
     **Scene** (Params ``cells``, ``frames``, ``cell_m``, ``frame_period_s``):
     see :func:`scene_geometry` and :func:`true_track`. At the defaults it is
@@ -250,32 +250,37 @@ class TbdGrid(Scenario):
     0.35 rad/s on the transitions into frames 11-15 (1-based; about
     1.41 cells per frame, two of those transitions jump 2 cells along one
     axis) and goes straight on for frames 16-20. With fewer than 15 frames the
-    turn is truncated. Cell (row, col) covers x in [x_min + col cell_m,
-    x_min + (col + 1) cell_m) and the same in y for rows; its centre is
-    x_min + (col + 0.5) cell_m. The target puts its whole amplitude in the
+    turn is truncated. Cell (row, col) covers
+    $x \in [x_{\min} + \text{col}\, \Delta,\ x_{\min} + (\text{col} + 1) \Delta)$ ($\Delta$ = ``cell_m``)
+    and the same in $y$ for rows; its centre is $x_{\min} + (\text{col} + 0.5) \Delta$. The target puts its whole amplitude in the
     cell that contains its true position (position error at most half a cell
     per axis from the cell centre; the paper's start lies on a cell corner and
     belongs to the cell above and to the right of it).
 
     **Noise** (``noise``, ``ar_coefficients``): independent across cells; per
-    cell an AR(P) process over frames, v_k + a1 v_(k-1) + ... + aP v_(k-P) =
-    w_k, scaled to stationary variance sigma^2 = 1 and started from its
-    stationary distribution (:func:`generate_noise`), or white N(0, 1). The
-    coefficients must make the process stationary: all roots of z^P + a1
-    z^(P-1) + ... + aP strictly inside the unit circle. The paper's printed
-    a = (-2, 1.7, 0.64) has a pair of roots of modulus 1.525 (and in the
+    cell an AR($P$) process over frames,
+
+    $$
+    v_k + a_1 v_{k-1} + \dots + a_P v_{k-P} = w_k,
+    $$
+
+    scaled to stationary variance $\sigma^2 = 1$ and started from its
+    stationary distribution (:func:`generate_noise`), or white $\mathcal{N}(0, 1)$. The
+    coefficients must make the process stationary: all roots of
+    $z^P + a_1 z^{P-1} + \dots + a_P$ strictly inside the unit circle. The paper's printed
+    $a = (-2, 1.7, 0.64)$ has a pair of roots of modulus 1.525 (and in the
     opposite sign convention a root at -2.57): explosive either way, rejected
-    at validation. The default (-2, 1.7, -0.64) flips the sign of a3: roots
-    0.902 and 0.549 +- 0.639i (modulus 0.842), stationary, lag-1..3
+    at validation. The default $(-2, 1.7, -0.64)$ flips the sign of $a_3$: roots
+    0.902 and $0.549 \pm 0.639i$ (modulus 0.842), stationary, lag-1..3
     correlations 0.903, 0.683, 0.471.
 
-    **Target amplitude** (``amplitude``): ``constant`` s in every frame
+    **Target amplitude** (``amplitude``): ``constant`` $s$ in every frame
     (non-fluctuating), or ``swerling1``: independent from frame to frame
-    (scan-to-scan fluctuation), A_k = s sqrt(E_k) with E_k ~ Exp(1), so the
-    target power A_k^2 is exponential with mean s^2 (a Rayleigh amplitude).
-    SNR = 10 log10(s^2 / sigma^2) (:data:`SNR_DEFINITION`); the realised SNR of
-    a trial is 10 log10(mean_k A_k^2 / sigma^2) (= snr_db for constant
-    amplitude, NaN under the null).
+    (scan-to-scan fluctuation), $A_k = s \sqrt{E_k}$ with $E_k \sim \operatorname{Exp}(1)$, so the
+    target power $A_k^2$ is exponential with mean $s^2$ (a Rayleigh amplitude).
+    $\text{SNR} = 10 \log_{10}(s^2 / \sigma^2)$ (:data:`SNR_DEFINITION`); the realised SNR of
+    a trial is $10 \log_{10}(\overline{A_k^2} / \sigma^2)$, the mean over frames (= ``snr_db`` for
+    constant amplitude, NaN under the null).
 
     **Null** (``snr_db=None``): the same noise, no target; ``truth`` still
     holds the trajectory for reference, ``target_cells`` is None.
@@ -289,9 +294,8 @@ class TbdGrid(Scenario):
     **Scene** (a :class:`~bench.tasks.tbd.TBDScene`; docs/architecture.md,
     'Scenes'): ``grid`` (a :class:`~bench.tasks.tbd.Grid`), ``target_cells``
     (n, K, 2) int (row, col) or None, ``frame_period_s``, ``noise_std``
-    (sigma), ``noise_autocovariance`` (gamma(0..K-1) of the stationary noise
-    for that sigma: all lags that occur in a scene; white noise: (sigma^2, 0,
-    ...)), ``ar_coefficients`` (None for white noise),
+    ($\sigma$), ``noise_autocovariance`` ($\gamma(0), \dots, \gamma(K-1)$ of the stationary noise
+    for that $\sigma$: all lags that occur in a scene; white noise: $(\sigma^2, 0, \dots)$), ``ar_coefficients`` (None for white noise),
     ``hit_tolerance_cells``, ``snr_definition``, ``realised_snr_db`` (n,),
     ``amplitude`` (n, K) (the target amplitude per frame; zeros under the
     null), ``position_index`` (0, 1). ``truth`` is (n, K, 4) [x_m, y_m,

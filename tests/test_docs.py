@@ -7,8 +7,10 @@ import dataclasses
 import html
 import importlib.util
 import inspect
+import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -17,7 +19,8 @@ import pytest
 
 from radarbench.bench import registry
 from radarbench.bench.cli import build_parser
-from radarbench.bench.cli.docs import base_docstrings, docstring_markdown, main, pages, published, presets, subcommands
+from radarbench.bench.cli.docs import (MATHJAX, MATHS, base_docstrings, docstring_markdown, main, mathjax_script,
+                                       model_docstrings, pages, published, presets, subcommands, summary_markdown)
 from radarbench.bench.markdown import code, text
 from radarbench.bench.results.provenance import WALL_TIME_ROW
 from conftest import scaled
@@ -38,7 +41,7 @@ def site(tmp_path_factory) -> Path:
 def test_every_plugin_has_a_page_with_every_parameter(site, kind):
     for name, cls in getattr(registry, kind)().items():
         page = (site / kind / f"{name}.md").read_text(encoding="utf-8")
-        assert page.startswith(f"# {text(name)}\n") and text(cls.summary()) in page
+        assert page.startswith(f"# {text(name)}\n") and summary_markdown(cls) in page
         for field in dataclasses.fields(cls.Params):
             row = next((line for line in page.splitlines() if line.startswith(f"| {code(field.name)} ")), None)
             assert row is not None, f"{kind}/{name}: parameter {field.name} has no row"
@@ -49,6 +52,18 @@ def test_every_plugin_has_a_page_with_every_parameter(site, kind):
             assert (field.metadata.get("why") or "") in plain
         index = (site / kind / "index.md").read_text(encoding="utf-8")
         assert f"[{code(name)}]({name}.md)" in index
+
+
+def test_every_model_module_has_a_page_with_its_docstring(site):
+    """The maths methods and scenarios share (``models/``) is on the site, a page per module."""
+    index = (site / "models" / "index.md").read_text(encoding="utf-8")
+    docs = model_docstrings(REPO)
+    assert docstring_markdown(docs.pop("")) in index
+    for name, doc in docs.items():
+        page = (site / "models" / f"{name}.md").read_text(encoding="utf-8")
+        assert page.startswith(f"# {text('models.' + name)}\n") and docstring_markdown(doc) in page
+        assert f"({name}.md)" in index
+    assert {"kalman", "pcrb", "cfar", "cfar.halves"} <= set(model_docstrings(REPO))
 
 
 def test_a_plugin_registered_later_has_its_page(monkeypatch):
@@ -185,14 +200,88 @@ def test_an_output_that_is_a_file_is_refused_in_one_line(tmp_path, capsys):
     assert err.count("\n") == 0 and "OUT_DIR" in err and target.read_text() == "keep"
 
 
-@pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None or importlib.util.find_spec("material") is None,
-                    reason="the [docs] extra is not installed (pip install -e '.[docs]')")
-def test_the_site_builds_strictly(tmp_path):
-    """``mkdocs build --strict``: a broken link or anchor, a missing image or a page left out
-    of the navigation fails it."""
-    env = dict(os.environ, PYTHONPATH=str(REPO), NO_MKDOCS_2_WARNING="1")
-    done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
+DOCS_EXTRA = ("mkdocs", "material", "mathjax")
+#: a page's code, maths and scripts: the rest is what the reader sees as typed
+VERBATIM_OR_MATHS = re.compile(r'<(pre|code|script)\b.*?</\1>|<(span|div) class="arithmatex">.*?</\2>', re.S)
+#: an equation as pymdownx.arithmatex leaves it for MathJax (generic mode): \( \) inline, \[ \] display
+ARITHMATEX = re.compile(r'<(span|div) class="arithmatex">(.*?)</\1>', re.S)
+#: MathJax's checker of TeX (node): the site's equations that MathJax cannot typeset
+MATHJAX_CHECK = Path(__file__).with_name("mathjax_check.js")
+
+
+@pytest.fixture(scope="module")
+def built_site(tmp_path_factory) -> Path:
+    """``mkdocs build --strict`` of the repository: a broken link or anchor, a missing image
+    or a page left out of the navigation fails it."""
+    missing = [m for m in DOCS_EXTRA if importlib.util.find_spec(m) is None]
+    if missing:
+        pytest.skip(f"the [docs] extra is not installed ({', '.join(missing)} absent): pip install -e '.[docs]'")
+    out = tmp_path_factory.mktemp("built") / "site"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
+               NO_MKDOCS_2_WARNING="1")
+    done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(out)],
                           cwd=REPO, env=env, capture_output=True, text=True, timeout=scaled())
     assert done.returncode == 0, done.stderr[-3000:]
+    return out
+
+
+def test_the_site_builds_strictly(built_site):
     for kind in ("methods", "scenarios"):
-        assert all((tmp_path / "site" / kind / name / "index.html").is_file() for name in getattr(registry, kind)())
+        assert all((built_site / kind / name / "index.html").is_file() for name in getattr(registry, kind)())
+
+
+def _html_pages(site: Path) -> dict[str, str]:
+    return {str(p.relative_to(site)): p.read_text(encoding="utf-8") for p in site.rglob("*.html")}
+
+
+def test_the_built_site_shows_no_cross_reference_role_and_no_unrendered_maths(built_site):
+    """Outside code and maths, no page shows a Sphinx role or a dollar sign: a ``$`` left
+    there is an equation arithmatex did not take (``$x $``, ``$ x$``, an unclosed one); a
+    price in prose would be written ``&#36;``."""
+    role = re.compile(r":(?:func|class|meth|mod|data|attr|obj|exc|const):`")
+    shown = {page: VERBATIM_OR_MATHS.sub("", body) for page, body in _html_pages(built_site).items()}
+    assert not [page for page, body in shown.items() if role.search(body)]
+    assert not {page: re.findall(r".{0,30}\$.{0,30}", body)[:3] for page, body in shown.items() if "$" in body}
+
+
+def test_every_docstring_equation_is_maths_on_its_page_with_the_renderer(built_site):
+    """Each ``$...$``/``$$...$$`` of a plugin's docstrings (its own and its family's bases')
+    and of a ``models`` module's is an arithmatex element of its page, and every page with
+    one loads the MathJax configuration, then MathJax, copied into the site."""
+    classes = {f"{kind}/{name}": cls for kind in ("methods", "scenarios") for name, cls in getattr(registry, kind)().items()}
+    classes.update({f"tasks/{name}": type(task) for name, task in registry.tasks().items()})
+    docs = {page: "\n\n".join([inspect.getdoc(cls) or "", *base_docstrings(cls)]) for page, cls in classes.items()}
+    docs.update({f"models/{name}" if name else "models": doc for name, doc in model_docstrings(REPO).items()})
+    with_maths = 0
+    for page, doc in docs.items():
+        body = (built_site / page / "index.html").read_text(encoding="utf-8")
+        written = len(MATHS.findall(doc))
+        assert len(ARITHMATEX.findall(body)) >= written, page
+        with_maths += written > 0
+    assert with_maths >= 40
+    for page, body in _html_pages(built_site).items():
+        if ARITHMATEX.search(body):
+            scripts = re.findall(r'<script src="([^"]+)"', body)
+            config = next(i for i, s in enumerate(scripts) if s.endswith("javascripts/mathjax-config.js"))
+            renderer = next(s for s in scripts[config:] if s.endswith(MATHJAX))
+            assert (built_site / Path(page).parent / renderer).resolve().is_file(), page
+
+
+@pytest.mark.skipif(shutil.which("node") is None, reason="node is absent: MathJax's TeX parser cannot be run")
+def test_every_equation_of_the_site_typesets_in_mathjax(built_site):
+    """MathJax (the site's own copy, run by node) parses every equation of the site: no
+    unbalanced brace, no undefined macro (shown in red in a browser, an error here)."""
+    equations = {(html.unescape(tex)[2:-2].strip(), tag == "div")
+                 for body in _html_pages(built_site).values() for tag, tex in ARITHMATEX.findall(body)}
+    assert equations
+    es5 = mathjax_script().parent
+    done = subprocess.run(["node", str(MATHJAX_CHECK), str(es5)], input=json.dumps(sorted(equations)),
+                          capture_output=True, text=True, timeout=scaled())
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert json.loads(done.stdout) == []
+
+
+def test_docstring_maths_passes_through_as_written():
+    """The docstring step leaves LaTeX as written (no escape, no role or section rule inside it)."""
+    doc = "A $\\hat{x}_{k|k}$ and $a^*_i$::\n\n$$\nJ_k = \\max_{d'} \\left[ J_{k-1} \\right]::\n$$\n\nSee :func:`~m.f`."
+    assert docstring_markdown(doc) == doc.replace("$::", "$:").replace(":func:`~m.f`", "`f`")

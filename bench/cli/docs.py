@@ -1,11 +1,12 @@
 """The documentation site's pages generated from the code (docs/architecture.md, 'Documentation').
 
-From the registry: one page per task, method and scenario — its docstring as written
-(equations included), its parameters as ``bench list -v`` describes them (type, default,
-meaning, bounds and their reason: :func:`bench.params.describe_params`), its task, the
-presets that run it and the papers they reproduce, its row of the committed ``bench perf``
-tables. From the repository: every committed report (``reports/NAME/report.md`` and the
-files it links), README.md as the home page and CONTRIBUTING.md, their links rewritten to
+From the registry: one page per task, method and scenario — its docstring rendered
+(:func:`docstring_markdown`; its LaTeX typeset by MathJax, :data:`MATHJAX`), its
+parameters as ``bench list -v`` describes them (type, default, meaning, bounds and their
+reason: :func:`bench.params.describe_params`), its task, the presets that run it and the
+papers they reproduce, its row of the committed ``bench perf`` tables; and a page per
+module of ``models`` (its docstring: the maths they share). From the repository: every
+committed report (``reports/NAME/report.md`` and the files it links), README.md as the home page and CONTRIBUTING.md, their links rewritten to
 the site's; a page of the presets with the wall time each committed report records. From
 :func:`bench.cli.build_parser`: the command-line reference. Everything is
 discovered when the site is built, so a new plugin or report has its page without an edit
@@ -42,6 +43,10 @@ LOOP_STEPS = {"first": "first `bench run --preset quick` on a fresh clone (compi
               "warm": "the same again (kernels cached)", "noop": "a re-run with nothing to compute"}
 #: the width the command-line reference is wrapped to, whatever the terminal
 HELP_WIDTH = 100
+#: where the site serves its maths renderer: MathJax's one-file TeX-to-SVG build (every TeX
+#: package and the fonts inside, so nothing more is fetched), copied from the ``[docs]``
+#: extra's ``mathjax`` package (django-static-mathjax) when the site is built: no network
+MATHJAX = "assets/mathjax/tex-svg-full.js"
 #: an inline link or image: (its text and the opening parenthesis, the target, an optional title and ")")
 _LINK = re.compile(r"(!?\[(?:\\.|[^\]\\])*\]\()([^)\s]+)((?:\s+\"[^\"]*\")?\))")
 
@@ -124,22 +129,49 @@ def fenced(body: str, info: str = "text") -> str:
 _ROLE = re.compile(r":(?:func|class|meth|mod|data|attr|obj|exc|const):`(~?)([^`<>]+?)(?:\s*<([^`>]+)>)?`")
 #: a NumPy-style section: its title, then a line of dashes as long
 _SECTION = re.compile(r"^(\S[^\n]*)\n-{3,}[ \t]*$", re.M)
+#: LaTeX as the docstrings write it (CONTRIBUTING.md, 'Documentation'): a ``$$ ... $$`` display
+#: block, or ``$...$`` inline with no space inside either dollar (pymdownx.arithmatex's rule)
+MATHS = re.compile(r"\$\$.+?\$\$|(?<![\\$])\$(?=\S)(?:\\.|[^\\$])+?(?<=\S)\$", re.S)
+
+
+def role_name(role: re.Match) -> str:
+    """What a :data:`_ROLE` shows, as Sphinx does: its title, else its target (``~``: the last name)."""
+    target = role.group(3) or role.group(2)
+    return (target.rpartition(".")[2] if role.group(1) else role.group(2) if role.group(3) else target).strip()
+
+
+def summary_markdown(component) -> str:
+    """A plugin's one-line summary (its docstring's first line) as Markdown on one line."""
+    return line_markdown(component.summary())
+
+
+def line_markdown(line: str) -> str:
+    """Plain text (a summary) as Markdown on one line: its roles as code, the rest as
+    written (:func:`bench.markdown.text`)."""
+    parts, last = [], 0
+    for m in _ROLE.finditer(line):
+        parts += [text(line[last:m.start()]), code(role_name(m))]
+        last = m.end()
+    return "".join(parts + [text(line[last:])])
 
 
 def docstring_markdown(doc: str) -> str:
     """A docstring as Markdown for the docs site: cross-reference roles become inline code
     (``~`` keeps the last name, as Sphinx shows it), NumPy-style section titles headings,
     and a paragraph ending in ``::`` introduces the indented block after it, which Markdown
-    then shows as code (equations laid out by hand keep their layout). The rest (``code``,
-    ``*`` lists, emphasis) is Markdown already."""
-    def role(m: re.Match) -> str:
-        target = m.group(3) or m.group(2)
-        shown = target.rpartition(".")[2] if m.group(1) else (m.group(2) if m.group(3) else target)
-        return f"`{shown.strip()}`"
+    then shows as code (a layout kept as written). The maths (:data:`MATHS`) is left as
+    written for the site's renderer; the rest (``code``, ``*`` lists, emphasis) is Markdown
+    already."""
+    maths: list[str] = []
 
-    doc = _ROLE.sub(role, doc)
+    def hold(m: re.Match) -> str:                    # a placeholder no rule below can match
+        maths.append(m.group(0))
+        return f"\x00{len(maths) - 1}\x00"
+
+    doc = _ROLE.sub(lambda m: f"`{role_name(m)}`", MATHS.sub(hold, doc))
     doc = _SECTION.sub(lambda m: f"#### {m.group(1).strip()}\n", doc)
-    return re.sub(r"(\S)::[ \t]*$", r"\1:", doc, flags=re.M)
+    doc = re.sub(r"(\S)::[ \t]*$", r"\1:", doc, flags=re.M)
+    return re.sub("\x00([0-9]+)\x00", lambda m: maths[int(m.group(1))], doc)
 
 
 def links(names, folder: str, page: str) -> str:
@@ -188,6 +220,7 @@ def perf_rows(root: Path, csv_name: str, column: str, name: str, page: str) -> s
     seconds = [c for c in rows.columns if c.endswith("seconds_per_trial")]
     rows[seconds] = rows[seconds] * 1e3
     rows = rows.rename(columns={c: c.replace("seconds_", "ms_") for c in seconds})
+    rows = rows.rename(columns=lambda c: c.replace("_", " "))      # a header wraps at its spaces: no sideways scroll
     return f"From {source} (one core; how it is measured: that page).\n\n{frame_table(rows)}"
 
 
@@ -212,7 +245,7 @@ def component_page(kind: str, cls: type, page: str, facts: list[tuple[str, str]]
     """A method's or a scenario's page: its summary, ``facts`` (label, Markdown), docstring
     (and its base classes'), parameters, speed."""
     return "\n\n".join([
-        f"# {text(cls.name)}", text(cls.summary()),
+        f"# {text(cls.name)}", summary_markdown(cls),
         facts_list(facts + [("class", code(f"{cls.__module__}.{cls.__qualname__}"))]),
         "## Description", f"The {kind}'s docstring.", docstring_markdown(inspect.getdoc(cls) or ""),
         *base_docstrings(cls),
@@ -228,7 +261,7 @@ def plugin_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Pre
     methods, scenarios, tasks = registry.methods(), registry.scenarios(), registry.tasks()
     for name, cls in methods.items():
         page = f"methods/{name}.md"
-        facts = [("task", links([cls.task], "tasks", page) + f": {text(tasks[cls.task].summary())}"),
+        facts = [("task", links([cls.task], "tasks", page) + f": {summary_markdown(tasks[cls.task])}"),
                  ("runs on", links([s for s, c in scenarios.items() if fits(cls, c)], "scenarios", page)),
                  ("presets", preset_links([p for p in all_presets if name in p.methods], reports, page))]
         pages[page] = component_page("method", cls, page, facts, perf_rows(root, "perf.csv", "method", name, page))
@@ -242,13 +275,13 @@ def plugin_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Pre
     for name, task in tasks.items():
         page = f"tasks/{name}.md"
         pages[page] = "\n\n".join([
-            f"# {text(name)}", text(task.summary()), docstring_markdown(inspect.getdoc(type(task)) or ""),
+            f"# {text(name)}", summary_markdown(task), docstring_markdown(inspect.getdoc(type(task)) or ""),
             facts_list([("scenarios", links([s for s, c in scenarios.items() if name in c.tasks], "scenarios", page)),
                         ("methods", links([m for m, c in methods.items() if c.task == name], "methods", page)),
                         ("class", code(f"{type(task).__module__}.{type(task).__qualname__}"))])]) + "\n"
     for folder, title, table_of in (("tasks", "Tasks", tasks), ("methods", "Methods", methods),
                                     ("scenarios", "Scenarios", scenarios)):
-        rows = [[f"[{code(n)}]({n}.md)", text(c.summary())] for n, c in table_of.items()]
+        rows = [[f"[{code(n)}]({n}.md)", summary_markdown(c)] for n, c in table_of.items()]
         index = [f"# {title}", f"Every {folder[:-1]} registered when this site was built.", table([folder[:-1], "what"], rows)]
         missing = [u for u in registry.unavailable()             # "radarbench.methods.x", "bench.methods:x" -> "methods"
                    if re.split(r"[.:]", u.source.removeprefix("radarbench.").removeprefix("bench."))[0] == folder]
@@ -256,6 +289,34 @@ def plugin_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Pre
             index += ["Plugins that could not be registered in the environment that built this site:",
                       table(["plugin", "why"], [[code(u.name or u.source), text(u.error)] for u in missing])]
         pages[f"{folder}/index.md"] = "\n\n".join(index) + "\n"
+
+
+def model_docstrings(root: Path) -> dict[str, str]:
+    """The docstring of every module of the repository's ``models/`` (the maths methods and
+    scenarios share, docs/architecture.md, 'Models'), by its dotted name under ``models``
+    (``cfar`` for ``models/cfar/__init__.py``, "" for the package), read from its source:
+    nothing imported (the harness never imports ``models``)."""
+    import ast
+
+    docs = {}
+    for path in sorted((root / "models").rglob("*.py")):
+        parts = path.relative_to(root / "models").with_suffix("").parts
+        name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)     # "" for models/__init__.py
+        docs[name] = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+    return dict(sorted(docs.items()))
+
+
+def model_pages(root: Path, pages: dict[str, str | Path]) -> list[str]:
+    """A page per module of ``models`` (its docstring, rendered as a plugin's is) and an
+    index of them. Returns the modules' names."""
+    docs = model_docstrings(root)
+    about = docs.pop("", "")                      # the package's own docstring opens the index
+    for name, doc in docs.items():
+        pages[f"models/{name}.md"] = f"# {text('models.' + name)}\n\n{docstring_markdown(doc)}\n"
+    rows = [[f"[{code('models.' + n)}]({n}.md)", line_markdown(" ".join(d.split("\n\n")[0].split()))]
+            for n, d in docs.items()]
+    pages["models/index.md"] = "\n\n".join(["# Models", docstring_markdown(about), table(["module", "what"], rows)]) + "\n"
+    return list(docs)
 
 
 def report_pages(root: Path, pages: dict[str, str | Path], all_presets: list[Preset]) -> list[str]:
@@ -363,6 +424,17 @@ def presets_page(root: Path, all_presets: list[Preset], reports: list[str]) -> s
         fenced("\n".join(regenerate), "sh")]) + "\n"
 
 
+def mathjax_script() -> Path | None:
+    """The file :data:`MATHJAX` is a copy of, or None where the ``[docs]`` extra is not installed."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("mathjax")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    script = Path(next(iter(spec.submodule_search_locations))) / "static" / "mathjax" / "es5" / "tex-svg-full.js"
+    return script if script.is_file() else None
+
+
 def subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
     actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]   # noqa: SLF001 - argparse has no public accessor
     return dict(actions[0].choices) if actions else {}
@@ -398,6 +470,7 @@ def pages(root: str | Path) -> tuple[dict[str, str | Path], list]:
     if (root / LOOP_REPORT).is_file():
         published(root, LOOP_REPORT, out)
     plugin_pages(root, out, all_presets, set(reports))
+    models = model_pages(root, out)
     out["presets.md"] = presets_page(root, all_presets, reports)
     out["cli.md"] = cli_page()
 
@@ -406,7 +479,7 @@ def pages(root: str | Path) -> tuple[dict[str, str | Path], list]:
 
     from radarbench.bench import registry
     nav = [{"Tasks": section("tasks", registry.tasks())}, {"Methods": section("methods", registry.methods())},
-           {"Scenarios": section("scenarios", registry.scenarios())},
+           {"Scenarios": section("scenarios", registry.scenarios())}, {"Models": section("models", models)},
            {"Presets": "presets.md"}, {"Reports": ["reports/index.md"] + [{n: f"reports/{n}/index.md"} for n in reports]},
            {"Command line": "cli.md"}]
     return out, nav

@@ -245,13 +245,18 @@ class CfarMethod(Method):
 
 @register_method
 class CaCfar(CfarMethod):
-    """Cell-averaging CFAR along range and Doppler (running sums), combined, with peak detection.
+    r"""Cell-averaging CFAR along range and Doppler (running sums), combined, with peak detection.
 
-    Per dimension, mu = (1/N') sum of the N' reference cells in the map
-    (N' = 2L inside, fewer at the edges), U0 = K mu ("对被检测单元周围N个
+    Per dimension, $\mu = \frac{1}{N'} \sum x_i$ over the $N'$ reference cells in the map
+    ($N' = 2L$ inside, fewer at the edges), $U_0 = K\mu$ ("对被检测单元周围N个
     参考单元求均值,其结果便为噪声估计μ,检测门限U0=Kμ"), and under homogeneous
-    exponential noise Pfa(K) = (1 + K/N')^(-N'), so S = N' log10(1 + t/N')
-    at t = x/mu (:func:`models.cfar.ca_cfar`, O(1) per cell).
+    exponential noise
+
+    $$
+    P_{fa}(K) = (1 + K/N')^{-N'}, \qquad S = N' \log_{10}(1 + t/N'), \quad t = x/\mu
+    $$
+
+    (:func:`models.cfar.ca_cfar`, $O(1)$ per cell).
     """
 
     name = "ca-cfar"
@@ -284,14 +289,18 @@ class CaCfar(CfarMethod):
 
 @register_method
 class OsCfar(CfarMethod):
-    """Order-statistic CFAR along range and Doppler (numba selection kernel), combined, with peak detection.
+    r"""Order-statistic CFAR along range and Doppler (numba selection kernel), combined, with peak detection.
 
-    Per dimension, mu = the k-th smallest of the N = 2L reference cells
+    Per dimension, $\mu = x_{(k)}$, the $k$-th smallest of the $N = 2L$ reference cells
     ("将参考单元中N(N=2L)个信号的值排序,取出其中第k个最小值xk,xk即为噪声估计值μ"),
-    U0 = K mu; Pfa(K) = prod_{i=0}^{k-1} (N - i)/(N - i + K) under
-    homogeneous exponential noise (:func:`models.cfar.os_cfar`). At the
-    map's edges the window holds N' < N cells and k' = ceil(k N'/N). The
-    document prints no k; our default k = 12 of N = 16 is the common 3N/4.
+    $U_0 = K\mu$, and under homogeneous exponential noise (:func:`models.cfar.os_cfar`)
+
+    $$
+    P_{fa}(K) = \prod_{i=0}^{k-1} \frac{N - i}{N - i + K}.
+    $$
+
+    At the map's edges the window holds $N' < N$ cells and $k' = \lceil k N'/N \rceil$. The
+    document prints no $k$; our default $k = 12$ of $N = 16$ is the common $3N/4$.
     """
 
     name = "os-cfar"
@@ -330,8 +339,8 @@ class OsCfar(CfarMethod):
 
 
 class HalvesCfar(CfarMethod):
-    """GO- or SO-CFAR (:attr:`detector`): along range and along Doppler, the
-    larger or the smaller of the two half-windows' means is mu, combined, with
+    r"""GO- or SO-CFAR (:attr:`detector`): along range and along Doppler, the
+    larger or the smaller of the two half-windows' means is $\mu$, combined, with
     peak detection.
 
     Not in the HFSWR chapter (which names CA, OS and regression): the
@@ -343,21 +352,27 @@ class HalvesCfar(CfarMethod):
     in one half from masking the cell under test (Trunk, "Range resolution of
     targets using automatic detectors", 1978); both analysed in Gandhi &
     Kassam, "Analysis of CFAR processors in nonhomogeneous background", 1988. Per dimension, with the leading half
-    (L cells behind g guard cells before the cell under test) and the lagging
-    half (after it), each cut at the map's edges (n_l, n_r cells; one empty:
-    the other alone, CA's estimate):
+    ($L$ cells behind $g$ guard cells before the cell under test) and the lagging
+    half (after it), each cut at the map's edges ($n_l$, $n_r$ cells; one empty:
+    the other alone, CA's estimate), $m = \frac{1}{n} \sum$ of a half and $U_0 = T \mu$ with
 
-        mu = max(m_l, m_r) (GO) or min(m_l, m_r) (SO),  m = (1/n) sum of the half,  U0 = T mu;
+    $$
+    \mu = \max(m_l, m_r) \ \text{(GO)} \quad \text{or} \quad \min(m_l, m_r) \ \text{(SO)};
+    $$
 
-    under homogeneous exponential noise, with p_a = (n_a + T)/(N + T), q_a = 1 - p_a,
+    under homogeneous exponential noise, with $p_a = (n_a + T)/(N + T)$, $q_a = 1 - p_a$,
 
-        Pfa_GO(T) = sum_{a in (l, r)} (1 + T/n_a)^(-n_a) I_{q_a}(n_o, n_a)
-        Pfa_SO(T) = sum_{a in (l, r)} (1 + T/n_a)^(-n_a) I_{p_a}(n_a, n_o)
+    $$
+    \begin{aligned}
+    P_{fa}^{GO}(T) &= \sum_{a \in \{l, r\}} (1 + T/n_a)^{-n_a}\, I_{q_a}(n_o, n_a), \\
+    P_{fa}^{SO}(T) &= \sum_{a \in \{l, r\}} (1 + T/n_a)^{-n_a}\, I_{p_a}(n_a, n_o)
+    \end{aligned}
+    $$
 
-    (I the regularised incomplete beta function, o the other half; at
-    n_l = n_r = n, Pfa_SO = 2 sum_{k<n} C(n - 1 + k, k) (2 + T/n)^(-(n + k)) and
-    Pfa_GO = 2 (1 + T/n)^(-n) - Pfa_SO; :mod:`models.cfar.halves`), and the
-    statistic is S = -log10 Pfa(x / mu) per cell; T for a Pfa by root-finding.
+    ($I$ the regularised incomplete beta function, $o$ the other half; at
+    $n_l = n_r = n$, $P_{fa}^{SO} = 2 \sum_{k<n} \binom{n - 1 + k}{k} (2 + T/n)^{-(n + k)}$ and
+    $P_{fa}^{GO} = 2 (1 + T/n)^{-n} - P_{fa}^{SO}$; :mod:`models.cfar.halves`), and the
+    statistic is $S = -\log_{10} P_{fa}(x / \mu)$ per cell; $T$ for a Pfa by root-finding.
     """
 
     detector = ""
@@ -384,7 +399,7 @@ class HalvesCfar(CfarMethod):
 
 @register_method
 class GoCfar(HalvesCfar):
-    """Greatest-of CFAR: :class:`HalvesCfar` with mu = max(m_l, m_r) per dimension."""
+    """Greatest-of CFAR: :class:`HalvesCfar` with the larger half-window mean per dimension."""
 
     name = "go-cfar"
     detector = "go"
@@ -392,7 +407,7 @@ class GoCfar(HalvesCfar):
 
 @register_method
 class SoCfar(HalvesCfar):
-    """Smallest-of CFAR: :class:`HalvesCfar` with mu = min(m_l, m_r) per dimension."""
+    """Smallest-of CFAR: :class:`HalvesCfar` with the smaller half-window mean per dimension."""
 
     name = "so-cfar"
     detector = "so"
@@ -400,10 +415,10 @@ class SoCfar(HalvesCfar):
 
 @register_method
 class RegressionCfar(CfarMethod):
-    """Adaptive regression CFAR: a curve fitted to each power spectrum is the noise estimate.
+    r"""Adaptive regression CFAR: a curve fitted to each power spectrum is the noise estimate.
 
     "The adaptive regression detector fits the power spectrum by curve
-    regression; the fit is the noise estimate, times the threshold factor K
+    regression; the fit is the noise estimate, times the threshold factor $K$
     the threshold" (自适应回归检测器采用曲线回归方法拟合功率谱,获得噪声整体估计 ...
     将噪声估计值乘以门限因子K获得检测门限). The power spectrum of a range cell
     is its Doppler line, so the default fits along Doppler (``dimension``
@@ -415,7 +430,7 @@ class RegressionCfar(CfarMethod):
     cells far above the noise level (``iterations``, ``exclusion_factor``;
     :func:`models.cfar.regression.regression_fit`). The noise level is the
     fit corrected by the mean of the fitted variable over the cells it
-    keeps (exp(fit + gamma) for the plain log fit), so it is unbiased in
+    keeps ($e^{f + \gamma}$ for the plain log fit $f$, $\gamma$ Euler's constant), so it is unbiased in
     homogeneous noise.
 
     Nominal significance: derived, not calibrated, from each cell's
@@ -427,8 +442,8 @@ class RegressionCfar(CfarMethod):
     log-polynomial plain 1.01, 1.04, 1.16, with 2 robust iterations 1.07,
     1.26, 1.67; polynomial plain 1.01, 1.03, 1.14, robust 0.98, 1.16, 1.64
     (the deeper the tail, the more the approximations understate it).
-    ``threshold_factor`` is K at the mean leverage
-    (order + 1)/M of an M-cell line.
+    ``threshold_factor`` is $K$ at the mean leverage
+    $(\text{order} + 1)/M$ of an $M$-cell line.
     """
 
     name = "regression-cfar"

@@ -34,7 +34,7 @@ def tracker_of(params) -> tuple:
 
 @register_method
 class CfarTrack(Method):
-    """CFAR with peak detection on each scan's range-Doppler map, plots, then a multi-target tracker: the HFSWR chapter's chain.
+    r"""CFAR with peak detection on each scan's range-Doppler map, plots, then a multi-target tracker: the HFSWR chapter's chain.
 
     After "目标检测与跟踪方法 (Target detection and tracking methods),
     海洋遥感技术应用": CFAR along range and Doppler, combined, with peak
@@ -57,10 +57,11 @@ class CfarTrack(Method):
     :class:`~bench.tasks.multitarget.MultiTargetScene` of those plots.
 
     **What the tracker is told** (the chapter prints none of it; ours): the
-    measurement stds of a uniform error over one cell, sigma_r = dr / sqrt(12),
-    sigma_vr = dv / sqrt(12), and the scene's DOA std for azimuth; the clutter
-    density of the detector's nominal false alarms, lambda = pfa R D / V
-    (V the volume of range x azimuth x radial velocity the maps cover), the
+    measurement stds of a uniform error over one cell, $\sigma_r = \Delta r / \sqrt{12}$,
+    $\sigma_{v_r} = \Delta v / \sqrt{12}$, and the scene's DOA std for azimuth; the clutter
+    density of the detector's nominal false alarms, $\lambda = P_{fa} R D / V$
+    ($R D$ the cells of a map, $V$ the volume of range x azimuth x radial velocity
+    the maps cover), the
     Pd ``tracker_pd`` (a detector's Pd is not known to the system that uses
     it); the scan period, the sensor, the speed bounds and process noise of the
     scene. Plots carry no origin (every one is marked clutter): the tracker

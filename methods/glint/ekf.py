@@ -134,18 +134,18 @@ def noise_covariance(model: GlintModel, which: str) -> np.ndarray:
 
 @register_method
 class EKF(Method):
-    """Extended Kalman filter assuming Gaussian measurement noise (batched over trials).
+    r"""Extended Kalman filter assuming Gaussian measurement noise (batched over trials).
 
     Runs :func:`ekf_filter` on the ``glint`` scenario's model (the tracking
     scene's :class:`~models.glint.GlintModel`): the exact linear dynamics with
     the known control, the spherical measurement linearised at the
-    prediction, angle residuals wrapped to (-pi, pi]. The filter assumes Gaussian measurement
-    noise with the Gaussian core's variance sigma^2 (``noise_variance =
+    prediction, angle residuals wrapped to $(-\pi, \pi]$. The filter assumes Gaussian
+    measurement noise with the Gaussian core's variance $\sigma^2$ (``noise_variance =
     "core"``: ignores the glint, so outliers pass into the estimate with the
-    full gain) or with the glint noise's total variance, (1 - eps) sigma^2 +
-    2 eps eta^2 for the mixture model (``"mixture"``: the best linear
-    filter's choice, consistent on average but slower for the Gaussian
-    bulk). Returns the updated estimate x_k|k and its covariance P_k|k (for
+    full gain) or with the glint noise's total variance,
+    $(1 - \epsilon) \sigma^2 + 2 \epsilon \eta^2$ for the mixture model (``"mixture"``: the
+    best linear filter's choice, consistent on average but slower for the Gaussian
+    bulk). Returns the updated estimate $x_{k|k}$ and its covariance $P_{k|k}$ (for
     NEES); traces: ``nis``, the normalised innovation squared.
     """
 

@@ -91,41 +91,48 @@ def huber_reweigh(c: float):
 
 @register_method
 class HuberEKF(Method):
-    """Huber M-estimator EKF on the glint noise's eps-contaminated density (batched over trials).
+    r"""Huber M-estimator EKF on the glint noise's ε-contaminated density (batched over trials).
 
     The classical robust filter of glint tracking (Song & Sun cite Masreliez's
     score-function filter, ref. [7], and the robust preprocessing of Hewer, Martin & Zeh,
     ref. [6]). Of the two, Huber's M-estimator: Masreliez's update
-    x = x_pred + P H' g(nu), g = -grad log p(nu), needs the score of the *predictive*
-    innovation density, the convolution of N(0, H P H') with the glint density; for the
-    spherical measurement H P H' is not diagonal, so that density is a multivariate
-    integral per step and trial with no closed form. Huber's estimator needs only psi of
-    each whitened residual, and its threshold follows from the same eps the scene's
-    glint density has (Huber's minimax c for (1 - eps) N + eps H), so at eps = 0 it is the
-    EKF exactly.
+    $x = x_{\text{pred}} + P H' g(\nu)$, $g = -\nabla \log p(\nu)$, needs the score of the
+    *predictive* innovation density, the convolution of $\mathcal{N}(0, H P H')$ with the
+    glint density; for the spherical measurement $H P H'$ is not diagonal, so that density
+    is a multivariate integral per step and trial with no closed form. Huber's estimator
+    needs only $\psi$ of each whitened residual, and its threshold follows from the same
+    $\epsilon$ the scene's glint density has (Huber's minimax $c$ for
+    $(1 - \epsilon) \mathcal{N} + \epsilon H$), so at $\epsilon = 0$ it is the EKF exactly.
 
     Prediction, linearisation and the covariance recursion are :func:`ekf_filter`'s
-    (the exact linear dynamics with the known control; H = dh/dx at x_pred; R =
-    diag(sigma_i^2), the Gaussian core of the glint density). The update is the M-estimate
-    of the linearised regression nu = H d + e, d = x - x_pred ~ N(0, P) (Boncelet &
-    Dickinson, "A variant of Huber robust regression", SIAM J. Sci. Stat. Comput. 5, 1984),
-    with Huber's rho on the measurement residuals only (the prior is Gaussian):
+    (the exact linear dynamics with the known control; $H = \partial h / \partial x$ at
+    $x_{\text{pred}}$; $R = \operatorname{diag}(\sigma_i^2)$, the Gaussian core of the glint
+    density). The update is the M-estimate of the linearised regression $\nu = H d + e$,
+    $d = x - x_{\text{pred}} \sim \mathcal{N}(0, P)$ (Boncelet & Dickinson, "A variant of
+    Huber robust regression", SIAM J. Sci. Stat. Comput. 5, 1984), with Huber's $\rho$ on
+    the measurement residuals only (the prior is Gaussian; $c$ from Huber 1964):
 
-        d = argmin  sum_i rho_c(r_i) + d' P^-1 d / 2,   r_i = (nu - H d)_i / sigma_i
-        rho_c(r) = r^2/2 (|r| <= c),  c |r| - c^2/2 (|r| > c)
-        c: 2 phi(c)/c - 2 Phi(-c) = eps/(1 - eps)                       (Huber 1964)
+    $$
+    \begin{aligned}
+    d &= \arg\min_d \sum_i \rho_c(r_i) + \tfrac12 d' P^{-1} d, \qquad r_i = (\nu - H d)_i / \sigma_i, \\
+    \rho_c(r) &= \begin{cases} r^2/2 & |r| \le c \\ c |r| - c^2/2 & |r| > c \end{cases}, \qquad
+    \frac{2 \phi(c)}{c} - 2 \Phi(-c) = \frac{\epsilon}{1 - \epsilon}
+    \end{aligned}
+    $$
 
     solved exactly over the patterns of clipped residuals (:func:`huber_reweigh`). At the
-    minimum, with W = diag(w_i), w_i = psi_c(r_i)/r_i = min(1, c/|r_i|), the estimate is a
-    Kalman update with R W^-1,
+    minimum, with $W = \operatorname{diag}(w_i)$, $w_i = \psi_c(r_i)/r_i = \min(1, c/|r_i|)$,
+    the estimate is a Kalman update with $R W^{-1}$,
 
-        K = P H' (H P H' + R W^-1)^-1,  d = K nu;
+    $$
+    K = P H' (H P H' + R W^{-1})^{-1}, \qquad d = K \nu;
+    $$
 
-    then
-    x = x_pred + K nu and P = (I - K H) P (I - K H)' + K R W^-1 K' (Joseph form with the
-    final weights: the covariance of the weighted update, as the Huber-based filters
-    report it). ``epsilon`` is the scene's (``"scene"``) unless a number is given.
-    Returns x_k|k and P_k|k; traces ``nis`` (the innovation's under R).
+    then $x = x_{\text{pred}} + K \nu$ and $P = (I - K H) P (I - K H)' + K R W^{-1} K'$
+    (Joseph form with the final weights: the covariance of the weighted update, as the
+    Huber-based filters report it). ``epsilon`` is the scene's (``"scene"``) unless a
+    number is given. Returns $x_{k|k}$ and $P_{k|k}$; traces ``nis`` (the innovation's
+    under $R$).
     """
 
     name = "huber-ekf"

@@ -68,7 +68,7 @@ class _Context:
 
 @register_method
 class Viterbi(Method):
-    """Block Viterbi estimation on a quantised state trellis, with the true glint density.
+    r"""Block Viterbi estimation on a quantised state trellis, with the true glint density.
 
     After Demirbas, "Manoeuvring-target tracking with the Viterbi algorithm in
     the presence of interference", IEE Proc. F 136(6), 1989 (component-by-
@@ -85,8 +85,8 @@ class Viterbi(Method):
     depends on the radial coordinate, bearing on the bearing-direction one,
     elevation on the elevation-direction one (up to terms of the order of
     the target's cross-range excursion over its range). Each axis has the
-    2-state (position, velocity) model s' = F2 s + g (u_axis + w), F2 =
-    [[1, P1], [0, a]], g = [P2, P1]', and its own trellis — the paper's
+    2-state (position, velocity) model $s' = F_2 s + g (u_{\text{axis}} + w)$,
+    $F_2 = \begin{bmatrix} 1 & P_1 \\ 0 & a \end{bmatrix}$, $g = [P_2, P_1]'$, and its own trellis — the paper's
     component-by-component estimation — with the other axes held at their
     current estimates when the likelihood is evaluated; ``sweeps`` > 1
     repeats the pass over the axes within each block (block coordinate ascent
@@ -95,38 +95,42 @@ class Viterbi(Method):
     zero-disturbance prediction, and it is returned without a trellis.
 
     **Trellis of one axis** (derivation). The MAP path maximises
-    log p(s_0) + sum_k [log p(s_k | s_k-1) + log p(z_k | s_k)]. The
-    disturbance w is represented by ``disturbance_levels`` values w_m equally
-    spaced on +- ``disturbance_span`` sigma_w with probabilities pi_m from the
+
+    $$
+    \log p(s_0) + \sum_k \left[ \log p(s_k \mid s_{k-1}) + \log p(z_k \mid s_k) \right].
+    $$
+
+    The disturbance $w$ is represented by ``disturbance_levels`` values $w_m$ equally
+    spaced on $\pm$ ``disturbance_span`` $\times\, \sigma_w$ with probabilities $\pi_m$ from the
     normal density (:func:`disturbance_levels`), so a node has that many
-    successors F2 s + g (u + w_m), with log transition probability log pi_m.
+    successors $F_2 s + g (u + w_m)$, with log transition probability $\log \pi_m$.
     The state is quantised on a grid of ``position_levels`` x
-    ``velocity_levels`` nodes centred on the prediction F2 s* + g u of the
-    best node s* of the previous step, spanning +- ``gate_sigmas`` standard
-    deviations of the predicted (p, v) of a linear filter for the axis (the
+    ``velocity_levels`` nodes centred on the prediction $F_2 s^* + g u$ of the
+    best node $s^*$ of the previous step, spanning $\pm$ ``gate_sigmas`` standard
+    deviations of the predicted $(p, v)$ of a linear filter for the axis (the
     gate; :func:`models.kalman.covariance_sequence` with the measurement
     variance mapped to metres at the prior range); the quantisation step is
     the gate over the levels. Successors entering the same node merge (the
     Viterbi recursion keeps the best score), those outside the gate are
-    dropped. The branch metric is log pi_m + log p(z_k | state), the second
+    dropped. The branch metric is $\log \pi_m + \log p(z_k \mid \text{state})$, the second
     the *true* glint log density (:func:`models.glint.glint_logpdf`:
-    the scenario's mixture or additive model with its sigma, eta and eps) of
+    the scenario's mixture or additive model with its $\sigma$, $\eta$ and $\epsilon$) of
     the measurement residuals, evaluated on the position levels and
     interpolated linearly at the successor's position.
 
     * ``node_value = "survivor"`` (default) keeps in each node the exact state
       of its surviving path, so increments smaller than a quantisation step
-      (P2 w is millimetres here) are not rounded away; ``"centre"`` replaces
+      ($P_2 w$ is millimetres here) are not rounded away; ``"centre"`` replaces
       it by the node's grid value, the textbook quantised trellis.
     * ``gate_noise = "glint"`` (default) sizes the gate as if every
-      measurement had the glint part's variance 2 eta^2 (at least the total
-      variance; the total variance when eps = 0). A gate from the total
+      measurement had the glint part's variance $2 \eta^2$ (at least the total
+      variance; the total variance when $\epsilon = 0$). A gate from the total
       variance (``"total"``) is ~3x narrower here and, when a glint spike
       falls on the first measurements, can settle on a wrong track that
-      never re-enters the gate (about 1 trial in 30 at eps = 0.05).
+      never re-enters the gate (about 1 trial in 30 at $\epsilon = 0.05$).
     * Step 0 is built in stages: the prior's gate on a coarse grid (metric
-      log N(node; x0, P0) + log p(z_0 | node)) locates the best position
-      level, then grids each spanning at least +-2 steps of the previous one
+      $\log \mathcal{N}(\text{node}; x_0, P_0) + \log p(z_0 \mid \text{node})$) locates the best position
+      level, then grids each spanning at least $\pm 2$ steps of the previous one
       around the best level (with 3 or 5 position levels, halving the step:
       :func:`refined_step`) refine it down to the step of step 1. The
       prior's gate is ~10-100x wider than later ones, and a coarse start
@@ -145,17 +149,27 @@ class Viterbi(Method):
 
     **The paper's trellis** (``trellis = "paper-1d"``; the default
     ``"pv-grid"`` is the trellis above, ours). Song & Sun (section 2) quantise
-    each spherical component s_i (range, bearing, elevation) on its own 1-D
-    trellis of values q delta_i (gates ``quantisation_steps``, printed:
-    0.005, 0.001, 0.001), with successors s_q(k+1) = Q(f_i(s_q(k), sdot(k),
-    ..., w)) (eq. 6), the derivative sdot from differences of the estimates,
+    each spherical component $s_i$ (range, bearing, elevation) on its own 1-D
+    trellis of values $q \delta_i$ (gates ``quantisation_steps``, printed:
+    0.005, 0.001, 0.001), with successors (eq. 6, the derivative $\dot{s}$ from
+    differences of the estimates)
+
+    $$
+    s_{q_i}(k+1) = Q\big(f_i(s_{q_i}(k), \dot{s}_i(k), \dots, w_{d_i}(k), \dots)\big) \qquad (6)
+    $$
+
     transition probabilities from the discrete disturbance levels (three
-    values, section 3), branch metric eq. (8-2) log Pr(s_q(k) | s_q(k-1)) +
-    log p(z_i(k) | s_q(k)) with the true glint density, blocks of ``Lb`` and
-    ``start_nodes`` candidate start nodes per block (the paper's n, not
+    values, section 3), the branch metric with the true glint density
+
+    $$
+    M = \log \Pr(s_q(k) \mid s_q(k-1)) + \log p(z_i(k) \mid s_q(k)) \qquad (8\text{-}2)
+    $$
+
+    and blocks of ``Lb`` and
+    ``start_nodes`` candidate start nodes per block (the paper's $n$, not
     printed; 1 is Demirbas's single node). See :func:`paper_1d_component`
     and :func:`paper_1d_track` for our readings (constant-rate prediction,
-    Gauss-Hermite levels, n_i0, passive range).
+    Gauss-Hermite levels, $n_{i0}$, passive range).
 
     **Cost** per trial and step: for each observed axis and sweep, up to
     ``survivors`` (at a block start) or ``position_levels`` x

@@ -215,96 +215,108 @@ def _latched_mode(high, in_high, run, x, P, acc_row, accel_nis, chiW, ok, seen):
 
 @register_method
 class ARAdaptive(Method):
-    """AR-model adaptive tracker: χ² switch between AR orders, Q by sliding-window covariance matching (patent).
+    r"""AR-model adaptive tracker: χ² switch between AR orders, Q by sliding-window covariance matching (patent).
 
     After the patent "基于最优AR模型的自适应机动目标跟踪方法" (adaptive
     maneuvering-target tracking based on an optimal AR model). The patent
     prints the steps and no equation; what follows is our derivation of each
-    step, in the patent's symbols (Q₀, W, M, N, α).
+    step, in the patent's symbols ($Q_0$, $W$, $M$, $N$, $\alpha$).
 
-    **Step (1), parameters**: initial state-noise variance Q₀ (``q0_m2``),
-    sliding window W (``window``), state dimension M (``state_dim``),
-    polynomial orders N (``order_low``, ``order_high``: the patent's "低阶"
-    and "高阶" models share M), significance α (``alpha``). The defaults are
-    ours (the patent prints none): M = 4, N = 1 and 2, W = 10, α = 0.01,
-    Q₀ = 1 m². Initialisation: the AR state's prior is the scenario's
-    kinematic prior (x0, P0) mapped to the lagged positions
+    **Step (1), parameters**: initial state-noise variance $Q_0$ (``q0_m2``),
+    sliding window $W$ (``window``), state dimension $M$ (``state_dim``),
+    polynomial orders $N$ (``order_low``, ``order_high``: the patent's "低阶"
+    and "高阶" models share $M$), significance $\alpha$ (``alpha``). The defaults are
+    ours (the patent prints none): $M = 4$, $N = 1$ and 2, $W = 10$, $\alpha = 0.01$,
+    $Q_0 = 1$ m². Initialisation: the AR state's prior is the scenario's
+    kinematic prior $(x_0, P_0)$ mapped to the lagged positions
     (:func:`lag_map`), so every tracker of the suite starts from the same
     information.
 
-    **State-space form.** Per position axis the state is the M latest
-    positions, X_k = [x_k, x_k−1, …, x_k−M+1]', with
+    **State-space form.** Per position axis the state is the $M$ latest
+    positions, $X_k = [x_k, x_{k-1}, \dots, x_{k-M+1}]'$, with (:func:`companion`)
 
-        X_k+1 = F(a) X_k + w_k,   F(a) = [[a_1 … a_M], [I_M−1  0]]  (:func:`companion`)
-        z_k   = e_0' X_k + v_k,   v_k ~ N(0, R),   w_k ~ N(0, Q_k),  Q_k = q_k e_0 e_0'
+    $$
+    \begin{aligned}
+    X_{k+1} &= F(a) X_k + w_k, &
+      F(a) &= \begin{bmatrix} a_1 \; \cdots \; a_M \\ I_{M-1} \quad 0 \end{bmatrix}, \\
+    z_k &= e_0' X_k + v_k, &
+      v_k &\sim \mathcal{N}(0, R), \quad w_k \sim \mathcal{N}(0, Q_k), \quad Q_k = q_k e_0 e_0'
+    \end{aligned}
+    $$
 
-    (the new position is the AR prediction Σ a_i x_k+1−i plus noise; the
+    (the new position is the AR prediction $\sum_i a_i x_{k+1-i}$ plus noise; the
     other components are shifts, without noise). Filtered by the one batched
     Kalman filter's per-trial steps (:func:`models.kalman.predict_batched`,
     :func:`models.kalman.update_batched`). Velocity and
     acceleration are not states ("不需要估计目标的速度和加速度", no velocity or
-    acceleration estimated); the scenario's [p, v, a] is read off X by
+    acceleration estimated); the scenario's $[p, v, a]'$ is read off $X$ by
     :func:`kinematic_map` (filtered position; derivatives of the
     least-squares quadratic through the lagged positions) with covariance
-    D P D'.
+    $D P D'$.
 
     **Steps (2)/(5), MMSE AR coefficients of order N.** A predictor
-    x_k+1 = Σ_{i=1..M} a_i x_k+1−i is exact on every polynomial of degree
-    ≤ N iff Σ a_i = 1 and Σ a_i (−i)^j = 0, j = 1..N (apply it to
-    (t − t_k+1)^j), i.e. V'a = e_0 with V_ij = (−i)^j (M ≥ N + 1
+    $x_{k+1} = \sum_{i=1}^{M} a_i x_{k+1-i}$ is exact on every polynomial of degree
+    $\le N$ iff $\sum_i a_i = 1$ and $\sum_i a_i (-i)^j = 0$, $j = 1, \dots, N$ (apply it to
+    $(t - t_{k+1})^j$), i.e. $V'a = e_0$ with $V_{ij} = (-i)^j$ ($M \ge N + 1$
     unknowns). The prediction error on such a trajectory from the estimate
-    X̂_k|k is a'(X_k − X̂_k|k) + w_k, of variance a' P_k|k a + q_k, so the
+    $\hat{X}_{k|k}$ is $a'(X_k - \hat{X}_{k|k}) + w_k$, of variance $a' P_{k|k} a + q_k$, so the
     minimum-mean-square-error coefficients "in the Kalman-filter framework"
-    (our reading; the patent prints no equation) solve min a' P_k|k a subject to V'a = e_0:
+    (our reading; the patent prints no equation) solve $\min_a a' P_{k|k} a$ subject
+    to $V'a = e_0$ (:func:`ar_coefficients`):
 
-        a = P⁻¹ V (V' P⁻¹ V)⁻¹ e_0                         (:func:`ar_coefficients`)
+    $$
+    a = P^{-1} V (V' P^{-1} V)^{-1} e_0
+    $$
 
     recomputed every step and per trial, so they follow the noise statistics
     ("AR模型系数可以根据噪声统计特性的变化进行实时调整"; ``coefficients =
-    "filter"``, the default). With P = I (``coefficients = "min-norm"``,
+    "filter"``, the default). With $P = I$ (``coefficients = "min-norm"``,
     ours) this is the least-squares polynomial extrapolation, the MMSE
-    predictor from M raw measurements of equal, independent errors. With
-    M = N + 1 both are the unique exact predictor: N = 1, M = 2 gives
-    x_k+1 = 2x_k − x_k−1; N = 2, M = 3 gives x_k+1 = 3x_k − 3x_k−1 + x_k−2.
-    (M = 4, N = 1, min-norm: a = (1, 0.5, 0, −0.5).)
+    predictor from $M$ raw measurements of equal, independent errors. With
+    $M = N + 1$ both are the unique exact predictor: $N = 1$, $M = 2$ gives
+    $x_{k+1} = 2x_k - x_{k-1}$; $N = 2$, $M = 3$ gives $x_{k+1} = 3x_k - 3x_{k-1} + x_{k-2}$.
+    ($M = 4$, $N = 1$, min-norm: $a = (1, 0.5, 0, -0.5)$.)
 
-    **Steps (3)/(6), Q_k by covariance matching** over the sliding window W
+    **Steps (3)/(6), $Q_k$ by covariance matching** over the sliding window $W$
     (after Mehra, "Approaches to adaptive filtering", and Myers & Tapley,
     "Adaptive sequential estimation with unknown noise statistics"): for the
-    model above E[ν_j²] = e_0' F P_j−1|j−1 F' e_0 + q + R, so
+    model above $E[\nu_j^2] = e_0' F P_{j-1|j-1} F' e_0 + q + R$, so (:func:`matched_noise`)
 
-        q̂_k = (1/W) Σ_{j=k−W+1..k} (ν_j² − e_0' F_j P_j−1|j−1 F_j' e_0 − R),
-        Q_k = max(q̂_k, 0) e_0 e_0'                        (:func:`matched_noise`)
+    $$
+    \hat{q}_k = \frac{1}{W} \sum_{j=k-W+1}^{k}
+        \left(\nu_j^2 - e_0' F_j P_{j-1|j-1} F_j' e_0 - R\right), \qquad
+    Q_k = \max(\hat{q}_k, 0)\, e_0 e_0'
+    $$
 
-    the projection of q̂_k e_0 e_0' on the positive-semi-definite cone
-    (eigenvalue clipping: its one eigenvalue is q̂_k): our reading of the
+    the projection of $\hat{q}_k e_0 e_0'$ on the positive-semi-definite cone
+    (eigenvalue clipping: its one eigenvalue is $\hat{q}_k$): our reading of the
     patent's "保证了状态噪声方差的半正定性" (keeps the state-noise covariance
     PSD); the estimator and the clipping are ours, the patent prints neither. Samples
-    count from step M on (every lag of the prediction measured); Q₀ is used
-    until the window holds W of them. Q_k is estimated at every step,
+    count from step $M$ on (every lag of the prediction measured); $Q_0$ is used
+    until the window holds $W$ of them. $Q_k$ is estimated at every step,
     whichever order filtered it ("在整个滤波的过程中").
 
     **The ablation of the adaptive Q** (ours, not the patent's):
-    ``state_noise = "fixed"`` keeps Q_k = Q₀ e_0 e_0' at every step, Q₀
+    ``state_noise = "fixed"`` keeps $Q_k = Q_0 e_0 e_0'$ at every step, $Q_0$
     being ``q0_m2``, the patent's own initial value of step (1). Everything
-    else (coefficients, χ² switch, switch back, W for the latched rule) is
+    else (coefficients, χ² switch, switch back, $W$ for the latched rule) is
     unchanged, so the paired difference between ``state_noise = "matching"``
-    and ``"fixed"`` at the same Q₀ is the effect of the covariance matching
+    and ``"fixed"`` at the same $Q_0$ is the effect of the covariance matching
     alone; the fixed value is a parameter rather than, say, the CV filter's
-    Q because the AR state has no velocity for a CV Q to act on. Q₀ is the
+    $Q$ because the AR state has no velocity for a CV $Q$ to act on. $Q_0$ is the
     variance added to the new position per step, so to the first difference
-    x_k − x_k−1 (T times the velocity) too; the CV filter's DWNA adds
-    σ_a² T⁴/4 to the position and σ_a² T⁴ to that difference: equal noise on
-    the velocity is σ_a = √Q₀ / T², equal noise on the position σ_a = 2√Q₀ / T²
-    (the ar-tracking preset sweeps both models on the first).
+    $x_k - x_{k-1}$ ($T$ times the velocity) too; the CV filter's DWNA adds
+    $\sigma_a^2 T^4/4$ to the position and $\sigma_a^2 T^4$ to that difference: equal noise on
+    the velocity is $\sigma_a = \sqrt{Q_0} / T^2$, equal noise on the position
+    $\sigma_a = 2\sqrt{Q_0} / T^2$ (the ar-tracking preset sweeps both models on the first).
 
     **Step (4), the χ² switching rule.** At every tested step the low-order
-    prediction's innovation ν_k with S_k = e_0' P_k|k−1 e_0 + R gives
-    ε_k = ν_k² / S_k, χ²(1) under a matched model; the step is a maneuver
-    when ε_k > χ²_1(α) (``scipy.stats.chi2.isf``), and step k is then
+    prediction's innovation $\nu_k$ with $S_k = e_0' P_{k|k-1} e_0 + R$ gives
+    $\epsilon_k = \nu_k^2 / S_k$, $\chi^2(1)$ under a matched model; the step is a maneuver
+    when $\epsilon_k > \chi^2_1(\alpha)$ (``scipy.stats.chi2.isf``), and step $k$ is then
     filtered by the high-order model instead (steps 5–6), from the same
-    X̂_k−1|k−1, P_k−1|k−1: the state keeps its dimension M, so nothing is
-    re-initialised ("无缝切换"). Tests start at step M.
+    $\hat{X}_{k-1|k-1}$, $P_{k-1|k-1}$: the state keeps its dimension $M$, so nothing is
+    re-initialised ("无缝切换"). Tests start at step $M$.
 
     **The switch back** (the patent leaves it open):
 
@@ -313,16 +325,16 @@ class ARAdaptive(Method):
       model and the high order filters exactly the steps whose low-order
       innovation fails the test; the switch back is the next step that
       passes. A false switch is one rejection on a quiet step; with a
-      matched model the tests are independent, each at level α.
+      matched model the tests are independent, each at level $\alpha$.
     * ``switching = "latched"`` (ours, the variable-dimension filter's rule,
-      Bar-Shalom & Birmiwal): the high order stays until it has filtered W
-      steps and the acceleration estimate â_j (:func:`kinematic_map`) is
-      insignificant, Σ_{last W} â_j² / var(â_j) < χ²_W(α); only low-order
-      steps are tested.
+      Bar-Shalom & Birmiwal): the high order stays until it has filtered $W$
+      steps and the acceleration estimate $\hat{a}_j$ (:func:`kinematic_map`) is
+      insignificant, $\sum_{\text{last } W} \hat{a}_j^2 / \operatorname{var}(\hat{a}_j) < \chi^2_W(\alpha)$;
+      only low-order steps are tested.
 
-    Estimates: [p, v, a] per axis and its covariance; traces ``mode`` (1.0
+    Estimates: $[p, v, a]'$ per axis and its covariance; traces ``mode`` (1.0
     where the high order filtered the step), ``switch`` (1.0 where the χ²
-    test rejected the low order), ``q_k`` (Q_k's scale after the step,
+    test rejected the low order), ``q_k`` ($Q_k$'s scale after the step,
     m²; the mean over axes in 2-D), ``nis`` (the tested low-order NIS). In
     2-D each axis is tracked by its own AR filter (the patent's range
     tracker, per coordinate); ``mode`` and ``switch`` are 1 where either

@@ -32,27 +32,38 @@ def _axis_blocks(block: np.ndarray, dims: int) -> np.ndarray:
 
 @register_method
 class CurrentStatistical(KinematicTracker):
-    """Current statistical model (Zhou & Kumar) with adaptive acceleration variance, batched over trials.
+    r"""Current statistical model (Zhou & Kumar) with adaptive acceleration variance, batched over trials.
 
     Zhou Hongren & K. S. P. Kumar, "A 'current' statistical model and
     adaptive algorithm for estimating maneuvering targets" (1984), as in Li
     & Jilkov's survey part I, sec. 4.3 (the model the AR-model patent names
-    as the non-zero-mean Markov model). Per axis, state [p, v, a]: the
+    as the non-zero-mean Markov model). Per axis, state $[p, v, a]'$: the
     acceleration is a first-order Markov process around the "current" mean
-    a_bar, da/dt = -alpha (a - a_bar) + w; discretised,
-    x_{k+1} = F x_k + U a_bar + w_k with the Singer F(alpha), U
+    $\bar{a}$, $\dot{a} = -\alpha (a - \bar{a}) + w$; discretised,
+    $x_{k+1} = F x_k + U \bar{a} + w_k$ with the Singer $F(\alpha)$, $U$
     (:func:`models.kinematics.current_statistical_input`) and
-    Q = sigma_a^2 Q_1(alpha) (the Singer Q for unit sigma). The algorithm:
-    a_bar is the current acceleration estimate a_k|k, so the prediction is
-    x_k+1|k = F x_k|k + U a_k|k (= the CA prediction), P_k+1|k = F P F' + Q_k
-    with the adaptive variance
-    sigma_a^2 = (4 - pi)/pi (a_max - a_k|k)^2 if a_k|k >= 0,
-    (4 - pi)/pi (a_max_neg + a_k|k)^2 if a_k|k < 0 (per axis; a_k|k clipped
-    to [-a_max_neg, a_max] and the std held at ``accel_std_floor_m_s2``, ours,
-    where the printed formula would give 0). Started from the scene's prior.
-    Covariances depend on the data (through Q_k) and carry the trial axis.
-    Traces: ``mode`` 1, ``switch`` 0, ``accel_std`` (n, K) the adaptive
-    sigma_a of the first axis used to predict the next step.
+    $Q = \sigma_a^2 Q_1(\alpha)$ (the Singer $Q$ for unit $\sigma$). The algorithm:
+    $\bar{a}$ is the current acceleration estimate $a_{k|k}$, so the prediction is
+
+    $$
+    x_{k+1|k} = F x_{k|k} + U a_{k|k}, \qquad P_{k+1|k} = F P_{k|k} F' + Q_k
+    $$
+
+    (the CA prediction) with the adaptive variance
+
+    $$
+    \sigma_a^2 = \begin{cases}
+      \frac{4 - \pi}{\pi} (a_{\max} - a_{k|k})^2 & a_{k|k} \ge 0 \\
+      \frac{4 - \pi}{\pi} (a_{-\max} + a_{k|k})^2 & a_{k|k} < 0
+    \end{cases}
+    $$
+
+    per axis ($a_{-\max}$: ``a_max_neg``; $a_{k|k}$ clipped to $[-a_{-\max}, a_{\max}]$ and
+    the std held at ``accel_std_floor_m_s2``, ours, where the printed formula would
+    give 0). Started from the scene's prior. Covariances depend on the data
+    (through $Q_k$) and carry the trial axis. Traces: ``mode`` 1, ``switch`` 0,
+    ``accel_std`` (n, K) the adaptive $\sigma_a$ of the first axis used to predict
+    the next step.
     """
 
     name = "current-statistical"

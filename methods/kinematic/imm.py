@@ -254,11 +254,11 @@ def filterpy_imm(models: list[LinearGaussianModel], transition: np.ndarray, mu0:
 
 @register_method
 class IMMCVCA(KinematicTracker):
-    """IMM with a CV and a CA mode (transition matrix a parameter), batched over trials and modes.
+    r"""IMM with a CV and a CA mode (transition matrix a parameter), batched over trials and modes.
 
-    Modes on the scenario's [p, v, a] state per axis: CV (DWNA, sigma_a; the
-    acceleration not modelled: its row of F and of Q zero,
-    :func:`models.kinematics.embed_cv`) and CA (DWPA, sigma_j); the
+    Modes on the scenario's $[p, v, a]'$ state per axis: CV (DWNA, $\sigma_a$; the
+    acceleration not modelled: its row of $F$ and of $Q$ zero,
+    :func:`models.kinematics.embed_cv`) and CA (DWPA, $\sigma_j$); the
     estimator is :func:`imm_filter` (Blom & Bar-Shalom), FilterPy's
     ``IMMEstimator`` the reference. Both modes start from the scene's prior.
     Returns the combined estimate and covariance. Traces: ``mode`` the

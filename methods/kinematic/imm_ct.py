@@ -72,22 +72,23 @@ def to_scenario_state(x: np.ndarray, P: np.ndarray, sigma_a: float) -> tuple[np.
 
 @register_method
 class IMMCVCT(KinematicTracker):
-    """IMM with a CV and a coordinated-turn mode of unknown turn rate (EKF), batched over trials and modes.
+    r"""IMM with a CV and a coordinated-turn mode of unknown turn rate (EKF), batched over trials and modes.
 
     Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking and
-    Navigation* (2001), sec. 11.7: both modes on [x, vx, y, vy, Omega] (planar scenes,
-    ``dims = 2``). CV: DWNA per axis (sigma_a), Omega a random walk it does not use
-    (F_OmegaOmega = 1, Q_OmegaOmega = (sigma_Omega T)^2), so the CT mode's estimate of the
-    turn rate survives mixing. CT: the coordinated turn with Omega held over the step
-    (:mod:`models.turn`, eq. 11.7.1-4), predicted as an EKF, x = f(x), P = J P J' + Q with
-    the Jacobian J at the mixed estimate; Q a white acceleration sigma_a (DWNA) per axis and
-    the turn-rate increment sigma_Omega T. Both modes measure the positions linearly, so the
-    mode-matched updates, likelihoods, mixing and combination are :func:`imm_filter`'s (the
-    IMM of ``imm-cv-ca``); FilterPy's ``IMMEstimator`` with the CT filter's ``predict``
-    replaced is the reference. Prior: the scene's on position and velocity, Omega ~
-    N(0, ``initial_turn_rate_std_deg_s``^2). Reported in the scenario's state with the turn's
-    acceleration Omega (-vy, vx) (:func:`to_scenario_state`). Traces: ``mode`` the CT mode's
-    probability, ``switch`` 0.
+    Navigation* (2001), sec. 11.7: both modes on $[x, v_x, y, v_y, \Omega]'$ (planar scenes,
+    ``dims = 2``). CV: DWNA per axis ($\sigma_a$), $\Omega$ a random walk it does not use
+    ($F_{\Omega\Omega} = 1$, $Q_{\Omega\Omega} = (\sigma_\Omega T)^2$), so the CT mode's estimate of the
+    turn rate survives mixing. CT: the coordinated turn with $\Omega$ held over the step
+    (:mod:`models.turn`, eq. 11.7.1-4), predicted as an EKF, $x \leftarrow f(x)$,
+    $P \leftarrow J P J' + Q$ with the Jacobian $J$ at the mixed estimate; $Q$ a white
+    acceleration $\sigma_a$ (DWNA) per axis and the turn-rate increment $\sigma_\Omega T$.
+    Both modes measure the positions linearly, so the mode-matched updates, likelihoods,
+    mixing and combination are :func:`imm_filter`'s (the IMM of ``imm-cv-ca``); FilterPy's
+    ``IMMEstimator`` with the CT filter's ``predict`` replaced is the reference. Prior:
+    the scene's on position and velocity, $\Omega \sim \mathcal{N}(0, \sigma_{\Omega,0}^2)$
+    ($\sigma_{\Omega,0}$: ``initial_turn_rate_std_deg_s``). Reported in the scenario's state
+    with the turn's acceleration $\Omega\, (-v_y, v_x)$ (:func:`to_scenario_state`). Traces:
+    ``mode`` the CT mode's probability, ``switch`` 0.
     """
 
     name = "imm-cv-ct"

@@ -47,14 +47,20 @@ class _LinearTracker(KinematicTracker):
 
 @register_method
 class ConstantVelocityKF(_LinearTracker):
-    """Constant-velocity Kalman filter (white-noise acceleration), batched over trials.
+    r"""Constant-velocity Kalman filter (white-noise acceleration), batched over trials.
 
-    Per axis, state [p, v]: F = [[1, T], [0, 1]], Q = sigma_a^2 g g',
-    g = [T^2/2, T]' (discrete white-noise acceleration; Bar-Shalom, Li &
+    Per axis, state $[p, v]'$ (discrete white-noise acceleration; Bar-Shalom, Li &
     Kirubarajan, *Estimation with Applications to Tracking and Navigation*,
-    sec. 6.3.2), H = [1, 0]; started from the scene's prior. Reported in the
-    scenario's [p, v, a] state with a = 0 of variance sigma_a^2
-    (:mod:`methods.kinematic.base`). Traces: ``mode`` 0, ``switch`` 0.
+    sec. 6.3.2):
+
+    $$
+    F = \begin{bmatrix} 1 & T \\ 0 & 1 \end{bmatrix}, \quad
+    Q = \sigma_a^2\, g g', \quad g = [T^2/2,\ T]', \quad H = [1,\ 0],
+    $$
+
+    started from the scene's prior. Reported in the scenario's $[p, v, a]'$ state
+    with $a = 0$ of variance $\sigma_a^2$ (:mod:`methods.kinematic.base`).
+    Traces: ``mode`` 0, ``switch`` 0.
     """
 
     name = "cv-kf"
@@ -76,13 +82,18 @@ class ConstantVelocityKF(_LinearTracker):
 
 @register_method
 class ConstantAccelerationKF(_LinearTracker):
-    """Constant-acceleration Kalman filter (Wiener-process acceleration), batched over trials.
+    r"""Constant-acceleration Kalman filter (Wiener-process acceleration), batched over trials.
 
-    Per axis, state [p, v, a]: F = [[1, T, T^2/2], [0, 1, T], [0, 0, 1]],
-    Q = sigma_j^2 g g', g = [T^2/2, T, 1]' (discrete Wiener-process
-    acceleration; Bar-Shalom et al. 2001, sec. 6.3.3; sigma_j the std of the
-    acceleration increment over one step), H = [1, 0, 0]. Traces: ``mode`` 1,
-    ``switch`` 0.
+    Per axis, state $[p, v, a]'$ (discrete Wiener-process acceleration; Bar-Shalom
+    et al. 2001, sec. 6.3.3):
+
+    $$
+    F = \begin{bmatrix} 1 & T & T^2/2 \\ 0 & 1 & T \\ 0 & 0 & 1 \end{bmatrix}, \quad
+    Q = \sigma_j^2\, g g', \quad g = [T^2/2,\ T,\ 1]', \quad H = [1,\ 0,\ 0],
+    $$
+
+    $\sigma_j$ the std of the acceleration increment over one step. Traces:
+    ``mode`` 1, ``switch`` 0.
     """
 
     name = "ca-kf"
@@ -97,14 +108,22 @@ class ConstantAccelerationKF(_LinearTracker):
 
 @register_method
 class SingerKF(_LinearTracker):
-    """Singer-model Kalman filter (zero-mean Markov acceleration), batched over trials.
+    r"""Singer-model Kalman filter (zero-mean Markov acceleration), batched over trials.
 
     Singer, "Estimating optimal tracking filter performance for manned
     maneuvering targets" (IEEE Trans. AES, 1970), as in Li & Jilkov's survey
-    part I, sec. 4.1: da/dt = -alpha a + w, E[w w] = 2 alpha sigma_m^2, state
-    [p, v, a] per axis, F = [[1, T, (alpha T - 1 + e^{-alpha T})/alpha^2],
-    [0, 1, (1 - e^{-alpha T})/alpha], [0, 0, e^{-alpha T}]] and the exact Q
-    (Van Loan; :func:`models.kinematics.singer`). Traces: ``mode`` 1,
+    part I, sec. 4.1: $\dot{a} = -\alpha a + w$, $E[w(t) w(t+\tau)] = 2 \alpha \sigma_m^2 \delta(\tau)$,
+    state $[p, v, a]'$ per axis,
+
+    $$
+    F = \begin{bmatrix}
+      1 & T & (\alpha T - 1 + e^{-\alpha T}) / \alpha^2 \\
+      0 & 1 & (1 - e^{-\alpha T}) / \alpha \\
+      0 & 0 & e^{-\alpha T}
+    \end{bmatrix}
+    $$
+
+    and the exact $Q$ (Van Loan; :func:`models.kinematics.singer`). Traces: ``mode`` 1,
     ``switch`` 0.
     """
 

@@ -168,46 +168,47 @@ def _vd_kernel(z, valid, x0, P0, F_cv, Q_cv, F_ca, Q_ca, H, R, rho, detect_thres
 
 @register_method
 class VariableDimension(KinematicTracker):
-    """Variable-dimension filter (Bar-Shalom & Birmiwal): CV, CA on a chi-square maneuver detection with a back-dated restart (s steps before the detection, re-filtered), back to CV when the acceleration is insignificant.
+    r"""Variable-dimension filter (Bar-Shalom & Birmiwal): CV, CA on a chi-square maneuver detection with a back-dated restart (s steps before the detection, re-filtered), back to CV when the acceleration is insignificant.
 
     Bar-Shalom & Birmiwal, "Variable dimension filter for maneuvering target
     tracking" (IEEE Trans. AES, 1982), as described in the AR-model patent's
     background (CV filtering, CA once a detection statistic exceeds its
-    threshold). State [p, v, a] per axis; in the quiet mode the CV model
-    (DWNA, sigma_a, acceleration 0 and outside the model,
+    threshold). State $[p, v, a]'$ per axis; in the quiet mode the CV model
+    (DWNA, $\sigma_a$, acceleration 0 and outside the model,
     :func:`models.kinematics.embed_cv`), in the maneuver mode the CA model
-    (DWPA, sigma_j). The rule (each trial switches and restarts on its own,
+    (DWPA, $\sigma_j$). The rule (each trial switches and restarts on its own,
     so the filter runs as one compiled loop over trials and steps,
     :func:`_vd_kernel`, on the per-trial steps of :mod:`models.kalman`):
 
     * **Detection** (CV mode): the fading-memory NIS
-      eps_bar_k = rho eps_bar_{k-1} + eps_k (eps_k = nu' S^-1 nu of the CV
-      filter, chi2(m) under no maneuver, m = dims; effective window
-      1/(1 - rho)) is compared with the (1 - ``detect_level``) quantile of a
-      scaled chi-square c chi2(nu), c = 1/(1 + rho), nu = m (1 + rho)/(1 - rho),
-      the one with eps_bar's steady-state mean m/(1 - rho) and variance
-      2m/(1 - rho^2) (our choice of the threshold's law).
-    * **Switch to CA, back-dated** at step k (trace ``switch`` = 1): the maneuver is
-      taken to have begun ``window_steps`` = s steps earlier; the CA filter
-      restarts from the estimate at k - s (position, velocity and their
+      $\bar{\epsilon}_k = \rho\, \bar{\epsilon}_{k-1} + \epsilon_k$
+      ($\epsilon_k = \nu' S^{-1} \nu$ of the CV filter, $\chi^2(m)$ under no maneuver,
+      $m$ = dims; effective window $1/(1 - \rho)$) is compared with the
+      1 − ``detect_level`` quantile of a scaled chi-square $c\, \chi^2(n)$,
+      $c = 1/(1 + \rho)$, $n = m (1 + \rho)/(1 - \rho)$, the one with $\bar{\epsilon}$'s
+      steady-state mean $m/(1 - \rho)$ and variance $2m/(1 - \rho^2)$ (our choice of
+      the threshold's law).
+    * **Switch to CA, back-dated** at step $k$ (trace ``switch`` = 1): the maneuver is
+      taken to have begun ``window_steps`` = $s$ steps earlier; the CA filter
+      restarts from the estimate at $k - s$ (position, velocity and their
       covariance kept; acceleration 0 with std ``accel_init_std_m_s2``,
-      uncorrelated; the prior of step 0 if k < s) and re-filters
-      z_{k-s+1..k}, so the acceleration is estimated from the window.
+      uncorrelated; the prior of step 0 if $k < s$) and re-filters
+      $z_{k-s+1}, \dots, z_k$, so the acceleration is estimated from the window.
       Bar-Shalom & Birmiwal initialise the acceleration from the innovation
-      at k - s instead; our diffuse restart lets the window's measurements
-      estimate it. Estimates already output are not revised, but from k on
-      the CA filter has seen the window's s measurements as a maneuver's: a
-      head start over a tracker that switches at k without looking back (the
+      at $k - s$ instead; our diffuse restart lets the window's measurements
+      estimate it. Estimates already output are not revised, but from $k$ on
+      the CA filter has seen the window's $s$ measurements as a maneuver's: a
+      head start over a tracker that switches at $k$ without looking back (the
       AR tracker's seamless switch), which the comparisons against it carry.
-    * **Switch back to CV** (the acceleration insignificant): after s steps
-      in CA mode, when delta_k = sum of a_j' P_aa,j^-1 a_j over the last s
-      steps is below the (1 - ``back_level``) quantile of chi2(m s) (delta's
-      law were the estimates independent with a = 0); the acceleration
-      leaves the state and eps_bar restarts at 0.
+    * **Switch back to CV** (the acceleration insignificant): after $s$ steps
+      in CA mode, when $\delta_k = \sum_{j=k-s+1}^{k} \hat{a}_j' P_{aa,j}^{-1} \hat{a}_j$ is below
+      the 1 − ``back_level`` quantile of $\chi^2(m s)$ ($\delta$'s law were the
+      estimates independent with $a = 0$); the acceleration leaves the state and
+      $\bar{\epsilon}$ restarts at 0.
 
-    Reported covariance: in CV mode the acceleration variance is sigma_a^2
+    Reported covariance: in CV mode the acceleration variance is $\sigma_a^2$
     (:mod:`methods.kinematic.base`). Traces: ``mode`` (0 CV, 1 CA),
-    ``switch``, ``fading_nis`` (eps_bar; NaN in CA mode).
+    ``switch``, ``fading_nis`` ($\bar{\epsilon}$; NaN in CA mode).
     """
 
     name = "vd-filter"

@@ -96,78 +96,82 @@ def third_moment_null_variance(L: np.ndarray, centred: bool) -> np.ndarray:
 
 @register_method
 class Cumulant(InnovationDetector):
-    """Sliding-window third-order (zero-lag) cumulant of the whitened innovation, chi-square test.
+    r"""Sliding-window third-order (zero-lag) cumulant of the whitened innovation, chi-square test.
 
     After Song, Ji & Gao (2004), "A new method of maneuver detection based on
     higher-order cumulants", Acta Electronica Sinica; the cumulant statistics
     after Giannakis & Tsatsanis, IEEE TASSP 38(7), 1990. Under the null the
-    whitened innovation x (:func:`models.kalman.innovations`) is i.i.d.
-    N(0, 1) per component, so its third-order cumulant is zero; a maneuver
+    whitened innovation $x$ (:func:`models.kalman.innovations`) is i.i.d.
+    $\mathcal{N}(0, 1)$ per component, so its third-order cumulant is zero; a maneuver
     biases the innovation and, while a window straddles the onset, skews it.
 
-    Per component i, over the last M samples (:func:`window_third_moment`):
+    Per component $i$, over the last $M$ samples (:func:`window_third_moment`):
 
-    * ``moment = "centred"`` (default): c3 = (1/M) sum (x - xbar)^3, the
+    * ``moment = "centred"`` (default): $c_3 = \frac{1}{M} \sum (x - \bar{x})^3$, the
       zero-lag third-order cumulant. It is blind to a *constant* bias: for a
-      window that straddles a step bias mu with biased fraction p,
-      kappa3 = p (1-p) (1-2p) mu^3, so it reacts to the onset transient,
-      vanishes at p = 1/2 and once the window is fully biased.
-    * ``moment = "raw"``: c3 = (1/M) sum x^3, which also sees a constant bias
-      (mu^3 + 3 mu).
+      window that straddles a step bias $\mu$ with biased fraction $p$,
+      $\kappa_3 = p (1-p) (1-2p) \mu^3$, so it reacts to the onset transient,
+      vanishes at $p = 1/2$ and once the window is fully biased.
+    * ``moment = "raw"``: $c_3 = \frac{1}{M} \sum x^3$, which also sees a constant bias
+      ($\mu^3 + 3 \mu$).
     * ``moment = "lagged"``: the paper's Steps 1-2 (sec. 3). Step 1 de-means
-      each sample by the mean of the M samples *before* it (:func:`lagged_deviation`),
-      x̃(k) = x(k) − x̄(k); Step 2, eq. (9):
-      ĉ⁽ⁱ⁾ = (1/M) Σ_{k=i−M}^{i−1} x̃³(k).
+      each sample by the mean of the $M$ samples *before* it (:func:`lagged_deviation`),
+      $\tilde{x}(k) = x(k) - \bar{x}(k)$; Step 2, eq. (9),
+      $\hat{c}_{3x}^{(i)} = \frac{1}{M} \sum_{k=i-M}^{i-1} \tilde{x}^3(k)$.
       A turn's bias, a ramp then a near-constant level in the innovation, is
       not removed by a lagged mean while it grows, so this moment is not blind
       to it the way the same-window centring is. Time index: the paper's
-      window for "sample i" is the M samples i−M .. i−1; here the statistic
-      at step k is the one whose window ends at k (the paper's i = k + 1),
-      i.e. the decision made when sample k arrives, as Step 5 describes
+      window for "sample $i$" is the $M$ samples $i-M, \dots, i-1$; here the statistic
+      at step $k$ is the one whose window ends at $k$ (the paper's $i = k + 1$),
+      i.e. the decision made when sample $k$ arrives, as Step 5 describes
       ("当第 i+1 个观测数据到来时, 用最新的 M 个观测数据重复步骤1~4", when
-      sample i+1 arrives, repeat Steps 1-4 on the latest M samples). x̃(k)
-      for k < M uses x̄(M), the mean of x(0..M−1), known at step M−1, so the
-      first window is complete, without look-ahead, at step M−1: the
+      sample $i+1$ arrives, repeat Steps 1-4 on the latest $M$ samples). $\tilde{x}(k)$
+      for $k < M$ uses $\bar{x}(M)$, the mean of $x(0), \dots, x(M-1)$, known at step $M-1$, so the
+      first window is complete, without look-ahead, at step $M-1$: the
       statistic is zero before it and ``valid_from = M − 1``.
 
-    Variance V of the normalisation:
+    Variance $V$ of the normalisation:
 
     * ``variance = "model"`` (default): the exact null variance below
       (centred and raw only; the lagged moment's windows overlap the means
       they are de-meaned by, so it has no simple closed form);
     * ``variance = "sample"``: the paper's Step 3, eq. (10), the sample
-      variance of the cubed values over the same window,
-      σ²(ĉ⁽ⁱ⁾) ≈ (1/M) Σ_{k=i−M}^{i−1} (x̃³(k) − ĉ⁽ⁱ⁾)² (for "centred" the
-      cubes are of x − the window mean, for "raw" of x).
+      variance of the cubed values over the same window (for "centred" the
+      cubes are of $x$ minus the window mean, for "raw" of $x$):
 
-    Normalised statistic T_i = c3^2 / V:
+    $$
+    \sigma^2(\hat{c}_{3x}^{(i)}) \approx \frac{1}{M} \sum_{k=i-M}^{i-1}
+        \left(\tilde{x}^3(k) - \hat{c}_{3x}^{(i)}\right)^2 \qquad (10)
+    $$
 
-    * ``"consistent"`` (default): V = Var(c3) under the null, exactly
-      6 (M-1)(M-2) / M^3 (centred) or 15 / M (raw), so T_i ~ chi2(1)
-      asymptotically in M; with the sample variance, V = σ̂² / M
-      (T_i = M ĉ² / σ̂²).
+    Normalised statistic $T_i = c_3^2 / V$:
+
+    * ``"consistent"`` (default): $V = \operatorname{Var}(c_3)$ under the null, exactly
+      $6 (M-1)(M-2) / M^3$ (centred) or $15 / M$ (raw), so $T_i \sim \chi^2(1)$
+      asymptotically in $M$; with the sample variance, $V = \hat{\sigma}^2 / M$
+      ($T_i = M \hat{c}^2 / \hat{\sigma}^2$).
     * ``"paper"``: the normalisation as printed, eq. (11),
-      c̄⁽ⁱ⁾ = (ĉ⁽ⁱ⁾)² / σ²(ĉ⁽ⁱ⁾), with σ² the variance of x^3 (model: 15 raw,
-      6 (M-1)(M-2) / M^2 centred; sample: eq. 10), i.e. the consistent
-      statistic divided by M: M times too small for the chi2(1) test eq. (8)
-      compares it with. The nominal threshold is the same chi2 quantile for
+      $\bar{c}_{3x}^{(i)} = (\hat{c}_{3x}^{(i)})^2 / \sigma^2(\hat{c}_{3x}^{(i)})$, with $\sigma^2$ the
+      variance of $x^3$ (model: 15 raw, $6 (M-1)(M-2) / M^2$ centred; sample: eq. 10), i.e. the
+      consistent statistic divided by $M$: $M$ times too small for the $\chi^2(1)$ test eq. (8)
+      compares it with. The nominal threshold is the same $\chi^2$ quantile for
       both, as in the paper, so the calibration table shows the paper's
       miscalibration.
 
-    The paper works on the "观测数据" (observed data) x(k), a scalar sequence
+    The paper works on the "观测数据" (observed data) $x(k)$, a scalar sequence
     whose Gaussian part is the measurement noise; it does not say which
     sequence of a tracker that is. Every detector here works on the whitened
     innovation of the reference CV filter (:func:`models.kalman.innovations`),
     one sequence per measurement component, so the paper's scalar test runs
     per component and ``combine`` joins them.
 
-    Components are combined by ``"sum"`` (sum_i T_i ~ chi2(n_z), the whitened
-    components being independent) or ``"max"`` (max_i T_i against the
-    chi2(1) quantile at per-component level 1 - (1 - pfa)^(1/n_z)).
-    Before the window fills (k < M-1) the statistic uses the partial window
-    of L = k+1 samples with M replaced by L (zero where the centred variance
-    vanishes, L <= 2); ``valid_from = M - 1``. c3 of a non-Gaussian sum
-    converges slowly, so the chi2 law is only approximate at small M.
+    Components are combined by ``"sum"`` ($\sum_i T_i \sim \chi^2(n_z)$, the whitened
+    components being independent) or ``"max"`` ($\max_i T_i$ against the
+    $\chi^2(1)$ quantile at per-component level $1 - (1 - P_{fa})^{1/n_z}$).
+    Before the window fills ($k < M-1$) the statistic uses the partial window
+    of $L = k+1$ samples with $M$ replaced by $L$ (zero where the centred variance
+    vanishes, $L \le 2$); ``valid_from = M - 1``. $c_3$ of a non-Gaussian sum
+    converges slowly, so the $\chi^2$ law is only approximate at small $M$.
     """
 
     name = "cumulant"

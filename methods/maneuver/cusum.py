@@ -46,26 +46,28 @@ def reference_cusum(score: np.ndarray, drift: float) -> np.ndarray:
 
 @register_method
 class Cusum(InnovationDetector):
-    """Page's CUSUM on the normalised innovation squared (NIS) or on the GLR statistic, drift a parameter.
+    r"""Page's CUSUM on the normalised innovation squared (NIS) or on the GLR statistic, drift a parameter.
 
     Page (1954), "Continuous inspection schemes", Biometrika 41; for maneuvers,
     Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking and
-    Navigation* (2001), sec. 11.2. The score s_t is the NIS
-    nu_t' S_t^-1 nu_t of the scenario's reference filter (``score = "nis"``,
-    chi2(n_z) under a matched model, mean n_z) or the GLR statistic l(t) of
+    Navigation* (2001), sec. 11.2. The score $s_t$ is the NIS
+    $\nu_t' S_t^{-1} \nu_t$ of the scenario's reference filter (``score = "nis"``,
+    $\chi^2(n_z)$ under a matched model, mean $n_z$) or the GLR statistic $l(t)$ of
     :class:`methods.maneuver.glr.Glr` (``score = "glr"``, with its ``window`` and
-    ``jump``), and
+    ``jump``), and, with the drift $\delta$ (``drift``),
 
-        g_t = max(0, g_(t-1) + s_t - drift),   g_(-1) = 0
+    $$
+    g_t = \max(0,\ g_{t-1} + s_t - \delta), \qquad g_{-1} = 0
+    $$
 
     accumulates the excess of the score over the drift (:func:`page_cusum`). The
-    drift must exceed the score's mean under no maneuver (n_z for the NIS; the
-    GLR's depends on its window), else g grows without a maneuver; between that
+    drift must exceed the score's mean under no maneuver ($n_z$ for the NIS; the
+    GLR's depends on its window), else $g$ grows without a maneuver; between that
     mean and the score's mean under the maneuver one wants to see, it trades
-    delay against false alarms. g has no closed-form null law, so there is no
+    delay against false alarms. $g$ has no closed-form null law, so there is no
     nominal threshold: calibrate empirically (on null trials). ``valid_from`` is
-    the score's (0 for the NIS, M - 1 for the GLR). g starts at zero and reaches its
-    stationary law only after a few times (score spread / (drift - null mean))^2
+    the score's (0 for the NIS, $M - 1$ for the GLR). $g$ starts at zero and reaches its
+    stationary law only after a few times $(\text{score spread} / (\delta - \text{null mean}))^2$
     steps, so with a drift close to the null mean its early steps alarm less often
     than later ones (calibration pools them all); its alarms cluster in few trials.
     """

@@ -180,33 +180,35 @@ def reference_glr(model: LinearGaussianModel, z: np.ndarray, x0: np.ndarray, P0:
 
 @register_method
 class Glr(InnovationDetector):
-    """Generalized likelihood ratio (GLR) test for a jump in acceleration or velocity, onset in a window.
+    r"""Generalized likelihood ratio (GLR) test for a jump in acceleration or velocity, onset in a window.
 
     Willsky & Jones (1976), "A generalized likelihood ratio approach to the
     detection and estimation of jumps in linear systems", IEEE Trans. Automatic
     Control; Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to
     Tracking and Navigation* (2001), sec. 11.3. On the innovations of the
     scenario's reference filter (:func:`models.kalman.innovations`), the
-    hypothesis "a jump b (one value per measured component) in the target's
+    hypothesis "a jump $b$ (one value per measured component) in the target's
     acceleration (``jump = "acceleration"``) or velocity (``"velocity"``) with
-    onset theta" against "no jump": the log-likelihood ratio maximised over b is
-    d' C^-1 d / 2, with d = sum G' S^-1 nu and C = sum G' S^-1 G over the steps
-    since theta (:func:`glr_statistic`), G the innovation's response to a unit
-    jump, from the filter's gains (:func:`signatures`, the G(t; theta), F(t; theta)
+    onset $\theta$" against "no jump": the log-likelihood ratio maximised over $b$ is
+    $d' C^{-1} d / 2$, with $d = \sum G' S^{-1} \nu$ and $C = \sum G' S^{-1} G$ over the steps
+    since $\theta$ (:func:`glr_statistic`), $G$ the innovation's response to a unit
+    jump, from the filter's gains (:func:`signatures`, the $G(t; \theta)$, $F(t; \theta)$
     recursions, computed once per batch: they do not depend on the data). The
-    statistic is maximised over the ``window`` = M latest onsets:
+    statistic is maximised over the ``window`` = $M$ latest onsets:
 
-        l(t) = max_{t-M < theta <= t} d(t; theta)' C(t; theta)^-1 d(t; theta)
+    $$
+    l(t) = \max_{t-M < \theta \le t} d(t; \theta)'\, C(t; \theta)^{-1}\, d(t; \theta)
+    $$
 
-    Before the window fills (t < M - 1) the onsets are theta = 0 .. t;
-    ``valid_from = M - 1``. The maximising lag t - theta (the onset estimate) is
+    Before the window fills ($t < M - 1$) the onsets are $\theta = 0, \dots, t$;
+    ``valid_from = M - 1``. The maximising lag $t - \theta$ (the onset estimate) is
     the trace ``onset_lag``.
 
-    Nominal threshold: for each onset, d' C^-1 d ~ chi2(n_z) exactly under a
-    matched model (d is Gaussian with covariance C); the maximum over the M
-    onsets is thresholded at the chi2(n_z) quantile of level pfa / M
+    Nominal threshold: for each onset, $d' C^{-1} d \sim \chi^2(n_z)$ exactly under a
+    matched model ($d$ is Gaussian with covariance $C$); the maximum over the $M$
+    onsets is thresholded at the $\chi^2(n_z)$ quantile of level $P_{fa} / M$
     (Bonferroni). The onsets' statistics are strongly correlated, so this is an
-    approximation that is conservative (the false-alarm rate is at most pfa,
+    approximation that is conservative (the false-alarm rate is at most $P_{fa}$,
     usually well below): calibrate empirically for a comparison at equal Pfa.
     """
 

@@ -40,22 +40,22 @@ def fading_valid_from(delta: float) -> int:
 
 @register_method
 class Innovation(InnovationDetector):
-    """Normalised innovation squared (NIS) chi-square test, sliding-window or fading-memory.
+    r"""Normalised innovation squared (NIS) chi-square test, sliding-window or fading-memory.
 
     Bar-Shalom, Li & Kirubarajan (2001), sec. 11.2.2. For the scenario's
     reference filter (:func:`models.kalman.innovations`),
-    eps_k = nu_k' S_k^-1 nu_k ~ chi2(n_z) under a matched model, and the
+    $\epsilon_k = \nu_k' S_k^{-1} \nu_k \sim \chi^2(n_z)$ under a matched model, and the
     innovations are white, so:
 
-    * sliding window (``delta = 0``): sum of the last s = ``window`` values,
-      ~ chi2(s n_z). Before the window fills the partial sum is reported;
+    * sliding window (``delta = 0``): the sum of the last $s$ = ``window`` values,
+      $\sim \chi^2(s\, n_z)$. Before the window fills the partial sum is reported;
       ``valid_from = window - 1``.
-    * fading memory (``delta > 0``, ``window = 1``): e_k = delta e_{k-1} + eps_k,
-      mean n_z / (1 - delta), variance 2 n_z / (1 - delta^2). The nominal
-      threshold uses the moment match (1 + delta) e ~ chi2(n_z (1 + delta) /
-      (1 - delta)), which is approximate (its false-alarm rate runs above
+    * fading memory (``delta > 0``, ``window = 1``): $e_k = \delta e_{k-1} + \epsilon_k$,
+      mean $n_z / (1 - \delta)$, variance $2 n_z / (1 - \delta^2)$. The nominal
+      threshold uses the moment match $(1 + \delta)\, e \sim \chi^2\left(n_z \frac{1 + \delta}{1 - \delta}\right)$,
+      which is approximate (its false-alarm rate runs above
       nominal; calibrate empirically). ``valid_from`` is the first step at
-      which delta^(k+1) < 0.01 (the start-up deficit of the mean is < 1%).
+      which $\delta^{k+1} < 0.01$ (the start-up deficit of the mean is < 1%).
 
     Alarms of window statistics are correlated in time: the per-step Pfa is
     not the inverse of the mean run length.

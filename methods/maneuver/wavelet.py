@@ -257,7 +257,7 @@ def null_threshold(pfa: float, df: int, n_levels: int) -> float:
 
 @register_method
 class Wavelet(InnovationDetector):
-    """Multiresolution (wavelet) test of the whitened innovation at the coarse levels, after Hong.
+    r"""Multiresolution (wavelet) test of the whitened innovation at the coarse levels, after Hong.
 
     After L. Hong, "Multiresolutional filtering using wavelet transform", IEEE
     TAES 29(4), 1993, and "Multiresolutional multiple-model target tracking",
@@ -270,59 +270,64 @@ class Wavelet(InnovationDetector):
     applications", Lecture Notes in Statistics 103, 1995. PyWavelets does the
     transforms (:func:`causal_coefficients`).
 
-    Input: the whitened innovation x_k = L_k^-1 nu_k of the scenario's
-    reference filter (:func:`models.kalman.innovations`), i.i.d. N(0, I_m)
-    under the null. Each component is decomposed to level J = ``levels``
+    Input: the whitened innovation $x_k = L_k^{-1} \nu_k$ of the scenario's
+    reference filter (:func:`models.kalman.innovations`), i.i.d. $\mathcal{N}(0, I_m)$
+    under the null. Each component is decomposed to level $J$ = ``levels``
     with an orthonormal wavelet (``wavelet``; Haar by default). For Haar and
-    a block of L = 2^j samples ending at step k (pyramid A_0 = x,
-    A_j+1 = (A_j,older + A_j,newer)/sqrt 2, D_j+1 = (A_j,older - A_j,newer)/sqrt 2):
+    a block of $L = 2^j$ samples ending at step $k$ (pyramid $A_0 = x$,
+    $A_{j+1} = (A_{j,\text{older}} + A_{j,\text{newer}})/\sqrt{2}$,
+    $D_{j+1} = (A_{j,\text{older}} - A_{j,\text{newer}})/\sqrt{2}$):
 
-        A_j(k) = L^-1/2 sum_{t=k-L+1..k} x_t
-        D_j(k) = L^-1/2 (sum_{t=k-L+1..k-L/2} x_t - sum_{t=k-L/2+1..k} x_t)
+    $$
+    \begin{aligned}
+    A_j(k) &= L^{-1/2} \sum_{t=k-L+1}^{k} x_t, \\
+    D_j(k) &= L^{-1/2} \Big( \sum_{t=k-L+1}^{k-L/2} x_t - \sum_{t=k-L/2+1}^{k} x_t \Big)
+    \end{aligned}
+    $$
 
-    A step bias mu from inside the block with p biased samples gives
-    A_j = mu p / sqrt(L) (mu sqrt(L) for a fully biased block) and
-    |D_j| <= mu sqrt(L) / 2 (onset at the block midpoint; zero once the block
+    A step bias $\mu$ from inside the block with $p$ biased samples gives
+    $A_j = \mu p / \sqrt{L}$ ($\mu \sqrt{L}$ for a fully biased block) and
+    $|D_j| \le \mu \sqrt{L} / 2$ (onset at the block midpoint; zero once the block
     is fully biased): the approximation sees the bias, the detail the onset.
 
     Causal, two modes (``mode``):
 
-    * ``decimated`` (Hong's pyramid, default): level-j coefficients are those
-      of consecutive non-overlapping blocks of 2^j samples (for Haar); one
-      becomes available at the end of its block, k = b 2^j - 1, and is held
+    * ``decimated`` (Hong's pyramid, default): level-$j$ coefficients are those
+      of consecutive non-overlapping blocks of $2^j$ samples (for Haar); one
+      becomes available at the end of its block, $k = b\, 2^j - 1$, and is held
       until the next block ends. The wait for the block end is the method's
-      inherent delay: (2^j - 1)/2 steps on average over the onset phase, on
+      inherent delay: $(2^j - 1)/2$ steps on average over the onset phase, on
       top of the time the bias needs to build up. For a longer orthogonal
-      filter (length F: dbN, symN, coifN) a level-j coefficient spans
-      (F - 1)(2^j - 1) + 1 samples, so consecutive supports overlap; the
-      coefficients are still released every 2^j steps (at the same block
+      filter (length $F$: dbN, symN, coifN) a level-$j$ coefficient spans
+      $(F - 1)(2^j - 1) + 1$ samples, so consecutive supports overlap; the
+      coefficients are still released every $2^j$ steps (at the same block
       ends), each at the end of its support, and still form an orthonormal
       set (the decimated DWT), but the delay grows with the support.
     * ``sliding``: the undecimated (stationary) transform at every step on the
-      last support (2^j for Haar) samples: shorter delay, coefficients
+      last support ($2^j$ for Haar) samples: shorter delay, coefficients
       correlated over time.
 
-    Statistic at step k (:func:`wavelet_statistic`): T(k) = max over the
-    tested levels j = J - coarsest + 1 .. J (``coarsest`` coarsest levels; by
-    default J-1 and J) of T_j(k) = sum over components i of A_j,i(k)^2 and/or
-    D_j,i(k)^2 (``coefficients``). Coefficients of an orthonormal transform
-    of white N(0, 1) noise are i.i.d. N(0, 1) and A_j, D_j of the same
-    block are orthogonal, so T_j(k) ~ chi2(df) exactly under the null, with
-    df = m (one kind) or 2m (``both``). Nominal threshold: Sidak across the
-    tested levels, chi2.isf(alpha, df) with alpha = 1 - (1 - pfa)^(1/c),
-    c = ``coarsest``. The levels are correlated (nested blocks: A_J is
-    (A_J-1,older + A_J-1,newer)/sqrt 2), so this is approximate; since each
-    event {T_j <= t} is a symmetric convex set of Gaussian coefficients, the
-    Gaussian correlation inequality (Royen 2014) makes it conservative (true
-    per-step Pfa <= pfa). The harness's empirical calibration corrects it.
+    Statistic at step $k$ (:func:`wavelet_statistic`): $T(k) = \max_j T_j(k)$ over the
+    tested levels $j = J - c + 1, \dots, J$ ($c$ = ``coarsest`` coarsest levels; by
+    default $J-1$ and $J$), $T_j(k) = \sum_i A_{j,i}(k)^2$ and/or $\sum_i D_{j,i}(k)^2$
+    over the components $i$ (``coefficients``). Coefficients of an orthonormal transform
+    of white $\mathcal{N}(0, 1)$ noise are i.i.d. $\mathcal{N}(0, 1)$ and $A_j$, $D_j$ of the same
+    block are orthogonal, so $T_j(k) \sim \chi^2(\mathrm{df})$ exactly under the null, with
+    $\mathrm{df} = m$ (one kind) or $2m$ (``both``). Nominal threshold: Šidák across the
+    tested levels, ``chi2.isf(alpha, df)`` with $\alpha = 1 - (1 - P_{fa})^{1/c}$. The levels
+    are correlated (nested blocks: $A_J = (A_{J-1,\text{older}} + A_{J-1,\text{newer}})/\sqrt{2}$),
+    so this is approximate; since each event $\{T_j \le t\}$ is a symmetric convex set
+    of Gaussian coefficients, the Gaussian correlation inequality (Royen 2014) makes it
+    conservative (true per-step Pfa $\le P_{fa}$). The harness's empirical calibration
+    corrects it.
 
     ``valid_from``: the first step at which every tested level has a complete
-    block (decimated) or window (sliding): 2^J - 1 for Haar, later for longer
+    block (decimated) or window (sliding): $2^J - 1$ for Haar, later for longer
     filters (:func:`valid_from`). The statistic is 0 before it (never NaN),
     and each level trace is 0 before that level's first coefficient. A
     configuration whose ``valid_from`` is not before the scenario's last step
     raises ConfigError naming ``levels``. Traces: ``innovation_i`` (whitened
-    components) and ``level_j`` (T_j of each tested level).
+    components) and ``level_j`` ($T_j$ of each tested level).
     """
 
     name = "wavelet"

@@ -93,7 +93,7 @@ class GmPhdParams:
 
 @register_method
 class StoneSoupGmPhd(StoneSoupPeer):
-    """Stone Soup's GM-PHD filter (PHDUpdater, GaussianMixtureReducer) with the UKF and labelled components, as a tracker (peer of jpda-ukf; extra [peers]).
+    r"""Stone Soup's GM-PHD filter (PHDUpdater, GaussianMixtureReducer) with the UKF and labelled components, as a tracker (peer of jpda-ukf; extra [peers]).
 
     The Gaussian-mixture PHD filter of Vo & Ma, "The Gaussian mixture
     probability hypothesis density filter" (IEEE Trans. Signal Processing 54(11),
@@ -101,11 +101,11 @@ class StoneSoupGmPhd(StoneSoupPeer):
     multiple target tracker" (FUSION 2006) as identities, all from Stone Soup:
     the scene's CV transition and range / azimuth / radial velocity
     measurement (:class:`methods.multitarget.stonesoup_peer.HFSWRMeasurement`) under
-    ``UnscentedKalmanPredictor`` / ``UnscentedKalmanUpdater`` (the same α, β, κ
+    ``UnscentedKalmanPredictor`` / ``UnscentedKalmanUpdater`` (the same $\alpha$, $\beta$, $\kappa$
     as ``jpda-ukf``), ``GaussianMixtureHypothesiser`` over a
-    ``DistanceHypothesiser`` (Mahalanobis gate √γ, γ the χ²(3) quantile of
-    P_G), ``PHDUpdater`` (or ``LCCUpdater``) with the scene's P_D and clutter
-    density λ and the parameter P_S, and ``GaussianMixtureReducer`` (prune,
+    ``DistanceHypothesiser`` (Mahalanobis gate $\sqrt{\gamma}$, $\gamma$ the $\chi^2(3)$ quantile of
+    $P_G$), ``PHDUpdater`` (or ``LCCUpdater``) with the scene's $P_D$ and clutter
+    density $\lambda$ and the parameter $P_S$, and ``GaussianMixtureReducer`` (prune,
     merge, cap). The scan loop is that of Stone Soup's
     ``PointProcessMultiTargetTracker.__next__`` with one change: its single
     static birth component cannot cover a 100 km sector in polar coordinates
@@ -113,13 +113,13 @@ class StoneSoupGmPhd(StoneSoupPeer):
     Clark, Vo & Vo, "Adaptive target birth intensity for PHD and CPHD filters",
     IEEE Trans. AES 48(2), 2012): one component per plot of the last scan that
     no extracted component's gate held, its position the plot's and velocity
-    the radial velocity along the line of sight with a N(0, v_max²) prior per
+    the radial velocity along the line of sight with a $\mathcal{N}(0, v_{\max}^2)$ prior per
     axis — Stone Soup's ``MultiMeasurementInitiator`` prior of the JPDA peer —
     each weighted ``birth_rate`` / (number of such plots).
-    With ``births = "adaptive"`` (the default) every plot z of the last scan
-    is a birth, weighted ``birth_rate`` (1 − ρ(z)) / Σ (1 − ρ), ρ(z) the
-    updated weight of the mixture's own components on z, the probability that
-    z came from a target already in the mixture (Ristic et al. 2012's
+    With ``births = "adaptive"`` (the default) every plot $z$ of the last scan
+    is a birth, weighted ``birth_rate`` $\times\, (1 - \rho(z)) / \sum (1 - \rho)$, $\rho(z)$ the
+    updated weight of the mixture's own components on $z$, the probability that
+    $z$ came from a target already in the mixture (Ristic et al. 2012's
     measurement-driven birth): a plot a tentative component explains gives
     little birth mass, an unexplained one most of it. The birth rate is the
     same at every scan and set without the scene's arrivals, so targets may

@@ -50,31 +50,31 @@ class MfaParams(TrackerParams):
 
 @register_method
 class StoneSoupMfa(InitiatedPeer):
-    """Stone Soup's multi-frame assignment MHT (MFADataAssociator, MFAHypothesiser) with the UKF and MultiMeasurementInitiator (peer of jpda-ukf; extra [peers]).
+    r"""Stone Soup's multi-frame assignment MHT (MFADataAssociator, MFAHypothesiser) with the UKF and MultiMeasurementInitiator (peer of jpda-ukf; extra [peers]).
 
     A track-oriented multiple hypothesis tracker: each confirmed track holds
     a tree of hypotheses (its Gaussian-mixture components, tagged with the
     plot index each one took at each scan, 0 for a miss), and the global
-    hypothesis over the last W scans (``slide_window``) is the assignment of
+    hypothesis over the last $W$ scans (``slide_window``) is the assignment of
     one leaf per track, every plot used at most once per scan, of least
     total cost. It is Stone Soup's ``MFADataAssociator``, the multi-scan
     assignment of Xia, Granström, Svensson, García-Fernández & Williams,
     "Multiscan implementation of the trajectory Poisson multi-Bernoulli
     mixture filter" (J. Adv. Information Fusion 14(2), 2019): the
-    W-dimensional assignment is relaxed by Lagrange multipliers into W
+    $W$-dimensional assignment is relaxed by Lagrange multipliers into $W$
     single-scan assignments (``linear_sum_assignment``), the multipliers move
     by subgradient steps, and where the single-scan solutions disagree a
     primal solution is completed by an integer programme (SCIP through
     OR-Tools), until they agree, the duality gap is small or the primal cost
     stops falling (Stone Soup's limits, at most 10 iterations); then every
-    hypothesis whose association W − 1 scans back differs from the
+    hypothesis whose association $W - 1$ scans back differs from the
     best global hypothesis's is pruned (N-scan pruning). Stone Soup's other
     MHT-family tracker, ``PMHTTracker`` (Streit & Luginbuhl's probabilistic
     MHT), is not used: it keeps a fixed number of targets from given priors
     (no track birth) and assigns plots softly by EM over a batch, so it is
     neither track-oriented nor able to follow ships that appear and leave.
     At this preset's scale (6 ships, up to 30 clutter plots per scan, small
-    gates) the hypotheses per track stay few with W = 3, bounded anyway by
+    gates) the hypotheses per track stay few with $W = 3$, bounded anyway by
     ``max_hypotheses``.
 
     The scan, in the order of the code (:class:`methods.multitarget.stonesoup_peer.InitiatedPeer`):
@@ -84,11 +84,11 @@ class StoneSoupMfa(InitiatedPeer):
        ``normalise=False``, so a hypothesis' weight is the track-score
        likelihood ratio of track-oriented MHT (Blackman, "Multiple hypothesis
        tracking for multiple target tracking", IEEE AESM 19(1), 2004):
-       1 − P_D P_G for a miss, P_D N(z; ẑ, S) / λ for a plot inside the gate
-       (γ the χ²(3) quantile of P_G). ``MFAHypothesiser`` multiplies it by the
+       $1 - P_D P_G$ for a miss, $P_D\, \mathcal{N}(z; \hat{z}, S) / \lambda$ for a plot inside the gate
+       ($\gamma$ the $\chi^2(3)$ quantile of $P_G$). ``MFAHypothesiser`` multiplies it by the
        component's weight and appends the plot's index to the tag;
     2. ``MFADataAssociator`` solves the window's assignment with cost
-       −log(weight) per leaf and a cost 0 for a plot being clutter, and
+       $-\log(\text{weight})$ per leaf and a cost 0 for a plot being clutter, and
        returns each track's hypotheses that survive N-scan pruning;
     3. :meth:`_update`: the ``max_hypotheses`` heaviest survivors are updated by
        the UKF (a miss keeps its prediction) and form the track's new mixture;
@@ -100,7 +100,7 @@ class StoneSoupMfa(InitiatedPeer):
        a holding track it confirms starts a one-component mixture at its
        last state (:meth:`_adopt`), so its hypothesis tree starts there.
 
-    The same models, UKF (α, β, κ), gate probability, initiator and
+    The same models, UKF ($\alpha$, $\beta$, $\kappa$), gate probability, initiator and
     termination as ``stonesoup-jpda``, so the two peers differ in the
     association alone (JPDA's soft single-scan update against the MHT's hard
     multi-scan decision). Parameters read by our own trackers alone

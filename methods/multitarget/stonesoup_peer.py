@@ -133,7 +133,7 @@ class StoneSoupPeer(Method):
 
 
 class InitiatedPeer(StoneSoupPeer):
-    """The peers that start tracks as ``stonesoup-jpda`` does and end them by ``jpda-ukf``'s rules.
+    r"""The peers that start tracks as ``stonesoup-jpda`` does and end them by ``jpda-ukf``'s rules.
 
     The scan loop of the track-based Stone Soup peers at equal footing with
     ``jpda-ukf`` (:mod:`methods.multitarget.trackers`): the same models and UKF
@@ -146,16 +146,16 @@ class InitiatedPeer(StoneSoupPeer):
     **Initiation**: Stone Soup's closest to M/N is ``MultiMeasurementInitiator``:
     every plot no confirmed track's gate holds starts a holding track
     (position from the plot, velocity from the plot's radial velocity along the
-    line of sight plus a prior std of v_max per axis); holding tracks are
+    line of sight plus a prior std of $v_{\max}$ per axis); holding tracks are
     associated by ``GNNWith2DAssignment`` on the Mahalanobis distance (gate
-    √γ) and updated by the UKF; a holding track with M + 2 plots (the two
-    initial plots and M more) is confirmed; one without a plot for N − M + 1
+    $\sqrt{\gamma}$) and updated by the UKF; a holding track with $M + 2$ plots (the two
+    initial plots and M more) is confirmed; one without a plot for $N - M + 1$
     consecutive scans (``UpdateTimeStepsDeleter``) is dropped. So it is
-    "M + 2 plots before N − M + 1 consecutive misses", not "M of the N frames
+    "$M + 2$ plots before $N - M + 1$ consecutive misses", not "$M$ of the $N$ frames
     after the second plot": close, not identical (no N-frame deadline, no
-    speed gate on the second plot beyond the prior's v_max).
-    **Termination**: the same three rules as ``jpda-ukf`` (M_t of the last
-    N_t scans without a plot in the gate, the position std bound, the speed
+    speed gate on the second plot beyond the prior's $v_{\max}$).
+    **Termination**: the same three rules as ``jpda-ukf`` ($M_t$ of the last
+    $N_t$ scans without a plot in the gate, the position std bound, the speed
     bound), evaluated here on Stone Soup's tracks (Stone Soup has no
     "M of N" deleter). Outputs: confirmed tracks (2), terminated at their last
     scan (3), holding tracks with at least two plots as tentative (1).
@@ -249,15 +249,15 @@ class InitiatedPeer(StoneSoupPeer):
 
 @register_method
 class StoneSoupJpda(InitiatedPeer):
-    """Stone Soup's JPDA with UnscentedKalmanUpdater and MultiMeasurementInitiator (peer of jpda-ukf; extra [peers]).
+    r"""Stone Soup's JPDA with UnscentedKalmanUpdater and MultiMeasurementInitiator (peer of jpda-ukf; extra [peers]).
 
     The same models and parameters as ``jpda-ukf`` (:mod:`methods.multitarget.trackers`):
     the CV transition and discrete white-noise Q of :mod:`models.hfswr`
     (:class:`HFSWRTransition`), the range / azimuth / radial velocity
-    measurement with R = diag(σ²) (:class:`HFSWRMeasurement`),
+    measurement with $R = \operatorname{diag}(\sigma^2)$ (:class:`HFSWRMeasurement`),
     ``UnscentedKalmanPredictor`` / ``UnscentedKalmanUpdater`` with the same
-    α, β, κ, ``PDAHypothesiser`` (clutter density λ, P_D, gate probability
-    P_G) under ``JPDA`` (which enumerates the joint events of *all* tracks of
+    $\alpha$, $\beta$, $\kappa$, ``PDAHypothesiser`` (clutter density $\lambda$, $P_D$, gate probability
+    $P_G$) under ``JPDA`` (which enumerates the joint events of *all* tracks of
     a scan at once: no clustering, so its cost grows exponentially with the
     number of tracks), the JPDA mixture reduced by ``gm_reduce_single`` (eqs.
     6.73–6.74). Initiation and termination: :class:`InitiatedPeer`.

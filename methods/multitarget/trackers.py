@@ -68,31 +68,31 @@ class _MultiTargetTracker(Method):
 
 @register_method
 class JpdaUkf(_MultiTargetTracker):
-    """JPDA with a UKF, M/N initiation and three termination rules (the HFSWR tracking chapter's chain).
+    r"""JPDA with a UKF, M/N initiation and three termination rules (the HFSWR tracking chapter's chain).
 
     After "目标检测与跟踪方法 (Target detection and tracking methods),
     海洋遥感技术应用", section 2(2): M/N track initiation (every unassociated plot
     a track head, a speed-and-noise gate, two plots initialise a UKF, M/N
     confirmation at frame N + 2), maintenance by JPDA (validation matrix,
-    feasible joint events, Poisson clutter of density λ, marginal association
+    feasible joint events, Poisson clutter of density $\lambda$, marginal association
     probabilities weighting the UKF updates, eqs. 6.72–6.74) and a UKF
-    (eqs. 6.75 onwards; :mod:`models.ukf`), termination when M_t of the last
-    N_t frames have no plot, when the position covariance exceeds a bound, or
+    (eqs. 6.75 onwards; :mod:`models.ukf`), termination when $M_t$ of the last
+    $N_t$ frames have no plot, when the position covariance exceeds a bound, or
     when the speed is impossible. The scan loop, step by step:
     :mod:`methods.multitarget.kernels`; the joint events: :mod:`methods.multitarget.jpda`
     (exact up to ``max_cluster_size`` tracks × plots, per-track PDA beyond,
     counted in ``last_trace["pda_fallback_clusters"]``).
 
-    The tracker is told what a scenario's scene states: Pd, λ, the noise
+    The tracker is told what a scenario's scene states: $P_D$, $\lambda$, the noise
     stds, the scan period, the sensor, the targets' speed bounds and process
     noise (docs/architecture.md, 'Scenes'). Every trial runs as one compiled
     call; the outputs hold tentative (1), confirmed (2) and terminated (3)
-    tracks, J = the most table slots a trial of the batch used.
+    tracks, $J$ = the most table slots a trial of the batch used.
 
     Our ablations, not the chapter's: ``filter = "ekf"`` is JPDA with the EKF
     of ``gnn-ekf`` (association and filter then separate against
     ``gnn-ekf`` with ``filter = "ukf"``); ``confirmation = "kth-plot"``
-    confirms on the (M + 2)-th plot with no frame deadline, the rule of
+    confirms on the $(M + 2)$-th plot with no frame deadline, the rule of
     Stone Soup's ``MultiMeasurementInitiator``.
     """
 
@@ -124,13 +124,13 @@ class JpdaUkf(_MultiTargetTracker):
 
 @register_method
 class GnnEkf(_MultiTargetTracker):
-    """Global nearest neighbour (linear_sum_assignment on the gated statistical distance) with an EKF; the same initiation and termination.
+    r"""Global nearest neighbour (linear_sum_assignment on the gated statistical distance) with an EKF; the same initiation and termination.
 
     The baseline of ``jpda-ukf``: the same scan loop (:mod:`methods.multitarget.kernels`)
-    with an EKF (H = ∂h/∂x of :func:`models.hfswr.measure_jacobian` at the
+    with an EKF ($H = \partial h / \partial x$ of :func:`models.hfswr.measure_jacobian` at the
     prediction) and, at each association stage (confirmed tracks, then
     tentative ones on the plots left), the assignment of plots to tracks that
-    minimises the sum of squared statistical distances ν' S⁻¹ ν over the gated
+    minimises the sum of squared statistical distances $\nu' S^{-1} \nu$ over the gated
     pairs (``scipy.optimize.linear_sum_assignment``; an ungated pair costs more
     than leaving the track without a plot). The assignment runs in Python
     between two compiled calls per stage and scan. ``filter = "ukf"`` (our

@@ -96,25 +96,28 @@ def _outputs(z: np.ndarray):
 
 @register_method
 class DpTbd(Method):
-    """Tonissen-Evans DP track-before-detect: cell merit plus the best previous merit in the window, backtracking.
+    r"""Tonissen-Evans DP track-before-detect: cell merit plus the best previous merit in the window, backtracking.
 
-    Recursion (frames k = 0..K-1, cells x = (row, col)):
-    I_0(x) = z_0(x); I_k(x) = z_k(x) + max_(d in W) I_(k-1)(x - d), with W the
-    box of radius q = ceil(max_speed_m_s T / cell_m) (:func:`window_radius`;
-    predecessors outside the grid are not candidates), backpointers
-    psi_k(x) = the first maximising d in the window numbering. Score =
-    max_x I_(K-1)(x) (the scene statistic the harness thresholds at a
-    per-scene Pfa); track: from the
-    first argmax at the last frame, x_(k-1) = x_k - psi_k(x_k); value map =
-    I_(K-1). The merit is the raw frame value (the classic merit for a
-    non-fluctuating target in Gaussian noise, where the LLR is affine in z);
-    under correlated noise it ignores the correlation, which is what
-    ``dp-tbd-mf`` exploits.
+    Recursion (frames $k = 0, \dots, K-1$, cells $x = (\text{row}, \text{col})$):
+
+    $$
+    I_0(x) = z_0(x), \qquad I_k(x) = z_k(x) + \max_{d \in W} I_{k-1}(x - d),
+    $$
+
+    with $W$ the box of radius $q = \lceil v_{\max} T / \Delta \rceil$ ($v_{\max}$: ``max_speed_m_s``,
+    $\Delta$: ``cell_m``; :func:`window_radius`; predecessors outside the grid are not
+    candidates), backpointers $\psi_k(x)$ = the first maximising $d$ in the window
+    numbering. Score $= \max_x I_{K-1}(x)$ (the scene statistic the harness thresholds
+    at a per-scene Pfa); track: from the first argmax at the last frame,
+    $x_{k-1} = x_k - \psi_k(x_k)$; value map $= I_{K-1}$. The merit is the raw frame
+    value (the classic merit for a non-fluctuating target in Gaussian noise, where the
+    LLR is affine in $z$); under correlated noise it ignores the correlation, which is
+    what ``dp-tbd-mf`` exploits.
 
     Default ``max_speed_m_s`` = 150 m/s: the paper's target moves at 141 m/s
     (1.41 cells per frame in the turn), and at 100 m cells its cell index
     jumps by 2 along one axis on two transitions of the turn (frames 13 and
-    17); q = 2 (a 5 x 5 window) keeps the whole true cell path admissible.
+    17); $q = 2$ (a 5 x 5 window) keeps the whole true cell path admissible.
     The classic 3 x 3 window is ``max_speed_m_s = 100``.
 
     **Pre-whitening** (``prewhiten = true``, an ablation, not Tonissen's
@@ -122,10 +125,10 @@ class DpTbd(Method):
     innovations under the scene's AR model (:func:`prewhiten`), unit
     variance and white under H0. The merit is then the sum along the path
     of whitened values; the target's own contribution is whitened too: a
-    target entering a new cell adds s / sigma_w there (10.4 dB more than s
+    target entering a new cell adds $s / \sigma_w$ there (10.4 dB more than $s$
     for the default AR(3)), but while it stays in a cell its residual is
-    s (1 + a1 + ... ) / sigma_w, and the cells it left carry the echoes
-    a_i s / sigma_w for i frames. The recursion is unchanged, so the merit
+    $s (1 + a_1 + \dots) / \sigma_w$, and the cells it left carry the echoes
+    $a_i s / \sigma_w$ for $i$ frames. The recursion is unchanged, so the merit
     is no longer a likelihood ratio for a moving target: it is the classic
     merit on the innovations, which measures what per-cell whitening alone
     buys.
@@ -133,10 +136,10 @@ class DpTbd(Method):
     Implementation: a numba kernel (:func:`methods.tbd.kernels.dp_tbd`),
     batched over trials (one at a time inside, so memory does not grow with
     n), float32 merits. The forward pass computes maxima only: the box
-    maximum is separable (along columns, then along rows: 2 (2q + 1) maxima
-    per cell instead of (2q + 1)^2) and keeps I_k of every frame (K H W
-    float32, 20 MB at 500 x 500 x 20); backtracking recomputes psi_k at the
-    track's cell from I_(k-1), with the first-maximum tie rule. Score, track
+    maximum is separable (along columns, then along rows: $2 (2q + 1)$ maxima
+    per cell instead of $(2q + 1)^2$) and keeps $I_k$ of every frame ($K H W$
+    float32, 20 MB at 500 x 500 x 20); backtracking recomputes $\psi_k$ at the
+    track's cell from $I_{k-1}$, with the first-maximum tie rule. Score, track
     and value map are those of the stacked-argmax reference
     (:mod:`methods.tbd.reference`) and of the original max + argmax kernel
     (``tests/tbd_kernels_oracle.py``), bit for bit.
@@ -387,132 +390,154 @@ def conditional_llr_problem(scenario_params) -> str | None:
 class DpTbdMf(Method):
     r"""Multi-frame DP-TBD: (cell, previous cell) state, conditional LLR of the correlated noise plus a turn-angle prior.
 
-    **Model.** Frame k (k = 0..K-1) holds z_k(x) = n_k(x) + s 1[x = x_k] on
-    cells x, the target at x_k. The noise is independent across cells and, in
+    **Model.** Frame $k$ ($k = 0, \dots, K-1$) holds $z_k(x) = n_k(x) + s\, 1[x = x_k]$ on
+    cells $x$, the target at $x_k$. The noise is independent across cells and, in
     each cell, a zero-mean stationary Gaussian process over frames with
-    autocovariance gamma(h) (``scene.noise_autocovariance``). The amplitude
-    s is not known to the method: it assumes s = sigma 10^(design_snr_db/20)
-    (sigma = ``scene.noise_std``). A mismatch costs power only; the
+    autocovariance $\gamma(h)$ (``scene.noise_autocovariance``). The amplitude
+    $s$ is not known to the method: it assumes $s = \sigma\, 10^{D/20}$
+    ($D$ = ``design_snr_db``, $\sigma$ = ``scene.noise_std``). A mismatch costs power only; the
     threshold is calibrated on null scenes, so the false-alarm rate holds.
 
-    **State.** (x_k, d_k), d_k = x_k - x_(k-1) in the box window of radius q
+    **State.** $(x_k, d_k)$, $d_k = x_k - x_{k-1}$ in the box window of radius $q$
     (:func:`window_radius`), i.e. the pair (current cell, previous cell).
 
     **Likelihood term.** By the chain rule, the path's log-likelihood ratio
     against noise alone is a sum over frames of conditional LLRs. "Along the
-    path" the method scores, at frame k, the cell the path occupies, x_k, and
+    path" the method scores, at frame $k$, the cell the path occupies, $x_k$, and
     conditions its value on the *same cell's* two previous frames: the noise
     is independent across cells, so values of other cells (including the
-    path's own earlier cells x_(k-1), x_(k-2)) carry no information about
-    n_k(x_k) (conditioning on them gives beta = 0 and collapses to the white
-    LLR); what the path decides is whether the target was in x_k at k-1 and
-    k-2. Write e1 = 1[x_(k-1) = x_k] = 1[d_k = 0] and e2 = 1[x_(k-2) = x_k] =
-    1[d_k + d_(k-1) = 0]. For (n_k, n_(k-1), n_(k-2)) of one cell the
-    covariance is the Toeplitz matrix of (gamma0, gamma1, gamma2), so
+    path's own earlier cells $x_{k-1}$, $x_{k-2}$) carry no information about
+    $n_k(x_k)$ (conditioning on them gives $\beta = 0$ and collapses to the white
+    LLR); what the path decides is whether the target was in $x_k$ at $k-1$ and
+    $k-2$. Write $e_1 = 1[x_{k-1} = x_k] = 1[d_k = 0]$ and $e_2 = 1[x_{k-2} = x_k] =
+    1[d_k + d_{k-1} = 0]$. For $(n_k, n_{k-1}, n_{k-2})$ of one cell the
+    covariance is the Toeplitz matrix of $(\gamma_0, \gamma_1, \gamma_2)$, so
 
-        E[n_k | n_(k-1), n_(k-2)] = beta1 n_(k-1) + beta2 n_(k-2),
-        (beta1, beta2)' = [[gamma0, gamma1], [gamma1, gamma0]]^-1 (gamma1, gamma2)',
-        sigma_c^2 = gamma0 - beta1 gamma1 - beta2 gamma2.
+    $$
+    \begin{aligned}
+    E[n_k \mid n_{k-1}, n_{k-2}] &= \beta_1 n_{k-1} + \beta_2 n_{k-2}, \\
+    \begin{bmatrix} \beta_1 \\ \beta_2 \end{bmatrix} &=
+      \begin{bmatrix} \gamma_0 & \gamma_1 \\ \gamma_1 & \gamma_0 \end{bmatrix}^{-1}
+      \begin{bmatrix} \gamma_1 \\ \gamma_2 \end{bmatrix}, \\
+    \sigma_c^2 &= \gamma_0 - \beta_1 \gamma_1 - \beta_2 \gamma_2.
+    \end{aligned}
+    $$
 
-    Given z_(k-1)(x_k), z_(k-2)(x_k), the value z_k(x_k) is Gaussian with
-    variance sigma_c^2 and mean beta1 z_(k-1) + beta2 z_(k-2) under H0 (no
-    target in the cell), s + beta1 (z_(k-1) - s e1) + beta2 (z_(k-2) - s e2)
+    Given $z_{k-1}(x_k)$, $z_{k-2}(x_k)$, the value $z_k(x_k)$ is Gaussian with
+    variance $\sigma_c^2$ and mean $\beta_1 z_{k-1} + \beta_2 z_{k-2}$ under H0 (no
+    target in the cell), $s + \beta_1 (z_{k-1} - s e_1) + \beta_2 (z_{k-2} - s e_2)$
     under the path hypothesis. With the residual
-    r0 = z_k - beta1 z_(k-1) - beta2 z_(k-2) (all at x_k) and
-    r1 = r0 - s c, c = 1 - beta1 e1 - beta2 e2:
+    $r_0 = z_k - \beta_1 z_{k-1} - \beta_2 z_{k-2}$ (all at $x_k$) and
+    $r_1 = r_0 - s c$, $c = 1 - \beta_1 e_1 - \beta_2 e_2$:
 
-        Lambda_k(x_k; d_k, d_(k-1)) = (r0^2 - r1^2) / (2 sigma_c^2)
-                                    = (s c / sigma_c^2) r0 - s^2 c^2 / (2 sigma_c^2).
+    $$
+    \Lambda_k(x_k; d_k, d_{k-1}) = \frac{r_0^2 - r_1^2}{2 \sigma_c^2}
+      = \frac{s c}{\sigma_c^2} r_0 - \frac{s^2 c^2}{2 \sigma_c^2}.
+    $$
 
-    Four cases: c = 1 (new cell), 1 - beta2 (back to the cell of k-2),
-    1 - beta1 (stayed since k-1), 1 - beta1 - beta2 (stayed since k-2).
-    Frame 1 conditions on one previous frame: beta = gamma1 / gamma0,
-    sigma_c^2 = gamma0 - gamma1^2 / gamma0, c = 1 or 1 - beta (d_1 = 0);
-    frame 0 on none: Lambda_0 = s z_0 / gamma0 - s^2 / (2 gamma0). The
-    default tbd-grid noise (AR(3), a = (-2, 1.7, -0.64), gamma0 = 1) gives
-    beta = (1.545, -0.711), sigma_c^2 = 0.0915 (the prediction removes
+    Four cases: $c = 1$ (new cell), $1 - \beta_2$ (back to the cell of $k-2$),
+    $1 - \beta_1$ (stayed since $k-1$), $1 - \beta_1 - \beta_2$ (stayed since $k-2$).
+    Frame 1 conditions on one previous frame: $\beta = \gamma_1 / \gamma_0$,
+    $\sigma_c^2 = \gamma_0 - \gamma_1^2 / \gamma_0$, $c = 1$ or $1 - \beta$ ($d_1 = 0$);
+    frame 0 on none: $\Lambda_0 = s z_0 / \gamma_0 - s^2 / (2 \gamma_0)$. The
+    default tbd-grid noise (AR(3), $a = (-2, 1.7, -0.64)$, $\gamma_0 = 1$) gives
+    $\beta = (1.545, -0.711)$, $\sigma_c^2 = 0.0915$ (the prediction removes
     10.4 dB of the noise power seen by a target entering a new cell) and
-    c = (1, 1.711, -0.545, 0.167): a target sitting in one cell is almost
+    $c = (1, 1.711, -0.545, 0.167)$: a target sitting in one cell is almost
     invisible in the prediction residual, as it should be for strongly
-    low-pass noise. White noise gives beta = 0, c = 1 and Lambda affine in
-    z: the classic merit. Approximation, stated: the sum of these terms is
+    low-pass noise. White noise gives $\beta = 0$, $c = 1$ and $\Lambda$ affine in
+    $z$: the classic merit. Approximation, stated: the sum of these terms is
     the exact path LLR only for noise that is Markov of order 2 in each cell
     and ignoring the information the *unvisited* frames of a visited cell
     carry about its noise (a causal, path-local index, as in the paper).
 
-    **Turn-angle term.** theta_k = the signed angle from d_(k-1) to d_k in
-    (-pi, pi]; weight log p(theta_k) with p a density on (-pi, pi] that is
-    >= 0, decreasing in |theta| and integrates to 1
-    (:func:`turn_log_density`): ``von-mises`` exp(kappa cos theta) /
-    (2 pi I0(kappa)) or ``laplace`` (truncated) kappa exp(-kappa |theta|) /
-    (2 (1 - exp(-kappa pi))), kappa = ``turn_concentration``; kappa = 0 is
-    uniform. Zero displacement: when d_(k-1) = 0 or d_k = 0 the heading, hence
-    theta, is undefined; such transitions get the uniform density 1/(2 pi)
-    (the prior averaged over headings), so the turn term neither favours nor
-    forbids a pause, and the LLR decides. Frame 1 has no previous
-    displacement: the transition is uniform, weight log(1/(2 pi)) for every
-    d_1 ("uniform transition at frame 2"). p(theta) is used as a weight per
+    **Turn-angle term.** $\theta_k$ = the signed angle from $d_{k-1}$ to $d_k$ in
+    $(-\pi, \pi]$; weight $\log p(\theta_k)$ with $p$ a density on $(-\pi, \pi]$ that is
+    $\ge 0$, decreasing in $|\theta|$ and integrates to 1
+    (:func:`turn_log_density`), $\kappa$ = ``turn_concentration``:
+
+    $$
+    p_{\text{von-mises}}(\theta) = \frac{e^{\kappa \cos\theta}}{2\pi I_0(\kappa)}, \qquad
+    p_{\text{laplace}}(\theta) = \frac{\kappa\, e^{-\kappa |\theta|}}{2 (1 - e^{-\kappa\pi})}
+    $$
+
+    (the Laplace truncated); $\kappa = 0$ is uniform. Zero displacement: when
+    $d_{k-1} = 0$ or $d_k = 0$ the heading, hence $\theta$, is undefined; such transitions
+    get the uniform density $1/(2\pi)$ (the prior averaged over headings), so the turn
+    term neither favours nor forbids a pause, and the LLR decides. Frame 1 has no
+    previous displacement: the transition is uniform, weight $\log(1/(2\pi))$ for every
+    $d_1$ ("uniform transition at frame 2"). $p(\theta)$ is used as a weight per
     transition (as in the paper), not renormalised over the discrete window;
     every path has the same number of transitions, so the constant does not
     bias path lengths.
 
-    **Recursion.** The path score sum_k Lambda_k + sum_(k>=2) log p(theta_k)
-    + (K-1 >= 1) log(1/2 pi) is a sum of terms in consecutive states, so
+    **Recursion.** The path score
+    $\sum_k \Lambda_k + \sum_{k \ge 2} \log p(\theta_k) + [K-1 \ge 1] \log\frac{1}{2\pi}$
+    is a sum of terms in consecutive states, so
 
-        J_0(x) = Lambda_0(x)
-        J_1(x, d) = Lambda_1(x; d) + log(1/(2 pi)) + J_0(x - d)
-        J_k(x, d) = max_d' [J_(k-1)(x - d, d') + log p(theta(d', d)) + Lambda_k(x; d, d')]
+    $$
+    \begin{aligned}
+    J_0(x) &= \Lambda_0(x), \\
+    J_1(x, d) &= \Lambda_1(x; d) + \log\tfrac{1}{2\pi} + J_0(x - d), \\
+    J_k(x, d) &= \max_{d'} \left[ J_{k-1}(x - d, d') + \log p(\theta(d', d)) + \Lambda_k(x; d, d') \right]
+    \end{aligned}
+    $$
 
-    with backpointers psi_k(x, d) = the first maximising d'. Score =
-    max_(x, d) J_(K-1)(x, d); track: from the argmax, x_(k-1) = x_k - d_k,
-    d_(k-1) = psi_k(x_k, d_k); value map = max_d J_(K-1)(x, d). Lambda
-    depends on d' only through d' = -d, so for each d the generic
-    predecessors share one Lambda plane and the special one gets its own.
+    with backpointers $\psi_k(x, d)$ = the first maximising $d'$. Score
+    $= \max_{x, d} J_{K-1}(x, d)$; track: from the argmax, $x_{k-1} = x_k - d_k$,
+    $d_{k-1} = \psi_k(x_k, d_k)$; value map $= \max_d J_{K-1}(x, d)$. $\Lambda$
+    depends on $d'$ only through $d' = -d$, so for each $d$ the generic
+    predecessors share one $\Lambda$ plane and the special one gets its own.
 
     **Choosing the design SNR and the prior.** The constant term
-    -s^2 c^2 / (2 sigma_c^2) makes entering a new cell (c = 1) cost more, the
-    larger s, while sitting in a cell (c = 0.167 for the default noise) costs
-    almost nothing: when s is far above the true amplitude A (beyond about
-    s = 2A the true path's expected LLR per frame, s (A - s/2) / sigma_c^2,
+    $-s^2 c^2 / (2 \sigma_c^2)$ makes entering a new cell ($c = 1$) cost more, the
+    larger $s$, while sitting in a cell ($c = 0.167$ for the default noise) costs
+    almost nothing: when $s$ is far above the true amplitude $A$ (beyond about
+    $s = 2A$ the true path's expected LLR per frame, $s (A - s/2) / \sigma_c^2$,
     is negative), the best path stops following the target and the detector
     collapses. A small study (100 x 100 cells, 20 frames, Pfa 1e-2 from 300
     null scenes, 100 trials per point) gave Pd at true SNR -6 / -5 dB of
     0.37 / 0.84 (design 0 dB), 0.53 / 0.91 (2 dB), 0.10 / 0.56 (4 dB), with
-    kappa = 5; kappa = 3, 5, 8 gave 0.46, 0.53, 0.62 at -6 dB (design 2 dB)
-    and the truncated Laplace with kappa = 5 matched von Mises with kappa = 8.
-    Defaults: design 2 dB, von Mises, kappa = 5 (a 45 degree turn costs 1.5,
+    $\kappa = 5$; $\kappa = 3, 5, 8$ gave 0.46, 0.53, 0.62 at -6 dB (design 2 dB)
+    and the truncated Laplace with $\kappa = 5$ matched von Mises with $\kappa = 8$.
+    Defaults: design 2 dB, von Mises, $\kappa = 5$ (a 45 degree turn costs 1.5,
     a 90 degree one 5 nats, the scene's 20 degree-per-frame turn 0.3).
 
     **Along-track likelihood** (``likelihood = "along-track"``; the default
     ``"per-cell"`` is the conditional LLR above). The paper writes the index
-    term as (eqs. 11-14) ln p(z_k, z_(k-1), z_(k-2) | X_k) /
-    p(z_(k-1), z_(k-2) | X_k) minus the same ratio under H0, with the
-    3-D and 2-D densities "均值为s，方差为σ²，相关系数为r的...联合高斯分布"
-    (mean s, variance sigma^2, correlation coefficient r) under H1 and mean 0
-    under H0, the values taken along the track: z_k(x_k), z_(k-1)(x_(k-1)),
-    z_(k-2)(x_(k-2)). Reading: the paper models the noise sequence v_k of
+    term as (eqs. 11-14)
+
+    $$
+    \ln \frac{p(z_k, z_{k-1}, z_{k-2} \mid X_k)}{p(z_{k-1}, z_{k-2} \mid X_k)}
+      - \ln \frac{p(z_k, z_{k-1}, z_{k-2} \mid H_0)}{p(z_{k-1}, z_{k-2} \mid H_0)},
+    $$
+
+    with the 3-D and 2-D densities "均值为s，方差为σ²，相关系数为r的...联合高斯分布"
+    (mean $s$, variance $\sigma^2$, correlation coefficient $r$) under H1 and mean 0
+    under H0, the values taken along the track: $z_k(x_k)$, $z_{k-1}(x_{k-1})$,
+    $z_{k-2}(x_{k-2})$. Reading: the paper models the noise sequence $v_k$ of
     eq. (4) as one AR process over scans and never distinguishes whether the
-    track changed cells, so the correlation between the values j frames
-    apart along the track is the noise's lag-j autocorrelation
-    rho(j) = gamma(j) / gamma(0) whatever the cells (the Toeplitz matrix of
-    gamma(0..2); "r" is rho(1), rho(2) follows from the AR model). This is
+    track changed cells, so the correlation between the values $j$ frames
+    apart along the track is the noise's lag-$j$ autocorrelation
+    $\rho(j) = \gamma(j) / \gamma(0)$ whatever the cells (the Toeplitz matrix of
+    $\gamma(0), \gamma(1), \gamma(2)$; "r" is $\rho(1)$, $\rho(2)$ follows from the AR model). This is
     the paper's model of the data, not ours: in the scene the noise of
     different cells is independent, so for a moving track the term subtracts
     the prediction from *other* cells' noise (:func:`along_track_llr`; the
     kernel is :mod:`methods.tbd.alongtrack`). Frame 1 uses the 2-D / 1-D
-    ratio (rho(1)), frame 0 the 1-D density.
+    ratio ($\rho(1)$), frame 0 the 1-D density.
 
-    **Cost.** (2q + 1)^4 transitions per cell and frame (625 at q = 2).
+    **Cost.** $(2q + 1)^4$ transitions per cell and frame (625 at $q = 2$).
     The kernels (:func:`methods.tbd.mf_kernels.dp_tbd_mf`,
     :func:`methods.tbd.alongtrack.dp_tbd_mf_along_track`) compute maxima
-    only and recompute psi_k on the track; the turn weight depends on d' and
-    d only through their headings, which factorises the maximum over d'
+    only and recompute $\psi_k$ on the track; the turn weight depends on $d'$ and
+    $d$ only through their headings, which factorises the maximum over $d'$
     (16 weighted candidates per heading instead of 24 per displacement at
-    q = 2); the frames advance together row by row, and only the volumes
-    J_k of frames 1, 5, 9, ... and K - 1 are kept (about 150 MB at
-    500 x 500 x 20, q = 2, for one trial at a time). Results are those of
+    $q = 2$); the frames advance together row by row, and only the volumes
+    $J_k$ of frames 1, 5, 9, ... and $K - 1$ are kept (about 150 MB at
+    500 x 500 x 20, $q = 2$, for one trial at a time). Results are those of
     the original max + argmax kernels (``tests/tbd_kernels_oracle.py``) bit for
-    bit. Default ``max_speed_m_s`` = 150 (q = 2) keeps the paper's true
+    bit. Default ``max_speed_m_s`` = 150 ($q = 2$) keeps the paper's true
     cell path admissible (see :class:`DpTbd`).
     """
 

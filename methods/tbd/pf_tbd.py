@@ -55,84 +55,95 @@ def residual_predictors(batch: Batch) -> tuple[np.ndarray, np.ndarray]:
 class PfTbd(Method):
     r"""Particle-filter TBD (Salmond-Birch existence model, Rutten-Gordon-Maskell births): posterior existence log-odds and mean track.
 
-    **State.** E_k in {0, 1} (target absent / present) and, when present,
-    x_k = (px, py, vx, vy, A): position and velocity (m, m/s) in the plane of the
-    scene's grid and the amplitude A added to the cell holding (px, py) (the
-    ``tbd-grid`` cell model: the whole amplitude in one cell). E is a Markov chain,
-    P(E_k = 1 | E_(k-1) = 0) = P_b (``birth_probability``),
-    P(E_k = 0 | E_(k-1) = 1) = P_d (``death_probability``); no target before frame 0.
+    **State.** $E_k \in \{0, 1\}$ (target absent / present) and, when present,
+    $x_k = (p_x, p_y, v_x, v_y, A)$: position and velocity (m, m/s) in the plane of the
+    scene's grid and the amplitude $A$ added to the cell holding $(p_x, p_y)$ (the
+    ``tbd-grid`` cell model: the whole amplitude in one cell). $E$ is a Markov chain,
+    $P(E_k = 1 \mid E_{k-1} = 0) = P_b$ (``birth_probability``),
+    $P(E_k = 0 \mid E_{k-1} = 1) = P_d$ (``death_probability``); no target before frame 0.
 
-    **Dynamics** (frame period T from the scene). Nearly constant velocity with
-    discrete white-noise acceleration of std sigma_a (``accel_std_m_s2``) per axis,
+    **Dynamics** (frame period $T$ from the scene). Nearly constant velocity with
+    discrete white-noise acceleration of std $\sigma_a$ (``accel_std_m_s2``) per axis,
 
-        p_k = p_(k-1) + T v_(k-1) + (T^2 / 2) sigma_a w,   v_k = v_(k-1) + T sigma_a w,
+    $$
+    p_k = p_{k-1} + T v_{k-1} + \tfrac{T^2}{2} \sigma_a w, \qquad v_k = v_{k-1} + T \sigma_a w,
+    $$
 
-    and a log-amplitude random walk log A_k = log A_(k-1) + sigma_l w_A, sigma_l =
-    ``amplitude_walk_db`` ln(10) / 20 (w, w_A standard normal). A target whose cell
-    leaves the grid is not in the scene: its particles get weight 0. Birth prior:
-    position uniform over the grid, velocity uniform in the box |vx|, |vy| <=
-    ``max_speed_m_s``, SNR 20 log10(A / sigma) uniform on [``snr_min_db``,
-    ``snr_max_db``].
+    and a log-amplitude random walk $\log A_k = \log A_{k-1} + \sigma_l w_A$,
+    $\sigma_l = D \ln(10) / 20$, $D$ = ``amplitude_walk_db`` ($w$, $w_A$ standard normal). A target
+    whose cell leaves the grid is not in the scene: its particles get weight 0. Birth
+    prior: position uniform over the grid, velocity uniform in the box
+    $|v_x|, |v_y| \le$ ``max_speed_m_s``, SNR $20 \log_{10}(A / \sigma)$ uniform on
+    [``snr_min_db``, ``snr_max_db``].
 
     **Likelihood.** The frames are the scene's: independent across cells, each
-    cell's noise stationary Gaussian over frames with autocovariance gamma(h)
-    (``scene.noise_autocovariance``; white: gamma(h > 0) = 0). As in ``dp-tbd-mf``
+    cell's noise stationary Gaussian over frames with autocovariance $\gamma(h)$
+    (``scene.noise_autocovariance``; white: $\gamma(h > 0) = 0$). As in ``dp-tbd-mf``
     (:class:`methods.tbd.dp_tbd.DpTbdMf`), a cell's value is predicted from the same
-    cell's two previous frames, r_k(c) = z_k(c) - beta1 z_(k-1)(c) - beta2
-    z_(k-2)(c), which is N(0, sigma_c^2) under H0 (Markov-2 approximation of the
+    cell's two previous frames, $r_k(c) = z_k(c) - \beta_1 z_{k-1}(c) - \beta_2 z_{k-2}(c)$,
+    which is $\mathcal{N}(0, \sigma_c^2)$ under H0 (Markov-2 approximation of the
     noise; frames 1 and 0 use one and no previous frame). Under a particle's
-    history (cells c0, c1, c2 at frames k, k-1, k-2 and amplitudes a0, a1, a2; a
-    frame before its birth has none) the residual of cell c has mean
+    history (cells $c_0, c_1, c_2$ at frames $k, k-1, k-2$ and amplitudes $a_0, a_1, a_2$; a
+    frame before its birth has none) the residual of cell $c$ has mean
 
-        m(c) = a0 [c0 = c] - beta1 a1 [c1 = c] - beta2 a2 [c2 = c],
+    $$
+    m(c) = a_0 [c_0 = c] - \beta_1 a_1 [c_1 = c] - \beta_2 a_2 [c_2 = c],
+    $$
 
     so the frame's log-likelihood ratio against H0, given the past frames, is the
     sum over the distinct cells of the particle's history of
 
-        lambda_k(c) = (m(c) r_k(c) - m(c)^2 / 2) / sigma_c^2
+    $$
+    \lambda_k(c) = \frac{m(c)\, r_k(c) - m(c)^2 / 2}{\sigma_c^2}
+    $$
 
     (the cells the target left carry its echo through the predictor; every other
-    cell's ratio is 1). White noise: beta = 0 and lambda = (A z_k(c0) - A^2 / 2) /
-    sigma^2, Salmond & Birch's point target in Gaussian noise. The likelihood
-    ratio l = exp(lambda) is the particle weight.
+    cell's ratio is 1). White noise: $\beta = 0$ and
+    $\lambda = (A z_k(c_0) - A^2 / 2) / \sigma^2$, Salmond & Birch's point target in
+    Gaussian noise. The likelihood ratio $l = e^{\lambda}$ is the particle weight.
 
-    **Birth and existence** (Rutten et al.). Each frame N_b birth particles (a
-    ``birth_fraction`` of the ``particles``) are drawn from a proposal q_b and N_c
-    continuing ones are predicted from the N_c resampled at the previous frame.
-    With P_(k-1) the existence probability and o = P / (1 - P) its odds,
+    **Birth and existence** (Rutten et al.). Each frame $N_b$ birth particles (a
+    ``birth_fraction`` of the ``particles``) are drawn from a proposal $q_b$ and $N_c$
+    continuing ones are predicted from the $N_c$ resampled at the previous frame.
+    With $P_{k-1}$ the existence probability and $o = P / (1 - P)$ its odds,
 
-        S_b = (1 / N_b) sum_i l(x_b^i) p_b(x_b^i) / q_b(x_b^i),   S_c = (1 / N_c) sum_j l(x_c^j),
-        o_k = (P_b S_b + (1 - P_d) o_(k-1) S_c) / ((1 - P_b) + P_d o_(k-1)),
+    $$
+    \begin{aligned}
+    S_b &= \frac{1}{N_b} \sum_i \frac{l(x_b^i)\, p_b(x_b^i)}{q_b(x_b^i)}, \qquad
+    S_c = \frac{1}{N_c} \sum_j l(x_c^j), \\
+    o_k &= \frac{P_b S_b + (1 - P_d)\, o_{k-1} S_c}{(1 - P_b) + P_d\, o_{k-1}}
+    \end{aligned}
+    $$
 
-    (the existence posterior: the numerator is present-at-k by birth or by
-    survival, the denominator absent-at-k, whose likelihood ratio is 1). Birth
-    particle i has weight proportional to P_b l p_b / (q_b N_b), continuing
-    particle j to (1 - P_d) o_(k-1) l / N_c; N_c of the N_b + N_c are resampled
+    (the existence posterior: the numerator is present-at-$k$ by birth or by
+    survival, the denominator absent-at-$k$, whose likelihood ratio is 1). Birth
+    particle $i$ has weight proportional to $P_b l p_b / (q_b N_b)$, continuing
+    particle $j$ to $(1 - P_d)\, o_{k-1} l / N_c$; $N_c$ of the $N_b + N_c$ are resampled
     (``resampling``: systematic, or stratified) for the next frame. Proposal
     (``birth_proposal``): ``measurement`` draws the birth cell uniformly among the
-    cells whose residual reaches ``birth_threshold`` sigma_c at frame k
-    (p_b / q_b = M / (H W) for M such cells; uniform over the grid when none
+    cells whose residual reaches ``birth_threshold`` $\times\, \sigma_c$ at frame $k$
+    ($p_b / q_b = M / (H W)$ for $M$ such cells; uniform over the grid when none
     does), position uniform in the cell, velocity and SNR from the prior; this
     ignores the prior mass of the cells below the threshold (Rutten et al.'s
     approximation: their likelihood ratio is small). ``uniform`` draws from the
-    prior itself (Salmond & Birch; p_b / q_b = 1). All in the log domain.
+    prior itself (Salmond & Birch; $p_b / q_b = 1$). All in the log domain.
     Defaults (``birth_threshold``, ``birth_fraction``, ``accel_std_m_s2``): from
     a small study on 128 x 128 ``tbd-grid`` scenes near Pd = 0.5 (the threshold
     trades births on noise cells against missing the target's cell; an
     acceleration std below the turn's own lets the particles lose the target
     in the turn, which collapses the existence probability).
 
-    **Outputs.** Score = log o_(K-1), the log-odds of existence at the last frame
+    **Outputs.** Score $= \log o_{K-1}$, the log-odds of existence at the last frame
     (monotone in the posterior existence probability, without its saturation at 1);
     there is no analytic null law, so it is calibrated on null scenes. Track: per
-    frame the existence-conditioned posterior mean of (px, py) over the weighted
+    frame the existence-conditioned posterior mean of $(p_x, p_y)$ over the weighted
     particles (before resampling), the cell holding it (clipped to the grid). No
     value map.
 
     **Random numbers and cost.** Counter-based draws per trial from ``seed`` and
     the trial number (:mod:`methods.tbd.pf_kernels`): a trial's output does not
     depend on its batch. One numba kernel over trials (one at a time), particles
-    and frames: O(K (N + H W)) per trial (the H W term: the measurement proposal's
+    and frames: $O(K (N + H W))$ per trial (the $H W$ term: the measurement proposal's
     scan of each frame). Reference for ``bench perf`` and the tests: the same
     filter in plain NumPy over the particle axis, one trial at a time
     (:func:`methods.tbd.reference.reference_pf_tbd`), on the same draws.

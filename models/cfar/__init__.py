@@ -1,4 +1,4 @@
-"""CFAR detector maths on range-Doppler power maps: reference windows, the
+r"""CFAR detector maths on range-Doppler power maps: reference windows, the
 CA and OS noise estimates over a whole batch of maps, their closed-form
 false-alarm probabilities, and the nominal significance every CFAR method
 of the ``cell-detection`` task reports (docs/architecture.md, 'Models').
@@ -8,43 +8,45 @@ The detectors are the three of the HFSWR detection chain ("目标检测与跟踪
 hfswr-cfar-mn-jpda-ukf): CFAR "done along range and along Doppler
 separately, then the two results combined, with the result of a peak
 detection" (地波雷达的CFAR检测处理通常在距离向和多普勒向分别进行 ... 再综合距离向、
-多普勒向检测结果,结合峰值检测的结果). Per dimension a cell under test x_D is
-compared with U0 = K mu:
+多普勒向检测结果,结合峰值检测的结果). Per dimension a cell under test $x_D$ is
+compared with $U_0 = K\mu$:
 
-* CA: "mu = the mean of the N reference cells around the cell under test,
-  U0 = K mu" (对被检测单元周围N个参考单元求均值,其结果便为噪声估计μ,检测门限U0=Kμ);
-* OS: "the N (N = 2L) reference cells, L on each side of x_D, are sorted and
-  the k-th smallest x_k is the noise estimate mu; U0 = K mu"
+* CA: "$\mu$ = the mean of the $N$ reference cells around the cell under test,
+  $U_0 = K\mu$" (对被检测单元周围N个参考单元求均值,其结果便为噪声估计μ,检测门限U0=Kμ);
+* OS: "the $N$ ($N = 2L$) reference cells, $L$ on each side of $x_D$, are sorted and
+  the $k$-th smallest $x_k$ is the noise estimate $\mu$; $U_0 = K\mu$"
   (将参考单元中N(N=2L)个信号的值排序,取出其中第k个最小值xk,xk即为噪声估计值μ).
 
 The third detector, the adaptive regression CFAR, fits a curve instead of
 a window: :mod:`models.cfar.regression`.
 
-The CA text says the register holds N = 2L + 1 cells and averages "the N
-reference cells"; the register of 2L + 1 includes the cell under test, so
-both detectors here use N = 2L reference cells, L per side, as the OS text
+The CA text says the register holds $N = 2L + 1$ cells and averages "the $N$
+reference cells"; the register of $2L + 1$ includes the cell under test, so
+both detectors here use $N = 2L$ reference cells, $L$ per side, as the OS text
 prints. The document prints no guard cells: ``guard`` cells per side
 between the cell under test and its reference cells are our parameter
 (guard = 0 is the printed structure).
 
-**Windows and map edges.** Along an axis of M cells, the cell i has its
-reference cells at i - g - L .. i - g - 1 and i + g + 1 .. i + g + L; those
+**Windows and map edges.** Along an axis of $M$ cells, the cell $i$ has its
+reference cells at $i - g - L, \dots, i - g - 1$ and $i + g + 1, \dots, i + g + L$; those
 outside the map are dropped (one-sided windows at the edges), so the cell's
-N' = N_left + N_right <= 2L, and its closed form uses that N'. OS keeps its
-quantile at the edges: k' = ceil(k N' / N) (:func:`edge_rank`).
+$N' = N_{\text{left}} + N_{\text{right}} \le 2L$, and its closed form uses that $N'$. OS keeps its
+quantile at the edges: $k' = \lceil k N' / N \rceil$ (:func:`edge_rank`).
 
 **Nominal significance.** For square-law detected (exponential) noise of
-any level, the false-alarm probability of "x > K mu" is (Rohling's closed
+any level, the false-alarm probability of "$x > K\mu$" is (Rohling's closed
 forms, as the HFSWR chapter's sources give them)
 
-    CA:  Pfa(K) = (1 + K/N)^(-N)
-    OS:  Pfa(K) = prod_{i=0}^{k-1} (N - i) / (N - i + K),
+$$
+P_{fa}^{CA}(K) = (1 + K/N)^{-N}, \qquad
+P_{fa}^{OS}(K) = \prod_{i=0}^{k-1} \frac{N - i}{N - i + K},
+$$
 
-and each method reports, per cell, S = -log10 Pfa(t) at the observed ratio
-t = x / mu (:func:`ca_significance`, :func:`os_significance`): a monotone
-transform of t, so "S > -log10(pfa)" is exactly "t > K(pfa)" and one
-threshold serves every detector, window and dimension. S is capped at
-:data:`MAX_SIGNIFICANCE` (Pfa = 1e-300, the smallest the calibration takes).
+and each method reports, per cell, $S = -\log_{10} P_{fa}(t)$ at the observed ratio
+$t = x / \mu$ (:func:`ca_significance`, :func:`os_significance`): a monotone
+transform of $t$, so "$S > -\log_{10} P_{fa}$" is exactly "$t > K(P_{fa})$" and one
+threshold serves every detector, window and dimension. $S$ is capped at
+:data:`MAX_SIGNIFICANCE` ($P_{fa} = 10^{-300}$, the smallest the calibration takes).
 
 GO and SO (the larger or smaller of the two half-windows' means, our
 baselines beside the chapter's detectors) share CA's windows and running

@@ -1,4 +1,4 @@
-"""GO- and SO-CFAR: the greatest-of and smallest-of the two half-windows'
+r"""GO- and SO-CFAR: the greatest-of and smallest-of the two half-windows'
 means as the noise estimate, their closed-form false-alarm probabilities and
 threshold factors (:mod:`models.cfar`; docs/architecture.md, 'Models').
 
@@ -6,37 +6,45 @@ The CFAR detectors of the HFSWR chain (hfswr-cfar-mn-jpda-ukf in the shared
 papers, sec. 1 "CFAR检测") run along range and along Doppler separately, each
 with a 1-D window of L reference cells on each side of the cell under test
 (behind ``guard`` cells). GO and SO keep that geometry: along each axis the
-two halves are the leading side (i - g - L .. i - g - 1) and the lagging side
-(i + g + 1 .. i + g + L), cut at the map's edges exactly as CA's window
-(:func:`models.cfar.window_counts`: n_l, n_r cells). With the half means
-m_l = (1/n_l) sum_left, m_r = (1/n_r) sum_right,
+two halves are the leading side ($i - g - L, \dots, i - g - 1$) and the lagging side
+($i + g + 1, \dots, i + g + L$), cut at the map's edges exactly as CA's window
+(:func:`models.cfar.window_counts`: $n_l$, $n_r$ cells). With the half means
+$m_l = \frac{1}{n_l} \sum_{\text{left}}$, $m_r = \frac{1}{n_r} \sum_{\text{right}}$,
 
-    GO: mu = max(m_l, m_r)        SO: mu = min(m_l, m_r),
+$$
+\text{GO: } \mu = \max(m_l, m_r), \qquad \text{SO: } \mu = \min(m_l, m_r),
+$$
 
 and a cell whose one half lies wholly outside the map uses the other half
-alone (then mu is CA's mean and its Pfa CA's closed form at N' = n). The
+alone (then $\mu$ is CA's mean and its Pfa CA's closed form at $N' = n$). The
 dimensions are combined and the peak detection folded in as for CA and OS.
 
-**Closed forms.** For square-law detected (exponential) noise, x > T mu with
-independent halves (sums Gamma(n_l), Gamma(n_r)), conditioning on which half
-is the larger (ours, by direct integration; for n_l = n_r = n they reduce to
+**Closed forms.** For square-law detected (exponential) noise, $x > T\mu$ with
+independent halves (sums $\Gamma(n_l)$, $\Gamma(n_r)$), conditioning on which half
+is the larger (ours, by direct integration; for $n_l = n_r = n$ they reduce to
 the forms of Hansen & Sawyers 1980 and Gandhi & Kassam 1988):
 
-    Pfa_SO(T) = sum_{a in (l, r)} (1 + T/n_a)^(-n_a) I_{p_a}(n_a, n_o)
-    Pfa_GO(T) = sum_{a in (l, r)} (1 + T/n_a)^(-n_a) I_{q_a}(n_o, n_a)
+$$
+\begin{aligned}
+P_{fa}^{SO}(T) &= \sum_{a \in \{l, r\}} (1 + T/n_a)^{-n_a}\, I_{p_a}(n_a, n_o), \\
+P_{fa}^{GO}(T) &= \sum_{a \in \{l, r\}} (1 + T/n_a)^{-n_a}\, I_{q_a}(n_o, n_a)
+\end{aligned}
+$$
 
-with o the other half, N = n_l + n_r, p_a = (n_a + T)/(N + T),
-q_a = 1 - p_a = n_o/(N + T), and I_x(alpha, beta) the regularised incomplete
+with $o$ the other half, $N = n_l + n_r$, $p_a = (n_a + T)/(N + T)$,
+$q_a = 1 - p_a = n_o/(N + T)$, and $I_x(\alpha, \beta)$ the regularised incomplete
 beta function, for integer arguments the finite negative-binomial sum
-I_x(alpha, beta) = sum_{i<beta} C(alpha - 1 + i, i) x^alpha (1 - x)^i (all
-terms positive: no cancellation however small Pfa gets). At n_l = n_r = n:
+$I_x(\alpha, \beta) = \sum_{i<\beta} \binom{\alpha - 1 + i}{i} x^\alpha (1 - x)^i$ (all
+terms positive: no cancellation however small Pfa gets). At $n_l = n_r = n$:
 
-    Pfa_SO = 2 sum_{k=0}^{n-1} C(n - 1 + k, k) (2 + T/n)^(-(n + k))
-    Pfa_GO = 2 (1 + T/n)^(-n) - Pfa_SO.
+$$
+P_{fa}^{SO} = 2 \sum_{k=0}^{n-1} \binom{n - 1 + k}{k} (2 + T/n)^{-(n + k)}, \qquad
+P_{fa}^{GO} = 2 (1 + T/n)^{-n} - P_{fa}^{SO}.
+$$
 
-(A form sometimes quoted with (1 + T/n)^(-n) in place of (2 + T/n)^(-n) in
-the SO sum fails at T = 0, where it gives more than 1.) The NumPy form
-:func:`halves_pfa` evaluates I_x by ``scipy.special.betainc``, the kernels
+(A form sometimes quoted with $(1 + T/n)^{-n}$ in place of $(2 + T/n)^{-n}$ in
+the SO sum fails at $T = 0$, where it gives more than 1.) The NumPy form
+:func:`halves_pfa` evaluates $I_x$ by ``scipy.special.betainc``, the kernels
 :func:`halves_log_survival` by the finite sum: two implementations, checked
 against each other and against simulation in tests/property/test_cfar_halves.py.
 """

@@ -1,17 +1,17 @@
-"""The order-statistic machinery of OS-CFAR (:mod:`models.cfar`; docs/architecture.md,
-'Models'): selection networks that leave the k-th smallest of the N = 2L
+r"""The order-statistic machinery of OS-CFAR (:mod:`models.cfar`; docs/architecture.md,
+'Models'): selection networks that leave the $k$-th smallest of the $N = 2L$
 reference cells on one wire, the numba kernel that runs them over the lines
 of a batch of maps, and the closed-form log survival it is judged by.
 
 OS-CFAR after the HFSWR detection chain (hfswr-cfar-mn-jpda-ukf in the
-shared papers, sec. 1 "CFAR检测"): "the N (N = 2L) reference cells, L on
-each side of x_D, are sorted and the k-th smallest x_k is the noise
-estimate mu" (将参考单元中N(N=2L)个信号的值排序,取出其中第k个最小值xk,xk即为噪声估计值μ).
+shared papers, sec. 1 "CFAR检测"): "the $N$ ($N = 2L$) reference cells, $L$ on
+each side of $x_D$, are sorted and the $k$-th smallest $x_k$ is the noise
+estimate $\mu$" (将参考单元中N(N=2L)个信号的值排序,取出其中第k个最小值xk,xk即为噪声估计值μ).
 No sort is needed for one order statistic: a selection network (Batcher's
-odd-even merge sort pruned to the comparators the k-th wire depends on)
+odd-even merge sort pruned to the comparators the $k$-th wire depends on)
 finds it branch-free, as element-wise min/max across the cells of a row.
 Under exponential noise its false-alarm probability is
-Pfa(t) = prod_{i<k} (N - i)/(N - i + t) (the closed form), whose
+$P_{fa}(t) = \prod_{i<k} (N - i)/(N - i + t)$ (the closed form), whose
 negative natural log :func:`_os_log_survival` computes per cell.
 """
 

@@ -1,10 +1,10 @@
-"""The peak detection of the CFAR methods (:mod:`models.cfar`; docs/architecture.md,
+r"""The peak detection of the CFAR methods (:mod:`models.cfar`; docs/architecture.md,
 'Models'): a cell survives if its power is the largest of a box around it.
 
 The HFSWR detection chain (hfswr-cfar-mn-jpda-ukf in the shared papers,
 sec. 1 "CFAR检测") combines the CFAR result "with the result of a peak
 detection" (结合峰值检测的结果) and prints no neighbourhood: the box of
-+-half_range range and +-half_doppler Doppler cells is our parameter
+$\pm$ ``half_range`` range and $\pm$ ``half_doppler`` Doppler cells is our parameter
 (:mod:`methods.cfar.detectors`).
 """
 

@@ -1,4 +1,4 @@
-"""The adaptive regression CFAR: a curve fitted to each power spectrum is the
+r"""The adaptive regression CFAR: a curve fitted to each power spectrum is the
 noise estimate, and the nominal significance of a cell against it under
 homogeneous exponential noise (docs/architecture.md, 'Models').
 
@@ -6,15 +6,15 @@ The HFSWR chapter ("目标检测与跟踪方法-海洋遥感技术应用", the s
 hfswr-cfar-mn-jpda-ukf, sec. 1 (3)): "the adaptive regression detector fits
 the power spectrum by curve regression and obtains an estimate of the
 noise as a whole ... the fitted result is the noise estimate; the noise
-estimate times the threshold factor K is the detection threshold, and K
+estimate times the threshold factor $K$ is the detection threshold, and $K$
 controls the false-alarm rate" (自适应回归检测器采用曲线回归方法拟合功率谱,获得
 噪声整体估计 ... 拟合出的结果即为噪声估计,将噪声估计值乘以门限因子K获得检测门限,
 通过K控制虚警率的大小). It prints neither the curve family nor its order, nor
-how K follows from the false-alarm rate. Ours, each a parameter of
+how $K$ follows from the false-alarm rate. Ours, each a parameter of
 :class:`Curve`:
 
 * **family** ``"log-polynomial"`` (default): a least-squares polynomial in
-  the log power ln x, the spectrum in dB as radar engineers plot it.
+  the log power $\ln x$, the spectrum in dB as radar engineers plot it.
   Narrow clutter lines 30 dB above the noise pull such a fit up by a few
   dB at most; the same lines drag a fit in the linear power far above the
   noise around them. ``"polynomial"``: least squares in the linear power,
@@ -24,25 +24,25 @@ how K follows from the false-alarm rate. Ours, each a parameter of
 * **robust iterations**: refits leaving out the cells above
   ``exclusion_factor`` times the current noise level.
 
-**Noise level.** Under exponential noise of level sigma^2, x = sigma^2 E
-with E ~ Exp(1), and the fit of the fitted variable y = f(x) estimates
-sigma^2 through the moments of f(E) over the cells it keeps
-(:func:`noise_moments`): m = E[ln E] = -gamma (Euler's constant) for the
-plain log fit, so the level is exp(fit - m); m = 1 for the plain linear
-fit. With robust iterations the kept cells are those with E <= c (c the
-exclusion factor), and m, v become the censored moments
+**Noise level.** Under exponential noise of level $\sigma^2$, $x = \sigma^2 E$
+with $E \sim \operatorname{Exp}(1)$, and the fit of the fitted variable $y = f(x)$ estimates
+$\sigma^2$ through the moments of $f(E)$ over the cells it keeps
+(:func:`noise_moments`): $m = E[\ln E] = -\gamma$ (Euler's constant) for the
+plain log fit, so the level is $e^{\text{fit} - m}$; $m = 1$ for the plain linear
+fit. With robust iterations the kept cells are those with $E \le c$ ($c$ the
+exclusion factor), and $m$, $v$ become the censored moments
 (:func:`censored_exponential_moments`, :func:`log_exponential_moments`).
 
-**Nominal significance.** S = -log10 Pfa(t) at t = x / level, derived under
-homogeneous exponential noise from the cell's leverage h (the hat-matrix
-diagonal phi_i' G^-1 phi_i; for a cell the robust fit left out, g, the
+**Nominal significance.** $S = -\log_{10} P_{fa}(t)$ at $t = x / \text{level}$, derived under
+homogeneous exponential noise from the cell's leverage $h$ (the hat-matrix
+diagonal $\phi_i' G^{-1} \phi_i$; for a cell the robust fit left out, $g$, the
 variance factor of its fit): our derivation, in the docstrings of
 :func:`polynomial_significance` and :func:`log_polynomial_significance`,
 checked against simulation in tests/property/test_cfar_regression_properties.py.
 
-All functions take lines (P, M) — P power spectra of M cells — or maps
+All functions take lines (P, M) — $P$ power spectra of $M$ cells — or maps
 (n, R, D) with a leading trial axis, and fit every line at once: one
-(Q x Q) normal-equation solve per line by batched matrix products.
+$Q \times Q$ normal-equation solve per line by batched matrix products.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""CFAR reference windows along an axis, their one-sided edges, and the closed forms of
-CA and OS: false-alarm probability, threshold factor, the nominal significance S = -log10 Pfa
+r"""CFAR reference windows along an axis, their one-sided edges, and the closed forms of
+CA and OS: false-alarm probability, threshold factor, the nominal significance $S = -\log_{10} P_{fa}$
 (:mod:`models.cfar`, whose docstring states the maths; docs/architecture.md, 'Models')."""
 
 from __future__ import annotations

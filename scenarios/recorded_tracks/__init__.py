@@ -65,7 +65,7 @@ class RecordedTrackScene(TrackingScene, DetectionScene):
 
 @register_scenario
 class RecordedTracks(Scenario):
-    """Segments of recorded tracks (a CSV/Parquet file, or the traffic package's real aircraft) as truth; position measurements in Gaussian noise.
+    r"""Segments of recorded tracks (a CSV/Parquet file, or the traffic package's real aircraft) as truth; position measurements in Gaussian noise.
 
     **Source**: ``path``, a CSV (or Parquet, with pyarrow) of one row per recorded
     point: ``track`` (an id, read as text: ``1`` and ``01`` are two tracks; a Parquet
@@ -106,9 +106,9 @@ class RecordedTracks(Scenario):
     **Maneuvers** (the onset truth): with ``maneuver_measure = "acceleration"``
     (the default) a step maneuvers when the magnitude of the horizontal
     acceleration is at least ``maneuver_threshold_m_s2`` (a turn, a speed
-    change, or both; a coordinated turn at rate omega and speed v has |a| =
-    omega v: 3 deg/s at 60 m/s is 3.1 m/s^2); with ``"turn-rate"`` when the
-    turn rate |v x a| / |v|^2 is at least ``turn_rate_threshold_deg_s`` (turns
+    change, or both; a coordinated turn at rate $\omega$ and speed $v$ has
+    $|a| = \omega v$: 3 deg/s at 60 m/s is 3.1 m/s²); with ``"turn-rate"`` when the
+    turn rate $|v \times a| / |v|^2$ is at least ``turn_rate_threshold_deg_s`` (turns
     only; none below 1 m/s). Either in runs of at least ``min_maneuver_steps``
     (a shorter run is quiet: a gust, not a maneuver), counted over the steps a
     track has: a missing step never maneuvers.
@@ -123,9 +123,9 @@ class RecordedTracks(Scenario):
     trackers' prior mean (the origin) plus a draw from the prior: the shape,
     speed and turns are the aircraft's; where it flew is not.
 
-    **Measurements**: z_k = position_k + v_k, v_k ~ N(0, sigma^2 I_2), sigma =
-    ``noise_std_m`` x 10^(-snr_db/20) (the SNR definition of ``maneuvering-1d``;
-    the null: 0 dB). With ``measurements = "recorded"`` the trials *replay* the
+    **Measurements**: $z_k = p_k + v_k$, $v_k \sim \mathcal{N}(0, \sigma^2 I_2)$,
+    $\sigma = \sigma_0\, 10^{-\text{SNR}/20}$, $\sigma_0$ = ``noise_std_m`` (the SNR definition of
+    ``maneuvering-1d``; the null: 0 dB). With ``measurements = "recorded"`` the trials *replay* the
     file's own measurements instead: columns ``x_meas_m``, ``y_meas_m`` (beside
     planar truth) or ``latitude_meas``, ``longitude_meas`` (beside geodetic
     truth, in the same tangent plane, at the row's ``altitude_m``), one per
@@ -142,9 +142,9 @@ class RecordedTracks(Scenario):
     are drawn but unused.
 
     **Ragged trials** (docs/architecture.md, 'Ragged batches'): replaying, and with
-    ``min_steps`` (after ``onset_step``, at most ``steps``) a trial's length L
+    ``min_steps`` (after ``onset_step``, at most ``steps``) a trial's length $L$
     is drawn uniformly in ``min_steps``..``steps`` from its own stream and its
-    steps from L on are padding. With masked gaps or ``min_steps`` the scene's
+    steps from $L$ on are padding. With masked gaps or ``min_steps`` the scene's
     ``valid_steps`` (n, K) is False at a segment's missing steps and its
     padding, the measurements there NaN, ``maneuver_mask`` False there; the
     config then requires ``valid-step-masks``, so the maneuver detectors
