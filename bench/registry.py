@@ -131,8 +131,7 @@ def _check_params(cls: type, kind: str) -> None:
 
 
 def register_method(cls: type[Method]) -> type[Method]:
-    tasks()
-    known = tuple(_TASKS)            # the names claimed: one claimed twice is refused where used
+    known = _task_names()            # the names claimed: one claimed twice is refused where used
     task = getattr(cls, "task", None)
     if not isinstance(task, str) or task not in known:
         raise PluginError(f"method {getattr(cls, 'name', cls.__qualname__)!r}: task {task!r} is not one of "
@@ -147,8 +146,7 @@ def register_method(cls: type[Method]) -> type[Method]:
 
 
 def register_scenario(cls: type[Scenario]) -> type[Scenario]:
-    tasks()
-    known = tuple(_TASKS)
+    known = _task_names()
     served = getattr(cls, "tasks", ())
     name = getattr(cls, "name", cls.__qualname__)
     if not isinstance(served, (tuple, list)) or not all(isinstance(t, str) for t in served):
@@ -302,6 +300,19 @@ def discover() -> None:
     _discover_tasks()
     _load_entry_points("bench.scenarios")
     _load_entry_points("bench.methods")
+
+
+def _task_names() -> tuple[str, ...]:
+    """The task names a method or scenario may name: the built-ins and the plugins' tasks,
+    without importing the other methods and scenarios (a module registering its class, imported
+    on its own, would otherwise import its siblings while half-initialised itself, and a sibling
+    importing from it would fail as unavailable)."""
+    if not _BUILTIN_TASKS_DONE:
+        from radarbench.bench.run import numba_cache
+        numba_cache.install()       # as discover() does, before the registering module's kernels compile
+    _builtin_tasks()
+    _discover_tasks()
+    return tuple(_TASKS)
 
 
 def _builtin_tasks() -> None:

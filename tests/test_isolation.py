@@ -1,8 +1,10 @@
 """One method's failure never stops the others; a broken plugin never breaks the registry."""
 
 import os
+import subprocess
 import sys
 from dataclasses import dataclass
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -190,3 +192,46 @@ def test_retry_failed_reruns_only_the_failed_pairs(flaky, tmp_path, monkeypatch)
     # the recorded trials gained the retried configs' traces, in plan order
     labels = ["flaky[fail_in=calibration]", "flaky[fail_in=evaluation]", "innovation"]
     assert records and all(list(r.methods) == labels for r in records)
+
+
+#: fork one child per module from a parent that has only the libraries loaded: each child
+#: imports its module first, as a user's script would, then the registry discovers the rest
+_IMPORTED_FIRST = r"""
+import importlib, os, sys
+import numpy, scipy.stats, numba  # noqa: E401,F401 - shared by the children, loaded once
+failures = []
+for module in sys.argv[1:]:
+    child = os.fork()
+    if child == 0:
+        importlib.import_module(module)
+        from radarbench.bench import registry
+        registry.discover()
+        lost = [f"{u.source}: {u.reason}" for u in registry.unavailable()]
+        print("\n".join(f"{module} first -> {line}" for line in lost), flush=True)
+        os._exit(1 if lost else 0)
+    _, status = os.waitpid(child, 0)
+    failures += [module] if status else []
+sys.exit(1 if failures else 0)
+"""
+
+
+def _imported_by_a_sibling() -> list[str]:
+    """The built-in plugin modules another module imports names from, and that register a
+    plugin themselves: imported first, each registers while half-initialised."""
+    import re
+    root = Path(registry.__file__).resolve().parent.parent
+    sources = [p for folder in ("methods", "scenarios") for p in sorted((root / folder).rglob("*.py"))]
+    named = {m for p in sources for m in re.findall(r"^from (radarbench\.(?:methods|scenarios)\.[\w.]+) import",
+                                                    p.read_text(), re.M)}
+    dotted = {f"radarbench.{p.relative_to(root).with_suffix('').as_posix().replace('/', '.')}": p for p in sources}
+    return sorted(m for m in named if m in dotted and re.search(r"^@register_(method|scenario)",
+                                                                 dotted[m].read_text(), re.M))
+
+
+def test_a_plugin_module_imported_first_leaves_every_sibling_available():
+    """Was: importing methods.tbd.dp_tbd on its own made pf-tbd 'unavailable' (registering
+    DpTbd discovered every plugin, and pf_tbd imported names dp_tbd had not defined yet)."""
+    modules = _imported_by_a_sibling()
+    assert "radarbench.methods.tbd.dp_tbd" in modules, modules
+    proc = subprocess.run([sys.executable, "-c", _IMPORTED_FIRST, *modules], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr[-2000:]
