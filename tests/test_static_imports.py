@@ -115,8 +115,11 @@ def checkout_project():
 
 
 def _stdlib_path() -> list[str]:
-    """The interpreter's own folders (the standard library, the installed libraries), none of ours."""
-    return [p for p in sys.path if p and not Path(p).resolve().is_relative_to(ROOT)]
+    """The interpreter's own folders (the standard library, the installed libraries), none of
+    ours: the checkout's roots are left out, a virtual environment inside the checkout (CI's
+    ``.venv``) is kept."""
+    ours = {ROOT.resolve(), (ROOT / "src").resolve(), (ROOT / "tests").resolve()}
+    return [p for p in sys.path if p and Path(p).resolve() not in ours]
 
 
 @needs_jedi
