@@ -31,6 +31,7 @@ import shlex
 import sqlite3
 import sys
 import threading
+import time
 import traceback
 from pathlib import Path
 
@@ -314,26 +315,35 @@ def _store_errors(out_dir: Path):
 
 
 def cmd_run(args) -> int:
+    started_ns = time.time_ns()
     _check_arguments(args)
     data, source, folder = _sweep_data(args)
-    from radarbench.bench.results import runfolder
+    out_dir = Path(args.out) if args.out else RUNS_DIR / data["name"]
+    command = _command_line(args)
+    key = None
+    if not (args.fresh or args.viewer):
+        from radarbench.bench.results import unchanged
+        key = unchanged.run_key(command=command, data=data, source=source, folder=folder,
+                                recording=not args.no_record, allow_large=args.yes)
+        if _nothing_to_do(args, out_dir, data["name"], key):
+            return 0
     _check_executor(args)
     if args.executor == "local":
         from radarbench.bench.run.processes import prestart_forkserver
         prestart_forkserver()
     plan = _load_plan(args, data, source, folder)
-    if plan.skipped and not args.quiet:
-        print(f"skipping {len(plan.skipped)} (scenario config, method config) pairs the method refuses:",
-              file=sys.stderr)
-        for scenario, method, reason in plan.skipped:
-            print(f"  {method} on {scenario}: {reason}", file=sys.stderr)
-    out_dir = Path(args.out) if args.out else RUNS_DIR / plan.name
-    command = _command_line(args)
+    said = _skipped_lines(plan)
+    if not args.quiet:
+        for line in said:
+            print(line, file=sys.stderr)
     created = not os.path.lexists(out_dir)
     lock = runfolder.open_for_run(out_dir, fresh=args.fresh, what=f"bench run, {plan.name}")
     try:
         with runfolder.writing(out_dir), _store_errors(out_dir):
-            return _run_locked(args, plan, out_dir, command)
+            code = _run_locked(args, plan, out_dir, command)
+            if code == 0 and key is not None:
+                _remember_unchanged(plan, out_dir, key, started_ns, said)
+            return code
     except BaseException as exc:
         refused = isinstance(exc, (ConfigError, Fault, OSError, sqlite3.Error, MemoryError)) or is_out_of_memory(exc)
         if created and refused:
@@ -341,6 +351,44 @@ def cmd_run(args) -> int:
         raise
     finally:
         lock.release()
+
+
+def _skipped_lines(plan) -> list[str]:
+    """What a run says of the (scenario config, method config) pairs its plan skips."""
+    if not plan.skipped:
+        return []
+    return [f"skipping {len(plan.skipped)} (scenario config, method config) pairs the method refuses:"] + \
+        [f"  {method} on {scenario}: {reason}" for scenario, method, reason in plan.skipped]
+
+
+def _nothing_to_do(args, out_dir: Path, name: str, key: str) -> bool:
+    """A run of ``key`` into ``out_dir`` that would find every unit stored and the report
+    current says so as such a run does, and ends there: no plugin, no worker, no report
+    module is loaded (:mod:`bench.results.unchanged`)."""
+    from radarbench.bench.results import unchanged
+    if not os.path.isfile(out_dir / runfolder.STORE):
+        return False
+    with runfolder.open_for_run(out_dir, fresh=False, what=f"bench run, {name}"), _store_errors(out_dir):
+        record = unchanged.settled(out_dir, key)
+    if record is None:
+        return False
+    if not args.quiet:
+        for line in record["said"]:
+            print(line, file=sys.stderr)
+        print(f"Nothing to run: all {record['units']} units stored in {out_dir}", file=sys.stderr)
+    print(f"the report is up to date: {out_dir / 'report.md'}")
+    return True
+
+
+def _remember_unchanged(plan, out_dir: Path, key: str, started_ns: int, said: list[str]) -> None:
+    """After a run that succeeded: what the next one needs to see that nothing changed
+    (:func:`bench.results.unchanged.remember`)."""
+    from radarbench.bench import registry
+    from radarbench.bench.results import unchanged
+    from radarbench.bench.run.identity import files_read
+    data = [path for configs, find in ((plan.scenarios, registry.get_scenario), (plan.methods, registry.get_method))
+            for config in configs for path in find(config.name)().data_files(config.params)]
+    unchanged.remember(out_dir, key, started_ns, [*files_read(), *data], said)
 
 
 def _import_early(module: str) -> None:
@@ -354,6 +402,8 @@ def _import_early(module: str) -> None:
 def _run_locked(args, plan, out_dir: Path, command: str) -> int:
     """The run, in the locked folder."""
     from radarbench.bench import registry
+    from radarbench.bench.results import unchanged
+    unchanged.forget(out_dir)              # before anything in the folder changes: no stale record survives
     from radarbench.bench.run.progress import Progress
     from radarbench.bench.run.runner import Interrupted, plan_record, run_sweep, write_plan_toml
     threading.Thread(target=_import_early, args=("radarbench.bench.report",), daemon=True,

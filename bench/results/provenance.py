@@ -47,11 +47,27 @@ def git_commit() -> str:
     return out.stdout.strip() + (" (with uncommitted changes)" if dirty.stdout.strip() else "")
 
 
-@functools.lru_cache(maxsize=None)
-def _git_head(folder: Path) -> str | None:
+def head_of(folder: Path) -> str | None:
     """The commit checked out where ``folder`` lies; None outside a checkout or without git."""
     out = _git(folder, "rev-parse", "--short=12", "HEAD")
     return out.stdout.strip() if out is not None and out.returncode == 0 else None
+
+
+#: folder -> the commit :func:`_git_head` found there (what this process's provenance named)
+_HEADS: dict[str, str | None] = {}
+
+
+@functools.lru_cache(maxsize=None)
+def _git_head(folder: Path) -> str | None:
+    _HEADS[str(folder)] = head = head_of(folder)
+    return head
+
+
+def git_heads() -> dict[str, str | None]:
+    """Folder -> the commit checked out there, of every folder this process's provenance
+    named a commit of (:func:`distribution_of`): a later run compares them
+    (:mod:`bench.results.unchanged`)."""
+    return dict(_HEADS)
 
 
 @functools.lru_cache(maxsize=1)

@@ -171,9 +171,20 @@ class Module:
     marked: bool                # binds COMPUTES_RESULTS = True
 
 
+#: every module file this process's identities read (:func:`files_read`)
+_READ: set[Path] = set()
+
+
+def files_read() -> set[Path]:
+    """The module files this process's identities were computed from (those no class
+    imports among them), for :mod:`bench.results.unchanged`."""
+    return set(_READ)
+
+
 def read_module(name: str, file: Path) -> Module:
     """The module ``name`` in ``file``; parsed again only when the file changed (an edit
     between two runs of one process is seen)."""
+    _READ.add(file)
     st = file.stat()
     return _parse_module(name, file, st.st_mtime_ns, st.st_size)
 
