@@ -230,12 +230,33 @@ def _named(source: str, overrides):
         raise ConfigError(where, err.problem) from None
 
 
-def _load_plan(args, data: dict, source: str, folder: Path):
+def _check_names(args, data: dict, source: str, fingerprint: str | None) -> None:
+    """The sweep's plugin names checked before the plugins are imported, against the names
+    a process that imported them kept for this ``fingerprint`` of the plugins' sources
+    (:func:`bench.sweep.listing.cached_names`; None: this process has them already)."""
+    from radarbench.bench import registry
+    from radarbench.bench.sweep.config import check_names
+    from radarbench.bench.sweep.listing import cached_names
+    table = registry.names() if fingerprint is None else cached_names(fingerprint)
+    if table is not None:
+        with _named(source, _overrides(args)):
+            check_names(data, lambda kind, name: registry.absent_from(table, kind, name))
+
+
+def _load_plan(args, data: dict, source: str, folder: Path, fingerprint: str | None):
+    """The plan; the plugins' names kept for :func:`_check_names` (under ``fingerprint``,
+    taken before they were imported) once they are."""
+    from radarbench.bench import registry
     from radarbench.bench.sweep.config import parse_sweep
+    from radarbench.bench.sweep.listing import keep_names
     overrides = _overrides(args)
-    with _named(source, overrides):
-        return parse_sweep(data, source, allow_large=args.yes, base=folder,
-                           drop_idle_scenarios=bool(overrides.methods) and not overrides.scenarios)
+    try:
+        with _named(source, overrides):
+            return parse_sweep(data, source, allow_large=args.yes, base=folder,
+                               drop_idle_scenarios=bool(overrides.methods) and not overrides.scenarios)
+    finally:
+        if fingerprint is not None and registry.discovered():
+            keep_names(fingerprint)
 
 
 def _command_line(args) -> str:
@@ -318,12 +339,16 @@ def cmd_run(args) -> int:
     started_ns = time.time_ns()
     _check_arguments(args)
     data, source, folder = _sweep_data(args)
+    from radarbench.bench import registry
+    from radarbench.bench.sweep.listing import fingerprint
+    plugins = None if registry.discovered() else fingerprint()    # of the plugins' sources, before they load
+    _check_names(args, data, source, plugins)
     out_dir = Path(args.out) if args.out else RUNS_DIR / data["name"]
     command = _command_line(args)
     key = None
-    if not (args.fresh or args.viewer):
+    if not (args.fresh or args.viewer or plugins is None):
         from radarbench.bench.results import unchanged
-        key = unchanged.run_key(command=command, data=data, source=source, folder=folder,
+        key = unchanged.run_key(command=command, data=data, source=source, folder=folder, plugins=plugins,
                                 recording=not args.no_record, allow_large=args.yes)
         if _nothing_to_do(args, out_dir, data["name"], key):
             return 0
@@ -331,7 +356,7 @@ def cmd_run(args) -> int:
     if args.executor == "local":
         from radarbench.bench.run.processes import prestart_forkserver
         prestart_forkserver()
-    plan = _load_plan(args, data, source, folder)
+    plan = _load_plan(args, data, source, folder, plugins)
     said = _skipped_lines(plan)
     if not args.quiet:
         for line in said:

@@ -7,8 +7,8 @@ store (meta :data:`META`) what it was run from:
 * a **key**: the command line as the run folder keeps it, the sweep as data (after the
   command line's changes), its source and folder, the working directory, whether a
   recording is written and ``--yes``, the interpreter and its ``sys.path``, the data
-  folder's variable (``XDG_DATA_HOME``) and the plugins' entry points with their
-  distributions' versions;
+  folder's variable (``XDG_DATA_HOME``) and the plugins' fingerprint (their sources,
+  entry points and the installed distributions' versions: :func:`bench.sweep.listing.fingerprint`);
 * the **files** it depended on, by size, modification time and inode: every module the
   driver imported (the harness, the plugins, the libraries), every module file an identity
   read (:func:`bench.run.identity.files_read`, also those no class imports), the harness's
@@ -38,7 +38,6 @@ import sys
 from pathlib import Path
 
 from radarbench.bench.results import runfolder
-from radarbench.bench.sweep.listing import ENTRY_POINT_GROUPS
 
 #: the store's meta key of the record
 META = "unchanged_run"
@@ -47,13 +46,11 @@ META = "unchanged_run"
 SETTLE_S = 2.0
 
 
-def run_key(*, command: str, data: dict, source: str, folder: Path, recording: bool, allow_large: bool) -> str:
-    """The key of a ``bench run``: what decides its plan and outputs besides the files."""
-    import importlib.metadata
-
-    eps = importlib.metadata.entry_points()
-    plugins = sorted((group, ep.name, ep.value, getattr(ep.dist, "name", ""), getattr(ep.dist, "version", ""))
-                     for group in ENTRY_POINT_GROUPS for ep in eps.select(group=group))
+def run_key(*, command: str, data: dict, source: str, folder: Path, plugins: str, recording: bool,
+            allow_large: bool) -> str:
+    """The key of a ``bench run``: what decides its plan and outputs besides the files it
+    reads (``plugins``: :func:`bench.sweep.listing.fingerprint`, the plugins' sources,
+    entry points and the installed distributions' versions)."""
     whole = {"command": command, "sweep": data, "source": source, "folder": os.path.abspath(folder),
              "cwd": os.getcwd(), "recording": recording, "yes": allow_large,
              "python": [sys.executable, sys.version, sys.path], "data_home": os.environ.get("XDG_DATA_HOME"),
