@@ -71,7 +71,9 @@ def git_heads() -> dict[str, str | None]:
 
 
 @functools.lru_cache(maxsize=1)
-def _package_owners() -> dict[str, list[str]]:
+def package_owners() -> dict[str, list[str]]:
+    """Top-level package -> the distributions installing it: a scan of every distribution's
+    files (a quarter of a second), once per process for the provenance and the identities."""
     import importlib.metadata as md
     return md.packages_distributions()
 
@@ -89,7 +91,7 @@ def _installing(top: str):
     """The distribution that installs top-level package ``top`` (None: none does)."""
     import importlib.metadata as md
 
-    for name in _package_owners().get(top, []):
+    for name in package_owners().get(top, []):
         try:
             return md.distribution(name)
         except md.PackageNotFoundError:

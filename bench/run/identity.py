@@ -45,6 +45,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from radarbench.bench.results.provenance import package_owners
+
 #: the libraries whose versions belong to every identity (their numerics are the results')
 LIBRARIES = ("numpy", "scipy", "numba")
 #: hex digits of a shown identity
@@ -273,16 +275,12 @@ def _is_harness(path: Path) -> bool:
     return path.is_relative_to(_HARNESS) or path.parent == _PACKAGE_DIR
 
 
-@functools.lru_cache(maxsize=1)
-def _package_owners() -> dict[str, list[str]]:
-    """Top-level package -> the distributions installing it (a scan of every one: once)."""
-    return importlib.metadata.packages_distributions()
 
 
 @functools.lru_cache(maxsize=None)
 def distribution_of(top: str) -> str:
     """"name version" of the installed distribution of top-level package ``top``, "" for none."""
-    for name in _package_owners().get(top) or []:
+    for name in package_owners().get(top) or []:
         try:
             dist = importlib.metadata.distribution(name)
         except importlib.metadata.PackageNotFoundError:
@@ -297,8 +295,8 @@ def _own_tops(top: str, path: Path) -> frozenset[str]:
     is installed, else its own."""
     if top == _PACKAGE or not _installed(path):
         return frozenset({top})
-    names = set(_package_owners().get(top) or [])
-    return frozenset({t for t, ds in _package_owners().items() if names & set(ds)} | {top})
+    names = set(package_owners().get(top) or [])
+    return frozenset({t for t, ds in package_owners().items() if names & set(ds)} | {top})
 
 
 def _package_files(top: str) -> list[tuple[str, Path]]:
