@@ -282,6 +282,10 @@ def _last_line(exc: BaseException) -> str:
     return line if len(line) <= 300 else line[:297] + "..."
 
 
+#: whether discover() ran to its end (out of memory stops it half-way)
+_WHOLE = False
+
+
 def discovered() -> bool:
     """Whether this process has imported the plugins already."""
     return _DISCOVERED
@@ -290,7 +294,7 @@ def discovered() -> bool:
 def discover() -> None:
     """Import all plugins once per process: the built-ins, then the entry points; their
     numba kernels keep a cache whose failures never fail them (:mod:`bench.run.numba_cache`)."""
-    global _DISCOVERED
+    global _DISCOVERED, _WHOLE
     if _DISCOVERED:
         return
     _DISCOVERED = True
@@ -302,6 +306,7 @@ def discover() -> None:
     _discover_tasks()
     _load_entry_points("bench.scenarios")
     _load_entry_points("bench.methods")
+    _WHOLE = True
 
 
 def _builtin_tasks() -> None:
@@ -378,11 +383,14 @@ def absent(kind: str, name: str, named, missing: list[Unavailable]) -> str:
     return unknown_name(kind, name, named)
 
 
-def names() -> dict:
+def names() -> dict | None:
     """What :func:`absent_from` needs to answer a name without the plugins: per kind the
     names claimed and the registry's names (a name claimed twice qualified), and the
-    unavailable plugins (kept by :mod:`bench.sweep.listing` beside the listing)."""
+    unavailable plugins (kept by :mod:`bench.sweep.listing` beside the listing); None
+    when the discovery stopped half-way (out of memory), so no partial table is kept."""
     discover()
+    if not _WHOLE:
+        return None
     return {**{kind: {"claimed": sorted(_table(kind)), "named": sorted(_named(kind))}
                for kind in ("method", "scenario")},
             "unavailable": [dataclasses.astuple(u) for u in _UNAVAILABLE]}

@@ -272,10 +272,11 @@ def keep_names(fingerprint_: str) -> None:
     from radarbench.bench import registry
 
     path = _names_file(fingerprint_)
-    if path is None or path.exists():
+    table = registry.names() if path is not None and not path.exists() else None
+    if table is None:
         return
     try:
-        write_cached(path, json.dumps(registry.names()))
+        write_cached(path, json.dumps(table))
         for old in path.parent.glob("names-*.json"):
             if old != path:
                 old.unlink(missing_ok=True)
