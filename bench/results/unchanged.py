@@ -12,8 +12,8 @@ store (meta :data:`META`) what it was run from:
 * the **files** it depended on, by size, modification time and inode: every module the
   driver imported (the harness, the plugins, the libraries), every module file an identity
   read (:func:`bench.run.identity.files_read`, also those no class imports), the harness's
-  templates, presets and claims, the plan's data files, the folders holding them and the
-  ``sys.path`` entries (a file added or removed there changes its folder);
+  templates, presets and claims, the plan's data files; and the folders holding them and
+  the ``sys.path`` entries by the names in them (a file added, removed or renamed);
 * the commits checked out where an editable plugin lies (its provenance names them,
   :func:`bench.results.provenance.git_heads`), the outputs' digest and the units stored.
 
@@ -34,6 +34,7 @@ import hashlib
 import json
 import os
 import sqlite3
+import stat
 import sys
 from pathlib import Path
 
@@ -58,12 +59,17 @@ def run_key(*, command: str, data: dict, source: str, folder: Path, plugins: str
     return hashlib.sha256(json.dumps(whole, sort_keys=True, default=repr).encode()).hexdigest()
 
 
-def _stat(path: str) -> list[int] | None:
+def _state(path: str) -> list[int] | str | None:
+    """A file by [modification time, size, inode]; a folder by the names in it (a file added,
+    removed or renamed), its ``__pycache__`` left out (Python adds one as it imports)."""
     try:
         st = os.stat(path)
+        if not stat.S_ISDIR(st.st_mode):
+            return [st.st_mtime_ns, st.st_size, st.st_ino]
+        names = sorted(name for name in os.listdir(path) if name != "__pycache__")
     except OSError:
         return None
-    return [st.st_mtime_ns, st.st_size, st.st_ino]
+    return hashlib.sha256("\0".join(names).encode()).hexdigest()[:32]
 
 
 def _depended_on(read) -> set[str]:
@@ -98,8 +104,8 @@ def remember(out_dir: Path, key: str, started_ns: int, read, said: list[str]) ->
     files); ``said``: the lines it wrote on stderr before its units (the pairs it skips).
     Whether it was recorded."""
     from radarbench.bench.results.provenance import git_heads
-    files = {path: st for path in sorted(_depended_on(read)) if (st := _stat(path)) is not None}
-    if any(st[0] >= started_ns - SETTLE_S * 1e9 for st in files.values()):
+    files = {path: st for path in sorted(_depended_on(read)) if (st := _state(path)) is not None}
+    if any(isinstance(st, list) and st[0] >= started_ns - SETTLE_S * 1e9 for st in files.values()):
         return False
     with contextlib.closing(_open(out_dir)) as db:
         meta = dict(db.execute("SELECT key, value FROM meta"))
@@ -131,7 +137,7 @@ def settled(out_dir: Path, key: str) -> dict | None:
     if not isinstance(record, dict) or record.get("key") != key or record.get("outputs") != meta.get(
             runfolder.OUTPUTS_DIGEST) or str(record.get("units")) != meta.get("units_total"):
         return None
-    if any(_stat(path) != st for path, st in record["files"].items()):
+    if any(_state(path) != st for path, st in record["files"].items()):
         return None
     from radarbench.bench.results.provenance import head_of
     if any(head_of(Path(folder)) != head for folder, head in record["git"].items()):
