@@ -343,16 +343,12 @@ def cmd_run(args) -> int:
     from radarbench.bench.sweep.listing import fingerprint
     plugins = None if registry.discovered() else fingerprint()    # of the plugins' sources, before they load
     _check_names(args, data, source, plugins)
+    _check_executor(args)
     out_dir = Path(args.out) if args.out else RUNS_DIR / data["name"]
     command = _command_line(args)
-    key = None
-    if not (args.fresh or args.viewer or plugins is None):
-        from radarbench.bench.results import unchanged
-        key = unchanged.run_key(command=command, data=data, source=source, folder=folder, plugins=plugins,
-                                recording=not args.no_record, allow_large=args.yes)
-        if _nothing_to_do(args, out_dir, data["name"], key):
-            return 0
-    _check_executor(args)
+    key = _unchanged_key(args, command, data, source, folder, plugins)
+    if key is not None and _nothing_to_do(args, out_dir, data["name"], key):
+        return 0
     if args.executor == "local":
         from radarbench.bench.run.processes import prestart_forkserver
         prestart_forkserver()
@@ -384,6 +380,17 @@ def _skipped_lines(plan) -> list[str]:
         return []
     return [f"skipping {len(plan.skipped)} (scenario config, method config) pairs the method refuses:"] + \
         [f"  {method} on {scenario}: {reason}" for scenario, method, reason in plan.skipped]
+
+
+def _unchanged_key(args, command: str, data: dict, source: str, folder: Path, plugins: str | None) -> str | None:
+    """The key of this run for :mod:`bench.results.unchanged`; None where no answer from
+    the folder's record may stand in for the run (``--fresh``, ``--viewer``, plugins
+    registered in this process)."""
+    if args.fresh or args.viewer or plugins is None:
+        return None
+    from radarbench.bench.results import unchanged
+    return unchanged.run_key(command=command, data=data, source=source, folder=folder, plugins=plugins,
+                             recording=not args.no_record, allow_large=args.yes)
 
 
 def _nothing_to_do(args, out_dir: Path, name: str, key: str) -> bool:
