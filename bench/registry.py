@@ -280,6 +280,10 @@ def _last_line(exc: BaseException) -> str:
     return line if len(line) <= 300 else line[:297] + "..."
 
 
+#: whether discover() ran to its end (out of memory stops it half-way)
+_WHOLE = False
+
+
 def discovered() -> bool:
     """Whether this process has imported the plugins already."""
     return _DISCOVERED
@@ -288,7 +292,7 @@ def discovered() -> bool:
 def discover() -> None:
     """Import all plugins once per process: the built-ins, then the entry points; their
     numba kernels keep a cache whose failures never fail them (:mod:`bench.run.numba_cache`)."""
-    global _DISCOVERED
+    global _DISCOVERED, _WHOLE
     if _DISCOVERED:
         return
     _DISCOVERED = True
@@ -300,6 +304,7 @@ def discover() -> None:
     _discover_tasks()
     _load_entry_points("bench.scenarios")
     _load_entry_points("bench.methods")
+    _WHOLE = True
 
 
 def _task_names() -> tuple[str, ...]:
@@ -371,10 +376,43 @@ def unavailable() -> list[Unavailable]:
 def unavailable_reason(name: str) -> str | None:
     """Why the plugin ``name`` (or the module of that name) could not be
     registered, in one line; None when it is not among the unavailable ones."""
+    return _reason_among(name, unavailable())
+
+
+def _reason_among(name: str, missing: list[Unavailable]) -> str | None:
     name = bare_name(name)
-    hint = next((u for u in unavailable()
-                 if name in (u.name, re.split(r"[.:]", u.source)[-1].replace("_", "-"))), None)
+    hint = next((u for u in missing if name in (u.name, re.split(r"[.:]", u.source)[-1].replace("_", "-"))), None)
     return None if hint is None else hint.error
+
+
+def absent(kind: str, name: str, named, missing: list[Unavailable]) -> str:
+    """Why ``name``, claimed by no ``kind`` registered, names none: its plugin is one of
+    ``missing`` (unavailable), or it is unknown among ``named`` (the registry's names)."""
+    reason = _reason_among(name, missing)
+    if reason is not None:
+        return f"{kind} {name!r} is unavailable: {reason}"
+    return unknown_name(kind, name, named)
+
+
+def names() -> dict | None:
+    """What :func:`absent_from` needs to answer a name without the plugins: per kind the
+    names claimed and the registry's names (a name claimed twice qualified), and the
+    unavailable plugins (kept by :mod:`bench.sweep.listing` beside the listing); None
+    when the discovery stopped half-way (out of memory), so no partial table is kept."""
+    discover()
+    if not _WHOLE:
+        return None
+    return {**{kind: {"claimed": sorted(_table(kind)), "named": sorted(_named(kind))}
+               for kind in ("method", "scenario")},
+            "unavailable": [dataclasses.astuple(u) for u in _UNAVAILABLE]}
+
+
+def absent_from(table: dict, kind: str, name: str) -> str:
+    """Why the bare ``name`` names no ``kind`` of ``table`` (:func:`names`), "" when some
+    plugin claims it or it is qualified (only the registry can judge a qualifier)."""
+    if QUALIFIED.match(name) or name in table[kind]["claimed"]:
+        return ""
+    return absent(kind, name, table[kind]["named"], [Unavailable(*u) for u in table["unavailable"]])
 
 
 def bare_name(name: str) -> str:
@@ -469,10 +507,7 @@ def _find(kind: str, name: str) -> tuple[type | None, str]:
         return claims[0], ""
     if len(claims) > 1:
         return None, _collision(kind, bare, claims)
-    reason = unavailable_reason(bare)
-    if reason is not None:
-        return None, f"{kind} {name!r} is unavailable: {reason}"
-    return None, unknown_name(kind, name, _named(kind))
+    return None, absent(kind, name, _named(kind), unavailable())
 
 
 def _picked(kind: str, qualifier: str, bare: str) -> list[type]:

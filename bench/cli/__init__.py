@@ -31,6 +31,7 @@ import shlex
 import sqlite3
 import sys
 import threading
+import time
 import traceback
 from pathlib import Path
 
@@ -229,12 +230,33 @@ def _named(source: str, overrides):
         raise ConfigError(where, err.problem) from None
 
 
-def _load_plan(args, data: dict, source: str, folder: Path):
+def _check_names(args, data: dict, source: str, fingerprint: str | None) -> None:
+    """The sweep's plugin names checked before the plugins are imported, against the names
+    a process that imported them kept for this ``fingerprint`` of the plugins' sources
+    (:func:`bench.sweep.listing.cached_names`; None: this process has them already)."""
+    from radarbench.bench import registry
+    from radarbench.bench.sweep.config import check_names
+    from radarbench.bench.sweep.listing import cached_names
+    table = registry.names() if fingerprint is None else cached_names(fingerprint)
+    if table is not None:
+        with _named(source, _overrides(args)):
+            check_names(data, lambda kind, name: registry.absent_from(table, kind, name))
+
+
+def _load_plan(args, data: dict, source: str, folder: Path, fingerprint: str | None):
+    """The plan; the plugins' names kept for :func:`_check_names` (under ``fingerprint``,
+    taken before they were imported) once they are."""
+    from radarbench.bench import registry
     from radarbench.bench.sweep.config import parse_sweep
+    from radarbench.bench.sweep.listing import keep_names
     overrides = _overrides(args)
-    with _named(source, overrides):
-        return parse_sweep(data, source, allow_large=args.yes, base=folder,
-                           drop_idle_scenarios=bool(overrides.methods) and not overrides.scenarios)
+    try:
+        with _named(source, overrides):
+            return parse_sweep(data, source, allow_large=args.yes, base=folder,
+                               drop_idle_scenarios=bool(overrides.methods) and not overrides.scenarios)
+    finally:
+        if fingerprint is not None and registry.discovered():
+            keep_names(fingerprint)
 
 
 def _command_line(args) -> str:
@@ -314,26 +336,35 @@ def _store_errors(out_dir: Path):
 
 
 def cmd_run(args) -> int:
+    started_ns = time.time_ns()
     _check_arguments(args)
     data, source, folder = _sweep_data(args)
-    from radarbench.bench.results import runfolder
+    from radarbench.bench import registry
+    from radarbench.bench.sweep.listing import fingerprint
+    plugins = None if registry.discovered() else fingerprint()    # of the plugins' sources, before they load
+    _check_names(args, data, source, plugins)
     _check_executor(args)
+    out_dir = Path(args.out) if args.out else RUNS_DIR / data["name"]
+    command = _command_line(args)
+    key = _unchanged_key(args, command, data, source, folder, plugins)
+    if key is not None and _nothing_to_do(args, out_dir, data["name"], key):
+        return 0
     if args.executor == "local":
         from radarbench.bench.run.processes import prestart_forkserver
         prestart_forkserver()
-    plan = _load_plan(args, data, source, folder)
-    if plan.skipped and not args.quiet:
-        print(f"skipping {len(plan.skipped)} (scenario config, method config) pairs the method refuses:",
-              file=sys.stderr)
-        for scenario, method, reason in plan.skipped:
-            print(f"  {method} on {scenario}: {reason}", file=sys.stderr)
-    out_dir = Path(args.out) if args.out else RUNS_DIR / plan.name
-    command = _command_line(args)
+    plan = _load_plan(args, data, source, folder, plugins)
+    said = _skipped_lines(plan)
+    if not args.quiet:
+        for line in said:
+            print(line, file=sys.stderr)
     created = not os.path.lexists(out_dir)
     lock = runfolder.open_for_run(out_dir, fresh=args.fresh, what=f"bench run, {plan.name}")
     try:
         with runfolder.writing(out_dir), _store_errors(out_dir):
-            return _run_locked(args, plan, out_dir, command)
+            code = _run_locked(args, plan, out_dir, command)
+            if code == 0 and key is not None:
+                _remember_unchanged(plan, out_dir, key, started_ns, said)
+            return code
     except BaseException as exc:
         refused = isinstance(exc, (ConfigError, Fault, OSError, sqlite3.Error, MemoryError)) or is_out_of_memory(exc)
         if created and refused:
@@ -341,6 +372,55 @@ def cmd_run(args) -> int:
         raise
     finally:
         lock.release()
+
+
+def _skipped_lines(plan) -> list[str]:
+    """What a run says of the (scenario config, method config) pairs its plan skips."""
+    if not plan.skipped:
+        return []
+    return [f"skipping {len(plan.skipped)} (scenario config, method config) pairs the method refuses:"] + \
+        [f"  {method} on {scenario}: {reason}" for scenario, method, reason in plan.skipped]
+
+
+def _unchanged_key(args, command: str, data: dict, source: str, folder: Path, plugins: str | None) -> str | None:
+    """The key of this run for :mod:`bench.results.unchanged`; None where no answer from
+    the folder's record may stand in for the run (``--fresh``, ``--viewer``, plugins
+    registered in this process)."""
+    if args.fresh or args.viewer or plugins is None:
+        return None
+    from radarbench.bench.results import unchanged
+    return unchanged.run_key(command=command, data=data, source=source, folder=folder, plugins=plugins,
+                             recording=not args.no_record, allow_large=args.yes)
+
+
+def _nothing_to_do(args, out_dir: Path, name: str, key: str) -> bool:
+    """A run of ``key`` into ``out_dir`` that would find every unit stored and the report
+    current says so as such a run does, and ends there: no plugin, no worker, no report
+    module is loaded (:mod:`bench.results.unchanged`)."""
+    from radarbench.bench.results import unchanged
+    if not os.path.isfile(out_dir / runfolder.STORE):
+        return False
+    with runfolder.open_for_run(out_dir, fresh=False, what=f"bench run, {name}"), _store_errors(out_dir):
+        record = unchanged.settled(out_dir, key)
+    if record is None:
+        return False
+    if not args.quiet:
+        for line in record["said"]:
+            print(line, file=sys.stderr)
+        print(f"Nothing to run: all {record['units']} units stored in {out_dir}", file=sys.stderr)
+    print(f"the report is up to date: {out_dir / 'report.md'}")
+    return True
+
+
+def _remember_unchanged(plan, out_dir: Path, key: str, started_ns: int, said: list[str]) -> None:
+    """After a run that succeeded: what the next one needs to see that nothing changed
+    (:func:`bench.results.unchanged.remember`)."""
+    from radarbench.bench import registry
+    from radarbench.bench.results import unchanged
+    from radarbench.bench.run.identity import files_read
+    data = [path for configs, find in ((plan.scenarios, registry.get_scenario), (plan.methods, registry.get_method))
+            for config in configs for path in find(config.name)().data_files(config.params)]
+    unchanged.remember(out_dir, key, started_ns, [*files_read(), *data], said)
 
 
 def _import_early(module: str) -> None:
@@ -354,6 +434,8 @@ def _import_early(module: str) -> None:
 def _run_locked(args, plan, out_dir: Path, command: str) -> int:
     """The run, in the locked folder."""
     from radarbench.bench import registry
+    from radarbench.bench.results import unchanged
+    unchanged.forget(out_dir)              # before anything in the folder changes: no stale record survives
     from radarbench.bench.run.progress import Progress
     from radarbench.bench.run.runner import Interrupted, plan_record, run_sweep, write_plan_toml
     threading.Thread(target=_import_early, args=("radarbench.bench.report",), daemon=True,

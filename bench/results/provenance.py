@@ -47,15 +47,33 @@ def git_commit() -> str:
     return out.stdout.strip() + (" (with uncommitted changes)" if dirty.stdout.strip() else "")
 
 
-@functools.lru_cache(maxsize=None)
-def _git_head(folder: Path) -> str | None:
+def head_of(folder: Path) -> str | None:
     """The commit checked out where ``folder`` lies; None outside a checkout or without git."""
     out = _git(folder, "rev-parse", "--short=12", "HEAD")
     return out.stdout.strip() if out is not None and out.returncode == 0 else None
 
 
+#: folder -> the commit :func:`_git_head` found there (what this process's provenance named)
+_HEADS: dict[str, str | None] = {}
+
+
+@functools.lru_cache(maxsize=None)
+def _git_head(folder: Path) -> str | None:
+    _HEADS[str(folder)] = head = head_of(folder)
+    return head
+
+
+def git_heads() -> dict[str, str | None]:
+    """Folder -> the commit checked out there, of every folder this process's provenance
+    named a commit of (:func:`distribution_of`): a later run compares them
+    (:mod:`bench.results.unchanged`)."""
+    return dict(_HEADS)
+
+
 @functools.lru_cache(maxsize=1)
-def _package_owners() -> dict[str, list[str]]:
+def package_owners() -> dict[str, list[str]]:
+    """Top-level package -> the distributions installing it: a scan of every distribution's
+    files (a quarter of a second), once per process for the provenance and the identities."""
     import importlib.metadata as md
     return md.packages_distributions()
 
@@ -73,7 +91,7 @@ def _installing(top: str):
     """The distribution that installs top-level package ``top`` (None: none does)."""
     import importlib.metadata as md
 
-    for name in _package_owners().get(top, []):
+    for name in package_owners().get(top, []):
         try:
             return md.distribution(name)
         except md.PackageNotFoundError:

@@ -309,8 +309,8 @@ def folder_for(path: str | os.PathLike) -> Path:
 # ------------------------------------------------------------------ the store, checked read-only
 
 def store_tables() -> set[str]:
-    """The tables of a bench store (:data:`bench.results.store.SCHEMA`)."""
-    from radarbench.bench.results.store import SCHEMA
+    """The tables of a bench store (:data:`bench.results.schema.SCHEMA`)."""
+    from radarbench.bench.results.schema import SCHEMA
     return set(re.findall(r"CREATE TABLE IF NOT EXISTS (\w+)", SCHEMA))
 
 
@@ -319,7 +319,7 @@ def check_store(db: Path, *, need_plan: bool = False) -> None:
     truncated, a folder, a link, another program's SQLite file) without modifying it: read
     its header, then open it read-only (``immutable`` when it has no WAL, so no file is
     created beside it)."""
-    from radarbench.bench.results.store import read_only_uri      # the store imports numpy and pandas: only here
+    from radarbench.bench.results.schema import read_only_uri
 
     def refuse(why: str) -> ConfigError:
         return ConfigError(str(db), f"not a bench results store ({why}); move it away, or choose another folder")
@@ -371,7 +371,7 @@ def check_store(db: Path, *, need_plan: bool = False) -> None:
 
 def _check_plan_json(db: Path, text) -> None:
     """A stored plan that is not a JSON object is a damaged store (exit 2, every command)."""
-    from radarbench.bench.results.store import damaged
+    from radarbench.bench.results.schema import damaged
     try:
         ok = isinstance(json.loads(text), dict)
     except (TypeError, ValueError) as exc:

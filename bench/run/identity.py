@@ -45,6 +45,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from radarbench.bench.results.provenance import package_owners
+
 #: the libraries whose versions belong to every identity (their numerics are the results')
 LIBRARIES = ("numpy", "scipy", "numba")
 #: hex digits of a shown identity
@@ -171,9 +173,20 @@ class Module:
     marked: bool                # binds COMPUTES_RESULTS = True
 
 
+#: every module file this process's identities read (:func:`files_read`)
+_READ: set[Path] = set()
+
+
+def files_read() -> set[Path]:
+    """The module files this process's identities were computed from (those no class
+    imports among them), for :mod:`bench.results.unchanged`."""
+    return set(_READ)
+
+
 def read_module(name: str, file: Path) -> Module:
     """The module ``name`` in ``file``; parsed again only when the file changed (an edit
     between two runs of one process is seen)."""
+    _READ.add(file)
     st = file.stat()
     return _parse_module(name, file, st.st_mtime_ns, st.st_size)
 
@@ -262,16 +275,12 @@ def _is_harness(path: Path) -> bool:
     return path.is_relative_to(_HARNESS) or path.parent == _PACKAGE_DIR
 
 
-@functools.lru_cache(maxsize=1)
-def _package_owners() -> dict[str, list[str]]:
-    """Top-level package -> the distributions installing it (a scan of every one: once)."""
-    return importlib.metadata.packages_distributions()
 
 
 @functools.lru_cache(maxsize=None)
 def distribution_of(top: str) -> str:
     """"name version" of the installed distribution of top-level package ``top``, "" for none."""
-    for name in _package_owners().get(top) or []:
+    for name in package_owners().get(top) or []:
         try:
             dist = importlib.metadata.distribution(name)
         except importlib.metadata.PackageNotFoundError:
@@ -286,8 +295,8 @@ def _own_tops(top: str, path: Path) -> frozenset[str]:
     is installed, else its own."""
     if top == _PACKAGE or not _installed(path):
         return frozenset({top})
-    names = set(_package_owners().get(top) or [])
-    return frozenset({t for t, ds in _package_owners().items() if names & set(ds)} | {top})
+    names = set(package_owners().get(top) or [])
+    return frozenset({t for t, ds in package_owners().items() if names & set(ds)} | {top})
 
 
 def _package_files(top: str) -> list[tuple[str, Path]]:

@@ -30,7 +30,7 @@ import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from radarbench.bench.sweep import capabilities, feasibility
 from radarbench.bench import registry
@@ -401,6 +401,27 @@ def check_sweep_fields(data: Mapping[str, Any]) -> dict[str, Any]:
         "unit_timeout_s": _parse_unit_timeout(data["unit_timeout_s"]) if "unit_timeout_s" in data else None,
         "max_unit_memory_gb": memory_gb,
     }
+
+
+def check_names(data: Mapping[str, Any], absent: Callable[[str, str], str]) -> None:
+    """The plugin names of a sweep whose fields passed :func:`check_sweep_fields` checked
+    before the plugins are imported: each scenario's and each method's that is not
+    ``optional``, in the order :func:`parse_sweep` meets them, ``absent(kind, name)``
+    saying why a name names none ("" when it does; :func:`bench.registry.absent_from`).
+    What is not a name here (a wrong type) is left to :func:`parse_sweep`."""
+    wanted: list[tuple[str, Any, str]] = []
+    if isinstance(data.get("scenarios"), list):
+        wanted += [("scenario", e.get("name"), f"scenarios[{i}].name")
+                   for i, e in enumerate(data["scenarios"]) if isinstance(e, dict)]
+    else:
+        wanted.append(("scenario", data.get("scenario"), "scenario"))
+    if isinstance(data.get("methods"), list):
+        wanted += [("method", e.get("name"), f"methods[{i}].name")
+                   for i, e in enumerate(data["methods"]) if isinstance(e, dict) and not e.get("optional", False)]
+    for kind, name, field in wanted:
+        problem = absent(kind, name) if isinstance(name, str) else ""
+        if problem:
+            raise ConfigError(field, problem)
 
 
 @dataclass(frozen=True)

@@ -245,6 +245,45 @@ def _capability_lines(cls) -> list[str]:
     return [f"      {what}: {', '.join(sorted(names))}" for what, names in declared.items() if names]
 
 
+def _names_file(fingerprint_: str) -> Path | None:
+    folder = cache_dir()
+    return folder / f"names-{fingerprint_}.json" if private_dir(folder) else None
+
+
+def cached_names(fingerprint_: str) -> dict | None:
+    """The registry's names (:func:`bench.registry.names`) as a process that imported the
+    plugins kept them under ``fingerprint_`` (:func:`fingerprint`, taken before it imported
+    them), so a sweep's plugin names are checked without the plugins; None when none did."""
+    path = _names_file(fingerprint_)
+    text = read_cached(path) if path is not None else None
+    try:
+        table = json.loads(text) if text else None
+    except ValueError:
+        return None
+    ok = isinstance(table, dict) and isinstance(table.get("unavailable"), list) and all(
+        isinstance(table.get(kind), dict) and isinstance(table[kind].get("claimed"), list)
+        and isinstance(table[kind].get("named"), list) for kind in ("method", "scenario"))
+    return table if ok else None
+
+
+def keep_names(fingerprint_: str) -> None:
+    """Keep the registry's names under ``fingerprint_`` (:func:`fingerprint`, taken before
+    this process imported the plugins) for :func:`cached_names`; those of earlier sources go."""
+    from radarbench.bench import registry
+
+    path = _names_file(fingerprint_)
+    table = registry.names() if path is not None and not path.exists() else None
+    if table is None:
+        return
+    try:
+        write_cached(path, json.dumps(table))
+        for old in path.parent.glob("names-*.json"):
+            if old != path:
+                old.unlink(missing_ok=True)
+    except OSError:
+        pass
+
+
 def plugin_listing(verbose: bool = False) -> str:
     """The tasks, scenarios and methods as ``bench list`` prints them (cached, see above).
 
