@@ -20,7 +20,8 @@ the documentation site show the results):
    ``bench run`` has it, so every unit is computed again rather than read from the results cache;
 3. ``no-op re-run``: the same command into the warm run's folder: nothing to compute;
 4. ``edit one parameter``: ``--preset maneuver-detection`` run once, then again into the same
-   folder with one method parameter changed (``--set``): the units it reused and computed;
+   folder with one method parameter changed (``--set``): the units it reused and computed,
+   and whether its CSVs equal a fresh run of the edited sweep (without their timing columns);
 5. ``trials 100 -> 150``: a small sweep (``cv-turn-cv``, two SNR levels, three detectors) at
    100 trials, then at ``--trials 150`` into the same folder, and a fresh 150-trial run to
    compare with (the CSVs without their timing columns);
@@ -247,6 +248,11 @@ class Loop:
         suffix = f" (reduced: {reduced})" if reduced else ""
         self.bench("edit", f"maneuver-detection, first run{suffix}", *base)
         self.bench("edit", f"maneuver-detection, {key} edited{suffix}", *base, "--set", key)
+        self.bench("edit", f"maneuver-detection with {key}, a fresh run (to compare){suffix}", "--preset",
+                   "maneuver-detection", "--out", self.out("maneuver-detection-fresh"), *self.edit_overrides,
+                   "--set", key, *self.no_cache())
+        self.checks[f"maneuver-detection with {key} edited = a fresh run of the edited sweep"] = compare_runs(
+            Path(self.out("maneuver-detection")), Path(self.out("maneuver-detection-fresh")))
 
     def trials(self) -> None:
         sweep = self.work / "loop-trials.toml"
