@@ -335,7 +335,7 @@ def jpda_stage(tab, stage, z, n_plots, free, cfg, icfg):  # pragma: no cover - c
     t, m = d2.shape
     parent = np.arange(t)
     for i in range(m):
-        first = -1
+        first = np.int64(-1)                         # typed: a literal -1 would compile _find for it
         for j in range(t):
             if d2[j, i] < np.inf:
                 if first < 0:
