@@ -18,6 +18,9 @@ the documentation site show the results):
    results cache, stored unit costs, parsed identities, ``bench list``'s cache);
 2. ``warm quick run``: the same into a new run folder, kernels cached; ``--no-cache`` when
    ``bench run`` has it, so every unit is computed again rather than read from the results cache;
+   and whether the first run's runtime table (CPU ms per trial of each config, the report's
+   runtime section) is within :data:`RUNTIME_AGREEMENT` of the warm run's for every config
+   (the first run's compilation must not reach its units' times);
 3. ``no-op re-run``: the same command into the warm run's folder: nothing to compute;
 4. ``edit one parameter``: ``--preset maneuver-detection`` run once, then again into the same
    folder with one method parameter changed (``--set``): the units it reused and computed,
@@ -97,6 +100,11 @@ COMPUTED = re.compile(r"(?<!warm-up): done, (\d+)/\d+ units")
 #: the run's own count: "units: A reused from FOLDER, B from the results cache, C computed"
 REUSED = re.compile(r"units: (\d+) reused from .*?, (\d+) from the results cache")
 NOTHING = re.compile(r"Nothing to run")
+#: the report's runtime section and a row of its table: | `config` | CPU ms per trial | ...
+RUNTIME_SECTION = re.compile(r"^## Runtime$(.*?)(?=^## |\Z)", re.M | re.S)
+RUNTIME_ROW = re.compile(r"^\| `(?P<config>[^`]+)`\s*\| (?P<ms>[0-9.eE+-]+)\s*\|", re.M)
+#: how far apart a first run's CPU per trial and a warm run's may be, either way, for any config
+RUNTIME_AGREEMENT = 2.0
 
 
 @dataclasses.dataclass
@@ -237,6 +245,8 @@ class Loop:
         self.bench("warm", "warm quick run (kernels cached" + (", results cache bypassed)" if self.no_cache()
                                                                 else ")"),
                    "--preset", "quick", "--out", self.out("quick-warm"), *self.no_cache())
+        self.checks[f"the first run's runtime table is within {RUNTIME_AGREEMENT:g}x of the warm run's"] = \
+            runtimes_agree(Path(self.out("quick-first")) / "report.md", Path(self.out("quick-warm")) / "report.md")
 
     def noop(self) -> None:
         self.bench("noop", "no-op re-run (nothing to compute)", "--preset", "quick", "--out", self.out("quick-warm"))
@@ -307,6 +317,26 @@ def compare_runs(left: Path, right: Path) -> str:
         if not a.equals(b):
             differing.append(name)
     return "yes (" + ", ".join(names) + ")" if not differing else "no: " + ", ".join(differing) + " differ"
+
+
+def runtime_table(report: Path) -> dict[str, float]:
+    """config -> CPU ms per trial, from the runtime section of a run's ``report.md`` (empty
+    without one)."""
+    section = RUNTIME_SECTION.search(report.read_text(encoding="utf-8")) if report.is_file() else None
+    return {m["config"]: float(m["ms"]) for m in RUNTIME_ROW.finditer(section.group(1))} if section else {}
+
+
+def runtimes_agree(first: Path, warm: Path) -> str:
+    """Whether every config's CPU per trial in the ``first`` report is within
+    :data:`RUNTIME_AGREEMENT` of the ``warm`` one's, either way: one line naming the largest ratio."""
+    a, b = runtime_table(first), runtime_table(warm)
+    ratios = {c: max(a[c] / b[c], b[c] / a[c]) for c in sorted(set(a) & set(b)) if a[c] > 0 and b[c] > 0}
+    if not ratios:
+        return f"no runtime table to compare ({first.parent.name}: {len(a)} configs, {warm.parent.name}: {len(b)})"
+    worst = max(ratios, key=ratios.get)
+    beyond = sum(r > RUNTIME_AGREEMENT for r in ratios.values())
+    return (f"{'yes' if not beyond else 'no'} (max ratio {ratios[worst]:.2f} for {worst}: {a[worst]:.3g} ms "
+            f"first, {b[worst]:.3g} ms warm; {beyond} of {len(ratios)} configs beyond)")
 
 
 def plan_holds(plan: Path, methods: set[str], snr_db: set[float]) -> str:

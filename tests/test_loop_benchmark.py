@@ -100,3 +100,25 @@ def test_the_docs_show_the_loop_records_durations(tmp_path):
         assert cells in " ".join(page.split()), cells
     assert "[reports/perf/loop.md](reports/perf/loop.md)" in page
     assert fill_measured("# no marker\n", tmp_path, "x.md") == "# no marker\n"
+
+
+def _report(folder: Path, rows: dict[str, float]) -> Path:
+    folder.mkdir()
+    table = "\n".join(f"| `{config}` | {ms:.3g} | 100 | {ms / 10:.3g} |" for config, ms in rows.items())
+    (folder / "report.md").write_text("# Report\n\n## Runtime\n\n![runtime](figures/runtime.png)\n\n"
+                                      "| config | CPU ms per trial | trials run | total CPU seconds |\n"
+                                      f"|---|---|---|---|\n{table}\n\n## Provenance\n\n| `x` | 999 |\n")
+    return folder / "report.md"
+
+
+def test_the_runtime_check_compares_every_config_of_the_first_and_warm_reports_either_way(tmp_path):
+    loop = _loop_module()
+    warm = _report(tmp_path / "warm", {"cv-kf": 0.5, "imm-cv-ca[window=3]": 2.0})
+    assert loop.runtime_table(warm) == {"cv-kf": 0.5, "imm-cv-ca[window=3]": 2.0}     # the next section's rows left out
+    close = _report(tmp_path / "close", {"cv-kf": 0.9, "imm-cv-ca[window=3]": 1.2})
+    assert loop.runtimes_agree(close, warm).startswith("yes (max ratio 1.80 for cv-kf")
+    compiled = _report(tmp_path / "compiled", {"cv-kf": 0.5, "imm-cv-ca[window=3]": 2410.0})
+    assert loop.runtimes_agree(compiled, warm).startswith("no (max ratio 1205.00 for imm-cv-ca[window=3]")
+    faster = _report(tmp_path / "faster", {"cv-kf": 0.2, "imm-cv-ca[window=3]": 2.0})
+    assert loop.runtimes_agree(faster, warm).startswith("no (max ratio 2.50 for cv-kf")
+    assert loop.runtimes_agree(tmp_path / "none" / "report.md", warm).startswith("no runtime table")

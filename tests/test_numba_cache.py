@@ -18,6 +18,8 @@ import pytest
 from radarbench.bench.run import numba_cache, progress
 from tests.test_reliability_io import _mount_namespace, _read_only
 
+from conftest import scaled
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE_FOLDERS = ("bench", "methods", "models", "scenarios")
 SKIPPED = "bench: numba cache skipped: "
@@ -174,6 +176,47 @@ def test_every_kernel_keeps_a_guarded_cache_outside_the_package(fresh_kernels):
         assert isinstance(kernel._cache, numba_cache.GuardedCache), kernel
         assert not Path(kernel._cache.cache_path).is_relative_to(ROOT), kernel
 
+
+#: a process that calls ``affine`` of the module ``argv[2]`` in ``argv[1]`` and prints its
+#: cache hits and misses (a miss: it compiled the kernel)
+WAITER = '''
+import importlib, sys
+import numpy as np
+from radarbench.bench.run import numba_cache
+numba_cache.install()
+sys.path.insert(0, sys.argv[1])
+kernels = importlib.import_module(sys.argv[2])
+print("calling", flush=True)
+kernels.affine(np.arange(5.0))
+print(sum(kernels.affine.stats.cache_hits.values()), sum(kernels.affine.stats.cache_misses.values()))
+'''
+
+
+def test_a_kernel_another_process_compiles_is_waited_for_then_loaded_not_compiled_twice(fresh_kernels, tmp_path):
+    """Two processes of a cold run call one kernel: the second waits for the first to compile
+    it, then loads it from the cache (a warm-up's workers share the kernels they compile)."""
+    lock = fresh_kernels.affine._cache._lock_path()
+    assert numba_cache.COMPILE_LOCK.take(lock)            # this process starts compiling affine
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba"), "PYTHONPATH": str(ROOT)}
+    try:
+        waiter = subprocess.Popen([sys.executable, "-c", WAITER, str(tmp_path), fresh_kernels.__name__],
+                                  stdout=subprocess.PIPE, text=True, env=env)
+        assert waiter.stdout.readline() == "calling\n"
+        fresh_kernels.affine(np.arange(5.0))              # compiled and saved while the other process calls it
+    finally:
+        numba_cache.COMPILE_LOCK.give_back(lock)
+    out, _ = waiter.communicate(timeout=scaled())
+    assert waiter.returncode == 0
+    assert out.split() == ["1", "0"], "the other process compiled the kernel again instead of loading it"
+    assert numba_cache.COMPILE_LOCK.held() == []
+
+
+def test_a_failed_compilation_gives_its_lock_back(fresh_kernels):
+    """A kernel that does not compile is never saved: its lock must not stay held (another
+    process would wait on it)."""
+    with pytest.raises(Exception):
+        fresh_kernels.affine("not an array")
+    assert numba_cache.COMPILE_LOCK.held() == []
 
 def test_without_numba_cache_dir_the_cache_is_numbas_user_wide_folder_not_the_package(monkeypatch, tmp_path):
     monkeypatch.setattr(numba_cache.config, "CACHE_DIR", "")

@@ -54,6 +54,26 @@ def test_no_kernel_compiles_again_after_the_warm_up_of_the_quick_preset():
     assert not grown, f"compiled inside timed units (kernel: (after the warm-up, after the units)): {grown}"
 
 
+
+def _per_constant(kernel) -> list:
+    """A kernel's specialisations that differ from another of its own only in the literal
+    value of an argument: numba types a Python int constant one kernel passes another as
+    that value, and compiles the callee once per value."""
+    unliteral = [tuple(numba.core.types.unliteral(t) for t in sig) for sig in kernel.signatures]
+    return [sig for sig, plain in zip(kernel.signatures, unliteral) if unliteral.count(plain) > 1]
+
+
+@pytest.mark.slow
+def test_the_quick_preset_compiles_no_kernel_once_per_constant():
+    """After the quick preset's warm-up, no kernel holds two specialisations for two values
+    of one constant argument (each costs a whole compilation: the JPDA stage twice, once per
+    track status)."""
+    plan = load_sweep(Path(registry.__file__).parent / "presets" / "quick.toml")
+    _warm_up(plan)
+    repeated = {f"{k.py_func.__module__}.{k.py_func.__qualname__}": [str(sig) for sig in _per_constant(k)]
+                for k in kernels() if _per_constant(k)}
+    assert not repeated, f"compiled once per constant value: {repeated}"
+
 def test_a_one_trial_unit_compiles_nothing_after_a_two_trial_warm_up():
     """A batch of one trial types its arrays as a larger one does: a prior shared by the
     trials and broadcast to (1, d) is contiguous but read-only, which numba would type as

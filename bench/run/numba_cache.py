@@ -20,17 +20,22 @@ before it imports a plugin) gives every kernel compiled with ``cache=True`` a
   the kernel: it compiles without the cache; a damaged entry is written anew; a folder that
   could not be written is not tried again by this process. stderr says, once per command
   (:func:`bench.run.progress.say_once`: the first of its processes to say it), which folder
-  was skipped and why.
+  was skipped and why;
+- a kernel is compiled by one process at a time (:class:`CompileLock`): a process that misses
+  a kernel in the cache while another compiles it waits, then loads what the other saved, so
+  the workers of a cold run never compile the same kernel twice.
 """
 
 from __future__ import annotations
 
 import errno
+import fcntl
 import hashlib
 import io
 import os
 import pickle
 import sys
+import time
 
 from numba.core import caching, config
 from numba.core.dispatcher import Dispatcher
@@ -157,13 +162,33 @@ class GuardedCache(caching.FunctionCache):
         self._root = getattr(self._impl.locator, "root", self._cache_path)
 
     def load_overload(self, sig, target_context):
+        """The kernel's object code for ``sig`` from the cache; on a miss, once no other process
+        compiles this kernel (:class:`CompileLock`, held by this one until :meth:`save_overload`
+        or a failed compilation), what that process may have saved meanwhile."""
+        loaded = self._load(sig, target_context)
+        if loaded is None and self._root not in _UNWRITABLE and COMPILE_LOCK.take(self._lock_path()):
+            loaded = self._load(sig, target_context)
+            if loaded is not None:
+                COMPILE_LOCK.give_back(self._lock_path())
+        return loaded
+
+    def _load(self, sig, target_context):
         try:
             return super().load_overload(sig, target_context)
         except Exception as exc:  # noqa: BLE001 - whatever the cache holds, the kernel compiles
             _skipped(self._root, exc, saving=False)
             return None
 
+    def _lock_path(self) -> str:
+        return self._cache_file._index_path + LOCK_SUFFIX
+
     def save_overload(self, sig, data) -> None:
+        try:
+            self._save(sig, data)
+        finally:
+            COMPILE_LOCK.give_back(self._lock_path())
+
+    def _save(self, sig, data) -> None:
         if self._root in _UNWRITABLE:
             return
         try:
@@ -171,6 +196,92 @@ class GuardedCache(caching.FunctionCache):
         except Exception as exc:  # noqa: BLE001 - the kernel is compiled: only the cache lacks it
             if _skipped(self._root, exc, saving=True) in (NOT_WRITABLE, FULL):
                 _UNWRITABLE.add(self._root)
+
+
+#: what the lock file of a kernel's index file adds to its name
+LOCK_SUFFIX = ".lock"
+#: how long a process waits for another to compile a kernel before it compiles the kernel itself
+#: (a bound, never reached by a compilation: the other process may be stopped)
+COMPILE_WAIT_S = 300.0
+#: how often a waiting process looks whether the other one is done
+_POLL_S = 0.02
+
+
+class CompileLock:
+    """One process compiles a kernel at a time: an exclusive ``flock`` on a file beside the
+    kernel's index, taken on a miss in the cache, given back once the kernel is saved (or its
+    compilation failed). The operating system gives it back when a process ends, so a killed
+    compiler blocks no one. Taken again by the process that holds it (a kernel compiled for a
+    second signature while its first compiles), it counts. A kernel's callees are compiled
+    inside it and take their own locks: numba's calls between kernels never loop, so neither
+    do the waits. Where the lock cannot be had (a folder not writable, a file system without
+    ``flock``, the wait's bound) the kernel simply compiles."""
+
+    def __init__(self):
+        self._held: dict[str, list] = {}         # lock path -> [file descriptor, depth]
+
+    def take(self, path: str) -> bool:
+        """Hold ``path``'s lock, waiting while another process holds it; False if it cannot be had."""
+        if path in self._held:
+            self._held[path][1] += 1
+            return True
+        try:
+            os.makedirs(os.path.dirname(path), exist_ok=True)
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError:
+            return False
+        if not _flock(fd, time.monotonic() + COMPILE_WAIT_S):
+            os.close(fd)
+            return False
+        self._held[path] = [fd, 1]
+        return True
+
+    def give_back(self, path: str) -> None:
+        """Release one hold of ``path``'s lock (the lock itself with the last)."""
+        held = self._held.get(path)
+        if held is None:
+            return
+        held[1] -= 1
+        if held[1] == 0:
+            del self._held[path]
+            os.close(held[0])                    # closing the file releases its flock
+
+    def held(self) -> list[str]:
+        return list(self._held)
+
+
+def _flock(fd: int, deadline: float) -> bool:
+    while True:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(_POLL_S)
+        except OSError:
+            return False
+
+
+#: this process's compile locks
+COMPILE_LOCK = CompileLock()
+
+
+def _release_after_failed_compilations() -> None:
+    """A kernel whose compilation raises is never saved: its lock is given back when numba's
+    ``numba:compile`` event ends with the exception."""
+    from numba.core import event
+
+    class FailedCompilation(event.Listener):
+        def on_start(self, ev):
+            pass
+
+        def on_end(self, ev):
+            cache = getattr(ev.data["dispatcher"], "_cache", None)
+            if getattr(ev, "_exc_details", None) is not None and isinstance(cache, GuardedCache):
+                COMPILE_LOCK.give_back(cache._lock_path())
+
+    event.register("numba:compile", FailedCompilation())
 
 
 #: the folders this process does not write again (not writable, or full)
@@ -216,6 +327,9 @@ def kernels():
                 yield obj
 
 
+_installed = False
+
+
 def _enable_guarded_caching(self) -> None:
     self._cache = GuardedCache(self.py_func)
 
@@ -224,6 +338,10 @@ def install() -> None:
     """Every kernel decorated with ``cache=True`` from now on keeps a :class:`GuardedCache`,
     and so does every one decorated before (numba chose its folder then, but wrote nothing
     yet unless it compiled)."""
+    global _installed
+    if not _installed:
+        _release_after_failed_compilations()
+        _installed = True
     Dispatcher.enable_caching = _enable_guarded_caching
     for kernel in kernels():
         if not isinstance(kernel._cache, GuardedCache):

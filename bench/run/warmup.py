@@ -7,8 +7,8 @@ hands the workers a warm-up: per (scenario config, method config) pair, one task
 runs a :data:`WARM_UP_TRIALS`-trial calibration unit (where its task needs a threshold)
 and evaluation unit (at the lowest SNR), results thrown away. Each method's kernels are compiled by the
 one worker that takes its pair (the pairs spread over the workers), with the types the
-sweep passes, and cached; a kernel two methods share may compile in two workers at
-once. The first worker to compile says so on stderr (:data:`COMPILING`, once per run).
+sweep passes, and cached; a kernel two methods share compiles in one worker while the
+other waits for it, then loads it (:class:`bench.run.numba_cache.CompileLock`). The first worker to compile says so on stderr (:data:`COMPILING`, once per run).
 The sweep's units then load the kernels from the cache, so the runtime of every stored
 unit excludes compilation (the warm-up's seconds are stored apart).
 """

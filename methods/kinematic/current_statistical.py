@@ -102,7 +102,7 @@ class CurrentStatistical(KinematicTracker):
             np.ascontiguousarray(batch.z, dtype=float), np.ones((n, K), bool) if valid is None else
             np.ascontiguousarray(valid, dtype=bool), kernel_array(np.broadcast_to(model.x0, (n, F.shape[0]))),
             np.ascontiguousarray(model.P0, dtype=float), np.ascontiguousarray(model.H, dtype=float),
-            np.ascontiguousarray(model.R, dtype=float), F, Q_axes, U_axes, np.arange(2, F.shape[0], 3),
+            np.ascontiguousarray(model.R, dtype=float), kernel_array(F), Q_axes, U_axes, np.arange(2, F.shape[0], 3),
             float(params.a_max_m_s2), float(params.a_max_neg_m_s2), float(params.accel_std_floor_m_s2) ** 2)
         out = output(xs, Ps, 1)
         out.traces["accel_std"] = std

@@ -84,10 +84,14 @@ from radarbench.models.ukf import (
     wrap,
 )
 
-EMPTY, TENTATIVE, CONFIRMED, TERMINATED = 0, 1, 2, 3
+# Constants a kernel passes to another are NumPy scalars, not Python ints: numba types a Python
+# int constant as its literal value and compiles the callee once per value (jpda_stage for
+# CONFIRMED and again for TENTATIVE), where a typed scalar shares one compilation.
+EMPTY, TENTATIVE, CONFIRMED, TERMINATED = (np.int8(status) for status in range(4))     # TrackTable.status
 UKF, EKF = 0, 1
 CONFIRM_AT_FRAME_N_PLUS_2, CONFIRM_ON_KTH_PLOT = 0, 1     # TrackerParams' confirmation rules
-AZIMUTH = 1                       # the angle component of a plot [range, azimuth, radial velocity]
+AZIMUTH = np.int64(1)             # the angle component of a plot [range, azimuth, radial velocity]
+NO_ANGLE = np.int64(-1)           # a state: no component is an angle (models.ukf.unscented_mean)
 
 # cfg (float64) entries
 C_DT, C_LOG_PD, C_LOG_MISS, C_LOG_LAMBDA, C_GAMMA, C_VMIN, C_VMAX, C_INIT_SIGMAS, C_MAX_POS_STD, \
@@ -209,9 +213,9 @@ def ukf_predict(tab, s, F, Q, R, Wm, Wc, zeta, sx, sy):  # pragma: no cover - co
         return False
     chif = chi @ F.T                                      # χ_i⁻ = F χ_i (the CV transition)
     xm = np.empty(n)
-    unscented_mean(chif, Wm, -1, xm)
+    unscented_mean(chif, Wm, NO_ANGLE, xm)
     Pm = np.empty((n, n))
-    unscented_covariance(chif, xm, chif, xm, Wc, -1, Pm)
+    unscented_covariance(chif, xm, chif, xm, Wc, NO_ANGLE, Pm)
     Pm = 0.5 * (Pm + Pm.T) + Q
     tab.x[s] = xm
     tab.P[s] = Pm
@@ -331,7 +335,7 @@ def jpda_stage(tab, stage, z, n_plots, free, cfg, icfg):  # pragma: no cover - c
     t, m = d2.shape
     parent = np.arange(t)
     for i in range(m):
-        first = -1
+        first = np.int64(-1)                         # typed: a literal -1 would compile _find for it
         for j in range(t):
             if d2[j, i] < np.inf:
                 if first < 0:
