@@ -116,8 +116,8 @@ def _named(q: dict) -> tuple[set[str], set[str]]:
 
 @pytest.mark.parametrize("name", CLAIM_FILES)
 def test_every_config_a_claim_names_is_in_its_presets_sweep(name):
-    """A misspelt label would read as "did not run" (not comparable): only an optional
-    method unavailable here may be absent from a run."""
+    """A misspelt label or level would read as "did not run" (not comparable): only an
+    optional method unavailable here may be absent from a run."""
     from tests.conftest import parse_sweep_or_skip
     plan = parse_sweep_or_skip(tomllib.loads(presets()[name].read_text(encoding="utf-8")), f"preset {name}")
     known = {m.label for m in plan.methods}
@@ -128,6 +128,20 @@ def test_every_config_a_claim_names_is_in_its_presets_sweep(name):
             configs, named_scenarios = _named(q) if q else (set(), set())
             unknown = {x for x in configs - known if not any(x == o or x.startswith(f"{o}[") for o in optional)}
             assert not unknown and named_scenarios <= scenarios, (c.id, unknown, named_scenarios - scenarios)
+            absent = {level for level in (_levels(q) if q else set())
+                      if not any(np.isclose(level, s) for sc in plan.scenarios for s in sc.snr_db)}
+            assert not absent, (c.id, "SNR levels the preset does not run", absent)
+
+
+def _levels(q: dict) -> set[float]:
+    """The SNR levels (dB) a quantity names, inline quantities included ("all" is none)."""
+    levels = set()
+    for key, value in q.items():
+        if isinstance(value, dict):
+            levels |= _levels(value)
+        elif key == "snr_db" and isinstance(value, (int, float)):
+            levels.add(float(value))
+    return levels
 
 
 # ------------------------------------------------------------------ (b) quantities and verdicts
@@ -232,6 +246,27 @@ def test_a_config_that_did_not_run_makes_the_claim_not_comparable():
                  _tables(summary=_summary("x", [0.2, 0.5, 0.9])))
     assert (r.verdict, r.reason) == ("not comparable", "`peer` did not run")
 
+
+
+def test_a_level_that_did_not_run_makes_the_claim_not_comparable():
+    """A run narrowed by ``--snr`` (was: exit 2, "no level -5 dB", after every unit had run)."""
+    r = _verdict(_claim({"kind": "summary", "config": "x", "snr_db": -5, "column": "pd"}),
+                 _tables(summary=_summary("x", [0.2, 0.5, 0.9])))
+    assert (r.verdict, r.reason) == ("not comparable", "`x` at -5.0 dB (levels run: 0.0, 1.0, 2.0 dB) did not run")
+    comparisons = pd.DataFrame({"scenario": "s", "task": "t", "metric": "pd", "config_a": ["x"], "config_b": ["y"],
+                                "snr_db": [0.0], "difference": 0.1, "difference_low": 0.05, "difference_high": 0.15,
+                                "mcnemar_p": 0.01, "n_pairs": 100})
+    r = _verdict(_claim({**PAIRED, "snr_db": -5, "metric": "pd"}), _tables(comparisons=comparisons))
+    assert (r.verdict, r.reason) == ("not comparable", "the level -5.0 dB did not run")
+
+
+def test_a_reason_reading_a_quantity_that_did_not_run_says_so():
+    summary = _summary("x", [0.2, 0.5, 0.9])
+    claim = _claim({"kind": "summary", "config": "x", "snr_db": 1, "column": "pd"}, expect="between", min=0.4,
+                   max=0.6, reason="low: {{ q.low.value }}",
+                   also={"low": {"kind": "summary", "config": "x", "snr_db": -5, "column": "pd"}})
+    r = _verdict(claim, _tables(summary=summary))
+    assert (r.verdict, r.reason) == ("reproduces", "`x` at -5.0 dB (levels run: 0.0, 1.0, 2.0 dB) did not run")
 
 def test_crossing_is_the_reports_probit_and_a_difference_is_conservative():
     from radarbench.bench.markdown import snr50

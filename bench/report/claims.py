@@ -501,7 +501,11 @@ def evaluate(file: ClaimsFile, tables: Tables) -> Evaluation:
     evaluation = Evaluation(file, results, q, baseline_values(file.baselines, tables))
     for i, c in enumerate(file.claims):
         r = results[c.id]
-        if c.reason and not r.missing:
+        absent = [q[name].missing for name in c.also if q[name].missing]
+        if c.reason and absent and not r.missing:     # its reason would read them: say why instead
+            results[c.id] = replace(r, reason="; ".join(s for s in (r.reason, *(f"{a} did not run" for a in absent))
+                                                        if s))
+        elif c.reason and not r.missing:
             own = render_template(c.reason, f"{file.name}: claim[{i}].reason", claims=results, q=q,
                                   baselines=evaluation.baselines, baseline=_claims_baseline(c, file, tables),
                                   value=r.value, low=r.low, high=r.high, text=r.text, verdict=r.verdict)
