@@ -256,24 +256,24 @@ class Loop:
         reduced = " ".join(self.edit_overrides)
         base = ["--preset", "maneuver-detection", "--out", self.out("maneuver-detection"), *self.edit_overrides]
         suffix = f" (reduced: {reduced})" if reduced else ""
-        self.bench("edit", f"maneuver-detection, first run{suffix}", *base)
-        self.bench("edit", f"maneuver-detection, {key} edited{suffix}", *base, "--set", key)
-        self.bench("edit", f"maneuver-detection with {key}, a fresh run (to compare){suffix}", "--preset",
-                   "maneuver-detection", "--out", self.out("maneuver-detection-fresh"), *self.edit_overrides,
-                   "--set", key, *self.no_cache())
-        self.checks[f"maneuver-detection with {key} edited = a fresh run of the edited sweep"] = compare_runs(
-            Path(self.out("maneuver-detection")), Path(self.out("maneuver-detection-fresh")))
+        runs = [self.bench("edit", f"maneuver-detection, first run{suffix}", *base),
+                self.bench("edit", f"maneuver-detection, {key} edited{suffix}", *base, "--set", key),
+                self.bench("edit", f"maneuver-detection with {key}, a fresh run (to compare){suffix}", "--preset",
+                           "maneuver-detection", "--out", self.out("maneuver-detection-fresh"), *self.edit_overrides,
+                           "--set", key, *self.no_cache())]
+        self.checks[f"maneuver-detection with {key} edited = a fresh run of the edited sweep"] = same_runs(
+            runs, Path(self.out("maneuver-detection")), Path(self.out("maneuver-detection-fresh")))
 
     def trials(self) -> None:
         sweep = self.work / "loop-trials.toml"
         sweep.write_text(SMALL_SWEEP, encoding="utf-8")
-        self.bench("trials", "small sweep at 100 trials", str(sweep), "--out", self.out("trials"))
-        self.bench("trials", "the same raised to 150 trials", str(sweep), "--out", self.out("trials"),
-                   "--trials", "150")
-        self.bench("trials", "a fresh 150-trial run (to compare)", str(sweep), "--out", self.out("trials-fresh"),
-                   "--trials", "150", *self.no_cache())
-        self.checks["150 trials by raising 100 = a fresh 150-trial run"] = compare_runs(
-            Path(self.out("trials")), Path(self.out("trials-fresh")))
+        runs = [self.bench("trials", "small sweep at 100 trials", str(sweep), "--out", self.out("trials")),
+                self.bench("trials", "the same raised to 150 trials", str(sweep), "--out", self.out("trials"),
+                           "--trials", "150"),
+                self.bench("trials", "a fresh 150-trial run (to compare)", str(sweep), "--out",
+                           self.out("trials-fresh"), "--trials", "150", *self.no_cache())]
+        self.checks["150 trials by raising 100 = a fresh 150-trial run"] = same_runs(
+            runs, Path(self.out("trials")), Path(self.out("trials-fresh")))
 
     def overrides(self) -> None:
         out = self.out("overrides")
@@ -301,6 +301,13 @@ def edit_key(method: str, parameter: str, value) -> str:
 
 #: a CSV column that times something (it differs between any two runs)
 TIMING = re.compile(r"second|time|_ms$|wall|cpu", re.IGNORECASE)
+
+
+def same_runs(runs: list[Measured], left: Path, right: Path) -> str:
+    """:func:`compare_runs` once every command of the comparison ended well: a failed
+    command can leave CSVs that equal the other folder's (written before the failure)."""
+    failed = [f"{m.what!r} exited {m.exit_code}" for m in runs if m.exit_code != 0]
+    return "no: " + "; ".join(failed) if failed else compare_runs(left, right)
 
 
 def compare_runs(left: Path, right: Path) -> str:

@@ -90,3 +90,21 @@ def test_a_new_calibration_recomputes_the_calibrated_runs(tmp_path, capsys):
     assert "computing 18 (unit, method config) runs" in said, said     # 3 detector configs x 6 units (a nominal threshold is stored)
     _run(tmp_path, tmp_path / "fresh", capsys, "--no-cache", pfa=0.05)
     _same_as_fresh(out, tmp_path / "fresh")
+
+
+def test_a_removed_config_leaves_the_recording_too(tmp_path, capsys):
+    """Was: exit 1, "no task given for method config(s) 'innovation[window=1]'": the stored
+    trial records kept the removed config's traces, and the recording had no task for them."""
+    out = tmp_path / "run"
+    sweep = tmp_path / "sweep.toml"
+    for windows in ("[1, 5]", "[5]"):
+        sweep.write_text(SWEEP.format(trials=40, pfa=0.01, windows=windows))
+        assert main(["run", str(sweep), "--out", str(out), "--workers", "1"]) == 0, capsys.readouterr().err
+    from radarbench.bench.recording import TrialRecord
+    from radarbench.bench.report import _of_the_plan, _task_of
+    from radarbench.bench.results.store import Store
+    store = Store(out / "results.sqlite")
+    stored = {label for blob in store.records() for label in TrialRecord.from_bytes(blob).methods}
+    shown = {label for r in _of_the_plan(store.records(), _task_of(store.plan())) for label in r.methods}
+    assert "innovation[window=1]" in stored and shown == {"innovation[window=5]", "cusum"}
+    assert (out / "recording.rrd").is_file()

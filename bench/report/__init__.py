@@ -119,6 +119,16 @@ def require_plugins(record: dict, db: Path) -> None:
                                    "install them to rebuild its report"[:600])
 
 
+def _of_the_plan(blobs: list[bytes], task_of: dict) -> list[TrialRecord]:
+    """The stored trial records with the traces of the plan's method configs only: a record
+    merges the traces of every config that ran on its unit, and a config an edited sweep
+    removed leaves the report but not the store (docs/architecture.md, 'Results cache')."""
+    records = [TrialRecord.from_bytes(b) for b in blobs]
+    for r in records:
+        r.methods = {label: trace for label, trace in r.methods.items() if label in task_of}
+    return [r for r in records if r.methods]
+
+
 def _task_of(record: dict) -> dict:
     """Method config label -> its task (bench.tasks), from the stored plan."""
     return {m["label"]: registry.get_task(m["task"]) for m in record["methods"]}
@@ -528,7 +538,7 @@ def _build_with(store: Store, out_dir: Path, recording: bool, progress: Progress
     interactive = interactive_job(pool, specs)
     t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}
     steps = steps_frame(trials, series, record, t_of)
-    records = [TrialRecord.from_bytes(b) for b in store.records()]   # every read before the first write
+    records = _of_the_plan(store.records(), task_of)   # every read before the first write
     calibration = pd.DataFrame([c.as_row() for c in cals])
     fig_dir = out_dir / "figures"
     title = sweep["name"]
