@@ -131,7 +131,7 @@ def _check_params(cls: type, kind: str) -> None:
 
 
 def register_method(cls: type[Method]) -> type[Method]:
-    known = _task_names()            # the names claimed: one claimed twice is refused where used
+    known = _task_names(getattr(cls, "task", None))   # the names claimed: one claimed twice is refused where used
     task = getattr(cls, "task", None)
     if not isinstance(task, str) or task not in known:
         raise PluginError(f"method {getattr(cls, 'name', cls.__qualname__)!r}: task {task!r} is not one of "
@@ -146,8 +146,8 @@ def register_method(cls: type[Method]) -> type[Method]:
 
 
 def register_scenario(cls: type[Scenario]) -> type[Scenario]:
-    known = _task_names()
     served = getattr(cls, "tasks", ())
+    known = _task_names(*(served if isinstance(served, (tuple, list)) else (None,)))
     name = getattr(cls, "name", cls.__qualname__)
     if not isinstance(served, (tuple, list)) or not all(isinstance(t, str) for t in served):
         raise PluginError(f"scenario {name!r}: tasks must be a tuple of task names, got {served!r}"[:300], name)
@@ -307,16 +307,18 @@ def discover() -> None:
     _WHOLE = True
 
 
-def _task_names() -> tuple[str, ...]:
-    """The task names a method or scenario may name: the built-ins and the plugins' tasks,
-    without importing the other methods and scenarios (a module registering its class, imported
-    on its own, would otherwise import its siblings while half-initialised itself, and a sibling
-    importing from it would fail as unavailable)."""
+def _task_names(*wanted: str) -> tuple[str, ...]:
+    """The task names a method or scenario may name. The built-ins answer for a built-in
+    task without importing the other plugins (a module registering its class, imported on
+    its own, would otherwise import its siblings while half-initialised, and a sibling
+    importing from it would fail as unavailable); a task they lack is looked for by the
+    whole discovery, which finds the plugins' tasks after the built-in plugins."""
     if not _BUILTIN_TASKS_DONE:
         from radarbench.bench.run import numba_cache
         numba_cache.install()       # as discover() does, before the registering module's kernels compile
     _builtin_tasks()
-    _discover_tasks()
+    if any(not isinstance(t, str) or t not in _TASKS for t in wanted):
+        tasks()
     return tuple(_TASKS)
 
 
