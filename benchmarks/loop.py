@@ -100,6 +100,8 @@ COMPUTED = re.compile(r"(?<!warm-up): done, (\d+)/\d+ units")
 #: the run's own count: "units: A reused from FOLDER, B from the results cache, C computed"
 REUSED = re.compile(r"units: (\d+) reused from .*?, (\d+) from the results cache")
 NOTHING = re.compile(r"Nothing to run")
+#: an edited sweep in the same folder: "the sweep changed: reusing N stored units, computing M (unit, method config) runs"
+EDITED = re.compile(r"the sweep changed: reusing (\d+) stored units, computing (\d+) \(unit, method config\) runs")
 #: the report's runtime section and a row of its table: | `config` | CPU ms per trial | ...
 RUNTIME_SECTION = re.compile(r"^## Runtime$(.*?)(?=^## |\Z)", re.M | re.S)
 RUNTIME_ROW = re.compile(r"^\| `(?P<config>[^`]+)`\s*\| (?P<ms>[0-9.eE+-]+)\s*\|", re.M)
@@ -179,6 +181,10 @@ def run_timed(step: str, what: str, args: list[str], env: dict, cwd: Path, log: 
     text = log.read_text(encoding="utf-8", errors="replace")
     computed, reused = unit_counts(text)
     note = f"{left} processes still running {REAP_BOUND_S:.0f} s after the command (not counted)" if left else ""
+    edited = EDITED.search(text)
+    if edited:
+        note = "; ".join(filter(None, [note, f"the sweep changed: {edited[1]} stored units reused, {edited[2]} "
+                                             "(unit, method config) runs computed on them"]))
     if code != 0:
         note = "; ".join(filter(None, [note, f"exit {code}: {_last_line(text)}"]))
     return Measured(step, what, " ".join(["bench", *args[3:]]), wall, _children_cpu_s() - cpu0, code, computed,
