@@ -132,3 +132,30 @@ def test_a_file_modified_just_before_a_run_is_not_trusted(tmp_path):
     data.write_text("0\n")
     assert not unchanged.remember(out, "key", time.time_ns(), [data], [])
     assert unchanged.settled(out, "key") is None
+
+
+def test_a_record_the_store_refuses_fails_no_run(tmp_path, monkeypatch):
+    """The record only saves the next run time: a store that refuses it (a full disk) leaves
+    the run that just ended complete (was: that run ended in exit 3, "results store: ...")."""
+    from radarbench.bench.results import runfolder
+    from radarbench.bench.results.schema import SCHEMA
+    out = tmp_path / "run"
+    out.mkdir()
+    with contextlib.closing(sqlite3.connect(out / "results.sqlite")) as con:
+        con.executescript(SCHEMA)
+        con.execute("INSERT INTO meta VALUES ('units_total', '0')")
+        con.commit()
+    (out / "report.md").write_text("# r\n")
+    runfolder._write_manifest(out, ["report.md"])
+    _aged(tmp_path, 600)
+    opened = unchanged._open
+
+    def refusing(folder):
+        db = opened(folder)
+        db.execute("PRAGMA query_only = ON")    # every write fails as on a full disk: OperationalError
+        return db
+    later = time.time_ns() + 60 * 10 ** 9         # a run started after every file it read last changed
+    monkeypatch.setattr(unchanged, "_open", refusing)
+    assert unchanged.remember(out, "key", later, [], []) is False
+    monkeypatch.setattr(unchanged, "_open", opened)
+    assert unchanged.remember(out, "key", later, [], []) is True      # the same folder, writable: recorded

@@ -115,7 +115,10 @@ def remember(out_dir: Path, key: str, started_ns: int, read, said: list[str]) ->
         if failed or str(units) != meta.get("units_total") or not runfolder.outputs_current(out_dir, digest, digest):
             return False
         record = {"key": key, "files": files, "git": git_heads(), "outputs": digest, "units": units, "said": said}
-        db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (META, json.dumps(record)))
+        try:
+            db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (META, json.dumps(record)))
+        except sqlite3.OperationalError:   # a full disk, a store opened by another: the run stands, the next takes the long way
+            return False
     return True
 
 
