@@ -31,7 +31,11 @@ the documentation site show the results):
 6. ``overrides``: ``bench run --preset quick --methods cv-kf imm-cv-ca --snr 0 10``, and
    whether its ``plan.toml`` holds exactly those methods and levels.
 
-Steps 2-6 share the first step's caches (the user's second command onwards). The output,
+The commands run in the README's environment: a fresh virtual environment in the work
+folder with the clone installed as the README says (:data:`README_INSTALL`), so optional
+extras (the Stone Soup peers of ``[peers]``) are absent as on a user's first day; ``--python``
+runs them with another interpreter instead (the output names which, and whether the peers were
+there). Steps 2-6 share the first step's caches (the user's second command onwards). The output,
 a Markdown table and the same as JSON, is written to ``reports/perf/loop.md`` (``--out``).
 The test suite's duration is an input (``--suite-seconds`` or ``--suite-log``: a pytest
 output whose last line reads ``... in 1234.56s``), never typed into the docs.
@@ -64,6 +68,8 @@ OUT = Path("reports/perf/loop.md")
 #: the opening of the JSON block in the Markdown output (read back by ``bench.cli.docs.loop_record``)
 JSON_FENCE = "```json"
 STEPS = ("first", "warm", "noop", "edit", "trials", "overrides")
+#: the README's install line (its extras), run in a fresh virtual environment unless ``--python`` is given
+README_INSTALL = ("-e", ".[test]")
 #: a step that needs another before it runs it too (the warm run needs the first's caches)
 NEEDS = {"noop": "warm", "warm": "first"}
 #: Linux prctl option: orphaned descendants are re-parented to the caller, which reaps them
@@ -211,18 +217,32 @@ def _last_line(text: str) -> str:
 class Loop:
     """The steps' shared state: the clone, the caches, the run folders, the results."""
 
-    def __init__(self, work: Path, python: str, edit_overrides: list[str]):
+    def __init__(self, work: Path, python: str | None, edit_overrides: list[str]):
         self.work, self.python, self.edit_overrides = work, python, edit_overrides
         self.clone = work / "clone"
         self.results: list[Measured] = []
         self.checks: dict[str, str] = {}
         self.env = {**os.environ, "NUMBA_CACHE_DIR": str(work / "numba-cache"),
-                    "XDG_CACHE_HOME": str(work / "user-cache"), "PYTHONPATH": str(self.clone)}
+                    "XDG_CACHE_HOME": str(work / "user-cache")}
+        if python is not None:                              # another interpreter: the clone on its path
+            self.env["PYTHONPATH"] = str(self.clone)
         self.env.pop("PYTHONDONTWRITEBYTECODE", None)        # a fresh clone compiles its bytecode once
         self.flags: list[str] | None = None
+        self.environment = ""
 
     def prepare(self) -> None:
         subprocess.run(["git", "clone", "--quiet", "--no-hardlinks", str(REPO), str(self.clone)], check=True)
+        if self.python is None:
+            self.python = install_as_the_readme(self.work / "venv", self.clone)
+            self.environment = (f"a fresh virtual environment, `pip install {' '.join(README_INSTALL)}` in the "
+                                "clone (the README's)")
+        else:
+            self.environment = f"the interpreter given (`--python`), the clone on `PYTHONPATH`"
+        peers = subprocess.run([self.python, "-c", "import importlib.util as u; print(u.find_spec('stonesoup') "
+                                "is not None)"], env=self.env, capture_output=True, text=True, check=True)
+        self.environment += "; the Stone Soup peers (`[peers]`) " + (
+            "installed: the quick sweep runs them" if peers.stdout.strip() == "True"
+            else "absent: the quick sweep skips them, saying so")
         self.flags = run_flags(self.python, self.env, self.clone)
 
     def bench(self, step: str, what: str, *args: str) -> Measured:
@@ -287,6 +307,15 @@ class Loop:
                    "--methods", *OVERRIDE_METHODS, "--snr", *OVERRIDE_SNR)
         self.checks["the overrides run exactly those methods and SNR levels"] = plan_holds(
             Path(out) / "plan.toml", set(OVERRIDE_METHODS), {float(s) for s in OVERRIDE_SNR})
+
+
+def install_as_the_readme(venv: Path, clone: Path) -> str:
+    """A fresh virtual environment at ``venv`` with ``clone`` installed as the README says; its python."""
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+    python = str(venv / "bin" / "python")
+    print(f"loop: installing the clone into {venv} (pip install {' '.join(README_INSTALL)})", file=sys.stderr)
+    subprocess.run([python, "-m", "pip", "install", "--quiet", *README_INSTALL], cwd=clone, check=True)
+    return python
 
 
 def run_flags(python: str, env: dict, cwd: Path) -> list[str]:
@@ -383,7 +412,7 @@ def document(loop: Loop, suite_s: float | None, cpu_count: int, subreaper: bool,
     """The JSON record of a run of this script."""
     return {"created": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "git_commit": commit,
             "cpu_count": cpu_count, "platform": platform.platform(), "python": platform.python_version(),
-            "whole_tree_cpu": subreaper, "test_suite_wall_s": suite_s,
+            "whole_tree_cpu": subreaper, "environment": getattr(loop, "environment", ""), "test_suite_wall_s": suite_s,
             "steps": [dataclasses.asdict(m) for m in loop.results], "checks": loop.checks}
 
 
@@ -409,7 +438,8 @@ def markdown(record: dict) -> str:
         f"Written by `python benchmarks/loop.py` on {record['created']} at commit {record['git_commit']}, "
         f"{record['cpu_count']} CPUs ({record['platform']}, Python {record['python']}). Wall time as the user "
         f"waits; CPU as {cpu}. The load average (1, 5, 15 min) before and after each step says how busy the "
-        "machine was: other processes lengthen the wall time, not the CPU time.",
+        "machine was: other processes lengthen the wall time, not the CPU time. "
+        f"Commands run in {record.get('environment') or 'the interpreter running the script'}.",
         "\n".join(rows), *(["Checks:\n\n" + "\n".join(checks)] if checks else []),
         f"Test suite (`python -m pytest -q`, given to the script): "
         f"{'not given' if suite is None else f'{suite:.0f} s wall'}.",
@@ -425,6 +455,8 @@ def parse_args(argv=None):
     parser.add_argument("--out", type=Path, default=REPO / OUT, help=f"the Markdown output (default: {OUT})")
     parser.add_argument("--work", type=Path, help="keep the clone, caches, runs and logs here (default: a "
                                                    "temporary folder, removed)")
+    parser.add_argument("--python", help="run bench with this interpreter (the clone on its PYTHONPATH) instead "
+                                          "of a fresh virtual environment installed as the README says")
     parser.add_argument("--suite-seconds", type=float, help="the test suite's wall seconds, measured apart")
     parser.add_argument("--suite-log", type=Path, help="a pytest output; its last 'in N s' is the suite's time")
     parser.add_argument("--edit-overrides", nargs=argparse.REMAINDER, default=[],
@@ -439,7 +471,7 @@ def main(argv=None) -> int:
     subreaper = become_subreaper()
     work = args.work or Path(tempfile.mkdtemp(prefix="bench-loop-"))
     work.mkdir(parents=True, exist_ok=True)
-    loop = Loop(work, sys.executable, args.edit_overrides)
+    loop = Loop(work, args.python, args.edit_overrides)
     try:
         loop.prepare()
         chosen = set(args.steps)

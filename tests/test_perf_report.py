@@ -321,3 +321,24 @@ def test_a_rows_fraction_of_the_machine_limit_is_its_least_cost_over_its_time(mo
     assert f"| {1e-4 / seconds:.2g} (memory bandwidth) |" in text
     assert "| — (note 1) |" in text and "Notes: (1) it branches on the data" in text
     assert pd.read_csv(tmp_path / "limits.csv").iloc[0].to_dict() == MACHINE
+
+
+def test_a_reference_whose_peer_is_not_installed_is_reported_not_timed(monkeypatch, tmp_path):
+    """A reference that needs an optional extra absent here (the Stone Soup peers without
+    ``[peers]``) leaves its row's reference columns empty with the reason, the method timed,
+    and its speed-up target *not measured*; ``bench perf`` does not stop."""
+    from radarbench.bench.cli import perf
+
+    registry.discover()
+
+    def reference_run(method, batch):
+        raise registry.PluginError('needs the [peers] extra (pip install -e ".[peers]"): no stonesoup')
+
+    name = _burning_method(monkeypatch, "peer-absent", "a peer", 2, reference_run)
+    monkeypatch.setattr(registry.get_method(name), "perf_targets", {"*": {"speedup": 20.0}})
+    _in_this_process(monkeypatch)
+    perf.run_perf(tmp_path, methods=[name], progress=lambda _: None)
+    row = pd.read_csv(tmp_path / "perf.csv").iloc[0]
+    assert row.reference == 'a peer: not timed, needs the [peers] extra (pip install -e ".[peers]"): no stonesoup'
+    assert np.isnan(row.reference_seconds_per_trial) and np.isnan(row.speedup) and row.seconds_per_trial > 0
+    assert "speed-up ≥ 20: – not measured" in (tmp_path / "report.md").read_text()

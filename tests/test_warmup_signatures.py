@@ -123,3 +123,42 @@ def test_a_methods_seconds_in_a_unit_are_its_cpu_time(monkeypatch):
     result = execute_unit(UnitTask(plan, Unit("evaluation", 0, plan.scenarios[0].label, 10.0, 0, 2)))
     assert result.runs[0].error is None
     assert result.runs[0].seconds < 0.15, result.runs[0].seconds
+
+
+def test_a_method_configs_first_call_in_a_process_comes_before_its_timed_unit(monkeypatch):
+    """A unit whose (scenario config, method config, phase) this process has not run yet is
+    preceded by an untimed two-trial primer of it (its first-call costs out of the clock:
+    :func:`bench.run.units._prime`); the next unit of the pair is not; the primer's batch is the
+    unit's first trials, so the unit's results are those of a run without it."""
+    from radarbench.bench.run import units as units_module
+
+    plan = parse_sweep({"name": "primer", "scenario": "maneuvering-1d", "trials": 12, "chunk": 6, "seed": 5,
+                        "snr_db": [10.0], "scenario_params": {"steps": 30, "maneuver_start_s": 10.0,
+                                                               "maneuver_duration_s": 10.0},
+                        "methods": [{"name": "cv-kf"}, {"name": "singer"}]})
+    calls: list[tuple[str, int]] = []
+    for name in ("cv-kf", "singer"):
+        cls = registry.get_method(name)
+        monkeypatch.setattr(cls, "run", _counting(cls.run, name, calls))
+    monkeypatch.setattr(units_module, "_primed", set())
+    _, evaluation = plan_units(plan)
+    first, second = (UnitTask(plan, unit, {}) for unit in evaluation)
+    without = execute_unit(first, prime=False)
+    monkeypatch.setattr(units_module, "_primed", set())
+    calls.clear()
+    primed = execute_unit(first)
+    assert calls == [("cv-kf", 2), ("singer", 2), ("cv-kf", 6), ("singer", 6)]
+    calls.clear()
+    execute_unit(second)
+    assert calls == [("cv-kf", 6), ("singer", 6)]
+    for a, b in zip(without.runs, primed.runs):
+        assert a.label == b.label and a.metrics.keys() == b.metrics.keys()
+        for key in a.metrics:
+            np.testing.assert_array_equal(a.metrics[key], b.metrics[key])
+
+
+def _counting(run, name: str, calls: list):
+    def counted(self, batch, params):
+        calls.append((name, batch.n))
+        return run(self, batch, params)
+    return counted

@@ -385,7 +385,8 @@ def durations(root: Path, page: str) -> str:
     return "\n\n".join([
         f"Measured by `python benchmarks/loop.py` on {record['created']} ({record['cpu_count']} CPUs, "
         f"{text(record['platform'])}; {source}): wall time as you wait, CPU time of every process of the "
-        "command (its workers included); a busy machine (the load average) lengthens the wall time.",
+        "command (its workers included); a busy machine (the load average) lengthens the wall time."
+        + (f" Commands ran in {record['environment']}." if record.get("environment") else ""),
         table(["what", "wall time", "CPU time", "load average before (1, 5, 15 min)"], rows)])
 
 

@@ -181,13 +181,24 @@ def _measure(job: Job, scenario, scenario_params) -> dict:
         calls = {whole: [batch_of(job.reference_trials)]}
         if job.reference_trials > 1:
             calls[per_trial] = [batch_of(1, first=i) for i in range(job.reference_trials)]
-        reference_run(batch_of(1), params)
+        try:
+            reference_run(batch_of(1), params)
+        except registry.PluginError as exc:       # an optional peer not installed: the row says so
+            out["name"] = f"{out['name']}: not timed, {exc}"
+            for _ in range(ROUNDS - 1):
+                method_round()
+            return _with_chunk(job, out, best, batch_of, method, params)
         out["reference_mode"], seconds, parts = _reference_timing(method, reference_run, params, calls, method_round)
         out["reference_seconds_per_trial"] = seconds / job.reference_trials
         out["parts"] = {part: spent / job.reference_trials for part, spent in parts.items()}
     else:
         for _ in range(ROUNDS - 1):
             method_round()
+    return _with_chunk(job, out, best, batch_of, method, params)
+
+
+def _with_chunk(job: Job, out: dict, best: dict, batch_of, method, params) -> dict:
+    """``out`` with the method's seconds per trial, and per trial at the job's chunk when it has one."""
     out["chunk_seconds_per_trial"] = np.nan
     if job.chunk:      # the same batch cut to a preset's chunk: what a sweep's unit pays per trial
         chunk = batch_of(job.chunk)
@@ -489,12 +500,17 @@ def executor_scaling(workers: int, progress=print, plan=None) -> pd.DataFrame:
 
 # ------------------------------------------------------------------ report
 
+def _verdict(value: float, ok: bool) -> str:
+    """✓ or ✗, or *not measured* for a value that is not there (a reference not installed)."""
+    return ("✓" if ok else "✗") if np.isfinite(value) else "not measured"
+
+
 def _target_text(targets: dict, row: dict) -> str:
     checks = []
     for key, goal in targets.items():
         if key == "speedup":
-            value, ok = row["speedup"], row["speedup"] >= goal
-            checks.append(f"speed-up ≥ {goal:g}: {fmt(value)} {'✓' if ok else '✗'}")
+            value = row["speedup"]
+            checks.append(f"speed-up ≥ {goal:g}: {fmt(value)} {_verdict(value, value >= goal)}")
         elif key.endswith("_per_second"):
             rate = row.get(key, np.nan)
             ok = bool(np.isfinite(rate) and rate >= goal)

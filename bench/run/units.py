@@ -134,9 +134,43 @@ def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict, tasks) ->
     return (rec if valid is None else rec.at_steps(valid[i])).to_bytes()
 
 
-def execute_unit(work: UnitTask) -> UnitResult:
-    """Generate one unit's batch, run every method config on it, evaluate."""
+#: trials of a primer unit (:func:`_prime`): two, as the warm-up's (:data:`bench.run.warmup.WARM_UP_TRIALS`)
+PRIMER_TRIALS = 2
+
+#: (scenario config, method config, phase) this process has run: its first calls are behind it
+_primed: set[tuple] = set()
+
+
+def _prime(work: UnitTask) -> None:
+    """Run, untimed, a :data:`PRIMER_TRIALS`-trial unit of ``work``'s scenario config for the
+    method configs this process has not yet run on it in this phase; its result is dropped.
+
+    A method's first call in a process pays once what no later call pays: numba loading and
+    linking its kernels (left out of the clock already, :mod:`bench.run.worktime`), but also the
+    first touch of compiled libraries' pages, lazy imports, and caches of model matrices. On a
+    unit of 20 sub-millisecond trials that doubled the CPU time per trial of whichever unit
+    came first in each process, so a run's runtime table depended on how units fell on
+    workers. The primer takes those costs out of the timed units (as ``bench perf`` times after a
+    warm-up call); a failure in it is the real unit's to report."""
+    sc = work.plan.scenarios[work.unit.scenario_index]
+    fresh = tuple(mc.label for mc in unit_methods(work) if (sc.label, mc.label, work.unit.phase) not in _primed)
+    if not fresh or work.unit.n <= PRIMER_TRIALS:
+        return
+    unit = work.unit
+    primer = Unit(unit.phase, unit.scenario_index, unit.scenario_label, unit.snr_db, unit.trial_start, PRIMER_TRIALS)
+    try:
+        execute_unit(UnitTask(work.plan, primer, work.thresholds, methods=fresh), prime=False)
+    except BaseException as exc:  # noqa: BLE001 - the real unit runs and reports it
+        if _let_through(exc):
+            raise
+
+
+def execute_unit(work: UnitTask, prime: bool = True) -> UnitResult:
+    """Generate one unit's batch, run every method config on it, evaluate. With ``prime``, the
+    method configs' first calls in this process come first, untimed (:func:`_prime`)."""
     registry.discover()
+    if prime:
+        _prime(work)
     plan, unit = work.plan, work.unit
     sc = plan.scenarios[unit.scenario_index]
     domain = CALIBRATION if unit.phase == "calibration" else EVALUATION
@@ -191,6 +225,7 @@ def execute_unit(work: UnitTask) -> UnitResult:
             run.error, run.traceback = failures.describe(exc, method_cls)
         run.seconds = work_seconds() - t1
         result.runs.append(run)
+        _primed.add((sc.label, mc.label, unit.phase))
     tasks = list(dict.fromkeys(task_of(mc) for mc in methods))
     result.records = [(int(batch.trials[i]), _trial_record(plan, unit, batch, i, traces[i], tasks))
                       for i in recorded]

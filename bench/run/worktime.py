@@ -2,9 +2,10 @@
 
 A unit's runtime is what its generation and each method config cost in CPU time
 (``time.process_time``: its process's, so the wait for a busy core does not count, and a
-worker runs one unit at a time), less the CPU time spent holding numba's compiler lock:
+worker runs one unit at a time), less the CPU time spent holding numba's compiler lock or its LLVM lock:
 compiling a specialisation, or loading one from the on-disk cache, on a kernel's first
-call with new types. The warm-up compiles the kernels before any unit, so that time is
+call with new types (linking a loaded kernel's machine code, on its first call, holds the
+LLVM lock only). The warm-up compiles the kernels before any unit, so that time is
 normally nil; when it is not (a cold cache the warm-up did not see, a type it did not
 pass), the unit's runtime still holds the kernels' work only.
 """
@@ -23,8 +24,8 @@ _listening = False
 
 
 def _listen() -> None:
-    """Count numba's compiler-lock time from now on (once numba is imported; its lock is
-    re-entrant, so only the outermost hold is timed)."""
+    """Count the time numba holds its compiler lock or its LLVM lock from now on (once numba
+    is imported; the locks are re-entrant and nest, so only the outermost hold is timed)."""
     global _listening
     from numba.core import event
 
@@ -41,12 +42,13 @@ def _listen() -> None:
                 if _compiling["depth"] == 0:
                     _compiling["seconds"] += time.process_time() - _compiling["since"]
 
-    event.register("numba:compiler_lock", CompilerLockTime())
+    for kind in ("numba:compiler_lock", "numba:llvm_lock"):
+        event.register(kind, CompilerLockTime())
     _listening = True
 
 
 def compiling_seconds() -> float:
-    """CPU seconds this process has held numba's compiler lock since this module first
+    """CPU seconds this process has held numba's compiler or LLVM lock since this module first
     looked (0 until numba is imported: nothing can have compiled)."""
     if not _listening:
         if "numba" not in sys.modules:
