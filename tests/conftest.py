@@ -5,8 +5,20 @@ writes must write under ``tmp_path``/``tmp_path_factory``, which are per worker.
 session-scoped fixture runs once per worker process.
 """
 
-from radarbench import bench  # noqa: F401 - first: the portable target (bench/__init__.py) precedes numpy's import
 import os
+
+#: numba's kernel cache, one folder for the whole suite: its xdist workers and every ``bench``
+#: process a test starts (they inherit the variable). Without it the cache followed
+#: ``$XDG_CACHE_HOME``, which ``private_cache_home`` makes private to each worker, so each
+#: worker compiled every kernel again (minutes of the suite). The folder is numba's
+#: user-wide one, where a user's own runs keep their kernels; sharing it changes no result
+#: (an entry is keyed by its source, checked by its checksum, and one process compiles a
+#: kernel while the others wait: bench/run/numba_cache.py). Set before numba is imported,
+#: since numba reads it once. A test of the cache itself sets its own folder.
+os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(os.environ.get("XDG_CACHE_HOME")
+                                                      or os.path.expanduser("~/.cache"), "numba"))
+
+from radarbench import bench  # noqa: E402,F401 - first: the portable target (bench/__init__.py) precedes numpy's import
 import shutil
 import subprocess
 import sys

@@ -239,8 +239,8 @@ def test_a_notice_is_said_once_per_command_across_its_processes(tmp_path, monkey
 
 # ------------------------------------------------------------------ end to end, through the command line
 
-SWEEP = ('name = "imm"\nscenario = "maneuvering-1d"\ntrials = 2\nseed = 1\nsnr_db = [10]\nchunk = 1\n\n'
-         '[[methods]]\nname = "imm-cv-ca"\n')
+SWEEP = ('name = "kalman"\nscenario = "maneuvering-1d"\ntrials = 2\nseed = 1\nsnr_db = [10]\nchunk = 1\n\n'
+         '[[methods]]\nname = "cv-kf"\n')          # the batched Kalman filter's kernels: the fewest to compile
 RESULTS = ("trials.csv", "calibration.csv")
 
 
@@ -257,8 +257,8 @@ def _run(sweep: Path, out: Path, cache: Path, wrap: list[str] | None = None) -> 
 def good_run(tmp_path_factory):
     """A sweep with numba kernels run on an empty cache (filled by it): its results and its cache."""
     folder = tmp_path_factory.mktemp("good")
-    (folder / "imm.toml").write_text(SWEEP)
-    assert not [line for line in _run(folder / "imm.toml", folder / "run", folder / "numba") if SKIPPED in line]
+    (folder / "kalman.toml").write_text(SWEEP)
+    assert not [line for line in _run(folder / "kalman.toml", folder / "run", folder / "numba") if SKIPPED in line]
     return folder
 
 
@@ -288,7 +288,7 @@ def test_a_run_on_a_faulty_cache_is_complete_correct_and_says_so_once(good_run, 
     cache = tmp_path / "numba"
     wrap = _fault(kind, good_run, cache)
     before = _package_cache_files()
-    err = _run(good_run / "imm.toml", tmp_path / "run", cache, wrap)
+    err = _run(good_run / "kalman.toml", tmp_path / "run", cache, wrap)
     assert [line for line in err if "numba" in line] == [line for line in err if line.startswith(f"{SKIPPED}{cache} ({reason}")]
     assert len([line for line in err if "numba" in line]) == 1, err
     for name in RESULTS:
