@@ -40,6 +40,9 @@ a Markdown table and the same as JSON, is written to ``reports/perf/loop.md`` (`
 The test suite's duration is an input (``--suite-seconds`` or ``--suite-log``: a pytest
 output whose last line reads ``... in 1234.56s``), never typed into the docs.
 
+Run it with the Python of an environment that has the package installed (its comparisons read the
+runs' CSVs with pandas); the ``bench`` commands it times run in their own fresh environment.
+
     python benchmarks/loop.py                        # everything (CPU heavy: an idle machine)
     python benchmarks/loop.py --steps first warm noop --suite-log pytest.log
     python benchmarks/loop.py --edit-overrides --snr 0 5 --trials 20   # step 4 reduced (said in the output)

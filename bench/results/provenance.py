@@ -106,7 +106,13 @@ def distribution_of(module: str, dist=None) -> str:
     package lies; ``name, editable`` without git or a checkout); for code that no
     distribution installs, ``not installed`` (with the commit likewise)."""
     top = module.split(".")[0]
-    dist = dist if dist is not None else _installing(top)
+    return _distribution_text(top, dist if dist is not None else _installing(top))
+
+
+@functools.lru_cache(maxsize=None)
+def _distribution_text(top: str, dist) -> str:
+    """:func:`distribution_of` for a top-level package and its distribution, once per process
+    (reading a distribution's metadata parses its file: ~10 ms, for each of a sweep's configs)."""
     if dist is not None and not _is_editable(dist):
         return f"{dist.metadata['Name']} {dist.version}"
     where = getattr(sys.modules.get(top), "__file__", None)
