@@ -24,7 +24,7 @@ def test_warm_up_is_one_task_per_pair_with_both_phases_and_two_trials(write_swee
         assert announce == "marker" and len({u.methods for u in units}) == 1
         assert [(u.unit.phase, u.unit.snr_db, u.unit.n) for u in units] == [("calibration", None, 2),
                                                                            ("evaluation", 0.0, 2)]  # lowest SNR
-        assert units[1].thresholds == {m.label: 0.0 for m in plan.methods}
+        assert units[1].thresholds == {m.label: warmup.WARM_UP_THRESHOLD for m in plan.methods}
 
 
 def test_only_the_first_process_to_compile_says_so(tmp_path, monkeypatch, capsys):

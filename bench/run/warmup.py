@@ -31,6 +31,12 @@ __all__ = ["cache_is_cold", "plan_key", "remember_unused", "warm_up_tasks", "run
 #: view), and numba compiles another specialisation for them inside the timed units
 WARM_UP_TRIALS = 2
 
+#: the threshold of a warm-up evaluation unit, for every method config: one with a nominal Pfa in
+#: (0, 1) (0.1 for a -log10 Pfa statistic), as a calibrated run's, so the recorded trial's trace
+#: takes the path a real unit takes; at 0 a CFAR trace drew no threshold map, and the kernel
+#: behind it (``models.cfar.halves.halves_log_survival`` from Python) compiled inside a timed unit
+WARM_UP_THRESHOLD = 1.0
+
 #: the line on stderr when the warm-up compiles
 COMPILING = "compiling kernels (first run only)…"
 
@@ -112,11 +118,11 @@ def remember_unused(key: str) -> None:
 def warm_up_tasks(plan: Plan, announce: str | None = None) -> list:
     """One task per (scenario config, method config) pair of ``plan``: its warm-up
     calibration unit (when its task is calibrated) then its warm-up evaluation unit at
-    the lowest SNR (thresholds zero), for one worker to run both (:func:`run_warm_up`), so
+    the lowest SNR (thresholds :data:`WARM_UP_THRESHOLD`), for one worker to run both (:func:`run_warm_up`), so
     each method's kernels compile in one process, with the types a sweep passes them.
     ``announce``: the marker file whose creation elects the one process that says it
     compiles (None: silent)."""
-    zero = {m.label: 0.0 for m in plan.methods}
+    thresholds = {m.label: WARM_UP_THRESHOLD for m in plan.methods}
     tasks = []
     for i, sc in enumerate(plan.scenarios):
         calibrated = {m.label for m in calibrated_configs(plan, sc)}
@@ -125,8 +131,8 @@ def warm_up_tasks(plan: Plan, announce: str | None = None) -> list:
                               methods=(mc.label,))] \
                 if mc.label in calibrated else []
             if sc.snr_db:
-                units.append(UnitTask(plan, Unit("evaluation", i, sc.label, min(sc.snr_db), 0, WARM_UP_TRIALS), zero,
-                                      methods=(mc.label,)))
+                unit = Unit("evaluation", i, sc.label, min(sc.snr_db), 0, WARM_UP_TRIALS)
+                units.append(UnitTask(plan, unit, thresholds, methods=(mc.label,)))
             tasks.append((units, announce))
     return tasks
 
