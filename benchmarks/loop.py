@@ -240,7 +240,7 @@ class Loop:
             self.environment = (f"a fresh virtual environment, `pip install {' '.join(README_INSTALL)}` in the "
                                 "clone (the README's)")
         else:
-            self.environment = f"the interpreter given (`--python`), the clone on `PYTHONPATH`"
+            self.environment = "the interpreter given (`--python`), the clone on `PYTHONPATH`"
         peers = subprocess.run([self.python, "-c", "import importlib.util as u; print(u.find_spec('stonesoup') "
                                 "is not None)"], env=self.env, capture_output=True, text=True, check=True)
         self.environment += "; the Stone Soup peers (`[peers]`) " + (

@@ -76,7 +76,7 @@ def test_a_warm_up_says_whether_its_pair_ran_whole(monkeypatch, error, whole):
     without being unused, so such a warm-up must not be remembered (:func:`warmup.remember_unused`)."""
     from radarbench.bench.results.store import MethodRun, UnitResult
 
-    def execute(work):
+    def execute(work, prime=True):
         return UnitResult(work, "evaluation", "s", 0.0, 0, 1, 0.0, runs=[MethodRun("a", 0.0), MethodRun("b", 0.0, error)])
     monkeypatch.setattr(warmup, "execute_unit", execute)
     monkeypatch.setattr(warmup, "_announced", True)

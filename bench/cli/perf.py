@@ -68,7 +68,7 @@ from radarbench.bench.sweep import capabilities
 from radarbench.bench.run import limits
 from radarbench.bench import registry
 from radarbench.bench.errors import ConfigError
-from radarbench.bench.markdown import code, fmt, table
+from radarbench.bench.markdown import code, fmt, table, text
 from radarbench.bench.params import build_params
 from radarbench.bench.run.processes import call_in_fresh_process
 from radarbench.bench.sweep.rng import EVALUATION, TrialRNG, stable_key
@@ -541,7 +541,7 @@ def _scene_section(scenes: pd.DataFrame) -> list[str]:
         targets = cls.perf_targets if cls is not None else {}
         goal = targets.get(r["size"], targets.get("*", {}))
         if isinstance(r.get("skipped"), str) and r["skipped"]:
-            rows.append([code(r["scenario"]), r["size"], r["trials"], "–", "–", f"not timed: {r['skipped']}"])
+            rows.append([code(r["scenario"]), r["size"], r["trials"], "–", "–", f"not timed: {text(r['skipped'])}"])
             continue
         rows.append([code(r["scenario"]), r["size"], r["trials"], f"{r['seconds_per_trial'] * 1e3:.3g}",
                      f"{r['peak_rss_mb']:.0f}", _target_text(goal, r)])
@@ -615,7 +615,7 @@ def write_report(out_dir: Path, perf: pd.DataFrame, extra: list[dict], scaling: 
         rows.append([code(row["method"]), row["size"], row["trials"], f"{row['seconds_per_trial'] * 1e3:.3g}",
                      _chunk_text(row),
                      *("–" if not np.isfinite(row[rate]) else f"{row[rate]:.3g}" for rate in rates),
-                     row["reference"] or "–",
+                     text(row["reference"]) if row["reference"] else "–",      # a plugin's words
                      "–" if not np.isfinite(row["reference_seconds_per_trial"])
                      else f"{row['reference_seconds_per_trial'] * 1e3:.3g} ({_reference_calls(row, info)})",
                      fmt(row["speedup"]), _fraction_cell(row, notes), f"{row['peak_rss_mb']:.0f}",

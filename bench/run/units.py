@@ -134,7 +134,10 @@ def _trial_record(plan: Plan, unit: Unit, batch, i: int, traces: dict, tasks) ->
     return (rec if valid is None else rec.at_steps(valid[i])).to_bytes()
 
 
-#: trials of a primer unit (:func:`_prime`): two, as the warm-up's (:data:`bench.run.warmup.WARM_UP_TRIALS`)
+#: trials of a primer unit (:func:`_prime`) and of a warm-up unit (:mod:`bench.run.warmup`): two, never
+#: one, since a one-trial batch makes arrays a larger one does not (a shared prior broadcast to
+#: (1, d) is already contiguous, so it stays a read-only view), and numba compiles another
+#: specialisation for them inside the timed units
 PRIMER_TRIALS = 2
 
 #: (scenario config, method config, phase) this process has run: its first calls are behind it
@@ -154,7 +157,7 @@ def _prime(work: UnitTask) -> None:
     warm-up call); a failure in it is the real unit's to report."""
     sc = work.plan.scenarios[work.unit.scenario_index]
     fresh = tuple(mc.label for mc in unit_methods(work) if (sc.label, mc.label, work.unit.phase) not in _primed)
-    if not fresh or work.unit.n <= PRIMER_TRIALS:
+    if not fresh:
         return
     unit = work.unit
     primer = Unit(unit.phase, unit.scenario_index, unit.scenario_label, unit.snr_db, unit.trial_start, PRIMER_TRIALS)

@@ -22,14 +22,12 @@ import sys
 from radarbench.bench import registry
 from radarbench.bench.sweep.plan import Plan
 from radarbench.bench.run.progress import say
-from radarbench.bench.run.units import Unit, UnitTask, calibrated_configs, execute_unit
+from radarbench.bench.run.units import PRIMER_TRIALS, Unit, UnitTask, calibrated_configs, execute_unit
 
 __all__ = ["cache_is_cold", "plan_key", "remember_unused", "warm_up_tasks", "run_warm_up", "COMPILING"]
 
-#: trials of a warm-up unit: two, never one, since a one-trial batch makes arrays a larger one
-#: does not (a shared prior broadcast to (1, d) is already contiguous, so it stays a read-only
-#: view), and numba compiles another specialisation for them inside the timed units
-WARM_UP_TRIALS = 2
+#: trials of a warm-up unit (why two: :data:`bench.run.units.PRIMER_TRIALS`)
+WARM_UP_TRIALS = PRIMER_TRIALS
 
 #: the threshold of a warm-up evaluation unit, for every method config: one with a nominal Pfa in
 #: (0, 1) (0.1 for a -log10 Pfa statistic), as a calibrated run's, so the recorded trial's trace
@@ -167,7 +165,7 @@ def run_warm_up(units_announce) -> bool:
     from the cache: numba's ``numba:compile`` event) says so."""
     units, announce = units_announce
     if announce is None or _announced:
-        return _ran_whole([execute_unit(unit) for unit in units])
+        return _ran_whole([execute_unit(unit, prime=False) for unit in units])
     from numba.core import event
 
     class Announce(event.Listener):
@@ -178,4 +176,4 @@ def run_warm_up(units_announce) -> bool:
             pass
 
     with event.install_listener("numba:compile", Announce()):
-        return _ran_whole([execute_unit(unit) for unit in units])
+        return _ran_whole([execute_unit(unit, prime=False) for unit in units])
