@@ -23,9 +23,11 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib import ticker  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from radarbench.bench.results.figure_cache import reuse_in_effect  # noqa: E402
 from radarbench.bench.results.tables import identical_curves  # noqa: E402
 
 DPI = 110
@@ -35,26 +37,8 @@ PNG_COMPRESS_LEVEL = 1
 #: the figures of the :func:`rendering_in` block in progress: [(path, pickled figure, future of its PNG or None)]
 _pending: contextvars.ContextVar[list | None] = contextvars.ContextVar("pending_figures", default=None)
 _pool: contextvars.ContextVar = contextvars.ContextVar("figure_pool", default=None)
-#: the figures a build reuses (bench.results.figure_cache.FigureReuse) inside :func:`reusing`, else None
-_reuse: contextvars.ContextVar = contextvars.ContextVar("figure_reuse", default=None)
 #: the key of the figure a :func:`cached` function is drawing (None: not known)
 _key: contextvars.ContextVar = contextvars.ContextVar("figure_key", default=None)
-
-
-@contextlib.contextmanager
-def reusing(reuse):
-    """Within the block, the figures of :func:`cached` functions are reused and counted
-    by ``reuse`` (a :class:`bench.results.figure_cache.FigureReuse`)."""
-    token = _reuse.set(reuse)
-    try:
-        yield reuse
-    finally:
-        _reuse.reset(token)
-
-
-def reuse_in_effect():
-    """The :class:`bench.results.figure_cache.FigureReuse` of the :func:`reusing` block in progress, else None."""
-    return _reuse.get()
 
 
 def cached(fn):
@@ -65,7 +49,7 @@ def cached(fn):
 
     @functools.wraps(fn)
     def figure(*args, **kwargs):
-        reuse = _reuse.get()
+        reuse = reuse_in_effect()
         if reuse is None:
             return fn(*args, **kwargs)
         bound = signature.bind(*args, **kwargs)
@@ -87,7 +71,7 @@ def _write(path: Path, data: bytes, key: str | None) -> None:
     """The PNG ``data`` of the figure ``key`` to ``path`` (inside :func:`reusing`: only if
     its bytes changed, counted as drawn)."""
     from radarbench.bench.results import runfolder
-    reuse = _reuse.get()
+    reuse = reuse_in_effect()
     if reuse is None:
         runfolder.write_bytes(path, data)
     else:
@@ -257,6 +241,23 @@ def roc(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, snr_db: fl
     return _save(fig, path)
 
 
+class PlainLogLabels(ticker.Formatter):
+    """Tick labels of a log axis as plain numbers ("0.1", "10"; with ``minor``, 2 and 5 between
+    decades when the axis spans less than two), not matplotlib's default mathtext ("10^1"): the
+    parser's start-up is most of a report's drawing when the runtime's figure, drawn anew by
+    every run, is its only one."""
+
+    def __init__(self, minor: bool = False):
+        self.minor = minor
+
+    def __call__(self, value, pos=None) -> str:
+        if not self.minor:
+            return f"{value:g}"
+        low, high = sorted(self.axis.get_view_interval())
+        mantissa = round(value / 10 ** np.floor(np.log10(value)), 6)
+        return f"{value:g}" if low > 0 and high / low < 100 and mantissa in (2.0, 5.0) else ""
+
+
 @cached
 def runtime(per_method: pd.DataFrame, path: Path) -> Path:
     """CPU seconds per trial per method config (log scale)."""
@@ -266,6 +267,8 @@ def runtime(per_method: pd.DataFrame, path: Path) -> Path:
     ax.set_yticks(y, per_method.config, fontsize=8)
     ax.invert_yaxis()
     ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(PlainLogLabels())
+    ax.xaxis.set_minor_formatter(PlainLogLabels(minor=True))
     ax.set(xlabel="CPU milliseconds per trial", title="runtime per method config")
     ax.grid(alpha=0.3, axis="x")
     return _save(fig, path)

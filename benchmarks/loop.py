@@ -51,6 +51,7 @@ runs' CSVs with pandas); the ``bench`` commands it times run in their own fresh 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import ctypes
 import dataclasses
 import json
@@ -116,6 +117,10 @@ RUNTIME_SECTION = re.compile(r"^## Runtime$(.*?)(?=^## |\Z)", re.M | re.S)
 RUNTIME_ROW = re.compile(r"^\| `(?P<config>[^`]+)`\s*\| (?P<ms>[0-9.eE+-]+)\s*\|", re.M)
 #: how far apart a first run's CPU per trial and a warm run's may be, either way, for any config
 RUNTIME_AGREEMENT = 2.0
+#: the most of a warm quick run's CPU its report phase (tables, figures, pages, recording) may take
+REPORT_SHARE = 0.15
+#: the store's record of its last report build's CPU seconds (bench.report.REPORT_CPU)
+REPORT_CPU = "report_cpu_seconds"
 
 
 @dataclasses.dataclass
@@ -271,9 +276,11 @@ class Loop:
                    "--out", self.out("quick-first"))
 
     def warm(self) -> None:
-        self.bench("warm", "warm quick run (kernels cached" + (", results cache bypassed)" if self.no_cache()
-                                                                else ")"),
-                   "--preset", "quick", "--out", self.out("quick-warm"), *self.no_cache())
+        warm = self.bench("warm", "warm quick run (kernels cached" + (", results cache bypassed)" if self.no_cache()
+                                                                       else ")"),
+                          "--preset", "quick", "--out", self.out("quick-warm"), *self.no_cache())
+        self.checks[f"the warm run's report phase is at most {REPORT_SHARE:.0%} of its CPU"] = \
+            report_share(Path(self.out("quick-warm")) / "results.sqlite", warm)
         self.checks[f"the first run's runtime table is within {RUNTIME_AGREEMENT:g}x of the warm run's"] = \
             runtimes_agree(Path(self.out("quick-first")) / "report.md", Path(self.out("quick-warm")) / "report.md")
 
@@ -382,6 +389,21 @@ def runtimes_agree(first: Path, warm: Path) -> str:
     beyond = sum(r > RUNTIME_AGREEMENT for r in ratios.values())
     return (f"{'yes' if not beyond else 'no'} (max ratio {ratios[worst]:.2f} for {worst}: {a[worst]:.3g} ms "
             f"first, {b[worst]:.3g} ms warm; {beyond} of {len(ratios)} configs beyond)")
+
+
+def report_share(store: Path, run: Measured) -> str:
+    """Whether the report phase of ``run`` (its CPU seconds as the run recorded them in its store)
+    took at most :data:`REPORT_SHARE` of the run's whole-tree CPU: one line."""
+    import sqlite3
+
+    if not store.is_file():
+        return f"no {store.name}"
+    with contextlib.closing(sqlite3.connect(f"file:{store}?mode=ro", uri=True)) as db:
+        row = db.execute("SELECT value FROM meta WHERE key = ?", (REPORT_CPU,)).fetchone()
+    if row is None or run.cpu_s <= 0:
+        return "not recorded by this bench"
+    share = float(row[0]) / run.cpu_s
+    return f"{'yes' if share <= REPORT_SHARE else 'no'} ({float(row[0]):.1f} s of {run.cpu_s:.1f} s, {share:.0%})"
 
 
 def plan_holds(plan: Path, methods: set[str], snr_db: set[float]) -> str:

@@ -102,6 +102,68 @@ def test_a_figure_whose_file_was_changed_is_written_again(small_run_copy, tmp_pa
     assert _build(small_run_copy)[0] == 1 and figure.read_bytes() == good
 
 
+def test_a_rerun_whose_results_are_equal_redraws_only_the_runtime_figure(tmp_path, bench_cli):
+    """Two runs of one sweep into two folders compute equal results in other times: only
+    the runtime's figure shows the times (the glance's and the tasks' are drawn from the
+    results alone), and the second run's tables come from the user's cache, equal."""
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(TWO_TASKS.format(window=5))
+    runs = [bench_cli("run", sweep, "--out", tmp_path / name, "--workers", 1, "--no-record", "--no-cache", check=True)
+            for name in ("first", "second")]
+    assert _figures_line(runs[1].stderr)[0] == 1, runs[1].stderr
+    assert any((tmp_path / "first" / "figures").glob("glance-*.png"))
+    first, second = _outputs(tmp_path / "first"), _outputs(tmp_path / "second")
+    assert sorted(first) == sorted(second)
+    differing = {name for name in first if first[name].read_bytes() != second[name].read_bytes()}
+    # the times: the runtime's figure, summary.csv's seconds per trial, the pages (and their folder)
+    assert differing <= {"figures/runtime.png", "summary.csv", "report.md", "report.html"}, differing
+
+
+def _counted(fn):
+    calls = []
+
+    def counted(*args):
+        calls.append(args)
+        return fn(*args)
+    counted.__qualname__ = fn.__qualname__
+    return counted, calls
+
+
+def test_a_table_or_text_is_reused_for_equal_inputs_and_code(tmp_path):
+    import pandas as pd
+    frame = pd.DataFrame({"config": ["a", "b"], "pd": [0.5, float("nan")], "n": [3, 4], "ok": [True, False],
+                          "note": [None, "x"]})
+    summarise, calls = _counted(lambda values, label: frame.assign(label=label))
+    with reuse.reusing(reuse.FigureReuse(folder=tmp_path)):
+        first = reuse.reused(summarise, [1.0, 2.0], "x")
+        again = reuse.reused(summarise, [1.0, 2.0], "x")
+        other = reuse.reused(summarise, [1.0, 2.5], "x")
+        other_code = reuse.reused(summarise, [1.0, 2.0], "x", code="a plugin's task, edited")
+        text, text_calls = _counted(lambda s: s.upper())
+        assert reuse.reused(text, "abc") == reuse.reused(text, "abc") == "ABC"
+    assert len(calls) == 3 and len(text_calls) == 1
+    pd.testing.assert_frame_equal(again, first, check_exact=True)
+    pd.testing.assert_frame_equal(other, first, check_exact=True)
+    pd.testing.assert_frame_equal(other_code, first, check_exact=True)
+
+
+def test_a_value_that_cannot_be_kept_exactly_or_a_damaged_one_is_computed_again(tmp_path):
+    import pandas as pd
+    tuples, calls = _counted(lambda: pd.DataFrame({"pair": [(1, 2)]}))            # JSON gives back a list
+    indexed, indexed_calls = _counted(lambda: pd.DataFrame({"x": [1.0]}, index=[7]))
+    with reuse.reusing(reuse.FigureReuse(folder=tmp_path)):
+        for _ in range(2):
+            assert reuse.reused(tuples).pair.iloc[0] == (1, 2)
+            assert reuse.reused(indexed).index[0] == 7
+        assert len(calls) == len(indexed_calls) == 2 and not list(tmp_path.glob("*.json"))
+        text, text_calls = _counted(lambda: "kept")
+        reuse.reused(text)
+        for kept in tmp_path.glob("*.json"):
+            kept.write_bytes(b"{not json")
+        assert reuse.reused(text) == "kept" and len(text_calls) == 2
+    assert reuse.reused(text) == "kept" and len(text_calls) == 3          # outside a build: computed
+
+
 def test_a_figure_is_keyed_by_what_it_draws():
     import numpy as np
     import pandas as pd
@@ -112,6 +174,10 @@ def test_a_figure_is_keyed_by_what_it_draws():
     assert reuse.key_of({"a": 1, "b": 2}) != reuse.key_of({"b": 2, "a": 1})      # a legend's order
     assert reuse.key_of(np.zeros(3)) != reuse.key_of(np.zeros(3, np.float32))
     assert reuse.key_of(object()) is None                                          # never reused wrongly
+    labels = np.array(["a", "b"], dtype=object)
+    assert reuse.key_of(labels) != reuse.key_of(np.array(["a", None], dtype=object))
+    assert reuse.key_of(labels) != reuse.key_of(np.array(["ab"], dtype=object))
+    assert reuse.key_of(labels) != reuse.key_of(labels.reshape(2, 1))
 
 
 @pytest.fixture

@@ -122,3 +122,25 @@ def test_the_runtime_check_compares_every_config_of_the_first_and_warm_reports_e
     faster = _report(tmp_path / "faster", {"cv-kf": 0.2, "imm-cv-ca[window=3]": 2.0})
     assert loop.runtimes_agree(faster, warm).startswith("no (max ratio 2.50 for cv-kf")
     assert loop.runtimes_agree(tmp_path / "none" / "report.md", warm).startswith("no runtime table")
+
+
+def test_the_report_share_reads_the_build_cpu_the_run_recorded(tmp_path):
+    import sqlite3
+    loop = _loop_module()
+    store = tmp_path / "results.sqlite"
+    with sqlite3.connect(store) as db:
+        db.execute("CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT)")
+    run = loop.Measured("warm", "warm", "bench run", 10.0, 20.0, 0)
+    assert loop.report_share(store, run) == "not recorded by this bench"
+    with sqlite3.connect(store) as db:
+        db.execute("INSERT INTO meta VALUES (?, ?)", (loop.REPORT_CPU, repr(2.9)))
+    assert loop.report_share(store, run) == "yes (2.9 s of 20.0 s, 14%)"
+    with sqlite3.connect(store) as db:
+        db.execute("UPDATE meta SET value = ? WHERE key = ?", (repr(3.1), loop.REPORT_CPU))
+    assert loop.report_share(store, run) == "no (3.1 s of 20.0 s, 16%)"
+    assert loop.report_share(tmp_path / "none.sqlite", run) == "no none.sqlite"
+
+
+def test_the_loop_reads_the_key_the_report_records():
+    from radarbench.bench.report import REPORT_CPU
+    assert _loop_module().REPORT_CPU == REPORT_CPU

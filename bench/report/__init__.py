@@ -26,6 +26,7 @@ renamed, so no reader ever sees a half-written output.
 from __future__ import annotations
 
 import importlib
+import time
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +52,7 @@ from radarbench.bench.report.render import comparisons_markdown, glance_markdown
 from radarbench.bench.recording import TrialRecord, write_recording
 from radarbench.bench.run.runner import calibrations
 from radarbench.bench.results.store import Store
-from radarbench.bench.results.figure_cache import FigureReuse, write_if_changed
+from radarbench.bench.results.figure_cache import FigureReuse, reused, reusing, write_if_changed
 from radarbench.bench.results.tables import csv_text
 from radarbench.bench.tasks import ReportContext, summary_columns
 
@@ -139,17 +140,12 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
     """One row per (scenario config, method config, SNR): each task's summary
     of its trials, completed by its calibrations (:meth:`Task.apply_calibration`)."""
     tasks = {m["label"]: m["task"] for m in record["methods"]}
-    task_of = _task_of(record)
     present = set(tasks.values())               # only the run's tasks: no columns that are empty by design
     columns = summary_columns(t for name, t in registry.tasks().items() if name in present)
-    parts = [registry.get_task(task).summarise(g, series) for task, g in trials.groupby(trials.config.map(tasks))] \
-        if len(trials) else []
+    parts = [_task_summary(registry.get_task(task), g, series, [c for c in cals if c.method in set(g.config)])
+             for task, g in trials.groupby(trials.config.map(tasks))] if len(trials) else []
     summary = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=columns)
     summary = summary.reindex(columns=list(dict.fromkeys([*columns, *summary.columns])))
-    for c in cals:
-        rows = (summary.scenario == c.scenario) & (summary.config == c.method)
-        if rows.any():
-            task_of[c.method].apply_calibration(summary, trials, c)
     # The tasks' parts and the calibrations' in-place writes leave pandas' column blocks
     # split: one block again (a frame of 100+ blocks makes every later operation slow, and
     # pandas says so on the user's terminal). For the same reason, columns are taken with
@@ -159,7 +155,7 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
     speed = ev.groupby(["scenario", "method", "snr_db"]).agg(s=("seconds", "sum"), n=("n", "sum"))
     speed = (speed.s / speed.n).rename("seconds_per_trial").reset_index().rename(columns={"method": "config"})
     keys = {"scenario": str, "config": str, "snr_db": float}
-    summary = summary.loc[:, summary.columns != "seconds_per_trial"]
+    summary = _without_runtime(summary)
     summary = summary.assign(**{k: summary[k].astype(t) for k, t in keys.items()})
     summary = summary.merge(speed.assign(**{k: speed[k].astype(t) for k, t in keys.items()}), on=list(keys),
                             how="left")
@@ -167,6 +163,35 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
     summary = summary.assign(_s=summary.scenario.map(_scenario_order(record)), _o=summary.config.map(order))
     summary = summary.sort_values(["_s", "_o", "snr_db"])
     return summary[columns].reset_index(drop=True)
+
+
+def _task_summary(task, trials: pd.DataFrame, series: dict, cals: list) -> pd.DataFrame:
+    """A task's summary of its trials and their series (:meth:`Task.summarise`), completed by its
+    configs' calibrations (:meth:`Task.apply_calibration`) in the task's columns; reused for
+    equal trials, series and calibrations (:func:`reused`)."""
+    configs = set(trials.config)
+    mine = {key: value for key, value in series.items() if key[1] in configs}
+
+    def summarised(trials: pd.DataFrame, series: dict, cals: list) -> pd.DataFrame:
+        summary = task.summarise(trials, series)
+        summary = summary.reindex(columns=list(dict.fromkeys([*summary_columns([task]), *summary.columns])))
+        for c in cals:
+            if ((summary.scenario == c.scenario) & (summary.config == c.method)).any():
+                task.apply_calibration(summary, trials, c)
+        return summary
+    return reused(summarised, trials, mine, cals, key=(trials, mine, [c.as_row() for c in cals]), code=task_code(task))
+
+
+def task_code(*tasks) -> str:
+    """The code of ``tasks`` beyond the harness's (a plugin task's, :func:`bench.run.identity.code_identity`),
+    for the values a report reuses (:func:`reused`): names a harness task by its name alone."""
+    from radarbench.bench.run.identity import code_identity, module_file, is_harness
+    out = []
+    for task in tasks:
+        module = type(task).__module__
+        file = module_file(module)
+        out.append(task.name if file is not None and is_harness(file) else f"{task.name} {code_identity(module).hash}")
+    return ";".join(out)
 
 
 def store_tables(store: Store, record: dict, runs: pd.DataFrame) -> tuple[pd.DataFrame, dict, list, pd.DataFrame]:
@@ -463,7 +488,9 @@ def build_outputs(out_dir: Path, *, recording: bool = True, progress: Progress |
     ``recording`` (recording.rrd). ``workers``: the most processes that draw the figures
     (None: one per CPU, :func:`bench.report.building.figure_pool`). ``digest``: what the outputs are built from
     (:func:`bench.results.runfolder.outputs_digest`), recorded once they are all written, so an
-    unchanged folder is not rebuilt."""
+    unchanged folder is not rebuilt. The build's CPU seconds (this process's and its figure
+    processes') are recorded as the store's :data:`REPORT_CPU` (``benchmarks/loop.py`` reads them)."""
+    cpu_started = _cpu_seconds()
     progress = progress or Progress(quiet=True)
     out_dir = Path(out_dir)
     db = out_dir / "results.sqlite"
@@ -472,15 +499,30 @@ def build_outputs(out_dir: Path, *, recording: bool = True, progress: Progress |
     store = Store(db)
     try:
         reuse = FigureReuse.of_store(store)
-        with runfolder.writing(out_dir), figures.reusing(reuse):
+        with runfolder.writing(out_dir), reusing(reuse):
             report = _build(store, out_dir, recording, progress, workers)
             reuse.drop_unmade(out_dir)
         reuse.save(store)
         if digest:
             store.set_meta(runfolder.OUTPUTS_DIGEST, digest)
+        store.set_meta(REPORT_CPU, repr(_cpu_seconds() - cpu_started))
         return report
     finally:
         store.close()
+
+
+#: the store's record of the CPU seconds its last report build took (:func:`build_outputs`)
+REPORT_CPU = "report_cpu_seconds"
+
+
+def _cpu_seconds() -> float:
+    """CPU seconds of this process and of its children that have ended (a build's figure processes)."""
+    try:
+        import resource
+    except ImportError:                         # not on Windows: this process's alone
+        return time.process_time()
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
 
 
 def _task_contexts(present: list, task_of: dict, summary, trials, steps, series, cals, records, store,
@@ -491,9 +533,7 @@ def _task_contexts(present: list, task_of: dict, summary, trials, steps, series,
     for task in sorted(present, key=lambda t: not t.calibrated):
         configs = frozenset(label for label, t in task_of.items() if t is task)
         out.append((task, ReportContext(
-            # without the runtime (the runtime section's): a task's figures are drawn from its
-            # results alone, so equal results reuse them (bench.results.figure_cache)
-            summary=summary.loc[summary.config.isin(configs), summary.columns != "seconds_per_trial"], trials=trials[trials.config.isin(configs)],
+            summary=summary[summary.config.isin(configs)], trials=trials[trials.config.isin(configs)],
             steps=steps[steps.config.isin(configs)] if not steps.empty else steps,
             series={k: v for k, v in series.items() if k[1] in configs},
             calibrations=[c for c in cals if c.method in configs], records=records, store=store,
@@ -501,6 +541,13 @@ def _task_contexts(present: list, task_of: dict, summary, trials, steps, series,
             chance_pd=sweep["calibration"].get("chance_pd", EQUAL_CHANCE_PD),
             timeline_snr_db=sweep["record"].get("timeline_snr_db"), configs=configs, task=task)))
     return out
+
+
+def _without_runtime(summary: pd.DataFrame) -> pd.DataFrame:
+    """The summary without the runtime (the runtime section's): the figures of the tasks and of
+    the glance are drawn from results alone, so equal results reuse them however long their
+    trials took (bench.results.figure_cache)."""
+    return summary.loc[:, summary.columns != "seconds_per_trial"]
 
 
 def _recording_summary(summary: pd.DataFrame, tasks) -> pd.DataFrame:
@@ -537,7 +584,8 @@ def _build_with(store: Store, out_dir: Path, recording: bool, progress: Progress
     specs = interactive_specs(summary, task_of)      # drawn by the pool while the driver goes on
     interactive = interactive_job(pool, specs)
     t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}
-    steps = steps_frame(trials, series, record, t_of)
+    steps = reused(steps_frame, trials, series, record, t_of, key=(trials, series, record["scenarios"], record["methods"], t_of),
+                   code=task_code(*present))
     records = _of_the_plan(store.records(), task_of)   # every read before the first write
     calibration = pd.DataFrame([c.as_row() for c in cals])
     fig_dir = out_dir / "figures"
@@ -545,7 +593,8 @@ def _build_with(store: Store, out_dir: Path, recording: bool, progress: Progress
     sections.done("tables")
     with figures.rendering_in(pool):
         # the sections first: their figures draw in the pool while the comparisons are computed
-        contexts = _task_contexts(present, task_of, summary, trials, steps, series, cals, records, store, out_dir, sweep)
+        results = _without_runtime(summary)
+        contexts = _task_contexts(present, task_of, results, trials, steps, series, cals, records, store, out_dir, sweep)
         done, total = len(units), int(store.meta("units_total") or len(units))
         chance = {(c.scenario, c.method): c.chance_pd for c in cals}
         task_parts = [s for task, ctx in contexts for s in each_done(task.report_sections(ctx), sections, task.name)]
@@ -553,7 +602,8 @@ def _build_with(store: Store, out_dir: Path, recording: bool, progress: Progress
                        for s in each_done(task.trial_sections(ctx), sections, f"{task.name}: single trials")]
         runtime_parts = [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
         sections.done("runtime")
-        comparisons = comparisons_frame(trials, task_of)
+        comparisons = reused(comparisons_frame, trials, task_of, key=(trials, {k: t.name for k, t in task_of.items()}),
+                             code=task_code(*dict.fromkeys(task_of.values())))
         evaluation, paper_vs_ours = _paper_vs_ours(   # the paper-vs-ours table leads a preset's sections
             record.get("source", ""), {"summary": summary, "comparisons": comparisons, "calibration": calibration},
             sweep["calibration"])
@@ -562,7 +612,7 @@ def _build_with(store: Store, out_dir: Path, recording: bool, progress: Progress
         parts = [paper_vs_ours, _section_plan(record, store, present), _section_calibration(cals, summary, task_of),
                  *task_parts, comparisons_markdown(comparisons, task_of), *trial_parts, *runtime_parts]
         entries = glance(trials, task_of, comparisons, chance)
-        draw_glance_figures(entries, summary, fig_dir)
+        draw_glance_figures(entries, results, fig_dir)
         at_a_glance = glance_markdown(entries)
         sections.done("comparisons and at a glance")
     sections.done("figures written")

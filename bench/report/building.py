@@ -12,7 +12,7 @@ from radarbench.bench import figures
 from radarbench.bench.run.processes import default_workers, process_pool
 from radarbench.bench.run.progress import Progress
 from radarbench.bench.report.html import interactive_figures
-from radarbench.bench.results.figure_cache import code_key, harness_key, key_of
+from radarbench.bench.results.figure_cache import code_key, harness_key, key_of, reuse_in_effect
 
 
 #: the most processes that render a report's figures (:func:`figure_pool`)
@@ -71,7 +71,7 @@ class Sections:
 
     def done(self, what: str) -> None:
         """``what`` (a section, the tables) is done."""
-        reuse = figures.reuse_in_effect()
+        reuse = reuse_in_effect()
         if reuse is not None:
             self.progress.detail(reuse.summary())
         self.progress.advance()
@@ -80,7 +80,7 @@ class Sections:
 def interactive_job(pool, specs: list):
     """(report.html's interactive figures if the user's cache holds them, else None; the
     pool's job drawing them, else None; their key)."""
-    reuse = figures.reuse_in_effect()
+    reuse = reuse_in_effect()
     key = key_of(specs, code_key(interactive_figures.__module__))
     kept = reuse.fetch(key, ".html") if reuse is not None and key else None
     if kept is not None:
@@ -93,7 +93,7 @@ def interactive_html(kept, job, key, specs: list) -> str:
     if kept is not None:
         return kept
     text = figures.result_of(job, interactive_figures, specs)
-    reuse = figures.reuse_in_effect()
+    reuse = reuse_in_effect()
     if reuse is not None and key:
         reuse.keep(key, ".html", text.encode("utf-8"))
     return text
@@ -110,7 +110,7 @@ def reused_output(path, inputs, write) -> None:
     """``write(path)`` (an output drawn by the harness from ``inputs`` alone, the
     recording), unless the run folder or the user's cache holds it for the same inputs and
     harness code (:mod:`bench.results.figure_cache`)."""
-    reuse = figures.reuse_in_effect()
+    reuse = reuse_in_effect()
     key = key_of(inputs, harness_key()) if reuse is not None else None
     if key is not None and reuse.reuse(path, key, figure=False):
         return

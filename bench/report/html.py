@@ -32,6 +32,7 @@ from pathlib import Path
 import pandas as pd
 
 from radarbench.bench.report.render import environment, sentence_case
+from radarbench.bench.results.figure_cache import reused
 from radarbench.bench.results.tables import identical_curves
 
 PLACEHOLDER = '<div id="bench-interactive"></div>'
@@ -151,12 +152,18 @@ def _converter():
     return md
 
 
+def _converted(text: str) -> str:
+    """Markdown ``text`` as HTML (:func:`_converter`)."""
+    return _converter().convert(text)
+
+
 def _body(text: str) -> str:
-    """``text`` (Markdown) as HTML: our folds and placeholder, the rest converted between them."""
-    md, out, chunk = _converter(), [], []
+    """``text`` (Markdown) as HTML: our folds and placeholder, the rest converted between them,
+    each part reused where an earlier report converted the same text (:func:`reused`)."""
+    out, chunk = [], []
 
     def flush():
-        out.append(md.reset().convert("\n".join(chunk)))
+        out.append(reused(_converted, "\n".join(chunk)))
         chunk.clear()
     for line in text.split("\n"):
         fold = _FOLD.match(line)

@@ -15,11 +15,18 @@ to left out) — and of the code that draws it (the files of the function's modu
 An argument the key cannot describe (an object of another kind) makes its figure be
 drawn every time, never reused wrongly. Every other output of a build is written only
 when its bytes changed (:func:`write_if_changed`).
+
+The tables and texts a build computes from the results alone (a task's summary, the paired
+comparisons, the report's HTML body) are reused the same way (:func:`reused`): kept in the
+user's cache folder as JSON (``KEY.json``), keyed by their inputs and the code that computes
+them, so a run whose results equal an earlier one's (a warm re-run, an edit that left a
+task's configs alone) does not compute them again.
 """
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import hashlib
 import importlib.metadata
 import json
@@ -31,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["FigureReuse", "key_of", "write_if_changed", "CACHE_BYTES"]
+__all__ = ["FigureReuse", "key_of", "reuse_in_effect", "reused", "reusing", "write_if_changed", "CACHE_BYTES"]
 
 #: the most bytes of PNGs the user's cache folder keeps (the least recently used go first)
 CACHE_BYTES = 256 * 2 ** 20
@@ -39,6 +46,25 @@ CACHE_BYTES = 256 * 2 ** 20
 META = "report_figures"
 #: the libraries whose versions change a figure's pixels
 RENDERING_LIBRARIES = ("matplotlib", "numpy", "pandas", "pillow")
+
+#: the reuse of the :func:`reusing` block in progress (a :class:`FigureReuse`), else None
+_reuse: contextvars.ContextVar = contextvars.ContextVar("figure_reuse", default=None)
+
+
+@contextlib.contextmanager
+def reusing(reuse):
+    """Within the block, figures (:func:`bench.figures.cached`) and the values of :func:`reused`
+    calls are reused and counted by ``reuse`` (a :class:`FigureReuse`)."""
+    token = _reuse.set(reuse)
+    try:
+        yield reuse
+    finally:
+        _reuse.reset(token)
+
+
+def reuse_in_effect():
+    """The :class:`FigureReuse` of the :func:`reusing` block in progress, else None."""
+    return _reuse.get()
 
 
 class Unkeyable(Exception):
@@ -56,8 +82,12 @@ def _feed(h, value) -> None:
         h.update(f"path:{value}".encode())
     elif isinstance(value, np.ndarray):
         if value.dtype.hasobject:
+            items = value.ravel().tolist()
+            if all(type(item) is str for item in items):     # a column of labels: at once
+                h.update(f"strings{value.shape};".encode() + json.dumps(items).encode())
+                return
             h.update(f"objects{value.shape}".encode())
-            for item in value.ravel():
+            for item in items:
                 _feed(h, item)
         else:
             h.update(f"array:{value.dtype.str}{value.shape};".encode())
@@ -124,15 +154,76 @@ _harness_key: list[str] = []
 
 
 def harness_key() -> str:
-    """The harness's code (:func:`bench.results.runfolder.harness_files`), for an output drawn by
-    more of it than one module (the recording)."""
+    """The harness's code (:func:`bench.results.runfolder.harness_files`) and the versions of the
+    libraries a report is made with (:data:`bench.results.runfolder.REPORT_LIBRARIES`), for an
+    output made by more of it than one module (the recording, :func:`reused` values)."""
     if not _harness_key:
         from radarbench.bench.results import runfolder
         h = hashlib.sha256()
         for path in sorted(runfolder.harness_files()):
             h.update(str(path.name).encode() + b"\0" + path.read_bytes())
+        for name in runfolder.REPORT_LIBRARIES:
+            with contextlib.suppress(importlib.metadata.PackageNotFoundError):
+                h.update(f"{name} {importlib.metadata.version(name)};".encode())
         _harness_key.append(h.hexdigest())
     return _harness_key[0]
+
+
+def reused(fn, *args, key: tuple | None = None, code: str = ""):
+    """``fn(*args)``, a pure function of its arguments returning text or a data frame; inside
+    :func:`reusing`, what an equal call returned before, from the user's cache. The call is
+    named by ``fn``, ``key`` (what its arguments hold, described for :func:`key_of`; default
+    ``args``), the harness's code (:func:`harness_key`) and ``code`` (more code it runs: a
+    plugin's). A value :func:`_encoded` cannot keep exactly is computed every time."""
+    reuse = _reuse.get()
+    name = key_of(fn.__module__, fn.__qualname__, harness_key(), code, args if key is None else key) \
+        if reuse is not None and reuse.folder is not None else None
+    if name is not None:
+        data = reuse.fetch(name, ".json")
+        value = _decoded(data) if data is not None else None
+        if value is not None:
+            return value
+    value = fn(*args)
+    if name is not None and (data := _encoded(value)) is not None:
+        reuse.keep(name, ".json", data)
+    return value
+
+
+def _encoded(value) -> bytes | None:
+    """``value`` (text, or a data frame of JSON values with a default index) as JSON, None
+    unless :func:`_decoded` gives it back exactly (dtypes, column names and order, NaNs)."""
+    import pandas as pd
+    if isinstance(value, str):
+        return json.dumps({"text": value}).encode()
+    if not isinstance(value, pd.DataFrame) or not value.index.equals(pd.RangeIndex(len(value))) \
+            or not isinstance(value.index, pd.RangeIndex):
+        return None
+    try:
+        data = json.dumps({"columns": list(value.columns), "dtypes": [str(t) for t in value.dtypes],
+                           "values": [value.iloc[:, i].tolist() for i in range(value.shape[1])]}).encode()
+    except (TypeError, ValueError):
+        return None
+    back = _decoded(data)
+    try:
+        pd.testing.assert_frame_equal(back, value, check_exact=True)
+    except (AssertionError, TypeError, ValueError):
+        return None
+    return data
+
+
+def _decoded(data: bytes):
+    """What :func:`_encoded` wrote, None if ``data`` is not that."""
+    import pandas as pd
+    try:
+        doc = json.loads(data)
+        if "text" in doc:
+            return doc["text"] if isinstance(doc["text"], str) else None
+        columns = [pd.Series(values, dtype=dtype) for values, dtype in zip(doc["values"], doc["dtypes"], strict=True)]
+        frame = pd.concat(columns, axis=1, ignore_index=True) if columns else pd.DataFrame(index=pd.RangeIndex(0))
+        frame.columns = pd.Index(doc["columns"]) if doc["columns"] else frame.columns
+        return frame
+    except (ValueError, TypeError, KeyError, AttributeError):
+        return None
 
 
 def _read_regular(path: Path, limit: int = 1 << 30) -> bytes | None:
@@ -176,6 +267,7 @@ class FigureReuse:
     drawn: int = 0
     reused: int = 0
     drawn_files: list = field(default_factory=list)
+    kept: bool = False
 
     @classmethod
     def of_store(cls, store, use_cache: bool = True) -> "FigureReuse":
@@ -190,7 +282,7 @@ class FigureReuse:
         """Record the figures of this build in the store (for the next build); keep the
         user's cache within :data:`CACHE_BYTES`."""
         store.set_meta(META, json.dumps(self.current, sort_keys=True))
-        if self.folder is not None and self.drawn:
+        if self.folder is not None and self.kept:
             with contextlib.suppress(OSError):
                 _bound(self.folder)
 
@@ -246,6 +338,7 @@ class FigureReuse:
     def keep(self, key: str, suffix: str, data: bytes) -> None:
         """Keep ``data`` as ``KEY+suffix`` in the user's cache folder (if it is used)."""
         if self.folder is not None:
+            self.kept = True
             with contextlib.suppress(OSError):
                 _put(self.folder, key + suffix, data)
 

@@ -270,7 +270,7 @@ def _installed(path: Path) -> bool:
     return bool(_INSTALLED & set(path.parts))
 
 
-def _is_harness(path: Path) -> bool:
+def is_harness(path: Path) -> bool:
     """The harness's own files: ``bench/`` and the package's top files (``radarbench/__init__.py``)."""
     return path.is_relative_to(_HARNESS) or path.parent == _PACKAGE_DIR
 
@@ -368,7 +368,7 @@ def _closure(todo: list[tuple[str, Path | None]], own: frozenset[str], libraries
         if path is None:
             continue
         module = read_module(name, path)
-        if _is_harness(path) and not module.marked:
+        if is_harness(path) and not module.marked:
             continue
         modules[name] = module.content
         todo += [(other, None) for other in sorted(module.loads - seen)]
