@@ -38,6 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
+from radarbench.bench.sweep.user_cache import cache_dir, private_dir, write_whole
+
 __all__ = ["FigureReuse", "key_of", "reuse_in_effect", "reused", "reusing", "write_if_changed", "CACHE_BYTES"]
 
 #: the most bytes of PNGs the user's cache folder keeps (the least recently used go first)
@@ -340,7 +342,7 @@ class FigureReuse:
         if self.folder is not None:
             self.kept = True
             with contextlib.suppress(OSError):
-                _put(self.folder, key + suffix, data)
+                write_whole(self.folder / (key + suffix), data)
 
     def fetch(self, key: str, suffix: str) -> bytes | None:
         """What :meth:`keep` kept as ``KEY+suffix``, None if nothing."""
@@ -359,24 +361,9 @@ class FigureReuse:
 
 
 def _cache_folder() -> Path | None:
-    """The user's cache of figures, if it is a private folder (:func:`bench.sweep.listing.private_dir`)."""
-    from radarbench.bench.sweep.listing import cache_dir, private_dir
+    """The user's cache of figures, if it is a private folder (:func:`bench.sweep.user_cache.private_dir`)."""
     folder = cache_dir() / "figures"
     return folder if private_dir(cache_dir()) and private_dir(folder) else None
-
-
-def _put(folder: Path, name: str, data: bytes) -> None:
-    """Keep ``data`` as ``name`` in ``folder`` (an unpredictable temporary name, renamed)."""
-    import tempfile
-    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, folder / name)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
 
 
 def _bound(folder: Path) -> None:

@@ -4,7 +4,7 @@
 An entry is what one computation produced (:mod:`bench.run.reuse` says what is keyed and
 how), kept as one file named by the SHA-256 of its key, in a folder of its own:
 ``BENCH_RESULTS_CACHE_DIR`` if set, else ``results/`` in the user's cache folder of
-bench (``$XDG_CACHE_HOME/radar-maneuver-bench/``, :func:`bench.sweep.listing.cache_dir`).
+bench (``$XDG_CACHE_HOME/radar-maneuver-bench/``, :func:`bench.sweep.user_cache.cache_dir`).
 
 - **checked**: a file is ``MAGIC``, the SHA-256 of the rest, then an ``.npz`` of the
   entry's arrays and a JSON header (never pickle); one that does not match (garbled,
@@ -18,7 +18,7 @@ bench (``$XDG_CACHE_HOME/radar-maneuver-bench/``, :func:`bench.sweep.listing.cac
   to now, and :meth:`ResultsCache.evict` removes the least recently used ones until the
   folder is within the bound;
 - **never failing a run**: a folder that is not private (a link, another user's, one
-  others may write: :func:`bench.sweep.listing.private_dir`) is not used; one that cannot be
+  others may write: :func:`bench.sweep.user_cache.private_dir`) is not used; one that cannot be
   written (read-only, full) is read only, said once per run.
 """
 
@@ -34,7 +34,7 @@ import time
 import zipfile
 from pathlib import Path
 
-from radarbench.bench.sweep.listing import cache_dir, private_dir, read_own, write_whole
+from radarbench.bench.sweep.user_cache import cache_dir, private_dir, read_own, write_whole
 
 #: where the cache lives, when set (else the user's cache folder of bench, ``results/``)
 FOLDER_ENV = "BENCH_RESULTS_CACHE_DIR"

@@ -105,7 +105,7 @@ def remember_unused(key: str) -> None:
     the kernels still stale are ones its units do not call, so its next runs need no warm-up for them
     (:func:`cache_is_cold`). Without this, every run after an update of a kernel module
     would warm up again until some sweep called every kernel of it. Kept in the user's
-    cache folder (:func:`bench.sweep.listing.cache_dir`); where it cannot be written, the
+    cache folder (:func:`bench.sweep.user_cache.cache_dir`); where it cannot be written, the
     warm-up simply runs again."""
     from radarbench.bench.sweep.listing import write_table
     data = {k: v for k, v in _read_unused().items() if k != key}

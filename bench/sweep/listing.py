@@ -29,13 +29,12 @@ import importlib.resources
 import importlib.util
 import json
 import os
-import stat
 import sys
-import tempfile
 import tomllib
 from pathlib import Path
 
 from radarbench.bench.escapes import escape_controls
+from radarbench.bench.sweep.user_cache import cache_dir, private_dir, read_own, write_whole
 
 __all__ = ["plugin_listing", "preset_descriptions", "presets"]
 
@@ -115,45 +114,6 @@ def fingerprint() -> str:
     return digest.hexdigest()[:32]
 
 
-def cache_dir() -> Path:
-    """The user's cache folder of bench (the plugin listing here; the warm-up's memory,
-    :mod:`bench.run.warmup`); use it only where :func:`private_dir` holds."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "radar-maneuver-bench"
-
-
-def private_dir(path: Path) -> bool:
-    """Whether ``path`` is a folder only this user can write (made 0700 if absent): a real
-    folder, not a link, owned by the user, writable by no group or other."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        try:
-            os.mkdir(path, 0o700)
-        except FileExistsError:
-            pass
-        st = os.lstat(path)
-    except OSError:
-        return False
-    return stat.S_ISDIR(st.st_mode) and st.st_uid == os.getuid() and not st.st_mode & 0o022
-
-
-def read_own(path: Path, limit: int = -1) -> bytes | None:
-    """The bytes of ``path`` (at most ``limit``), a regular file of this user read without
-    following a link; None if it is not one, or cannot be read."""
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_NONBLOCK", 0))
-    except OSError:
-        return None
-    with os.fdopen(fd, "rb") as f:
-        st = os.fstat(f.fileno())
-        if not stat.S_ISREG(st.st_mode) or st.st_uid != os.getuid():
-            return None
-        try:
-            return f.read(limit)
-        except OSError:
-            return None
-
-
 def read_cached(path: Path) -> str | None:
     """The cached listing at ``path`` (:func:`read_own`); None if none."""
     data = read_own(path, 1 << 22)
@@ -162,19 +122,6 @@ def read_cached(path: Path) -> str | None:
     except (ValueError, KeyError, TypeError):
         return None
     return text if isinstance(text, str) else None
-
-
-def write_whole(path: Path, data: bytes) -> None:
-    """``data`` as ``path``: a new file of an unpredictable name in its folder, created
-    exclusively, renamed into place (a reader sees the old file or the new one, whole)."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
 
 
 def write_cached(path: Path, text: str) -> None:
