@@ -508,10 +508,13 @@ def main(argv=None) -> int:
     finally:
         commit = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short=12", "HEAD"], capture_output=True,
                                 text=True, check=False).stdout.strip()
-        record = document(loop, suite_s, os.cpu_count() or 0, subreaper, commit)
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(markdown(record), encoding="utf-8")
-        print(f"loop: written {args.out} (work folder {work})", file=sys.stderr)
+        if loop.results:
+            record = document(loop, suite_s, os.cpu_count() or 0, subreaper, commit)
+            args.out.parent.mkdir(parents=True, exist_ok=True)
+            args.out.write_text(markdown(record), encoding="utf-8")
+            print(f"loop: written {args.out} (work folder {work})", file=sys.stderr)
+        else:                                   # a failed set-up measured nothing: the last record stands
+            print(f"loop: nothing measured, {args.out} left as it was (work folder {work})", file=sys.stderr)
         if args.work is None:
             shutil.rmtree(work, ignore_errors=True)
     return 0 if all(m.exit_code == 0 for m in loop.results) else 1

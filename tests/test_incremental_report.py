@@ -141,7 +141,9 @@ def test_a_table_or_text_is_reused_for_equal_inputs_and_code(tmp_path):
         other_code = reuse.reused(summarise, [1.0, 2.0], "x", code="a plugin's task, edited")
         text, text_calls = _counted(lambda s: s.upper())
         assert reuse.reused(text, "abc") == reuse.reused(text, "abc") == "ABC"
-    assert len(calls) == 3 and len(text_calls) == 1
+        unknown, unknown_calls = _counted(lambda s: s.lower())
+        assert reuse.reused(unknown, "ABC", code=None) == reuse.reused(unknown, "ABC", code=None) == "abc"
+    assert len(calls) == 3 and len(text_calls) == 1 and len(unknown_calls) == 2      # unidentified code: never reused
     pd.testing.assert_frame_equal(again, first, check_exact=True)
     pd.testing.assert_frame_equal(other, first, check_exact=True)
     pd.testing.assert_frame_equal(other_code, first, check_exact=True)

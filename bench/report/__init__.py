@@ -142,8 +142,8 @@ def summary_frame(trials: pd.DataFrame, series: dict, runs: pd.DataFrame, record
     tasks = {m["label"]: m["task"] for m in record["methods"]}
     present = set(tasks.values())               # only the run's tasks: no columns that are empty by design
     columns = summary_columns(t for name, t in registry.tasks().items() if name in present)
-    parts = [_task_summary(registry.get_task(task), g, series, [c for c in cals if c.method in set(g.config)])
-             for task, g in trials.groupby(trials.config.map(tasks))] if len(trials) else []
+    parts = [_task_summary(registry.get_task(task), g, series, cals) for task, g in trials.groupby(trials.config.map(tasks))] \
+        if len(trials) else []
     summary = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=columns)
     summary = summary.reindex(columns=list(dict.fromkeys([*columns, *summary.columns])))
     # The tasks' parts and the calibrations' in-place writes leave pandas' column blocks
@@ -171,6 +171,7 @@ def _task_summary(task, trials: pd.DataFrame, series: dict, cals: list) -> pd.Da
     equal trials, series and calibrations (:func:`reused`)."""
     configs = set(trials.config)
     mine = {key: value for key, value in series.items() if key[1] in configs}
+    cals = [c for c in cals if c.method in configs]
 
     def summarised(trials: pd.DataFrame, series: dict, cals: list) -> pd.DataFrame:
         summary = task.summarise(trials, series)
@@ -179,18 +180,21 @@ def _task_summary(task, trials: pd.DataFrame, series: dict, cals: list) -> pd.Da
             if ((summary.scenario == c.scenario) & (summary.config == c.method)).any():
                 task.apply_calibration(summary, trials, c)
         return summary
-    return reused(summarised, trials, mine, cals, key=(trials, mine, [c.as_row() for c in cals]), code=task_code(task))
+    return reused(summarised, trials, mine, cals, key=(trials, mine, [c.as_row() for c in cals]), code=_task_code(task))
 
 
-def task_code(*tasks) -> str:
-    """The code of ``tasks`` beyond the harness's (a plugin task's, :func:`bench.run.identity.code_identity`),
-    for the values a report reuses (:func:`reused`): names a harness task by its name alone."""
-    from radarbench.bench.run.identity import code_identity, module_file, is_harness
+def _task_code(*tasks) -> str | None:
+    """The code of ``tasks`` beyond the harness's, for the values a report reuses (:func:`reused`):
+    a harness task by its name, a plugin's by its name and code identity
+    (:func:`bench.run.identity.code_identity`); None when one has no file to identify."""
+    from radarbench.bench.run.identity import code_identity, is_harness, module_file
     out = []
     for task in tasks:
         module = type(task).__module__
         file = module_file(module)
-        out.append(task.name if file is not None and is_harness(file) else f"{task.name} {code_identity(module).hash}")
+        if file is None:
+            return None
+        out.append(task.name if is_harness(file) else f"{task.name} {code_identity(module).hash}")
     return ";".join(out)
 
 
@@ -519,7 +523,7 @@ def _cpu_seconds() -> float:
     """CPU seconds of this process and of its children that have ended (a build's figure processes)."""
     try:
         import resource
-    except ImportError:                         # not on Windows: this process's alone
+    except ImportError:                         # Windows has none: this process's CPU alone
         return time.process_time()
     children = resource.getrusage(resource.RUSAGE_CHILDREN)
     return time.process_time() + children.ru_utime + children.ru_stime
@@ -585,7 +589,7 @@ def _build_with(store: Store, out_dir: Path, recording: bool, progress: Progress
     interactive = interactive_job(pool, specs)
     t_of = {key[0]: cols["t_s"][0] for key, cols in series.items() if "t_s" in cols}
     steps = reused(steps_frame, trials, series, record, t_of, key=(trials, series, record["scenarios"], record["methods"], t_of),
-                   code=task_code(*present))
+                   code=_task_code(*present))
     records = _of_the_plan(store.records(), task_of)   # every read before the first write
     calibration = pd.DataFrame([c.as_row() for c in cals])
     fig_dir = out_dir / "figures"
@@ -603,7 +607,7 @@ def _build_with(store: Store, out_dir: Path, recording: bool, progress: Progress
         runtime_parts = [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
         sections.done("runtime")
         comparisons = reused(comparisons_frame, trials, task_of, key=(trials, {k: t.name for k, t in task_of.items()}),
-                             code=task_code(*dict.fromkeys(task_of.values())))
+                             code=_task_code(*dict.fromkeys(task_of.values())))
         evaluation, paper_vs_ours = _paper_vs_ours(   # the paper-vs-ours table leads a preset's sections
             record.get("source", ""), {"summary": summary, "comparisons": comparisons, "calibration": calibration},
             sweep["calibration"])

@@ -42,7 +42,7 @@ from radarbench.bench.sweep.user_cache import cache_dir, private_dir, write_whol
 
 __all__ = ["FigureReuse", "key_of", "reuse_in_effect", "reused", "reusing", "write_if_changed", "CACHE_BYTES"]
 
-#: the most bytes of PNGs the user's cache folder keeps (the least recently used go first)
+#: the most bytes the user's cache folder of report outputs keeps (PNGs, pages, tables; the least recently used go first)
 CACHE_BYTES = 256 * 2 ** 20
 #: the store's meta entry naming each figure's key and file hash (:class:`FigureReuse`)
 META = "report_figures"
@@ -171,15 +171,16 @@ def harness_key() -> str:
     return _harness_key[0]
 
 
-def reused(fn, *args, key: tuple | None = None, code: str = ""):
+def reused(fn, *args, key: tuple | None = None, code: str | None = ""):
     """``fn(*args)``, a pure function of its arguments returning text or a data frame; inside
     :func:`reusing`, what an equal call returned before, from the user's cache. The call is
     named by ``fn``, ``key`` (what its arguments hold, described for :func:`key_of`; default
     ``args``), the harness's code (:func:`harness_key`) and ``code`` (more code it runs: a
-    plugin's). A value :func:`_encoded` cannot keep exactly is computed every time."""
+    plugin's; None: code that cannot be identified, so never reused). A value :func:`_encoded`
+    cannot keep exactly is computed every time."""
     reuse = _reuse.get()
     name = key_of(fn.__module__, fn.__qualname__, harness_key(), code, args if key is None else key) \
-        if reuse is not None and reuse.folder is not None else None
+        if reuse is not None and reuse.folder is not None and code is not None else None
     if name is not None:
         data = reuse.fetch(name, ".json")
         value = _decoded(data) if data is not None else None
