@@ -248,3 +248,44 @@ def test_a_run_with_nothing_new_rewrites_nothing(two_task_runs, bench_cli):
     again = bench_cli("run", out.parent / "sweep.toml", "--out", out, "--workers", 1, "--no-record", check=True)
     assert "the report is up to date" in again.stdout and "report: " not in again.stderr, again.stderr
     assert _mtimes(out) == before
+
+
+def test_an_edited_config_recomputes_only_its_own_paired_comparisons(tmp_path, monkeypatch):
+    """Each pair's comparison is reused by its values (bench.report.glance._pair_rows): with one
+    of four configs changed, the three pairs it is in are computed again, the three others not,
+    and the frame equals one computed afresh."""
+    import importlib
+    import types
+
+    import numpy as np
+    import pandas as pd
+    glance = importlib.import_module("radarbench.bench.report.glance")    # the package's name is the function
+
+    task = types.SimpleNamespace(name="t", ranking_metric="rmse", ranking_binary=False, ranking_higher_is_better=False,
+                                 equal_chance_metric="")
+    rng = np.random.default_rng(5)
+    configs = ["a", "b", "c", "d"]
+    trials = pd.DataFrame([{"scenario": "s", "config": c, "snr_db": snr, "trial": t, "rmse": rng.gamma(2.0)}
+                           for c in configs for snr in (0.0, 6.0) for t in range(8)])
+    edited = trials.assign(rmse=np.where(trials.config == "c", trials.rmse * 1.5, trials.rmse))
+    task_of = dict.fromkeys(configs, task)
+    calls = []
+    compare = glance.compare_pair
+    monkeypatch.setattr(glance, "compare_pair", lambda *a: calls.append(a) or compare(*a))
+    with reuse.reusing(reuse.FigureReuse(folder=tmp_path)):
+        glance.comparisons_frame(trials, task_of)
+        assert len(calls) == 6 * 3                               # 6 pairs, over all levels and per level
+        calls.clear()
+        incremental = glance.comparisons_frame(edited, task_of)
+    assert len(calls) == 3 * 3
+    pd.testing.assert_frame_equal(incremental, glance.comparisons_frame(edited, task_of), check_exact=True)
+
+
+def test_json_values_are_kept_only_when_read_back_as_they_were():
+    import numpy as np
+    rows = [{"n": 3, "p": float("nan"), "ok": True, "better": "tie", "low": -0.0, "none": None}]
+    assert reuse._decoded(reuse._encoded(rows)) is not None
+    assert reuse._same(reuse._decoded(reuse._encoded(rows)), rows)
+    assert reuse._encoded([(1, 2)]) is None                       # a tuple comes back a list
+    assert reuse._encoded([np.float64(1.0)]) is None              # a NumPy float comes back a float
+    assert reuse._encoded({1: "a"}) is None                       # a key comes back a string

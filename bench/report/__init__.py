@@ -606,8 +606,7 @@ def _build_with(store: Store, out_dir: Path, recording: bool, progress: Progress
                        for s in each_done(task.trial_sections(ctx), sections, f"{task.name}: single trials")]
         runtime_parts = [_section_runtime(runs, units, fig_dir, record), _section_failures(runs)]
         sections.done("runtime")
-        comparisons = reused(comparisons_frame, trials, task_of, key=(trials, {k: t.name for k, t in task_of.items()}),
-                             code=_task_code(*dict.fromkeys(task_of.values())))
+        comparisons = comparisons_frame(trials, task_of)
         evaluation, paper_vs_ours = _paper_vs_ours(   # the paper-vs-ours table leads a preset's sections
             record.get("source", ""), {"summary": summary, "comparisons": comparisons, "calibration": calibration},
             sweep["calibration"])

@@ -38,6 +38,7 @@ import pandas as pd
 
 from radarbench.bench.metrics import (CONFIDENCE, RELATIVE_RESOLUTION, bootstrap_mean_ci, mcnemar_exact,
                                       paired_difference, resolved_differences)
+from radarbench.bench.results.figure_cache import reused
 
 COMPARISON_COLUMNS = ["scenario", "task", "metric", "snr_db", "config_a", "config_b", "n_pairs", "mean_a", "mean_b",
                       "difference", "difference_low", "difference_high", "only_a", "only_b", "mcnemar_p",
@@ -131,15 +132,23 @@ def comparisons_frame(trials: pd.DataFrame, task_of: dict) -> pd.DataFrame:
         for metric, binary in _metrics(task, g):
             wide = _wide(g, metric)
             snr_db = wide.index.get_level_values("snr_db").to_numpy(float)
-            subsets = [(ALL_LEVELS, slice(None))] + [(level, snr_db == level) for level in np.unique(snr_db)]
+            levels = [ALL_LEVELS, *np.unique(snr_db)]                  # the rows of _pair_rows, in order
             for a, b in itertools.combinations(configs, 2):
                 va, vb = wide[a].to_numpy(float), wide[b].to_numpy(float)
                 key = {"scenario": scenario, "task": task.name, "metric": metric, "config_a": a, "config_b": b}
-                for snr, at in subsets:
-                    row = compare_pair(va[at], vb[at], snr_db[at], binary, task.ranking_higher_is_better)
+                for snr, row in zip(levels, reused(_pair_rows, va, vb, snr_db, binary, task.ranking_higher_is_better),
+                                    strict=True):
                     row["better"] = {"a": a, "b": b}.get(row["better"], "tie")
                     rows.append({**key, "snr_db": snr, **row})
     return pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
+
+
+def _pair_rows(a: np.ndarray, b: np.ndarray, snr_db: np.ndarray, binary: bool, higher_is_better: bool) -> list[dict]:
+    """:func:`compare_pair` of two configs over all levels, then level by level (in order): a pure
+    function of their values, reused where an earlier report compared the same values
+    (:func:`bench.results.figure_cache.reused`), so an edit of one config recomputes only its pairs."""
+    subsets = [slice(None)] + [snr_db == level for level in np.unique(snr_db)]
+    return [compare_pair(a[at], b[at], snr_db[at], binary, higher_is_better) for at in subsets]
 
 
 def _mean_by_config(g: pd.DataFrame, column: str) -> dict[str, tuple[float, float, float]]:

@@ -16,8 +16,8 @@ An argument the key cannot describe (an object of another kind) makes its figure
 drawn every time, never reused wrongly. Every other output of a build is written only
 when its bytes changed (:func:`write_if_changed`).
 
-The tables and texts a build computes from the results alone (a task's summary, the paired
-comparisons, the report's HTML body) are reused the same way (:func:`reused`): kept in the
+The tables and texts a build computes from the results alone (a task's summary, each pair's
+comparison, the report's HTML body) are reused the same way (:func:`reused`): kept in the
 user's cache folder as JSON (``KEY.json``), keyed by their inputs and the code that computes
 them, so a run whose results equal an earlier one's (a warm re-run, an edit that left a
 task's configs alone) does not compute them again.
@@ -193,11 +193,18 @@ def reused(fn, *args, key: tuple | None = None, code: str | None = ""):
 
 
 def _encoded(value) -> bytes | None:
-    """``value`` (text, or a data frame of JSON values with a default index) as JSON, None
-    unless :func:`_decoded` gives it back exactly (dtypes, column names and order, NaNs)."""
+    """``value`` (text; a list or dict of JSON values; a data frame of JSON values with a default
+    index) as JSON, None unless :func:`_decoded` gives it back exactly (types, dtypes, column
+    names and order, NaNs)."""
     import pandas as pd
     if isinstance(value, str):
         return json.dumps({"text": value}).encode()
+    if isinstance(value, (list, dict)):
+        try:
+            data = json.dumps({"data": value}).encode()
+        except (TypeError, ValueError):
+            return None
+        return data if _same(json.loads(data)["data"], value) else None
     if not isinstance(value, pd.DataFrame) or not value.index.equals(pd.RangeIndex(len(value))) \
             or not isinstance(value.index, pd.RangeIndex):
         return None
@@ -221,12 +228,28 @@ def _decoded(data: bytes):
         doc = json.loads(data)
         if "text" in doc:
             return doc["text"] if isinstance(doc["text"], str) else None
+        if "data" in doc:
+            return doc["data"] if isinstance(doc["data"], (list, dict)) else None
         columns = [pd.Series(values, dtype=dtype) for values, dtype in zip(doc["values"], doc["dtypes"], strict=True)]
         frame = pd.concat(columns, axis=1, ignore_index=True) if columns else pd.DataFrame(index=pd.RangeIndex(0))
         frame.columns = pd.Index(doc["columns"]) if doc["columns"] else frame.columns
         return frame
     except (ValueError, TypeError, KeyError, AttributeError):
         return None
+
+
+def _same(read, value) -> bool:
+    """Whether ``read`` (what JSON gave back) is ``value`` exactly: the same types (a tuple is not
+    a list, a NumPy float not a float), equal values, NaN for NaN, keys in order."""
+    if type(read) is not type(value):
+        return False
+    if isinstance(value, float):
+        return read == value or (read != read and value != value)
+    if isinstance(value, list):
+        return len(read) == len(value) and all(map(_same, read, value))
+    if isinstance(value, dict):
+        return list(read) == list(value) and all(_same(read[k], value[k]) for k in value)
+    return read == value
 
 
 def _read_regular(path: Path, limit: int = 1 << 30) -> bytes | None:
