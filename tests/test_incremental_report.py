@@ -289,3 +289,15 @@ def test_json_values_are_kept_only_when_read_back_as_they_were():
     assert reuse._encoded([(1, 2)]) is None                       # a tuple comes back a list
     assert reuse._encoded([np.float64(1.0)]) is None              # a NumPy float comes back a float
     assert reuse._encoded({1: "a"}) is None                       # a key comes back a string
+
+
+def test_bounding_the_cache_drops_a_killed_writers_temporary_files_not_a_live_ones(tmp_path):
+    import os
+    import time
+    stale, live, kept = tmp_path / ".KEY.json.abc.tmp", tmp_path / ".KEY2.json.def.tmp", tmp_path / "KEY.json"
+    for path in (stale, live, kept):
+        path.write_bytes(b"{}")
+    old = time.time() - 2 * reuse.STALE_TEMPORARY_S
+    os.utime(stale, (old, old))
+    reuse._bound(tmp_path)
+    assert not stale.exists() and live.exists() and kept.exists()

@@ -172,7 +172,8 @@ def harness_key() -> str:
 
 
 def reused(fn, *args, key: tuple | None = None, code: str | None = ""):
-    """``fn(*args)``, a pure function of its arguments returning text or a data frame; inside
+    """``fn(*args)``, a pure function of its arguments returning text, a list or dict of JSON
+    values, or a data frame; inside
     :func:`reusing`, what an equal call returned before, from the user's cache. The call is
     named by ``fn``, ``key`` (what its arguments hold, described for :func:`key_of`; default
     ``args``), the harness's code (:func:`harness_key`) and ``code`` (more code it runs: a
@@ -390,14 +391,25 @@ def _cache_folder() -> Path | None:
     return folder if private_dir(cache_dir()) and private_dir(folder) else None
 
 
+#: seconds after which a temporary file of the cache folder is a killed writer's, not one in progress
+STALE_TEMPORARY_S = 3600.0
+
+
 def _bound(folder: Path) -> None:
-    """Drop the least recently used files of ``folder`` beyond :data:`CACHE_BYTES`."""
+    """Drop the least recently used files of ``folder`` beyond :data:`CACHE_BYTES`, and the
+    temporary files writers killed mid-write left (:func:`bench.sweep.user_cache.write_whole`'s,
+    older than :data:`STALE_TEMPORARY_S`)."""
+    import time
     entries = []
     for entry in os.scandir(folder):
         with contextlib.suppress(OSError):
-            if not entry.name.startswith(".") and entry.is_file(follow_symlinks=False):
-                st = entry.stat(follow_symlinks=False)
+            if not entry.is_file(follow_symlinks=False):
+                continue
+            st = entry.stat(follow_symlinks=False)
+            if not entry.name.startswith("."):
                 entries.append((st.st_mtime, st.st_size, entry.path))
+            elif entry.name.endswith(".tmp") and time.time() - st.st_mtime > STALE_TEMPORARY_S:
+                os.unlink(entry.path)
     total = sum(size for _, size, _ in entries)
     for _, size, path in sorted(entries):
         if total <= CACHE_BYTES:

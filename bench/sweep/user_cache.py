@@ -11,6 +11,7 @@ reused figures and tables).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import stat
 import tempfile
@@ -66,5 +67,6 @@ def write_whole(path: Path, data: bytes) -> None:
             f.write(data)
         os.replace(tmp, path)
     except BaseException:
-        os.unlink(tmp)
+        with contextlib.suppress(OSError):     # the write's own error is the one to raise
+            os.unlink(tmp)
         raise
